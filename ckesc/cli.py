@@ -1,0 +1,546 @@
+"""The ``ckesc`` command line.
+
+Each subcommand is one ``add_<name>_command(subparsers)`` function that declares its arguments and
+sets ``handler`` (a function ``(args) -> exit code``); :data:`COMMANDS` lists them and :func:`main`
+builds the parser from that list. Adding a command (emulate, run, check-log, ...) is one function and
+one entry in :data:`COMMANDS`; nothing else here needs to change.
+
+Exit codes: 0 success; 1 the input had frames that do not decode (``decode``); 2 usage or input the
+wire format cannot carry (``encode``); 130 interrupted; 141 stdout closed early (``| head``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import re
+import sys
+from typing import IO, Any, Callable, Iterable, Iterator, NamedTuple, Sequence
+
+import can
+
+from . import __version__
+from .protocol import catalogue as cat
+from .protocol.catalogue import Field, FrameSpec, Layout
+from .protocol.errors import DecodeError, EncodeError
+from .protocol.frame import FALLBACK_PRIORITY, Decoder, encode, pick_response_layout
+from .protocol.ids import RESERVED_NODE_IDS, Kind, Priority
+from .protocol.legality import illegal_fields
+
+EXIT_OK = 0
+EXIT_FRAMES_FAILED = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a writer killed by `| head`
+
+
+# ---------------------------------------------------------------------------------------------------
+# Parser plumbing
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``ckesc encode: error: ... (see ckesc encode --help)``."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class UsageError(Exception):
+    """Bad command-line input found after parsing; printed as one line, exit 2."""
+
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def _int(text: str) -> int:
+    """Decimal or 0x-hex (also 0b/0o); leading zeros are read as decimal ("08" is 8)."""
+    text = text.strip()
+    try:
+        return int(text, 0)
+    except ValueError:
+        return int(text, 10)  # "08", "010": decimal; raises ValueError for anything else
+
+
+def _int_arg(text: str) -> int:
+    try:
+        return _int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r} (decimal or 0x-hex)") from None
+
+
+def _priority_arg(text: str) -> int:
+    try:
+        return _int(text)
+    except ValueError:
+        pass
+    try:
+        return int(Priority[text.strip().upper()])
+    except KeyError:
+        names = ", ".join(p.name for p in Priority)
+        raise argparse.ArgumentTypeError(f"not a priority: {text!r} (0..31 or one of {names})") from None
+
+
+# ---------------------------------------------------------------------------------------------------
+# ckesc decode
+
+# Hand parsing, not can.io.CanutilsLogReader: the reader iterates a whole file and raises on the first
+# bad line (no line number, nothing after it is read), needs the "(ts) iface ID#DATA" form (bare
+# "ID#DATA" as cansend takes it fails its three-way split), reads odd hex "ABC" as the bytes AB 0C
+# without a word, and flags only bus-error frames as error frames. We follow its conventions where
+# they are candump's (an id of more than 3 hex digits is extended, "ID#R" is a remote frame, "##"
+# opens a CAN FD frame, a trailing R/T is the direction) and build the same can.Message, line by line.
+
+CAN_ERR_FLAG = 0x20000000  # linux/can.h; candump prints error frames with it in the 8-digit id
+_HEX = frozenset("0123456789abcdefABCDEF")
+
+#: candump's default display form: "[(ts)]  can0  1F4E5205   [7]  34 12 E8 03 01 81 C0"
+_DISPLAY = re.compile(r"^(?:\((?P<ts>[^)]*)\)\s+)?(?P<iface>\S+)\s+(?P<id>[0-9A-Fa-f]+)\s+\[(?P<dlc>\d+)\]\s*(?P<rest>.*)$")
+
+
+class CandumpError(ValueError):
+    """A line that is not a CAN frame in any candump form; ``reason`` is machine-stable."""
+
+    def __init__(self, message: str, reason: str = "not-candump") -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+class CandumpLine(NamedTuple):
+    msg: can.Message
+    timestamp: float | None  # None when the line has none (the message's is then 0.0)
+    channel: str | None
+
+
+def parse_candump(line: str) -> CandumpLine | None:
+    """One line of candump output as a :class:`can.Message`; ``None`` for blank and ``#`` lines.
+
+    Accepts ``candump -L`` log lines ``(1700000000.123456) can0 1F4E5205#3412E8030181C0`` (with an
+    optional trailing ``R``/``T``), bare ``1F4E5205#...`` (cansend syntax, ``.`` separators allowed)
+    and candump's display form ``can0  1F4E5205   [7]  34 12 ...``. Raises :class:`CandumpError`.
+    """
+    text = line.strip()
+    if not text or text.startswith("#"):
+        return None
+    tokens = text.split()
+    if "#" not in text or " [" in text:  # a -L line never has " ["; a display line may have '#' in its ASCII column
+        return _parse_display(text)
+    timestamp = channel = None
+    is_rx = True
+    if tokens[0].startswith("("):
+        timestamp = _timestamp(tokens.pop(0), text)
+    if len(tokens) >= 2 and tokens[-1] in ("R", "T", "r", "t"):
+        is_rx = tokens.pop().upper() == "R"
+    if len(tokens) == 2 and "#" not in tokens[0]:
+        channel = tokens.pop(0)
+    if len(tokens) != 1:
+        raise CandumpError(f"not a candump line: {text!r}")
+    return CandumpLine(_frame(tokens[0], timestamp, channel, is_rx), timestamp, channel)
+
+
+def _timestamp(token: str, text: str) -> float:
+    if not (token.startswith("(") and token.endswith(")")):
+        raise CandumpError(f"timestamp {token!r} is not '(seconds)': {text!r}")
+    try:
+        return float(token[1:-1])
+    except ValueError:
+        raise CandumpError(f"timestamp {token!r} is not a number", "bad-timestamp") from None
+
+
+def _can_id(id_text: str) -> tuple[int, bool]:
+    if not id_text or not set(id_text) <= _HEX or len(id_text) > 8:
+        raise CandumpError(f"CAN id {id_text!r} is not 1..8 hex digits", "bad-id")
+    can_id = int(id_text, 16)
+    if len(id_text) <= 3 and can_id > 0x7FF:
+        raise CandumpError(f"standard CAN id 0x{can_id:03X} does not fit 11 bits", "bad-id")
+    return can_id, len(id_text) > 3  # candump prints 3 digits for 11-bit ids and 8 for 29-bit ones
+
+
+def _message(can_id: int, extended: bool, data: bytes, timestamp, channel, *, remote=False, dlc=None, is_rx=True) -> can.Message:
+    if extended and can_id & CAN_ERR_FLAG:
+        return can.Message(timestamp=timestamp or 0.0, arbitration_id=can_id & 0x1FFFFFFF, is_error_frame=True, data=data, channel=channel)
+    return can.Message(
+        timestamp=timestamp or 0.0,
+        arbitration_id=can_id,
+        is_extended_id=extended,
+        is_remote_frame=remote,
+        data=None if remote else data,
+        dlc=dlc,
+        channel=channel,
+        is_rx=is_rx,
+    )
+
+
+def _frame(token: str, timestamp: float | None, channel: str | None, is_rx: bool) -> can.Message:
+    id_text, _, data_text = token.partition("#")
+    can_id, extended = _can_id(id_text)
+    if data_text.startswith("#"):
+        raise CandumpError("CAN FD frame (ID##...): the protocol uses classic CAN 2.0B frames (4.1)", "not-classic-can")
+    if data_text[:1] in ("R", "r"):
+        dlc_text = data_text[1:]
+        if dlc_text and not (dlc_text.isdigit() and int(dlc_text) <= 8):
+            raise CandumpError(f"remote frame length {dlc_text!r} is not 0..8", "bad-data")
+        return _message(can_id, extended, b"", timestamp, channel, remote=True, dlc=int(dlc_text or 0), is_rx=is_rx)
+    hex_text = data_text.replace(".", "")
+    if not set(hex_text) <= _HEX:
+        raise CandumpError(f"data {data_text!r} is not hex", "bad-data")
+    if len(hex_text) % 2:
+        raise CandumpError(f"data {data_text!r} has an odd number of hex digits ({len(hex_text)})", "odd-hex")
+    return _message(can_id, extended, bytes.fromhex(hex_text), timestamp, channel, is_rx=is_rx)
+
+
+def _parse_display(text: str) -> CandumpLine:
+    m = _DISPLAY.match(text)
+    if m is None:
+        raise CandumpError(f"not a candump line: {text!r}")
+    timestamp = _timestamp(f"({m['ts']})", text) if m["ts"] is not None else None
+    can_id, extended = _can_id(m["id"])
+    dlc = int(m["dlc"])
+    rest = m["rest"]
+    if rest.startswith("remote request"):
+        msg = _message(can_id, extended, b"", timestamp, m["iface"], remote=True, dlc=min(dlc, 8))
+        return CandumpLine(msg, timestamp, m["iface"])
+    data = []
+    for token in rest.split():
+        if len(token) != 2 or not set(token) <= _HEX:
+            break  # the ASCII column of candump -a, or ERRORFRAME details
+        data.append(int(token, 16))
+    if len(data) != dlc:
+        raise CandumpError(f"[{dlc}] announces {dlc} data bytes, the line has {len(data)}", "bad-data")
+    return CandumpLine(_message(can_id, extended, bytes(data), timestamp, m["iface"]), timestamp, m["iface"])
+
+
+def decode_lines(lines: Iterable[str], decoder: Decoder | None = None) -> Iterator[dict[str, Any]]:
+    """One JSON-able dict per frame line (blank and comment lines give none), with ``line`` numbers.
+    A line that does not decode gives ``{"error", "line", "reason", "frame", "text"}``."""
+    decoder = decoder or Decoder()
+    for number, raw in enumerate(lines, 1):
+        text = raw.rstrip("\r\n")
+        try:
+            parsed = parse_candump(text)
+            if parsed is None:
+                continue
+            frame = decoder.decode(parsed.msg)
+        except CandumpError as exc:
+            yield {"error": str(exc), "line": number, "reason": exc.reason, "frame": None, "text": text}
+            continue
+        except DecodeError as exc:
+            yield {"error": str(exc), "line": number, "reason": exc.reason, "frame": exc.frame, "text": text}
+            continue
+        out = frame.to_json()
+        out["timestamp"] = parsed.timestamp
+        out["channel"] = parsed.channel
+        out["can_id"] = f"{parsed.msg.arbitration_id:08X}"
+        out["data"] = frame.data.hex().upper()
+        out["line"] = number
+        yield out
+
+
+def _open_input(path: str | None) -> tuple[IO[str], Callable[[], None]]:
+    """The text stream to read and how to let go of it (stdin is detached, not closed)."""
+    if path is None or path == "-":
+        buffer = getattr(sys.stdin, "buffer", None)
+        if buffer is None:  # already a text stream (tests, embedding)
+            return sys.stdin, lambda: None
+        # undecodable bytes become U+FFFD and that line fails to parse, instead of a UnicodeDecodeError
+        wrapper = io.TextIOWrapper(buffer, encoding="utf-8", errors="replace")
+        return wrapper, wrapper.detach
+    try:
+        stream = open(path, encoding="utf-8", errors="replace")  # universal newlines: CRLF logs are fine
+    except OSError as exc:
+        raise UsageError(f"cannot read {path}: {exc.strerror or exc}") from None
+    return stream, stream.close
+
+
+def _run_decode(args: argparse.Namespace) -> int:
+    stream, release = _open_input(args.file)
+    decoder = Decoder(nibble_order=args.nibble_order)
+    failed = 0
+    write = sys.stdout.write
+    dumps = json.JSONEncoder().encode
+    try:
+        for record in decode_lines(stream, decoder):  # streamed: one line in memory at a time
+            if "error" in record:
+                failed += 1
+            write(dumps(record) + "\n")
+    finally:
+        release()
+    return EXIT_FRAMES_FAILED if failed else EXIT_OK
+
+
+def add_decode_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "decode",
+        help="decode candump lines into JSON, one object per line",
+        description="Read candump lines (candump -L log, candump display form, or bare ID#DATA) from FILE or stdin "
+        "and print one JSON object per frame line. A line that does not decode prints "
+        '{"error": ..., "line": N, ...}. Exit 0 when every line decoded, 1 otherwise.',
+    )
+    p.add_argument("file", nargs="?", metavar="FILE", help="candump log; '-' or nothing: stdin")
+    p.add_argument(
+        "--nibble-order",
+        choices=("lsb", "swapped"),
+        default="lsb",
+        help="RawCommand_12b nibble order (R4; 'swapped' is the one alternative a DUT profile may select)",
+    )
+    p.set_defaults(handler=_run_decode)
+
+
+# ---------------------------------------------------------------------------------------------------
+# ckesc encode
+
+_LIST_FIELDS = ("channels", "payload")  # always lists, even with one value
+#: Throttle ranges of the document (4.4.15-4.4.17); larger values are encodable, what a device does is OBSERVE (R6).
+_THROTTLE_MAX = {"throttle14": cat.THROTTLE_MAX, "throttle12": cat.THROTTLE_MAX, "throttle10": cat.THROTTLE_10B_MAX}
+
+
+def _candidate_fields(spec: FrameSpec, name: str) -> list[Field]:
+    return [f for lay in spec.all_layouts for f in lay.fields if f.name == name]
+
+
+def _named_value(spec: FrameSpec, key: str, text: str) -> int | None:
+    """A code or flag name for a field value: ``option=write``, ``command=suspend``, ``color=red+green``."""
+    want = text.strip().lower().replace("_", " ")
+    for f in _candidate_fields(spec, key):
+        if f.codes is not None:
+            for code, label in f.codes.items():
+                if label.lower().replace("_", " ") == want:
+                    return code
+        if f.flags is not None:
+            total = 0
+            for part in re.split(r"[+|]", text):
+                member = f.flags.__members__.get(part.strip().upper())
+                if member is None:
+                    break
+                total |= int(member)
+            else:
+                return total
+    return None
+
+
+def parse_assignments(spec: FrameSpec, items: Sequence[str]) -> dict[str, Any]:
+    """``key=value`` words into field values: decimal or 0x-hex, comma lists, code names."""
+    values: dict[str, Any] = {}
+    for item in items:
+        key, eq, text = item.partition("=")
+        key = key.strip()
+        if not eq or not key:
+            raise UsageError(f"{item!r} is not key=value")
+        if key in values:
+            raise UsageError(f"field {key} is given twice")
+        try:
+            if "," in text or key in _LIST_FIELDS:
+                values[key] = [_int(part) for part in text.split(",") if part.strip()]
+            else:
+                values[key] = _int(text)
+        except ValueError:
+            named = None if "," in text else _named_value(spec, key, text)
+            if named is None:
+                raise UsageError(f"{key}={text!r}: not an integer (decimal or 0x-hex) nor a code name of {spec.name}.{key}") from None
+            values[key] = named
+    return values
+
+
+def _legal_text(f: Field) -> str:
+    if f.codes is not None:
+        return "one of " + ", ".join(f"{code} ({label})" for code, label in f.codes.items())
+    lo, hi = f.legal if f.legal is not None else (0, f.mask)
+    return f"{lo}..{hi}"
+
+
+def _chosen_layout(spec: FrameSpec, kind: Kind, data: bytes, values: dict[str, Any], layout: str | None) -> Layout | None:
+    """The layout :func:`encode` used (for the legality warnings)."""
+    if kind is Kind.MESSAGE:
+        size = len(data) - spec.has_tail
+        return spec.message_layout(size)
+    if kind is Kind.REQUEST:
+        return spec.request
+    if layout is not None:
+        return next((lay for lay in spec.responses if lay.name == layout), None)
+    return pick_response_layout(spec, values)  # encode's own choice, so the warnings name the same fields
+
+
+def encode_warnings(spec: FrameSpec, layout: Layout | None, values: dict[str, Any], source: int, destination: int | None) -> list[str]:
+    """Values the wire format carries but the document does not allow (the suite sends them on purpose)."""
+    out = []
+    if layout is not None:
+        for f, value in illegal_fields(layout, values):
+            rule = f"; ignored by rule {f.rejected_by}" if f.rejected_by else ""
+            out.append(f"{spec.name}.{f.name}={value} is outside the document's legal range {_legal_text(f)}{rule}")
+        top = _THROTTLE_MAX.get(layout.codec)
+        if top is not None:
+            for i, v in enumerate(values.get("channels") or ()):
+                if isinstance(v, int) and v > top:
+                    out.append(f"{spec.name}.channels[{i}]={v} is outside the document's throttle range 0..{top} (R6: OBSERVE)")
+            group = values.get("group")
+            groups = cat.THROTTLE_GROUPS
+            if layout.codec == "throttle12" and isinstance(group, int) and group not in groups:
+                out.append(f"{spec.name}.group={group} is outside the document's legal range {groups.start}..{groups.stop - 1}")
+    for label, node in (("source", source), ("destination", destination)):
+        if node in RESERVED_NODE_IDS:
+            out.append(f"{label} node id {node} is reserved (F7)")
+    return out
+
+
+def _run_encode(args: argparse.Namespace) -> int:
+    try:
+        spec = cat.spec(args.name)
+    except KeyError:
+        raise UsageError(f"no frame {args.name!r}; see 'ckesc frames' (names: {', '.join(cat.BY_NAME)})") from None
+    values = parse_assignments(spec, args.fields)
+    kind = Kind.RESPONSE if args.response else (Kind.REQUEST if spec.service else Kind.MESSAGE)
+    if spec.service and args.destination is None:
+        raise UsageError(f"{spec.name} is a service ({spec.type_id}): give --destination N (the node id it goes to)")
+    if not spec.service and args.destination is not None:
+        raise UsageError(f"{spec.name} is a message ({spec.type_id}): messages are broadcast, --destination does not apply")
+    try:
+        wire = encode(
+            spec,
+            values,
+            kind=kind,
+            source=args.source,
+            destination=args.destination,
+            transfer_id=args.transfer_id,
+            priority=args.priority,
+            layout=args.layout,
+            nibble_order=args.nibble_order,
+        )
+    except EncodeError as exc:
+        text = str(exc)
+        raise UsageError(text if text.startswith(spec.name) else f"{spec.name} {text}") from None
+    except (TypeError, ValueError) as exc:  # defensive: never a traceback for bad input
+        raise UsageError(f"{spec.name}: cannot encode {values}: {exc}") from None
+    layout = _chosen_layout(spec, kind, wire.data, values, args.layout)
+    for warning in encode_warnings(spec, layout, values, args.source, args.destination):
+        print(f"ckesc encode: warning: {warning}", file=sys.stderr)
+    print(wire)
+    return EXIT_OK
+
+
+def add_encode_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "encode",
+        help="build one frame and print it as ID#DATA",
+        description="Build one frame from field values and print it as candump/cansend ID#DATA. Values are decimal or "
+        "0x-hex, lists comma-separated (channels=1000,1000,1000,1000), or a code name (option=write). Values outside "
+        "the document's legal range print a warning and are still encoded; values the wire cannot carry exit 2.",
+        epilog="examples: ckesc encode set_freq option=1 msg1_interval=10 msg2_interval=50 msg3_interval=250 --destination 1\n"
+        "          ckesc encode raw_command_12b channels=1000,1000,1000,1000 group=1",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("name", metavar="NAME", help="catalogue name (set_freq), type id (214) or title; see 'ckesc frames'")
+    p.add_argument("fields", nargs="*", metavar="KEY=VALUE", help="field values")
+    p.add_argument("--source", type=_int_arg, default=0, metavar="N", help="source node id (default 0, the host: 4.4.18 note 8)")
+    p.add_argument("--destination", type=_int_arg, metavar="N", help="destination node id (services only; required for them)")
+    p.add_argument("--transfer-id", type=_int_arg, default=0, metavar="N", help="transfer id 0..31 (default 0)")
+    p.add_argument(
+        "--priority",
+        type=_priority_arg,
+        metavar="N|NAME",
+        help=f"0..31 or HIGHEST/HIGH/MEDIUM/LOW/LOWEST (default: the table's, else {FALLBACK_PRIORITY.name})",
+    )
+    p.add_argument("--response", action="store_true", help="a service response (default: a request)")
+    p.add_argument("--layout", metavar="NAME", help="layout by name where several fit (20013 query/reply, 241 response_option_N)")
+    p.add_argument("--nibble-order", choices=("lsb", "swapped"), default="lsb", help="RawCommand_12b nibble order (R4)")
+    p.set_defaults(handler=_run_encode)
+
+
+# ---------------------------------------------------------------------------------------------------
+# ckesc frames
+
+
+def _frame_rows() -> list[dict[str, Any]]:
+    rows = []
+    for s in cat.CATALOGUE:
+        rows.append(
+            {
+                "id": s.type_id,
+                "name": s.name,
+                "kind": s.kind_label,
+                "priority": None if s.priority is None else int(s.priority),
+                "priority_name": None if s.priority is None else s.priority.name,
+                "section": s.section,
+                "title": s.title,
+            }
+        )
+    return rows
+
+
+def _run_frames(args: argparse.Namespace) -> int:
+    rows = _frame_rows()
+    if args.json:
+        for row in rows:
+            print(json.dumps(row))
+        return EXIT_OK
+    table = [("ID", "NAME", "KIND", "PRIORITY", "SECTION", "TITLE")]
+    for r in rows:
+        prio = "-" if r["priority"] is None else f"{r['priority_name']} ({r['priority']})"
+        table.append((str(r["id"]), r["name"], r["kind"], prio, r["section"], r["title"]))
+    widths = [max(len(row[i]) for row in table) for i in range(len(table[0]) - 1)]
+    for row in table:
+        print("  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[-1])
+    print(f"\n'-': the table lists no priority (F5: OBSERVE); encode uses {FALLBACK_PRIORITY.name} ({int(FALLBACK_PRIORITY)}).")
+    return EXIT_OK
+
+
+def add_frames_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("frames", help="list the frame catalogue", description="List every frame of the CKESC 2.1 catalogue.")
+    p.add_argument("--json", action="store_true", help="one JSON object per frame")
+    p.set_defaults(handler=_run_frames)
+
+
+# ---------------------------------------------------------------------------------------------------
+# main
+
+#: The subcommands, in help order. Each adds its parser and sets ``handler``.
+COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
+    add_decode_command,
+    add_encode_command,
+    add_frames_command,
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="ckesc", description="Tools for the CKESC UAVCAN Protocol 2.1 conformance suite.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for add in COMMANDS:
+        add(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, usage errors: a return code, as for every other outcome
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    handler: Handler | None = getattr(args, "handler", None)
+    if handler is None:
+        parser.print_help(sys.stderr)
+        return EXIT_USAGE
+    try:
+        return handler(args)
+    except UsageError as exc:
+        print(f"ckesc {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
+
+
+def _silence_stdout() -> None:
+    """After the reader of our stdout went away (``| head``), point stdout at /dev/null so that the
+    interpreter's final flush does not print a second BrokenPipeError (Python docs, 'Note on SIGPIPE')."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        pass
+
+
+if __name__ == "__main__":
+    sys.exit(main())
