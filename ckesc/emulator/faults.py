@@ -1,0 +1,109 @@
+"""Switchable faults: each makes an emulated ESC break one rule in one way.
+
+The suite's self-test switches each fault on and checks that the tests citing the rules the fault
+names fail, and only those. Rule ids are those of ``spec/INTERPRETATIONS.md`` (F.., R..) and
+``S<section>`` for the document's own numbered clarifications that INTERPRETATIONS.md does not
+restate (e.g. ``S4.4.5`` for MSG2's units).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+
+
+@dataclass(frozen=True)
+class Fault:
+    name: str
+    rules: tuple[str, ...]
+    description: str
+
+
+_FAULTS = (
+    # framing (4.1)
+    Fault("tail_toggle_set", ("F2",), "single-frame tail bytes carry toggle=1"),
+    Fault("tail_not_single_frame", ("F2",), "tail bytes say start=1 end=0"),
+    Fault("transfer_id_stuck", ("F3",), "message transfer ids never increment"),
+    Fault("response_transfer_id_wrong", ("F4",), "service responses carry the request's transfer id + 1"),
+    Fault("response_to_broadcast", ("F4",), "service responses go to node 127 instead of the requester"),
+    Fault("response_as_request", ("F1", "F4"), "service responses have the request bit set"),
+    Fault("wrong_priority", ("F5",), "reports (MSG1..3) are sent at MEDIUM instead of LOWEST"),
+    Fault("response_wrong_priority", ("F5",), "service responses are sent at LOWEST whatever the table says"),
+    Fault("reports_at_default_id", ("F7",), "an ESC at node id 0x7D reports actively"),
+    # answers to broadcasts (4.4.2, 4.4.3)
+    Fault("answer_late", ("R2",), "MSG Control and GET_ESC_ID are answered 80 ms after the request"),
+    Fault("answer_not_staggered", ("R2",), "MSG Control and GET_ESC_ID answers come 10 ms after the request, whatever the node id"),
+    Fault("get_esc_id_with_option", ("R1",), "GET_ESC_ID replies carry [option, node_id, channel]"),
+    Fault("get_esc_id_wrong_node", ("R1",), "GET_ESC_ID replies name node id + 1"),
+    Fault("msg_control_answer_echo", ("R2",), "MSG Control is answered with the command echoed, not 0"),
+    Fault("msg_control_no_answer", ("R2", "S4.4.2"), "MSG Control is not answered"),
+    Fault("suspend_ignored", ("S4.4.2",), "MSG Control 0x55555555 does not stop active reporting"),
+    Fault("resume_ignored", ("S4.4.2",), "MSG Control 0xAAAAAAAA does not restart active reporting"),
+    # reports (4.4.4 - 4.4.14)
+    Fault("report_interval_wrong", ("R9",), "MSG1 comes every N x 3 ms instead of N x 2 ms"),
+    Fault("report_jitter", ("R9",), "report intervals jitter by up to +-30 %"),
+    Fault("msg2_interval_ignores_setting", ("R9",), "MSG2 keeps its default interval after Set Freq"),
+    Fault("status_direction_bit14", ("R7",), "MSG1 reports the direction on bit 14 instead of bit 15"),
+    Fault("status_running_wrong", ("R7",), "MSG1 bit 8 (run/stop) stays 0 while the motor runs"),
+    Fault("msg2_scale_tenths", ("S4.4.5",), "MSG2 voltage and current are in 0.1 units instead of 0.01"),
+    Fault("msg3_short", ("S4.4.6",), "MSG3 is sent with 3 payload bytes (Hobbywing's length)"),
+    Fault("speed_ignores_throttle", ("S4.4.4",), "MSG1 PWM stays 0 whatever the throttle"),
+    # comm loss (R8)
+    Fault("comm_loss_late", ("R8",), "the comm-loss flag is set 400 ms after the last command"),
+    Fault("comm_loss_early", ("R8",), "the comm-loss flag is set 100 ms after the last command"),
+    Fault("comm_loss_never", ("R8",), "the comm-loss flag is never set"),
+    Fault("comm_loss_sticky", ("R8",), "the comm-loss flag is not cleared by the next command"),
+    # throttle (4.4.15 - 4.4.17)
+    Fault("throttle_channel_ignored", ("S4.4.18",), "the ESC always follows channel 1, not its own throttle channel"),
+    Fault("twelve_bit_nibbles_swapped", ("R4",), "RawCommand_12b is read with the nibbles of p1/p4 swapped"),
+    Fault("twelve_bit_group_ignored", ("R4",), "RawCommand_12b is applied whatever its group id"),
+    Fault("ten_bit_not_doubled", ("R5",), "RawCommand_10b values are used as 0..1000 instead of doubled"),
+    Fault("fourteen_bit_byte_order", ("R3",), "RawCommand_14b is read as little-endian 14-bit fields"),
+    # settings and rejects (R10 - R13)
+    Fault("set_freq_accepts_illegal", ("R10",), "Set Freq applies values outside 10..250"),
+    Fault("set_freq_partial", ("R10",), "Set Freq applies the legal values of a partly illegal request"),
+    Fault("set_id_accepts_illegal", ("R10",), "Set ID applies node ids 0, 0x7E and 0x7F"),
+    Fault("set_baud_accepts_illegal", ("R10",), "Set Baud stores codes above 6"),
+    Fault("rotation_accepts_illegal", ("R10",), "Set Rotation treats any value other than 0/0xFF as reverse"),
+    Fault("throttle_select_accepts_illegal", ("R10",), "Throttle Select stores values above 1"),
+    Fault("set_id_after_window", ("R11",), "Set ID is applied after the 120 s window"),
+    Fault("set_baud_after_window", ("R11",), "Set Baud is applied after the 120 s window"),
+    Fault("set_baud_immediate", ("R11",), "Set Baud changes the bit rate at once instead of at the next power-up"),
+    Fault("set_id_needs_destination", ("R11",), "Set ID is obeyed only when addressed to the ESC's own node id"),
+    Fault("settings_while_suspended", ("R12",), "Set Led, Set Rotation and Set Freq take effect while reporting is suspended"),
+    Fault("rotation_while_running", ("R12",), "Set Rotation and Throttle Select take effect while the motor runs"),
+    Fault("intervals_not_persisted", ("R13",), "report intervals are lost at power-off"),
+    Fault("node_id_not_persisted", ("R13",), "node id and throttle channel are lost at power-off"),
+    Fault("rotation_not_persisted", ("R13",), "the rotation is lost at power-off"),
+    Fault("led_save_not_persisted", ("R13",), "Set Led with option 1 is lost at power-off"),
+    Fault("led_unsaved_persisted", ("R13",), "Set Led with option 0 survives power-off"),
+    Fault("throttle_source_not_persisted", ("R13",), "the throttle source is lost at power-off"),
+    Fault("baud_not_persisted", ("R13",), "the Set Baud code is lost at power-off"),
+    Fault("expand_not_persisted", ("R13",), "Expand Set Part settings are lost at power-off"),
+    Fault("suspend_persisted", ("R13",), "MSG Control suspension survives power-off"),
+    Fault("power_up_counter_stuck", ("S4.4.27",), "the power-up counter does not count power-ups"),
+    # other services
+    Fault("expand_set_answered", ("R14",), "Expand Set Part is answered"),
+    Fault("expand_set_big_endian", ("R14",), "Expand Set Part's Set_cmd is read big-endian"),
+    Fault("get_rec_untagged", ("R15",), "MSG_EXP12 records carry tail 0xC0 instead of 0xC1..0xC5"),
+    Fault("clear_rec_ignored", ("R15",), "Clear Rec leaves the temperature records"),
+    Fault("can_test_count_skips", ("R16",), "CAN Test counts up by 2 per frame"),
+    Fault("can_test_reports_continue", ("R16",), "other reports continue in CAN Test mode"),
+    Fault("can_test_persisted", ("R16", "R13"), "CAN Test mode survives power-off"),
+    Fault("self_test_always_passes", ("S4.4.24",), "Self Test answers 0 even when the power-up self-test failed"),
+    Fault("set_led_no_echo", ("S4.4.20",), "Set Led is answered with zeros"),
+    Fault("set_freq_read_wrong", ("S4.4.22",), "Set/Get Freq read answers the defaults, not the settings"),
+    Fault("major_config_bits_swapped", ("S4.4.28",), "242 puts the direction in bit 6 and the source in bit 7"),
+    Fault("maintenance_counts_wrong", ("S4.4.27",), "241 option 2 swaps the power-up and stop counters"),
+)
+
+FAULTS = MappingProxyType({f.name: f for f in _FAULTS})
+
+
+def check(names) -> frozenset[str]:
+    """Validate fault names; raises ValueError listing the unknown ones and the known ones."""
+    names = frozenset(names or ())
+    unknown = names - FAULTS.keys()
+    if unknown:
+        raise ValueError(f"unknown fault(s) {', '.join(sorted(unknown))}; known: {', '.join(sorted(FAULTS))}")
+    return names

@@ -1,0 +1,351 @@
+"""Lane 1: emulated ESCs in simulated time, as a python-can interface (``interface="ckesc-sim"``).
+
+    bus = can.Bus(interface="ckesc-sim", channel="bench", nodes=[1, 2, 3], bitrate=500000,
+                  faults=["answer_late"], flash_path="esc-flash.json", seed=0)
+
+Time is a discrete-event clock shared by everything on the channel: ``recv(timeout)`` advances it
+to the next frame for this bus or to the timeout, ``send()`` queues a frame at the current time.
+Frames take their transmission time at the bus bit rate (an extended data frame of n bytes is
+67 + 8n bit times; stuff bits are not modelled, so real frames are up to ~20 % longer) and contend
+by arbitration (lowest id first) when the bus frees up. Received frames carry the time their last
+bit arrived as ``timestamp``, like SocketCAN. An ESC whose bit rate differs from the host's neither
+hears nor is heard. Nothing here reads the wall clock or sleeps, so a run is deterministic for a
+given seed and a 120 s window costs milliseconds.
+
+A world lives as long as the process (like a bench that stays plugged in): a second ``can.Bus`` on
+the same channel joins it - which is how the harness reopens the host at another bit rate after
+Set Baud. :func:`discard` removes it.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections import deque
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import can
+from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
+
+from ..protocol.catalogue import DEFAULT_BITRATE
+from ..protocol.frame import WireFrame
+from .bench import Bench
+from .model import EscModel
+
+_WORLDS: dict[str, SimWorld] = {}
+
+FLASH_SAVE_PERIOD_S = 0.5  # simulated seconds between flash writes of changed counters (settings too)
+
+
+def frame_bits(dlc: int) -> int:
+    """Bit times of an extended data frame with ``dlc`` data bytes, with the 3-bit interframe space."""
+    return 67 + 8 * dlc
+
+
+class SimClock:
+    """The lane's clock: what tests read instead of the wall clock."""
+
+    def __init__(self, world: SimWorld) -> None:
+        self._world = world
+
+    def now(self) -> float:
+        return self._world.now
+
+    def __call__(self) -> float:
+        return self._world.now
+
+
+class _Pending:
+    __slots__ = ("ready", "seq", "wire", "origin", "bitrate")
+
+    def __init__(self, ready: float, seq: int, wire: WireFrame, origin: Any, bitrate: int) -> None:
+        self.ready, self.seq, self.wire, self.origin, self.bitrate = ready, seq, wire, origin, bitrate
+
+
+class SimWorld:
+    """One simulated CAN bus with its bench of ESCs and the host buses attached to it."""
+
+    def __init__(self, channel: str, bench: Bench, *, power_on: bool = True) -> None:
+        self.channel = channel
+        self.bench = bench
+        self.now = 0.0
+        self.clock = SimClock(self)
+        self.buses: list[SimEscBus] = []
+        self._pending: list[_Pending] = []
+        self._in_flight: tuple[float, _Pending] | None = None
+        self._seq = itertools.count()
+        self._tasks: list[SimCyclicTask] = []
+        self._next_flash = FLASH_SAVE_PERIOD_S
+        self.stats = {"frames": 0, "busy_s": 0.0}
+        if power_on:
+            bench.power_on(0.0)
+
+    # ------------------------------------------------------------------ event loop
+    def _next_bench(self) -> float | None:
+        return self.bench.next_deadline()
+
+    def next_event(self) -> float | None:
+        times = []
+        d = self._next_bench()
+        if d is not None:
+            times.append(max(d, self.now))
+        if self._in_flight is not None:
+            times.append(self._in_flight[0])
+        elif self._pending:
+            times.append(max(self.now, min(p.ready for p in self._pending)))
+        for task in self._tasks:
+            if task.active:
+                times.append(max(task.next_time, self.now))
+        return min(times) if times else None
+
+    def step(self) -> bool:
+        """Process the earliest event. False when nothing is scheduled."""
+        t = self.next_event()
+        if t is None:
+            return False
+        self.now = t
+        if self._in_flight is not None and self._in_flight[0] <= t:
+            self._finish_transmission()
+        for task in self._tasks:
+            if task.active and task.next_time <= t:
+                task.fire(t)
+        deadline = self._next_bench()
+        if deadline is not None and deadline <= t:
+            for esc, wire in self.bench.poll(t):
+                self._queue(wire, esc, esc.bitrate, ready=wire.timestamp)
+        if self._in_flight is None:
+            self._start_transmission()
+        if self.bench.flash is not None and t >= self._next_flash:
+            self.bench.persist()
+            self._next_flash = t + FLASH_SAVE_PERIOD_S
+        return True
+
+    def run_until(self, t_end: float, stop: Callable[[], bool] | None = None) -> None:
+        while True:
+            if stop is not None and stop():
+                return
+            t = self.next_event()
+            if t is None or t > t_end:
+                self.now = max(self.now, t_end)
+                return
+            self.step()
+
+    def _queue(self, wire: WireFrame, origin: Any, bitrate: int, ready: float) -> None:
+        self._pending.append(_Pending(max(ready, self.now), next(self._seq), wire, origin, bitrate))
+
+    def _start_transmission(self) -> None:
+        ready = [p for p in self._pending if p.ready <= self.now]
+        if not ready:
+            return
+        # arbitration: the lowest id wins; frames at another bit rate than the winner's are garbage
+        # to it, so only frames at one bit rate contend (a mixed-rate bus is broken anyway).
+        winner = min(ready, key=lambda p: (p.wire.arbitration_id, p.seq))
+        self._pending.remove(winner)
+        duration = frame_bits(len(winner.wire.data)) / winner.bitrate
+        self._in_flight = (round(self.now + duration, 12), winner)
+        self.stats["busy_s"] += duration
+
+    def _finish_transmission(self) -> None:
+        end, p = self._in_flight  # type: ignore[misc]
+        self._in_flight = None
+        self.stats["frames"] += 1
+        wire = p.wire._replace(timestamp=end)
+        sender = p.origin if isinstance(p.origin, EscModel) else None
+        self.bench.deliver(wire, end, p.bitrate, sender=sender)
+        for bus in self.buses:
+            if bus.bitrate != p.bitrate:
+                continue
+            if bus is p.origin and not bus.receive_own_messages:
+                continue
+            bus._deliver(wire, is_rx=bus is not p.origin)
+
+    # ------------------------------------------------------------------ host side
+    def send(self, bus: SimEscBus, msg: can.Message) -> None:
+        if not msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
+            # the ESCs ignore such frames; they still occupy the bus
+            wire = WireFrame(msg.arbitration_id, bytes(msg.data), is_extended_id=msg.is_extended_id)
+        else:
+            wire = WireFrame(msg.arbitration_id, bytes(msg.data))
+        self._queue(wire, bus, bus.bitrate, ready=self.now)
+
+    # ------------------------------------------------------------------ power
+    def power_off(self) -> None:
+        self.bench.power_off(self.now)
+
+    def power_on(self) -> None:
+        self.bench.power_on(self.now)
+
+    def power_cycle(self, off_time: float = 1.0) -> None:
+        self.power_off()
+        self.run_until(self.now + off_time)
+        self.power_on()
+
+
+class SimCyclicTask(ModifiableCyclicTaskABC, RestartableCyclicTaskABC):
+    """``bus.send_periodic`` in simulated time: exact periods on the lane's clock."""
+
+    def __init__(self, bus: SimEscBus, messages, period: float, duration: float | None,
+                 modifier_callback: Callable[[can.Message], None] | None) -> None:
+        super().__init__(messages, period)
+        self.bus = bus
+        self.duration = duration
+        self.modifier_callback = modifier_callback
+        self.active = False
+        self.index = 0
+        self.start()
+
+    def start(self) -> None:
+        world = self.bus.world
+        self.active = True
+        self.next_time = world.now
+        self.end_time = None if self.duration is None else world.now + self.duration
+        if self not in world._tasks:
+            world._tasks.append(self)
+
+    def stop(self) -> None:
+        self.active = False
+        if self in self.bus.world._tasks:
+            self.bus.world._tasks.remove(self)
+
+    def fire(self, t: float) -> None:
+        if self.end_time is not None and t > self.end_time:
+            self.stop()
+            return
+        msg = self.messages[self.index]
+        self.index = (self.index + 1) % len(self.messages)
+        if self.modifier_callback is not None:
+            self.modifier_callback(msg)
+        self.bus.world.send(self.bus, msg)
+        self.next_time = round(self.next_time + self.period, 9)
+
+
+class SimEscBus(can.BusABC):
+    """A host's view of a simulated bench. See the module docstring."""
+
+    def __init__(
+        self,
+        channel: Any = "ckesc-sim",
+        can_filters=None,
+        *,
+        nodes: Iterable[int] | str = (1,),
+        bitrate: int = DEFAULT_BITRATE,
+        faults: Iterable[str] | Mapping[int, Iterable[str]] | str | None = None,
+        flash_path: str | None = None,
+        seed: int = 0,
+        esc_config: Mapping[str, Any] | None = None,
+        receive_own_messages: bool = False,
+        **kwargs: Any,
+    ) -> None:
+        channel = str(channel)
+        if isinstance(nodes, str):  # from can.conf / CAN_CONFIG strings: "1,2,3"
+            nodes = [int(n, 0) for n in nodes.split(",") if n.strip()]
+        if isinstance(faults, str):
+            faults = [f for f in faults.split(",") if f.strip()]
+        world = _WORLDS.get(channel)
+        if world is None:
+            bench = Bench(nodes, faults=faults, flash=flash_path, seed=seed, config=esc_config)
+            world = _WORLDS[channel] = SimWorld(channel, bench)
+        self.world = world
+        self.bitrate = int(bitrate)
+        self.receive_own_messages = receive_own_messages
+        self._rx: deque[can.Message] = deque()
+        self.channel_info = f"ckesc-sim {channel} @ {self.bitrate} bit/s ({len(world.bench.escs)} ESCs)"
+        super().__init__(channel, can_filters=can_filters, **kwargs)
+        self.channel = channel
+        world.buses.append(self)
+
+    # ---------------------------------------------------------------- the lane's extras
+    @property
+    def clock(self) -> SimClock:
+        return self.world.clock
+
+    @property
+    def bench(self) -> Bench:
+        return self.world.bench
+
+    def now(self) -> float:
+        return self.world.now
+
+    def advance(self, seconds: float) -> None:
+        """Let simulated time pass (frames that arrive meanwhile wait in this bus's queue)."""
+        self.world.run_until(self.world.now + seconds)
+
+    def power_off(self) -> None:
+        self.world.power_off()
+
+    def power_on(self) -> None:
+        self.world.power_on()
+
+    def power_cycle(self, off_time: float = 1.0) -> None:
+        self.world.power_cycle(off_time)
+
+    def set_fault(self, name: str, on: bool = True, node: int | None = None) -> None:
+        self.world.bench.set_fault(name, on, node)
+
+    # ---------------------------------------------------------------- BusABC
+    def _deliver(self, wire: WireFrame, is_rx: bool) -> None:
+        msg = can.Message(timestamp=wire.timestamp, arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id,
+                          data=wire.data, is_rx=is_rx, channel=self.channel)
+        if self._matches_filters(msg):
+            self._rx.append(msg)
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self._check_open()
+        self.world.send(self, msg)
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        """The next frame, advancing simulated time up to ``timeout`` seconds to wait for it."""
+        self._check_open()
+        if self._rx:
+            return self._rx.popleft()
+        world = self.world
+        deadline = float("inf") if timeout is None else world.now + max(timeout, 0.0)
+        while not self._rx:
+            t = world.next_event()
+            if t is None:
+                if timeout is None:
+                    raise can.CanOperationError("ckesc-sim: recv() without timeout on a bus where nothing will ever happen")
+                world.now = max(world.now, deadline)
+                return None
+            if t > deadline:
+                world.now = deadline
+                return None
+            world.step()
+        return self._rx.popleft()
+
+    def _recv_internal(self, timeout: float | None):
+        return (self._rx.popleft() if self._rx else None), True
+
+    def _send_periodic_internal(self, msgs: can.Message | Sequence[can.Message], period: float,
+                                duration: float | None = None, autostart: bool = True,
+                                modifier_callback: Callable[[can.Message], None] | None = None) -> SimCyclicTask:
+        task = SimCyclicTask(self, msgs, period, duration, modifier_callback)
+        if not autostart:
+            task.stop()
+        return task
+
+    def _check_open(self) -> None:
+        if self._is_shutdown:
+            raise can.CanOperationError("ckesc-sim: the bus was shut down")
+
+    def shutdown(self) -> None:
+        if self._is_shutdown:
+            return
+        if self in self.world.buses:
+            self.world.buses.remove(self)
+        self.world.bench.persist()
+        super().shutdown()
+
+    @staticmethod
+    def _detect_available_configs():
+        return [{"interface": "ckesc-sim", "channel": "ckesc-sim"}]
+
+
+def discard(channel: str) -> None:
+    """Forget the world on ``channel`` (its flash file, if any, is written first)."""
+    world = _WORLDS.pop(str(channel), None)
+    if world is not None:
+        world.bench.persist()
+
+
+def world(channel: str) -> SimWorld:
+    return _WORLDS[str(channel)]
