@@ -9,12 +9,18 @@ from __future__ import annotations
 
 from typing import Any, Iterable, Mapping
 
-from ..protocol.frame import WireFrame
+from ..protocol.errors import DecodeError
+from ..protocol.frame import Decoder, Frame, WireFrame, classify
 from . import faults as _faults
 from .flash import FlashStore
-from .model import EscConfig, EscModel
+from .model import HANDLED, THROTTLE_FRAMES, EscConfig, EscModel
 
 FaultSpec = Iterable[str] | Mapping[int, Iterable[str]] | None
+INF = float("inf")
+
+
+def _or_inf(t: float | None) -> float:
+    return INF if t is None else t
 
 
 class Bench:
@@ -41,17 +47,31 @@ class Bench:
             cfg = EscConfig(slot=slot, node_id=node, seed=seed, faults=names, **dict(config or {}))
             self.escs.append(EscModel(cfg, stored.get(slot)))
         self.powered = False
+        self._decoder = Decoder(track_requests=False)
+        # each ESC's next deadline, refreshed only for the ESCs a call touched (the hot path of both lanes)
+        self._deadlines: list[float] = [INF] * len(self.escs)  # INF: nothing scheduled
+        self._throttle_index: dict[tuple[str, int | None], list[EscModel]] | None = None
+        self.ignored = 0  # frames on the bus that no ESC acts on (other ESCs' reports and answers)
+
+    def touch(self, esc: EscModel | None = None) -> None:
+        """Refresh cached deadlines after changing an ESC from outside (``None``: all of them)."""
+        self._throttle_index = None
+        for i, e in enumerate(self.escs):
+            if esc is None or e is esc:
+                self._deadlines[i] = _or_inf(e.next_deadline())
 
     # power ------------------------------------------------------------------------------------
     def power_on(self, now: float) -> None:
         self.powered = True
         for esc in self.escs:
             esc.power_on(now)
+        self.touch()
 
     def power_off(self, now: float) -> None:
         self.powered = False
         for esc in self.escs:
             esc.power_off(now)
+        self.touch()
         self.persist()
 
     # faults -----------------------------------------------------------------------------------
@@ -60,19 +80,72 @@ class Bench:
         for esc in self.escs:
             if node is None or esc.node_id == node:
                 (esc.faults.add if on else esc.faults.discard)(name)
+        self.touch()
+
+    def set_pwm_input(self, value: int | None, node: int | None = None) -> None:
+        """The analog throttle input (0..2000; None: no signal) of one ESC or all."""
+        for esc in self.escs:
+            if node is None or esc.node_id == node:
+                esc.pwm_input = value
+        self.touch()
 
     # frames -----------------------------------------------------------------------------------
     def deliver(self, frame: Any, now: float, bitrate: int, sender: EscModel | None = None) -> None:
-        for esc in self.escs:
+        """A frame on the bus reaches every powered ESC at its bit rate (decoded once for all).
+
+        Frames no ESC acts on (other ESCs' reports) are only counted, and a throttle frame goes only
+        to the ESCs it can address (:meth:`EscModel.throttle_keys`): the hot path of a busy bus."""
+        if getattr(frame, "is_extended_id", True):
+            kind, _, _, _, spec = classify(frame.arbitration_id)
+            if spec is not None and (kind, spec.name) not in HANDLED:
+                self.ignored += 1  # other ESCs' reports and answers: nobody acts on them, no need to decode
+                return
+        try:
+            decoded: Frame | DecodeError = self._decoder.decode(frame)
+        except DecodeError as exc:
+            decoded = exc
+        targets = self.escs
+        if isinstance(decoded, Frame) and decoded.spec is not None:
+            name = decoded.spec.name
+            if name in THROTTLE_FRAMES:
+                group = decoded.fields["group"] if name == "raw_command_12b" else None
+                targets = self._throttle_targets(name, group)
+        changed = False
+        for esc in targets:
             if esc is not sender and esc.powered and esc.bitrate == bitrate:
-                esc.receive(frame, now)
+                if esc.receive(frame, now, decoded=decoded):
+                    self._deadlines[self.escs.index(esc)] = _or_inf(esc.next_deadline())
+                    changed = True
+        if changed and targets is self.escs:
+            self._throttle_index = None  # a service may have changed a node's throttle channel
+
+    def _throttle_targets(self, name: str, group: int | None) -> list[EscModel]:
+        if self._throttle_index is None:
+            index: dict[tuple[str, int | None], list[EscModel]] = {}
+            everything: list[EscModel] = []
+            for esc in self.escs:
+                keys = esc.throttle_keys()
+                if keys is None:
+                    everything.append(esc)
+                else:
+                    for key in keys:
+                        index.setdefault(key, []).append(esc)
+            self._throttle_index = {k: sorted(set(v) | set(everything), key=self.escs.index) for k, v in index.items()}
+            self._throttle_index[("*", None)] = everything
+        return self._throttle_index.get((name, group), self._throttle_index[("*", None)])
 
     def next_deadline(self) -> float | None:
-        times = [t for t in (esc.next_deadline() for esc in self.escs) if t is not None]
-        return min(times) if times else None
+        t = min(self._deadlines)
+        return None if t == INF else t
 
     def poll(self, now: float) -> list[tuple[EscModel, WireFrame]]:
-        out = [(esc, w) for esc in self.escs for w in esc.poll(now)]
+        """What the ESCs due by ``now`` send, in due order."""
+        out = []
+        for i, t in enumerate(self._deadlines):
+            if t <= now:
+                esc = self.escs[i]
+                out.extend((esc, w) for w in esc.poll(now))
+                self._deadlines[i] = _or_inf(esc.next_deadline())
         out.sort(key=lambda pair: pair[1].timestamp)
         return out
 

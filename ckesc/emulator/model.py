@@ -39,7 +39,7 @@ from ..protocol.catalogue import (
     THROTTLE_MAX,
     Status,
 )
-from ..protocol.codecs import unpack_throttle12
+from ..protocol.codecs import codec_for, unpack_throttle12
 from ..protocol.errors import DecodeError
 from ..protocol.frame import Decoder, Frame, WireFrame, encode
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, Priority, message_id
@@ -53,17 +53,25 @@ EXP_MODE = "exp"
 
 #: Fault code 1 -> the MSG1 self-test error bit it lights (4.4.4 status bits 7..0).
 _FAULT_BITS = {
-    0x01: Status.SELFTEST_COM_INPUT_LOW,
-    0x02: Status.SELFTEST_COM_INPUT_HIGH,
-    0x11: Status.SELFTEST_A_OUTPUT_HIGH,
-    0x12: Status.SELFTEST_B_OUTPUT_HIGH,
-    0x13: Status.SELFTEST_C_OUTPUT_HIGH,
-    0x21: Status.SELFTEST_A_OUTPUT_LOW,
-    0x22: Status.SELFTEST_B_OUTPUT_LOW,
-    0x23: Status.SELFTEST_C_OUTPUT_LOW,
+    code: int(bit)
+    for code, bit in {
+        0x01: Status.SELFTEST_COM_INPUT_LOW,
+        0x02: Status.SELFTEST_COM_INPUT_HIGH,
+        0x11: Status.SELFTEST_A_OUTPUT_HIGH,
+        0x12: Status.SELFTEST_B_OUTPUT_HIGH,
+        0x13: Status.SELFTEST_C_OUTPUT_HIGH,
+        0x21: Status.SELFTEST_A_OUTPUT_LOW,
+        0x22: Status.SELFTEST_B_OUTPUT_LOW,
+        0x23: Status.SELFTEST_C_OUTPUT_LOW,
+    }.items()
 }
+_PWM, _CCW, _COMM_FAULT, _RUNNING = (int(Status.THROTTLE_PWM), int(Status.DIRECTION_CCW), int(Status.COMM_FAULT),
+                                     int(Status.RUNNING))
 
 _RECORD_SENSORS = ("mcu", "mos", "cap", "motor")  # MSG_EXP12 tail tags 0xC1..0xC4 (R15)
+
+#: (sensor, time constant s, rise at full load degC, ambient degC): a plausible, not a measured, ESC.
+_THERMAL = (("mos", 20.0, 60.0, 25.0), ("cap", 40.0, 35.0, 25.0), ("mcu", 30.0, 20.0, 30.0), ("motor", 60.0, 70.0, 25.0))
 
 
 @dataclass
@@ -73,6 +81,7 @@ class EscConfig:
     slot: int = 0  # position on the bench: the key of this ESC in the flash store (its node id can change)
     node_id: int = DEFAULT_ESC_NODE_ID  # node id of a factory-fresh ESC (no flash yet)
     throttle_channel: int | None = None  # factory channel; None: the node id if 1..20, else 1
+    baud_code: int = cat.DEFAULT_BAUD_CODE  # factory Set Baud code (1: 500 kbit/s)
     max_cells: int = 12
     max_current_10a: int = 8  # 80 A
     hardware_version: int = 3
@@ -101,7 +110,7 @@ def factory_nvm(config: EscConfig) -> dict[str, Any]:
     return {
         "node_id": config.node_id,
         "throttle_channel": channel,
-        "baud": cat.DEFAULT_BAUD_CODE,
+        "baud": config.baud_code,
         "led_color": int(cat.DEFAULT_LED_COLOR),
         "led_blink": 0,
         "rotation": 0,
@@ -186,6 +195,7 @@ class EscModel:
         self._seq = 0
         self._tids = TransferIdCounter()
         self._last_update = now
+        self._last_thermal = now
         self._next_report: dict[str, float] = {}
         self._reports_were_active = True
         self._next_can_test = 0.0
@@ -248,25 +258,32 @@ class EscModel:
             self.receive(frame, now)
         return self.poll(now), self.next_deadline()
 
-    def receive(self, msg: Any, now: float) -> None:
-        """A frame heard on the bus at ``now`` (the adapter has checked the bitrate matches)."""
+    def receive(self, msg: Any, now: float, *, decoded: Frame | DecodeError | None = None) -> bool:
+        """A frame heard on the bus at ``now`` (the adapter has checked the bitrate matches).
+        ``decoded``: the frame already decoded (or its DecodeError), when a bench decodes once for all.
+        Returns whether the ESC acted on it (its next deadline may have moved)."""
         if not self.powered or now < self.ready_at:
-            return
+            return False
         self.counters["rx"] += 1
-        self._update(now)
-        try:
-            frame = self._decoder.decode(msg)
-        except DecodeError:
+        if decoded is None:
+            try:
+                decoded = self._decoder.decode(msg)
+            except DecodeError as exc:
+                decoded = exc
+        if isinstance(decoded, DecodeError):
             self.counters["rx_malformed"] += 1
-            return
+            return False
+        frame = decoded
         if frame.spec is None:
             self.counters["rx_foreign"] += 1
-            return
+            return False
         handler = _HANDLERS.get((frame.kind, frame.name))
         if handler is None:
             self.counters["rx_ignored"] += 1
-            return
-        handler(self, frame, now)
+            return False
+        if handler is not EscModel._on_throttle:
+            self._update(now)  # throttle frames update only when addressed to this ESC's channel
+        return handler(self, frame, now) is not False
 
     def poll(self, now: float) -> list[WireFrame]:
         """Everything due at or before ``now``, in due order, each stamped with its due time."""
@@ -277,8 +294,7 @@ class EscModel:
             self._schedule_reports(now)
         out = []
         while self._outbox and self._outbox[0][0] <= now:
-            due, _, wire = heapq.heappop(self._outbox)
-            out.append(wire._replace(timestamp=due))
+            out.append(heapq.heappop(self._outbox)[2])  # stamped with its due time when queued
         self.counters["tx"] += len(out)
         return out
 
@@ -293,10 +309,18 @@ class EscModel:
             transfer_id = self._tids.peek(name) if "transfer_id_stuck" in self.faults else self._tids.next(name)
         if priority is None:
             priority = spec.priority if spec.priority is not None else Priority.MEDIUM
-        wire = encode(spec, fields, kind=kind, source=self.node_id, destination=destination,
-                      transfer_id=transfer_id, priority=priority, layout=layout)
-        wire = self._mangle_tail(wire, spec)
-        self._push(due, wire._replace(arbitration_id=wire.arbitration_id | id_or))
+        if kind is Kind.MESSAGE and layout is None and len(spec.layouts) == 1 and spec.has_tail:
+            # reports, the bulk of what an ESC sends: the layout's compiled codec directly
+            data = codec_for(spec.layouts[0]).encode(fields) + bytes((tail_byte(transfer_id),))
+            wire = WireFrame(message_id(priority, spec.type_id, self.node_id), data, due)
+        else:
+            wire = encode(spec, fields, kind=kind, source=self.node_id, destination=destination,
+                          transfer_id=transfer_id, priority=priority, layout=layout, timestamp=due)
+        if self.faults & _TAIL_FAULTS:
+            wire = self._mangle_tail(wire, spec)
+        if id_or:
+            wire = wire._replace(arbitration_id=wire.arbitration_id | id_or)
+        self._push(due, wire)
 
     def _push(self, due: float, wire: WireFrame) -> None:
         self._seq += 1
@@ -348,9 +372,13 @@ class EscModel:
             self.rpm = 0.0
         load = self.rpm / self.config.max_rpm
         self.current = 80.0 * load**3
-        for name, tau, gain, ambient in (("mos", 20.0, 60.0, 25.0), ("cap", 40.0, 35.0, 25.0), ("mcu", 30.0, 20.0, 30.0), ("motor", 60.0, 70.0, 25.0)):
-            goal = ambient + gain * load**2
-            self.temps[name] += (goal - self.temps[name]) * (1 - math.exp(-dt / tau))
+        thermal_dt = now - self._last_thermal
+        if thermal_dt >= 0.05:  # temperatures move in seconds: a coarser step costs less
+            self._last_thermal = now
+            for name, tau, gain, ambient in _THERMAL:
+                goal = ambient + gain * load**2
+                self.temps[name] += (goal - self.temps[name]) * (1 - math.exp(-thermal_dt / tau))
+            self._record_temperatures()
         running = self.rpm >= 1 or self.throttle > 0
         if running:
             self.run_time += dt
@@ -360,7 +388,6 @@ class EscModel:
             key = "starts" if running else "stops"
             self.nvm[key] = (self.nvm[key] + 1) & 0xFFFF
             self.nvm_dirty = True
-        self._record_temperatures()
 
     def _record_temperatures(self) -> None:
         for sensor in _RECORD_SENSORS:
@@ -447,17 +474,17 @@ class EscModel:
     # reports
 
     def status_word(self) -> int:
-        s = 0
+        """MSG1 status (R7), with plain ints: IntFlag arithmetic is slow on this hot path."""
+        s = _FAULT_BITS.get(self.self_test_fault, 0)
         if self.nvm["rotation"]:
-            s |= Status.THROTTLE_PWM if "status_direction_bit14" in self.faults else Status.DIRECTION_CCW
+            s |= _PWM if "status_direction_bit14" in self.faults else _CCW
         if self._active_source_is_pwm() and "status_direction_bit14" not in self.faults:
-            s |= Status.THROTTLE_PWM
+            s |= _PWM
         if self.comm_fault:
-            s |= Status.COMM_FAULT
+            s |= _COMM_FAULT
         if self.running and "status_running_wrong" not in self.faults:
-            s |= Status.RUNNING
-        s |= _FAULT_BITS.get(self.self_test_fault, 0)
-        return int(s)
+            s |= _RUNNING
+        return s
 
     def _emit_report(self, which: str, due: float) -> None:
         prio = Priority.MEDIUM if "wrong_priority" in self.faults else None
@@ -484,7 +511,7 @@ class EscModel:
     def _emit_raw(self, due: float, type_id: int, payload: bytes, priority: int) -> None:
         """A frame the catalogue's layouts cannot express (the faults that send wrong lengths)."""
         tid = self._tids.next(f"raw{type_id}")
-        self._push(due, WireFrame(message_id(priority, type_id, self.node_id), payload + bytes([tail_byte(tid)])))
+        self._push(due, WireFrame(message_id(priority, type_id, self.node_id), payload + bytes([tail_byte(tid)]), due))
 
     def _electrical(self) -> tuple[float, float]:
         sag = 0.02 * self.current
@@ -570,6 +597,20 @@ class EscModel:
             return
         self._emit(due, "get_esc_id", {"node_id": node, "throttle_channel": channel}, layout="reply")
 
+    def throttle_keys(self) -> set[tuple[str, int | None]] | None:
+        """The throttle frames this ESC can be addressed by, as (frame name, 12-bit group or None);
+        None: all of them (a fault changes how it reads them). Lets a bench route throttle frames
+        to the ESCs they concern; must agree with :meth:`_on_throttle`."""
+        if self.faults & _THROTTLE_READ_FAULTS:
+            return None
+        ch = self.nvm["throttle_channel"]
+        keys: set[tuple[str, int | None]] = {("raw_command_12b", (ch + 3) // 4)}
+        if 1 <= ch <= 4:
+            keys.add(("raw_command_14b", None))
+        if 1 <= ch <= 6:
+            keys.add(("raw_command_10b", None))
+        return keys
+
     def _on_throttle(self, f: Frame, now: float) -> None:
         channel = 1 if "throttle_channel_ignored" in self.faults else self.nvm["throttle_channel"]
         name = f.name
@@ -594,8 +635,15 @@ class EscModel:
                 raw = min(f.fields["channels"][channel - 1], THROTTLE_10B_MAX)
                 value = raw if "ten_bit_not_doubled" in self.faults else raw * 2
         if value is None:
-            return  # not addressed to this ESC's channel: not a command for it
-        self.can_throttle = min(value, THROTTLE_MAX)  # R6: above 2000 is OBSERVE; this ESC clamps
+            return False  # not addressed to this ESC's channel: not a command for it
+        value = min(value, THROTTLE_MAX)
+        if value == self.can_throttle and not self.comm_fault:
+            # the same command again: only the comm-loss deadline moves, and later, so nothing is due
+            # earlier than before; the motor's first-order lag integrates exactly over the longer step
+            self.last_command = now
+            return False
+        self._update(now)
+        self.can_throttle = value  # R6: above 2000 is OBSERVE; this ESC clamps
         self.last_command = now
         if self.comm_fault and "comm_loss_sticky" not in self.faults:
             self.comm_fault = False
@@ -806,6 +854,13 @@ class EscModel:
                                "msg2_interval": n["msg2_interval"], "msg3_interval": n["msg3_interval"]})
 
 
+_TAIL_FAULTS = frozenset({"tail_toggle_set", "tail_not_single_frame"})
+
+#: Faults that change which throttle frames address an ESC (see EscModel.throttle_keys).
+_THROTTLE_READ_FAULTS = frozenset({"throttle_channel_ignored", "twelve_bit_nibbles_swapped", "twelve_bit_group_ignored",
+                                   "fourteen_bit_byte_order"})
+
+#: What an ESC acts on; everything else on the bus is counted and ignored.
 _HANDLERS = {
     (Kind.MESSAGE, "can_test"): EscModel._on_can_test,
     (Kind.MESSAGE, "msg_control"): EscModel._on_msg_control,
@@ -827,3 +882,6 @@ _HANDLERS = {
     (Kind.REQUEST, "maintenance_information"): EscModel._on_maintenance,
     (Kind.REQUEST, "get_major_configuration"): EscModel._on_major_config,
 }
+
+THROTTLE_FRAMES = frozenset({"raw_command_14b", "raw_command_12b", "raw_command_10b"})
+HANDLED = frozenset(_HANDLERS)

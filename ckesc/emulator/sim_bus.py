@@ -19,6 +19,7 @@ Set Baud. :func:`discard` removes it.
 
 from __future__ import annotations
 
+import heapq
 import itertools
 from collections import deque
 from typing import Any, Callable, Iterable, Mapping, Sequence
@@ -61,8 +62,14 @@ class _Pending:
         self.ready, self.seq, self.wire, self.origin, self.bitrate = ready, seq, wire, origin, bitrate
 
 
+INF = float("inf")
+
+
 class SimWorld:
-    """One simulated CAN bus with its bench of ESCs and the host buses attached to it."""
+    """One simulated CAN bus with its bench of ESCs and the host buses attached to it.
+
+    Frames wait in ``_waiting`` (a heap by ready time) until the clock reaches their ready time,
+    then contend in ``_ready`` (a heap by id, i.e. arbitration order) for the bus."""
 
     def __init__(self, channel: str, bench: Bench, *, power_on: bool = True) -> None:
         self.channel = channel
@@ -70,7 +77,8 @@ class SimWorld:
         self.now = 0.0
         self.clock = SimClock(self)
         self.buses: list[SimEscBus] = []
-        self._pending: list[_Pending] = []
+        self._waiting: list[tuple[float, int, _Pending]] = []
+        self._ready: list[tuple[int, int, _Pending]] = []
         self._in_flight: tuple[float, _Pending] | None = None
         self._seq = itertools.count()
         self._tasks: list[SimCyclicTask] = []
@@ -80,36 +88,35 @@ class SimWorld:
             bench.power_on(0.0)
 
     # ------------------------------------------------------------------ event loop
-    def _next_bench(self) -> float | None:
-        return self.bench.next_deadline()
-
     def next_event(self) -> float | None:
-        times = []
-        d = self._next_bench()
-        if d is not None:
-            times.append(max(d, self.now))
+        t = min(self.bench._deadlines) if self.bench.escs else INF
         if self._in_flight is not None:
-            times.append(self._in_flight[0])
-        elif self._pending:
-            times.append(max(self.now, min(p.ready for p in self._pending)))
+            t = min(t, self._in_flight[0])
+        elif self._ready:
+            t = self.now
+        elif self._waiting:
+            t = min(t, self._waiting[0][0])
         for task in self._tasks:
-            if task.active:
-                times.append(max(task.next_time, self.now))
-        return min(times) if times else None
+            if task.next_time < t:
+                t = task.next_time
+        if t == INF:
+            return None
+        return t if t > self.now else self.now
 
-    def step(self) -> bool:
-        """Process the earliest event. False when nothing is scheduled."""
-        t = self.next_event()
+    def step(self, t: float | None = None) -> bool:
+        """Process the earliest event (at ``t`` when the caller just asked :meth:`next_event`).
+        False when nothing is scheduled."""
         if t is None:
-            return False
+            t = self.next_event()
+            if t is None:
+                return False
         self.now = t
         if self._in_flight is not None and self._in_flight[0] <= t:
             self._finish_transmission()
         for task in self._tasks:
-            if task.active and task.next_time <= t:
+            if task.next_time <= t:
                 task.fire(t)
-        deadline = self._next_bench()
-        if deadline is not None and deadline <= t:
+        if min(self.bench._deadlines) <= t:
             for esc, wire in self.bench.poll(t):
                 self._queue(wire, esc, esc.bitrate, ready=wire.timestamp)
         if self._in_flight is None:
@@ -127,19 +134,25 @@ class SimWorld:
             if t is None or t > t_end:
                 self.now = max(self.now, t_end)
                 return
-            self.step()
+            self.step(t)
 
     def _queue(self, wire: WireFrame, origin: Any, bitrate: int, ready: float) -> None:
-        self._pending.append(_Pending(max(ready, self.now), next(self._seq), wire, origin, bitrate))
+        p = _Pending(max(ready, self.now), next(self._seq), wire, origin, bitrate)
+        if p.ready <= self.now:
+            heapq.heappush(self._ready, (wire.arbitration_id, p.seq, p))
+        else:
+            heapq.heappush(self._waiting, (p.ready, p.seq, p))
 
     def _start_transmission(self) -> None:
-        ready = [p for p in self._pending if p.ready <= self.now]
+        waiting, ready = self._waiting, self._ready
+        while waiting and waiting[0][0] <= self.now:
+            p = heapq.heappop(waiting)[2]
+            heapq.heappush(ready, (p.wire.arbitration_id, p.seq, p))
         if not ready:
             return
-        # arbitration: the lowest id wins; frames at another bit rate than the winner's are garbage
-        # to it, so only frames at one bit rate contend (a mixed-rate bus is broken anyway).
-        winner = min(ready, key=lambda p: (p.wire.arbitration_id, p.seq))
-        self._pending.remove(winner)
+        # arbitration: the lowest id wins (a frame at another bit rate than its listeners' is
+        # garbage to them; a mixed-rate bus is broken anyway, so rates do not interact here)
+        winner = heapq.heappop(ready)[2]
         duration = frame_bits(len(winner.wire.data)) / winner.bitrate
         self._in_flight = (round(self.now + duration, 12), winner)
         self.stats["busy_s"] += duration
@@ -309,7 +322,7 @@ class SimEscBus(can.BusABC):
             if t > deadline:
                 world.now = deadline
                 return None
-            world.step()
+            world.step(t)
         return self._rx.popleft()
 
     def _recv_internal(self, timeout: float | None):

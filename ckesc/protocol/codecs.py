@@ -108,7 +108,7 @@ def _check_width(name: str, value: object, bits: int) -> None:
 class LayoutCodec:
     """A layout compiled for speed. ``decode(payload)`` assumes the length was checked."""
 
-    __slots__ = ("layout", "_struct", "_plan", "_simple", "_names", "_nibble_order")
+    __slots__ = ("layout", "_struct", "_plan", "_simple", "_names", "_nibble_order", "_known", "_n_words", "_fill")
 
     def __init__(self, layout: Layout, nibble_order: str = "lsb") -> None:
         self.layout = layout
@@ -126,6 +126,10 @@ class LayoutCodec:
             (f.name, index[(f.offset, f.size)], f.shift, f.mask, f.size * 8 == f.bits) for f in layout.fields
         )
         self._names = tuple(f.name for f in layout.fields)
+        self._known = frozenset(layout.field_names)
+        self._n_words = len(words)
+        # (name, word index, shift, mask, default) in field order, for encode
+        self._fill = tuple((f.name, index[(f.offset, f.size)], f.shift, f.mask, f.default) for f in layout.fields)
         self._simple = len(words) == len(layout.fields) and all(p[4] for p in self._plan)
 
     def decode(self, payload: bytes) -> dict:
@@ -147,8 +151,7 @@ class LayoutCodec:
 
     def encode(self, values: Mapping[str, object]) -> bytes:
         layout = self.layout
-        known = set(layout.field_names)
-        unknown = set(values) - known
+        unknown = values.keys() - self._known
         if unknown:
             raise EncodeError(
                 f"{layout.name}: unknown field(s) {', '.join(sorted(unknown))}; this layout has "
@@ -168,9 +171,9 @@ class LayoutCodec:
             for b in payload:
                 _check_width("payload byte", b, 8)
             return bytes(payload)
-        words = [0] * len(self._struct.unpack_from(bytes(self._struct.size)))
-        for f, (name, i, shift, mask, _) in zip(layout.fields, self._plan):
-            value = values.get(name, f.default)
+        words = [0] * self._n_words
+        for name, i, shift, mask, default in self._fill:
+            value = values.get(name, default)
             if value is None:
                 raise EncodeError(f"{layout.name}: field {name} is required (no default)")
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= mask:
