@@ -1,0 +1,7 @@
+"""``python -m ckesc`` is the ``ckesc`` command."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

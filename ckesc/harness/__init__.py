@@ -1,0 +1,1 @@
+"""The conformance harness: lanes, the DUT, requirements, verdicts, the pytest plugin and reports."""

@@ -1,0 +1,310 @@
+"""The device under test as the suites see it: a host on a lane, talking to one ESC.
+
+Everything a test needs goes through :class:`Dut`: send a broadcast or a request, wait on the
+lane's clock, look at what came (every frame is kept in ``dut.trace`` with its bus timestamp),
+power-cycle with proof, change throttle safely, snapshot and restore settings.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+import can
+
+from ..protocol import catalogue as cat
+from ..protocol.frame import Frame, WireFrame
+from ..protocol.host import Garbled, HostProtocol, Pending, Response
+from ..protocol.ids import Kind
+from .lanes import Lane
+from .profile import DutProfile
+from .verdict import Inconclusive, Record
+
+
+@dataclass
+class Sent:
+    wire: WireFrame
+    host_time: float
+    bus_time: float | None = None  # from the echo of our own frame (SocketCAN loopback / socketcand / sim)
+
+    @property
+    def time(self) -> float:
+        return self.bus_time if self.bus_time is not None else self.host_time
+
+
+@dataclass
+class Exchange:
+    """A request and what answered it."""
+
+    sent: Sent
+    pending: Pending
+    response: Frame | None = None
+    mismatch: list[str] = field(default_factory=list)
+
+    @property
+    def delay(self) -> float | None:
+        if self.response is None or self.response.timestamp is None:
+            return None
+        return self.response.timestamp - self.sent.time
+
+    @property
+    def fields(self) -> dict[str, Any]:
+        if self.response is None:
+            raise AssertionError(f"no answer to {self.pending.name} (destination {self.pending.destination}, "
+                                 f"transfer id {self.pending.transfer_id})")
+        return self.response.fields
+
+
+class Dut:
+    def __init__(self, lane: Lane, profile: DutProfile, *, node_id: int | None = None, host_node: int = 0,
+                 allow_motor_spin: bool = False) -> None:
+        self.lane = lane
+        self.profile = profile
+        self.host_node = host_node
+        self.proto = HostProtocol(host_node, nibble_order=profile.nibble_order)
+        self.allow_motor_spin = allow_motor_spin
+        self.trace: list[Frame] = []  # everything heard, decoded, in order
+        self.garbled: list[Garbled] = []
+        self._sent: list[Sent] = []
+        self._tasks: list[Any] = []
+        self.record = Record()
+        self.node_id = node_id if node_id is not None else self.discover()
+
+    # ------------------------------------------------------------------ clock
+    def now(self) -> float:
+        return self.lane.now()
+
+    @property
+    def clock(self) -> str:
+        return self.lane.clock
+
+    @property
+    def interval_tolerance_ms(self) -> float:
+        """How far one report interval may stray from its target: exact (float rounding) in the
+        simulated lane; one report-scheduling tick (1 ms) plus the lane's error in real time."""
+        return 1e-6 if self.clock == "simulated" else 1.0 + self.lane.timing_error * 1000
+
+    def wait(self, seconds: float) -> None:
+        """Let lane time pass, reading the bus (nothing is lost)."""
+        self.read_until(self.now() + seconds)
+
+    def read_until(self, t: float, stop: Callable[[Frame], bool] | None = None) -> Frame | None:
+        """Read frames until lane time ``t``; with ``stop``, return the first frame it accepts."""
+        while True:
+            left = t - self.now()
+            if left <= 0:
+                return None
+            msg = self.lane.recv(left)
+            if msg is None:
+                continue
+            frame = self._take(msg)
+            if frame is not None and stop is not None and stop(frame):
+                return frame
+
+    def _take(self, msg: can.Message) -> Frame | None:
+        if msg.is_extended_id and (msg.arbitration_id & 0x7F) == self.host_node and not msg.is_error_frame:
+            self._match_echo(msg)
+        for event in self.proto.receive(msg):
+            if isinstance(event, Garbled):
+                self.garbled.append(event)
+                return None
+            frame = event.frame
+            self.trace.append(frame)
+            if isinstance(event, Response):
+                event.pending.response = frame
+                event.pending.mismatch = event.mismatch
+            return frame
+        return None
+
+    def _match_echo(self, msg: can.Message) -> None:
+        data = bytes(msg.data)
+        for s in self._sent:
+            if s.bus_time is None and s.wire.arbitration_id == msg.arbitration_id and s.wire.data == data:
+                s.bus_time = msg.timestamp
+                return
+
+    # ------------------------------------------------------------------ sending
+    def send_wire(self, wire: WireFrame) -> Sent:
+        msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id)
+        sent = Sent(wire, self.now())
+        self._sent.append(sent)
+        if len(self._sent) > 256:
+            del self._sent[:128]
+        self.lane.bus.send(msg)
+        return sent
+
+    def broadcast(self, name: str, fields: Mapping[str, Any] | None = None, **kw: Any) -> Sent:
+        if name in _THROTTLE_FRAMES:
+            self._check_throttle(name, fields or {})
+        return self.send_wire(self.proto.message(name, fields, **kw))
+
+    def request(self, name: str, fields: Mapping[str, Any] | None = None, *, destination: int | None = None,
+                timeout: float = 0.1, **kw: Any) -> Exchange:
+        """Send a request and read until its answer or ``timeout`` (lane seconds)."""
+        dest = self.node_id if destination is None else destination
+        wire, pending = self.proto.request(name, fields, destination=dest, now=self.now(), timeout=timeout, **kw)
+        sent = self.send_wire(wire)
+        ex = Exchange(sent, pending)
+        spec = cat.spec(name)
+        if spec.responses and kw.get("expect_response", True):
+            self.read_until(sent.host_time + timeout, stop=lambda f: pending.response is not None)
+            self.proto.expire(self.now())
+        ex.response = pending.response
+        ex.mismatch = pending.mismatch
+        return ex
+
+    def ask(self, name: str, fields: Mapping[str, Any] | None = None, **kw: Any) -> dict[str, Any]:
+        """A request whose answer the test needs (not what it checks): no answer is an error."""
+        ex = self.request(name, fields, **kw)
+        if ex.response is None:
+            raise DutError(f"{name}: no answer from node {kw.get('destination', self.node_id)}")
+        return ex.response.fields
+
+    # ------------------------------------------------------------------ looking at what came
+    def frames(self, name: str | None = None, *, since: float | None = None, until: float | None = None,
+               source: int | None = None, kind: Kind | None = None) -> list[Frame]:
+        out = []
+        for f in self.trace:
+            if name is not None and f.name != name:
+                continue
+            if source is not None and f.source != source:
+                continue
+            if kind is not None and f.kind is not kind:
+                continue
+            ts = f.timestamp or 0.0
+            if since is not None and ts < since:
+                continue
+            if until is not None and ts > until:
+                continue
+            out.append(f)
+        return out
+
+    def reports(self, name: str, seconds: float, *, source: int | None = None) -> list[Frame]:
+        """Read for ``seconds`` and return the ``name`` frames the DUT sent meanwhile."""
+        start = self.now()
+        self.wait(seconds)
+        return self.frames(name, since=start, source=self.node_id if source is None else source)
+
+    def wait_for(self, name: str, timeout: float, *, source: int | None = None,
+                 where: Callable[[Frame], bool] | None = None) -> Frame | None:
+        src = self.node_id if source is None else source
+
+        def ok(f: Frame) -> bool:
+            return f.name == name and (src is None or f.source == src) and (where is None or where(f))
+
+        return self.read_until(self.now() + timeout, stop=ok)
+
+    # ------------------------------------------------------------------ discovery and state
+    def discover(self) -> int:
+        """Find the DUT's node id with GET_ESC_ID (R1), asking again until the profile's boot time
+        (plus a second) has passed: an ESC that is still booting hears nothing."""
+        give_up = self.now() + self.profile.boot_s + 1.0
+        while True:
+            sent = self.broadcast("get_esc_id", {"option": 0}, layout="query")
+            reply = self.read_until(sent.host_time + cat.ANSWER_DELAY_MAX_S * 2,
+                                    stop=lambda f: f.name == "get_esc_id" and f.layout is not None
+                                    and f.layout.name == "reply")
+            if reply is not None:
+                return reply.source
+            if self.now() >= give_up:
+                raise DutError(f"no ESC answered GET_ESC_ID for {self.profile.boot_s + 1.0:.1f} s: is it powered, at "
+                               f"{self.lane.bitrate} bit/s, and not at node id 0x7D (which answers nothing)? "
+                               "Give --node-id to skip discovery.")
+
+    def settings(self) -> dict[str, int]:
+        """The settings tests may change (242 and Set/Get Freq read)."""
+        cfg = self.ask("get_major_configuration", {"option": 0})
+        freq = self.ask("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0})
+        return {
+            "rotation": cfg["direction"],
+            "throttle_source": cfg["throttle_source"],
+            "throttle_channel": cfg["throttle_channel"],
+            "led_color": cfg["led_color"],
+            "led_blink": cfg["led_blink"],
+            "msg1_interval": freq["msg1_interval"],
+            "msg2_interval": freq["msg2_interval"],
+            "msg3_interval": freq["msg3_interval"],
+        }
+
+    def restore(self, snapshot: Mapping[str, int]) -> list[str]:
+        """Put back what a test changed; returns what could not be restored (after verifying)."""
+        self.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+        self.wait(cat.ANSWER_DELAY_MAX_S)
+        now = self.settings()
+        if any(now[k] != snapshot[k] for k in ("msg1_interval", "msg2_interval", "msg3_interval")):
+            self.ask("set_freq", {"option": 1, **{k: snapshot[k] for k in ("msg1_interval", "msg2_interval", "msg3_interval")}})
+        if now["rotation"] != snapshot["rotation"]:
+            self.ask("set_rotation", {"rotation": snapshot["rotation"]})
+        if now["throttle_source"] != snapshot["throttle_source"]:
+            self.ask("throttle_select", {"source": snapshot["throttle_source"]})
+        if self.profile.has("led") and (now["led_color"], now["led_blink"]) != (snapshot["led_color"], snapshot["led_blink"]):
+            self.ask("set_led", {"option": 1, "color": snapshot["led_color"], "blink": snapshot["led_blink"]})
+        after = self.settings()
+        return [f"{k}: {after[k]} (was {snapshot[k]})" for k in snapshot if after[k] != snapshot[k]]
+
+    def power_up_count(self) -> int | None:
+        ex = self.request("maintenance_information", {"option": 2})
+        if ex.response is None or "power_ups" not in ex.response.fields:
+            return None
+        return ex.response.fields["power_ups"]
+
+    def power_cycle(self, off_time: float = 1.0, boot_wait: float = 1.0) -> None:
+        """Power off, wait, on, and prove the cycle by the power-up counter (241 option 2);
+        raises Inconclusive when it cannot be proven."""
+        if not self.lane.power.available:
+            raise Inconclusive("this test needs a power cycle and no power control was given (--power)")
+        self.stop_throttle()
+        before = self.power_up_count()
+        self.lane.power.off()
+        self.lane.wait_power(off_time)
+        self.lane.power.on()
+        self.wait(boot_wait)
+        after = self.power_up_count()
+        self.record.observe("power-up counter", f"{before} -> {after}")
+        if before is None or after is None or after != (before + 1) & 0xFFFF:
+            raise Inconclusive(f"power cycle not proven: power-up counter {before} -> {after} (241 option 2)")
+
+    # ------------------------------------------------------------------ throttle (safety)
+    def _check_throttle(self, name: str, fields: Mapping[str, Any]) -> None:
+        if any(fields.get("channels", ())) and not self.allow_motor_spin:
+            raise Inconclusive("this test spins the motor: run with --allow-motor-spin (and the propeller off)")
+
+    def throttle_stream(self, name: str, fields: Mapping[str, Any], period: float = 0.0025) -> Any:
+        """Send a throttle frame every ``period`` s with its transfer id counting (F3) until
+        :meth:`stop_throttle` (called on every exit path by the plugin)."""
+        self._check_throttle(name, fields)
+        wire = self.proto.message(name, fields)
+        msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True)
+        spec = cat.spec(name)
+        key = (Kind.MESSAGE, name)
+
+        def bump(m: can.Message) -> None:
+            if spec.has_tail:
+                m.data[-1] = 0xC0 | self.proto.tids.next(key)
+
+        task = self.lane.bus.send_periodic(msg, period, modifier_callback=bump)
+        self._tasks.append(task)
+        return task
+
+    def stop_throttle(self) -> None:
+        for task in self._tasks:
+            try:
+                task.stop()
+            except Exception:  # noqa: BLE001 - on an exit path every stop is attempted
+                pass
+        self._tasks.clear()
+
+    def zero_throttle(self) -> None:
+        """Stop every stream and command zero on every channel in all three formats."""
+        self.stop_throttle()
+        self.send_wire(self.proto.message("raw_command_14b", {"channels": [0] * 4}))
+        for group in cat.THROTTLE_GROUPS:
+            self.send_wire(self.proto.message("raw_command_12b", {"channels": [0] * 4, "group": group}))
+        self.send_wire(self.proto.message("raw_command_10b", {"channels": [0] * 6}))
+
+
+class DutError(RuntimeError):
+    """The harness could not do what a test needed (not a verdict on the DUT)."""
+
+
+_THROTTLE_FRAMES = frozenset({"raw_command_14b", "raw_command_12b", "raw_command_10b"})

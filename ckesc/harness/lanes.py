@@ -1,0 +1,246 @@
+"""Lanes: where the DUT lives and which clock the suite measures with.
+
+* :class:`SimLane` - the emulator in simulated time (``ckesc-sim``): exact timing, clock "simulated".
+* :class:`BusLane` - a real python-can bus (a real ESC on SocketCAN, or ``ckesc emulate`` behind
+  socketcand): the clock is the bus timestamps (the host's own frames come back through
+  ``receive_own_messages`` or the socketcand echo), with the DUT profile's stated measurement error.
+
+Tests never read the wall clock or sleep: they ask the lane (through the ``dut`` fixture).
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import shlex
+import subprocess
+import sys
+import time
+from abc import ABC, abstractmethod
+from typing import Any
+
+import can
+
+from ..emulator import sim_bus
+from ..protocol.catalogue import DEFAULT_BITRATE
+
+_SIM_CHANNELS = itertools.count()
+
+
+class PowerControl(ABC):
+    """Switches the DUT's supply. ``available`` False: tests that need a power cycle are skipped."""
+
+    name = "power"
+    available = True
+
+    @abstractmethod
+    def off(self) -> None: ...
+
+    @abstractmethod
+    def on(self) -> None: ...
+
+
+class Lane(ABC):
+    name: str
+    clock: str  # the verdict clock label: "simulated" or "bus timestamp"
+    timing_error: float = 0.0  # seconds: margins smaller than this are INCONCLUSIVE
+    bus: can.BusABC
+    power: PowerControl
+    bitrate: int
+
+    @abstractmethod
+    def now(self) -> float:
+        """Lane time in the bus's time base (what frame timestamps are compared with)."""
+
+    @abstractmethod
+    def wait_power(self, seconds: float) -> None:
+        """Let ``seconds`` pass while the DUT is unpowered (no frames to read)."""
+
+    def recv(self, timeout: float) -> can.Message | None:
+        return self.bus.recv(timeout=max(timeout, 0.0))
+
+    @abstractmethod
+    def reopen(self, bitrate: int) -> None:
+        """Reopen the host's bus at another bit rate (after Set Baud)."""
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+
+# ------------------------------------------------------------------------------------------ simulated
+
+
+class EmulatorPower(PowerControl):
+    name = "emulator"
+
+    def __init__(self, lane: SimLane) -> None:
+        self.lane = lane
+
+    def off(self) -> None:
+        self.lane.sim.power_off()
+
+    def on(self) -> None:
+        self.lane.sim.power_on()
+
+
+class SimLane(Lane):
+    name = "simulated"
+    clock = "simulated"
+    timing_error = 0.0
+
+    def __init__(self, *, nodes=(1,), faults=None, flash_path: str | None = None, seed: int = 0,
+                 bitrate: int = DEFAULT_BITRATE, esc_config: dict[str, Any] | None = None) -> None:
+        self.channel = f"ckesc-suite-{os.getpid()}-{next(_SIM_CHANNELS)}"
+        self.bitrate = bitrate
+        self.bus = self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, nodes=list(nodes), faults=faults,
+                                      flash_path=flash_path, seed=seed, bitrate=bitrate, esc_config=esc_config,
+                                      receive_own_messages=True, ignore_config=True)
+        self.power = EmulatorPower(self)
+
+    def now(self) -> float:
+        return self.sim.now()
+
+    def wait_power(self, seconds: float) -> None:
+        self.sim.advance(seconds)
+
+    def reopen(self, bitrate: int) -> None:
+        old = self.sim
+        self.bus = self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, bitrate=bitrate,
+                                      receive_own_messages=True, ignore_config=True)
+        old.shutdown()
+        self.bitrate = bitrate
+
+    def close(self) -> None:
+        self.sim.shutdown()
+        sim_bus.discard(self.channel)
+
+
+# ------------------------------------------------------------------------------------------ real bus
+
+
+class CommandPower(PowerControl):
+    """Runs shell commands (e.g. a lab PSU's CLI, or ``ckesc control ... power off``)."""
+
+    name = "command"
+
+    def __init__(self, off_cmd: str, on_cmd: str) -> None:
+        if not off_cmd or not on_cmd:
+            raise ValueError("--power command needs both --power-off-cmd and --power-on-cmd")
+        self.off_cmd, self.on_cmd = off_cmd, on_cmd
+
+    def _run(self, cmd: str) -> None:
+        done = subprocess.run(shlex.split(cmd), capture_output=True, text=True, timeout=60)
+        if done.returncode != 0:
+            raise RuntimeError(f"power command {cmd!r} failed ({done.returncode}): {done.stderr.strip()}")
+
+    def off(self) -> None:
+        self._run(self.off_cmd)
+
+    def on(self) -> None:
+        self._run(self.on_cmd)
+
+
+class ManualPower(PowerControl):
+    """Asks an operator; works while pytest captures output (the plugin suspends capture)."""
+
+    name = "manual"
+
+    def __init__(self, prompt) -> None:
+        self.prompt = prompt  # callable(text) -> None, provided by the plugin
+
+    def off(self) -> None:
+        self.prompt("Switch the DUT's power OFF, then press Enter")
+
+    def on(self) -> None:
+        self.prompt("Switch the DUT's power ON, then press Enter")
+
+
+class NoPower(PowerControl):
+    name = "none"
+    available = False
+
+    def off(self) -> None:
+        raise RuntimeError("no power control")
+
+    on = off
+
+
+class BusLane(Lane):
+    name = "bus"
+    clock = "bus timestamp"
+
+    def __init__(self, bus_kwargs: dict[str, Any], power: PowerControl, *, timing_error: float) -> None:
+        self.bus_kwargs = dict(bus_kwargs)
+        self.bus_kwargs.setdefault("receive_own_messages", True)
+        self.bus = can.Bus(**self.bus_kwargs)
+        self.bitrate = int(self.bus_kwargs.get("bitrate") or DEFAULT_BITRATE)
+        self.power = power
+        self.timing_error = timing_error
+
+    def now(self) -> float:
+        # SocketCAN and socketcand stamp frames with the epoch clock; the lane measures in that base
+        return time.time()
+
+    def wait_power(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            self.bus.recv(timeout=left)  # drain whatever a powered-off bus still shows
+
+    def reopen(self, bitrate: int) -> None:
+        self.bus.shutdown()
+        kwargs = dict(self.bus_kwargs, bitrate=bitrate)
+        self.bus = can.Bus(**kwargs)
+        self.bus_kwargs = kwargs
+        self.bitrate = bitrate
+
+
+class RealtimeEmulatorLane(BusLane):
+    """``ckesc emulate`` in its own process, reached through python-can's stock socketcand client;
+    power through the emulator's control channel."""
+
+    name = "realtime"
+
+    def __init__(self, *, nodes=(1,), faults=None, flash_path: str | None = None, seed: int = 0,
+                 timing_error: float = 0.002) -> None:
+        cmd = [sys.executable, "-m", "ckesc", "emulate", "--nodes", ",".join(map(str, nodes)), "--socketcand", "0",
+               "--control", "0", "--seed", str(seed)]
+        if faults:
+            cmd += ["--faults", ",".join(faults)]
+        if flash_path:
+            cmd += ["--flash-path", flash_path]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        ports = self._read_ports()
+        host, port = ports["socketcand"]
+        self.control = ports["control"]
+        control_cmd = f"{shlex.quote(sys.executable)} -m ckesc control --port {self.control[1]} power"
+        power = CommandPower(control_cmd + " off", control_cmd + " on")
+        super().__init__({"interface": "socketcand", "host": host, "port": port, "channel": "can0",
+                          "ignore_config": True}, power, timing_error=timing_error)
+
+    def _read_ports(self) -> dict[str, tuple[str, int]]:
+        ports: dict[str, tuple[str, int]] = {}
+        assert self.proc.stdout is not None
+        while len(ports) < 2:
+            line = self.proc.stdout.readline()
+            if not line:
+                err = self.proc.stderr.read() if self.proc.stderr else ""
+                raise RuntimeError(f"ckesc emulate exited before listening: {err.strip()}")
+            parts = line.split()
+            if len(parts) == 2 and parts[0] in ("socketcand", "control"):
+                h, p = parts[1].rsplit(":", 1)
+                ports[parts[0]] = (h, int(p))
+        return ports
+
+    def reopen(self, bitrate: int) -> None:
+        # socketcand carries no bit rate: the emulator's bench decides who hears whom
+        self.bitrate = bitrate
+
+    def close(self) -> None:
+        try:
+            super().close()
+        finally:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()

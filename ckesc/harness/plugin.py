@@ -1,0 +1,377 @@
+"""The pytest plugin (entry point ``pytest11``): DUT selection, lanes, the ``dut`` fixture, the
+``requirement`` marker, verdicts, and the run's reports.
+
+It stays inert in a pytest run that collects no conformance test (the project's own tests): the
+options exist, but nothing is opened and no report is written.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from . import report as _report
+from .dut import Dut
+from .lanes import BusLane, CommandPower, Lane, ManualPower, NoPower, RealtimeEmulatorLane, SimLane
+from .profile import DutProfile
+from .requirements import REQUIREMENTS, requirement, strongest
+from .verdict import Inconclusive
+
+CONFORMANCE_PACKAGE = "conformance"
+
+
+# ----------------------------------------------------------------------------------------- options
+def pytest_addoption(parser: pytest.Parser) -> None:
+    g = parser.getgroup("ckesc", "CKESC conformance: device under test")
+    g.addoption("--dut", choices=("emulator", "bus"), default="emulator",
+                help="emulator (default): the ckesc emulator; bus: a device on a python-can bus")
+    g.addoption("--lane", choices=("simulated", "realtime"), default="simulated",
+                help="for --dut emulator: simulated time (default, exact) or `ckesc emulate` in its own process "
+                     "through socketcand (real time)")
+    g.addoption("--can-interface", help="python-can interface for --dut bus (else can.conf / CAN_INTERFACE)")
+    g.addoption("--can-channel", help="python-can channel, e.g. can0 (else can.conf / CAN_CHANNEL)")
+    g.addoption("--can-bitrate", type=int, help="bit rate of the host's bus (else can.conf / CAN_BITRATE)")
+    g.addoption("--can-config", action="append", default=[], metavar="KEY=VALUE",
+                help="extra python-can bus argument (repeatable)")
+    g.addoption("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
+    g.addoption("--nodes", help="emulator: node ids of the emulated bench (default 1); the DUT is the first")
+    g.addoption("--profile", help="DUT profile name in fixtures/duts or a path (default: emulator / ckesc-generic)")
+    g.addoption("--power", choices=("emulator", "command", "manual", "none"),
+                help="power control (default: emulator for --dut emulator, none for --dut bus)")
+    g.addoption("--power-off-cmd", help="--power command: shell command that switches the DUT off")
+    g.addoption("--power-on-cmd", help="--power command: shell command that switches the DUT on")
+    g.addoption("--allow-motor-spin", action="store_true", default=None,
+                help="allow non-zero throttle (default: only for the emulator). PROPELLERS OFF.")
+    g.addoption("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")
+    g.addoption("--emulator-seed", type=int, default=0, help="emulator: random seed")
+    g.addoption("--ckesc-reports", default=None, metavar="DIR",
+                help="write JUnit, JSON and text reports under DIR/<timestamp>/ (ckesc run sets reports/)")
+    g.addoption("--ckesc-summary", action="store_true", default=False,
+                help="print the per-section summary at the end (ckesc run sets it)")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "requirement(*ids): the requirement ids (requirements.toml) a test checks")
+    config.addinivalue_line("markers", "power_cycle: the test cycles the DUT's power")
+    config.addinivalue_line("markers", "spins_motor: the test commands non-zero throttle")
+    config.addinivalue_line("markers", "last: run after every other conformance test (run-wide checks)")
+    config.stash[_STATE] = _State()
+
+
+@dataclass
+class Result:
+    nodeid: str
+    name: str
+    section: str
+    requirements: list[str]
+    strength: str
+    outcome: str = "PASS"  # PASS FAIL INCONCLUSIVE OBSERVED SKIPPED ERROR
+    message: str = ""
+    duration: float = 0.0
+    properties: dict[str, str] = field(default_factory=dict)
+    observations: list[tuple[str, str]] = field(default_factory=list)
+
+
+@dataclass
+class _State:
+    results: dict[str, Result] = field(default_factory=dict)
+    conformance: bool = False
+    lane: Lane | None = None
+    profile: DutProfile | None = None
+    node_id: int | None = None
+    dut_frames: list = field(default_factory=list)  # every frame the DUT sent in the run (4.1 checks)
+    started: float = field(default_factory=time.time)
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+_STATE = pytest.StashKey[_State]()
+
+
+def state(config: pytest.Config) -> _State:
+    return config.stash[_STATE]
+
+
+# ----------------------------------------------------------------------------------------- collection
+def _is_conformance(item: pytest.Item) -> bool:
+    mod = getattr(item, "module", None)
+    return mod is not None and (mod.__name__.split(".")[0] == CONFORMANCE_PACKAGE)
+
+
+def item_requirements(item: pytest.Item) -> list[str]:
+    ids: list[str] = []
+    for m in item.iter_markers("requirement"):
+        ids.extend(m.args)
+    return list(dict.fromkeys(ids))
+
+
+def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config, items: list[pytest.Item]) -> None:
+    st = state(config)
+    problems = []
+    for item in items:
+        if not _is_conformance(item):
+            continue
+        st.conformance = True
+        ids = item_requirements(item)
+        if not ids:
+            problems.append(f"{item.nodeid}: no @pytest.mark.requirement(...)")
+        for i in ids:
+            if i not in REQUIREMENTS:
+                problems.append(f"{item.nodeid}: unknown requirement id {i!r}")
+    if problems:
+        raise pytest.UsageError("conformance tests must cite known requirements:\n  " + "\n  ".join(problems))
+    # run-wide checks (4.1 framing over every frame of the run) go last
+    items.sort(key=lambda it: 1 if it.get_closest_marker("last") else 0)
+
+
+# ----------------------------------------------------------------------------------------- lane / dut
+def _bus_kwargs(config: pytest.Config) -> dict[str, Any]:
+    import can
+
+    kwargs: dict[str, Any] = {}
+    if config.getoption("can_interface"):
+        kwargs["interface"] = config.getoption("can_interface")
+    if config.getoption("can_channel"):
+        kwargs["channel"] = config.getoption("can_channel")
+    if config.getoption("can_bitrate"):
+        kwargs["bitrate"] = config.getoption("can_bitrate")
+    for kv in config.getoption("can_config"):
+        key, sep, value = kv.partition("=")
+        if not sep:
+            raise pytest.UsageError(f"--can-config takes KEY=VALUE, got {kv!r}")
+        kwargs[key] = can.util.cast_from_string(value)
+    resolved = can.util.load_config(config=kwargs)  # explicit options, then CAN_* and can.conf
+    if not resolved.get("interface"):
+        raise pytest.UsageError("--dut bus needs --can-interface (or CAN_INTERFACE / can.conf)")
+    return dict(resolved)
+
+
+def _prompt(config: pytest.Config):
+    def ask(text: str) -> None:
+        capman = config.pluginmanager.getplugin("capturemanager")
+        with capman.global_and_fixture_disabled() if capman else _null():
+            input(f"\n>>> {text} ")
+
+    return ask
+
+
+class _null:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
+    dut_kind = config.getoption("dut")
+    faults = [f for f in config.getoption("emulator_faults").split(",") if f]
+    nodes = [int(n, 0) for n in (config.getoption("nodes") or "1").split(",")]
+    if dut_kind == "emulator":
+        flash = Path(tempfile.mkdtemp(prefix="ckesc-flash-")) / "flash.json"
+        if config.getoption("lane") == "realtime":
+            return RealtimeEmulatorLane(nodes=nodes, faults=faults, flash_path=str(flash),
+                                        seed=config.getoption("emulator_seed"), timing_error=max(profile.error_s, 0.002))
+        return SimLane(nodes=nodes, faults=faults, flash_path=str(flash), seed=config.getoption("emulator_seed"),
+                       esc_config={"boot_time": 0.25})
+    power_kind = config.getoption("power") or "none"
+    if power_kind == "command":
+        power = CommandPower(config.getoption("power_off_cmd"), config.getoption("power_on_cmd"))
+    elif power_kind == "manual":
+        power = ManualPower(_prompt(config))
+    elif power_kind == "none":
+        power = NoPower()
+    else:
+        raise pytest.UsageError("--power emulator works only with --dut emulator")
+    return BusLane(_bus_kwargs(config), power, timing_error=profile.error_s)
+
+
+@pytest.fixture(scope="session")
+def ckesc_lane(request: pytest.FixtureRequest):
+    config = request.config
+    st = state(config)
+    profile = DutProfile.load(config.getoption("profile") or ("emulator" if config.getoption("dut") == "emulator"
+                                                              else "ckesc-generic"))
+    lane = make_lane(config, profile)
+    st.lane, st.profile = lane, profile
+    st.info.update(dut=config.getoption("dut"), lane=lane.name, clock=lane.clock, profile=profile.name,
+                   bitrate=lane.bitrate, power=lane.power.name, timing_error_s=lane.timing_error,
+                   faults=config.getoption("emulator_faults") or "")
+    _install_signal_guard(config)
+    yield lane
+    try:
+        if st.node_id is not None:
+            Dut(lane, profile, node_id=st.node_id).zero_throttle()
+    finally:
+        lane.close()
+
+
+def _allow_spin(config: pytest.Config) -> bool:
+    flag = config.getoption("allow_motor_spin")
+    return bool(flag) if flag is not None else config.getoption("dut") == "emulator"
+
+
+@pytest.fixture
+def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
+    """The device under test, with its settings snapshotted before and restored (and verified)
+    after the test, and zero throttle on every exit path."""
+    config = request.config
+    st = state(config)
+    profile = st.profile
+    assert profile is not None
+    for rid in item_requirements(request.node):
+        cap = requirement(rid).capability
+        if cap and not profile.has(cap):
+            pytest.skip(f"the DUT profile {profile.name!r} lacks capability '{cap}' ({rid})")
+    if request.node.get_closest_marker("power_cycle") and not ckesc_lane.power.available:
+        pytest.skip("needs a power cycle; no power control (--power none)")
+    node = config.getoption("node_id") or st.node_id
+    d = Dut(ckesc_lane, profile, node_id=node, allow_motor_spin=_allow_spin(config))
+    st.node_id = d.node_id
+    st.info.setdefault("node_id", d.node_id)
+    if "esc_information" not in st.info:
+        ex = d.request("esc_information", {"option": 0})
+        st.info["esc_information"] = ex.response.physical() if ex.response else None
+    d.zero_throttle()
+    snapshot = d.settings()
+    request.node.stash[_DUT] = d
+    try:
+        yield d
+    finally:
+        d.zero_throttle()
+        st.dut_frames.extend(f for f in d.trace if f.source == d.node_id)
+        if d.node_id != st.node_id:
+            st.node_id = d.node_id
+        problems = d.restore(snapshot)
+        if problems:
+            raise RuntimeError("settings could not be restored after the test: " + "; ".join(problems))
+
+
+_DUT = pytest.StashKey[Dut]()
+
+
+@pytest.fixture
+def record(dut: Dut):
+    """The current test's measurement record (same as ``dut.record``)."""
+    return dut.record
+
+
+def _install_signal_guard(config: pytest.Config) -> None:
+    """Ctrl-C / SIGTERM: stop throttle before anything else happens."""
+
+    def handler(signum, frame):  # noqa: ARG001
+        st = state(config)
+        if st.lane is not None and st.profile is not None and st.node_id is not None:
+            try:
+                Dut(st.lane, st.profile, node_id=st.node_id).zero_throttle()
+            except Exception:  # noqa: BLE001 - best effort on the way out
+                pass
+        raise KeyboardInterrupt
+
+    try:
+        signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread
+        pass
+
+
+# ----------------------------------------------------------------------------------------- verdicts
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
+    rep: pytest.TestReport = yield
+    if not _is_conformance(item):
+        return rep
+    ids = item_requirements(item)
+    strength = strongest(ids)
+    d: Dut | None = item.stash.get(_DUT, None)
+    if rep.when == "call":
+        if rep.failed and strength == "OBSERVE":
+            rep.outcome = "passed"
+            msg = str(call.excinfo.value) if call.excinfo else ""
+            if d is not None:
+                d.record.observe("observed deviation", msg)
+        elif rep.failed and strength == "READING" and call.excinfo is not None:
+            readings = [i for i in ids if requirement(i).strength == "READING"]
+            rep.longrepr = f"[READING {', '.join(readings)}] {rep.longrepr}"
+        elif rep.passed and d is not None and d.record.inconclusive:
+            rep.outcome = "skipped"
+            rep.longrepr = (str(item.path), item.location[1] or 0, "INCONCLUSIVE: " + "; ".join(d.record.inconclusive))
+    _collect(item, rep, ids, strength, d)
+    return rep
+
+
+def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength: str, d: Dut | None) -> None:
+    st = state(item.config)
+    res = st.results.get(item.nodeid)
+    if res is None:
+        section = getattr(item.module, "SECTION", None) or requirement(ids[0]).section
+        res = st.results[item.nodeid] = Result(item.nodeid, item.name, section, ids, strength)
+    res.duration += rep.duration
+    if rep.when == "call" or (rep.when == "setup" and not rep.passed) or (rep.when == "teardown" and rep.failed):
+        outcome, message = _outcome(rep, strength, d)
+        if rep.when == "teardown" and res.outcome not in ("FAIL",):
+            outcome = "ERROR"
+        if rep.when != "teardown" or res.outcome != "FAIL":
+            res.outcome, res.message = outcome, message
+    if d is not None and rep.when in ("call", "teardown"):
+        res.properties = {}
+        for n, m in enumerate(d.record.measurements):
+            res.properties.update(m.as_properties(n))
+        res.observations = [(w, str(v)) for w, v in d.record.observations]
+
+
+def _outcome(rep: pytest.TestReport, strength: str, d: Dut | None) -> tuple[str, str]:
+    text = _longrepr_text(rep)
+    if rep.passed:
+        if strength == "OBSERVE":
+            return "OBSERVED", ""
+        return "PASS", ""
+    if rep.skipped:
+        return ("INCONCLUSIVE" if "INCONCLUSIVE" in text else "SKIPPED"), text
+    if rep.when == "setup":
+        return "ERROR", text
+    return "FAIL", text
+
+
+def _longrepr_text(rep: pytest.TestReport) -> str:
+    lr = rep.longrepr
+    if lr is None:
+        return ""
+    if isinstance(lr, tuple):
+        return str(lr[2])
+    crash = getattr(getattr(lr, "reprcrash", None), "message", None)
+    return crash if crash else str(lr)
+
+
+# ----------------------------------------------------------------------------------------- reports
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    st = state(session.config)
+    if not st.conformance or not st.results:
+        return
+    base = session.config.getoption("ckesc_reports")
+    if base:
+        out = _report.write_reports(Path(base), list(st.results.values()), st.info, started=st.started)
+        st.info["report_dir"] = str(out)
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:
+    st = state(config)
+    if not st.conformance or not st.results or not config.getoption("ckesc_summary"):
+        return
+    terminalreporter.write_sep("=", "CKESC conformance summary")
+    terminalreporter.write_line(_report.summary_text(list(st.results.values()), st.info))
+    if "report_dir" in st.info:
+        terminalreporter.write_line(f"reports: {st.info['report_dir']}")
+
+
+def results_json(config: pytest.Config) -> str:
+    st = state(config)
+    return json.dumps([r.__dict__ for r in st.results.values()], indent=1, default=str)
+
+
+__all__ = ["Inconclusive", "Result", "state"]

@@ -1,0 +1,81 @@
+"""The requirements table (``requirements.toml`` beside this file), loaded once.
+
+Every conformance test names the requirement ids it checks with ``@pytest.mark.requirement(...)``;
+the report groups results by section and shows which requirements are covered.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from types import MappingProxyType
+
+from ..protocol.catalogue import CATALOGUE
+
+STRENGTHS = ("SHALL", "READING", "OBSERVE")
+
+#: Section titles as the document's contents page names them.
+SECTION_TITLES = MappingProxyType(
+    {
+        "1": "Scope of application",
+        "4.1": "UAVCAN protocols (framing)",
+        "4.1.1": "Conceptual",
+        "4.1.2": "ID field",
+        "4.1.3": "CAN payload",
+        "4.2": "CAN ESC working mechanism",
+        "4.2.1": "Functionality",
+        "4.3": "List of data frame types",
+        "4.3.1": "ID domain assignment",
+        "4.3.2": "Data frame type table",
+        "attachment": "Fault code definitions",
+        **{s.section: s.title for s in CATALOGUE},
+        "4.4.8": "MSG_EXP2-6",
+    }
+)
+
+
+@dataclass(frozen=True)
+class Requirement:
+    id: str
+    strength: str
+    section: str
+    quote: str
+    note: str = ""
+    capability: str | None = None
+
+    @property
+    def title(self) -> str:
+        return SECTION_TITLES.get(self.section, self.section)
+
+
+def _load() -> dict[str, Requirement]:
+    text = resources.files(__package__).joinpath("requirements.toml").read_text(encoding="utf-8")
+    out: dict[str, Requirement] = {}
+    for row in tomllib.loads(text)["requirement"]:
+        req = Requirement(**row)
+        if req.strength not in STRENGTHS:
+            raise ValueError(f"requirement {req.id}: unknown strength {req.strength!r}")
+        if req.id in out:
+            raise ValueError(f"requirement {req.id} listed twice")
+        out[req.id] = req
+    return out
+
+
+REQUIREMENTS = MappingProxyType(_load())
+
+
+def requirement(req_id: str) -> Requirement:
+    try:
+        return REQUIREMENTS[req_id]
+    except KeyError:
+        raise KeyError(f"unknown requirement id {req_id!r} (see ckesc/harness/requirements.toml)") from None
+
+
+def strongest(ids) -> str:
+    """The strength a test takes from the requirements it checks: the strongest one."""
+    strengths = {requirement(i).strength for i in ids}
+    for s in STRENGTHS:
+        if s in strengths:
+            return s
+    return "OBSERVE"

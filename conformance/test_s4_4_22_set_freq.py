@@ -1,0 +1,91 @@
+"""Spec section 4.4.22: Set/Get Freq (214) - the MSG1/MSG2/MSG3 report intervals."""
+
+import pytest
+
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.legality import illegal_cases
+
+SECTION = "4.4.22"
+INTERVALS = ("msg1_interval", "msg2_interval", "msg3_interval")
+REPORTS = {"msg1_interval": "msg1", "msg2_interval": "msg2", "msg3_interval": "msg3"}
+
+
+def _read(dut):
+    return dut.request("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0})
+
+
+@pytest.mark.requirement("4.4.22-2", "F4")
+def test_read_answers_the_current_settings(dut):
+    """A read ignores the values sent and answers the settings in force."""
+    before = dut.settings()
+    ex = dut.request("set_freq", {"option": 0, "msg1_interval": 77, "msg2_interval": 88, "msg3_interval": 99})
+    assert ex.response is not None, "no answer to Set/Get Freq read"
+    assert not ex.mismatch, f"answer does not match the request: {ex.mismatch}"
+    got = {k: ex.response.fields[k] for k in INTERVALS}
+    assert got == {k: before[k] for k in INTERVALS}, f"read answered {got}, settings are {before}"
+    assert dut.settings() == before, "a read changed the settings"
+
+
+@pytest.mark.requirement("4.4.22-1", "4.4.22-3", "R9", "4.4.5-2", "4.4.6-2")
+@pytest.mark.parametrize("values", [(10, 50, 250), (25, 10, 100), (250, 250, 10)], ids=lambda v: "-".join(map(str, v)))
+def test_write_sets_the_report_intervals(dut, values):
+    """After a legal write every report comes at its new interval (value x 2 ms)."""
+    fields = dict(zip(INTERVALS, values))
+    ex = dut.request("set_freq", {"option": 1, **fields})
+    assert ex.response is not None, "no answer to Set/Get Freq write"
+    assert {k: ex.response.fields[k] for k in INTERVALS} == fields
+    longest = max(values) * cat.INTERVAL_UNIT_S
+    dut.wait(longest)  # let the old schedule run out
+    start = dut.now()
+    dut.wait(4 * longest + 0.01)
+    for key in INTERVALS:
+        stamps = [f.timestamp for f in dut.frames(REPORTS[key], since=start, source=dut.node_id)]
+        assert len(stamps) >= 3, f"{REPORTS[key]}: only {len(stamps)} reports in {4 * longest:.3f} s"
+        target = fields[key] * cat.INTERVAL_UNIT_S
+        worst = max(abs((b - a) - target) for a, b in zip(stamps, stamps[1:]))
+        dut.record.measure(f"{REPORTS[key]} interval error", worst * 1000, limit=dut.interval_tolerance_ms, unit="ms",
+                           clock=dut.clock, error=dut.lane.timing_error * 1000, requirement="R9")
+
+
+@pytest.mark.requirement("R10", "4.4.22-3")
+@pytest.mark.parametrize("case", illegal_cases(cat.spec("set_freq")), ids=lambda c: c.id)
+def test_illegal_write_changes_nothing(dut, case):
+    """A write with any interval outside 10..250 is ignored as a whole - read back now."""
+    before = dut.settings()
+    legal = {"msg1_interval": 20, "msg2_interval": 60, "msg3_interval": 200}
+    legal = {k: (v if v != before[k] else v + 1) for k, v in legal.items()}  # differs from the current values
+    fields = {**legal, case.field: case.value}
+    ex = dut.request("set_freq", {"option": 1, **fields})
+    dut.record.observe("answer to the illegal write (R10-answer)", ex.response.fields if ex.response else "none")
+    after = dut.settings()
+    changed = {k: (before[k], after[k]) for k in INTERVALS if before[k] != after[k]}
+    assert not changed, f"illegal {case.field}={case.value} changed {changed} (R10: ignored, never partly applied)"
+
+
+@pytest.mark.requirement("R10", "4.4.22-3", "4.4.22-6")
+@pytest.mark.power_cycle
+def test_illegal_write_changes_nothing_after_power_cycle(dut):
+    """Nothing of an illegal write surfaces after a power cycle either."""
+    before = dut.settings()
+    dut.request("set_freq", {"option": 1, "msg1_interval": 20, "msg2_interval": 9, "msg3_interval": 200})
+    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    after = dut.settings()
+    assert {k: after[k] for k in INTERVALS} == {k: before[k] for k in INTERVALS}
+
+
+@pytest.mark.requirement("4.4.22-6", "R13")
+@pytest.mark.power_cycle
+def test_intervals_persist_across_power_cycle(dut):
+    fields = {"msg1_interval": 15, "msg2_interval": 45, "msg3_interval": 240}
+    dut.ask("set_freq", {"option": 1, **fields})
+    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    after = dut.settings()
+    assert {k: after[k] for k in INTERVALS} == fields, f"after a power cycle: {after}"
+
+
+@pytest.mark.requirement("4.4.22-4")
+def test_observe_current_intervals(dut):
+    """Factory defaults are 10/50/250; a DUT in the field may differ: recorded, never failed."""
+    s = dut.settings()
+    dut.record.observe("intervals", {k: s[k] for k in INTERVALS})
+    assert (s["msg1_interval"], s["msg2_interval"], s["msg3_interval"]) == (10, 50, 250), "not at factory defaults"
