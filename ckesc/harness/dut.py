@@ -69,6 +69,8 @@ class Dut:
         self._tasks: list[Any] = []
         self.record = Record()
         self.node_id = node_id if node_id is not None else self.discover()
+        # every ESC that answered discovery (multi_dut); just the DUT when its id was given
+        self.nodes: list[int] = getattr(self, "discovered", [self.node_id])
 
     # ------------------------------------------------------------------ clock
     def now(self) -> float:
@@ -201,11 +203,12 @@ class Dut:
         give_up = self.now() + self.profile.boot_s + 1.0
         while True:
             sent = self.broadcast("get_esc_id", {"option": 0}, layout="query")
-            reply = self.read_until(sent.host_time + cat.ANSWER_DELAY_MAX_S * 2,
-                                    stop=lambda f: f.name == "get_esc_id" and f.layout is not None
-                                    and f.layout.name == "reply")
-            if reply is not None:
-                return reply.source
+            self.wait(cat.ANSWER_DELAY_MAX_S * 2)  # every ESC answers within 64 ms (R2); read them all
+            replies = [f for f in self.frames("get_esc_id", since=sent.host_time)
+                       if f.layout is not None and f.layout.name == "reply"]
+            if replies:
+                self.discovered = sorted({f.source for f in replies})
+                return replies[0].source
             if self.now() >= give_up:
                 raise DutError(f"no ESC answered GET_ESC_ID for {self.profile.boot_s + 1.0:.1f} s: is it powered, at "
                                f"{self.lane.bitrate} bit/s, and not at node id 0x7D (which answers nothing)? "

@@ -255,6 +255,42 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
 
 _DUT = pytest.StashKey[Dut]()
 
+#: The private bench of :func:`multi_dut` in the emulator lanes: node ids chosen so that
+#: node_id % 32 covers 1, 2 and wraps (33 -> slot 1).
+MULTI_NODES = (1, 2, 33)
+
+
+@pytest.fixture
+def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
+    """Several ESCs on one bus. With the emulator: a private bench of :data:`MULTI_NODES` (the main
+    DUT stays alone, as Set ID needs); on a real bus: the bus as it is (capability multi_node), with
+    ``dut.nodes`` the node ids that answered GET_ESC_ID. Settings are not snapshotted: tests using it
+    must change nothing persistent on a real bus."""
+    config = request.config
+    st = state(config)
+    profile = st.profile
+    assert profile is not None
+    if config.getoption("dut") == "emulator":
+        if config.getoption("lane") == "realtime":
+            lane: Lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=ckesc_lane.timing_error)
+        else:
+            lane = SimLane(nodes=MULTI_NODES, esc_config={"boot_time": 0.25})
+        own = True
+    else:
+        if not profile.has("multi_node"):
+            pytest.skip(f"the DUT profile {profile.name!r} lacks capability 'multi_node' (several ESCs on the bus)")
+        lane, own = ckesc_lane, False
+    d = Dut(lane, profile, node_id=None if own else (config.getoption("node_id") or st.node_id),
+            allow_motor_spin=_allow_spin(config))
+    request.node.stash[_DUT] = d
+    try:
+        yield d
+    finally:
+        d.zero_throttle()
+        st.dut_frames.extend(f for f in d.trace if f.source != d.host_node)
+        if own:
+            lane.close()
+
 
 @pytest.fixture
 def record(dut: Dut):
