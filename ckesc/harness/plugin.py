@@ -280,8 +280,7 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
         if not profile.has("multi_node"):
             pytest.skip(f"the DUT profile {profile.name!r} lacks capability 'multi_node' (several ESCs on the bus)")
         lane, own = ckesc_lane, False
-    d = Dut(lane, profile, node_id=None if own else (config.getoption("node_id") or st.node_id),
-            allow_motor_spin=_allow_spin(config))
+    d = Dut(lane, profile, node_id=None, allow_motor_spin=_allow_spin(config))  # discovery lists every ESC
     request.node.stash[_DUT] = d
     try:
         yield d
