@@ -17,7 +17,9 @@ from typing import Any
 
 CAPABILITIES = ("led", "motor", "pwm_input", "motor_temperature", "multi_node")
 
-PROFILE_DIR = Path(__file__).resolve().parents[2] / "fixtures" / "duts"
+#: Where profile names are looked up: the current project's fixtures/duts, then the ones shipped
+#: beside this source tree (an editable install or a checkout).
+PROFILE_DIRS = (Path.cwd() / "fixtures" / "duts", Path(__file__).resolve().parents[2] / "fixtures" / "duts")
 
 
 @dataclass
@@ -44,12 +46,14 @@ class DutProfile:
     def load(cls, name_or_path: str) -> DutProfile:
         path = Path(name_or_path)
         if not path.suffix:
-            path = PROFILE_DIR / f"{name_or_path}.toml"
+            candidates = [d / f"{name_or_path}.toml" for d in PROFILE_DIRS]
+            path = next((c for c in candidates if c.is_file()), candidates[-1])
         try:
             doc: dict[str, Any] = tomllib.loads(path.read_text(encoding="utf-8"))
         except FileNotFoundError:
-            known = ", ".join(sorted(p.stem for p in PROFILE_DIR.glob("*.toml")))
-            raise FileNotFoundError(f"no DUT profile {name_or_path!r} ({path}); shipped: {known}") from None
+            known = sorted({p.stem for d in PROFILE_DIRS for p in d.glob("*.toml")})
+            raise FileNotFoundError(f"no DUT profile {name_or_path!r} (looked for {path}); known: {', '.join(known)}; "
+                                    "or give a path to a .toml file") from None
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"{path}: {exc}") from None
         caps = doc.get("capabilities", {})

@@ -1,0 +1,127 @@
+"""``ckesc selftest``: the suite tests itself against the emulator's faults.
+
+Against the faultless emulator every conformance test must pass. For every fault switch, the
+suite run against it must fail, and every failing test must cite one of the requirement ids the
+fault names (``ckesc/emulator/faults.py``): a fault that fails nothing means a rule the suite does
+not really check; a failing test that does not cite the broken rule means a test that fails for
+the wrong reason, or cites the wrong clause. The result is the table fault -> failing tests.
+
+Each run is a separate ``pytest`` process (the simulated lane is deterministic), ``--jobs`` at a time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .emulator.faults import FAULTS
+
+
+@dataclass
+class FaultRun:
+    fault: str | None
+    rules: tuple[str, ...]
+    failing: list[tuple[str, list[str]]] = field(default_factory=list)  # (test, its requirement ids)
+    errors: list[str] = field(default_factory=list)
+    ran: int = 0
+    problem: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not self.problem
+
+
+def run_suite(fault: str | None, pytest_args: list[str] = ()) -> FaultRun:
+    rules = FAULTS[fault].rules if fault else ()
+    run = FaultRun(fault, rules)
+    with tempfile.TemporaryDirectory(prefix="ckesc-selftest-") as tmp:
+        cmd = [sys.executable, "-m", "pytest", "--pyargs", "conformance", "-q", "-p", "no:cacheprovider",
+               "--ckesc-reports", tmp, *pytest_args]
+        if fault:
+            cmd += ["--emulator-faults", fault]
+        done = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONHASHSEED": "0"})
+        reports = sorted(Path(tmp).glob("*/results.json"))
+        if not reports:
+            run.problem = f"no report (pytest exit {done.returncode}): {done.stdout[-800:]}{done.stderr[-800:]}"
+            return run
+        doc = json.loads(reports[-1].read_text())
+    results = doc["results"]
+    run.ran = len(results)
+    for r in results:
+        if r["outcome"] == "FAIL":
+            run.failing.append((r["nodeid"], r["requirements"]))
+        elif r["outcome"] == "ERROR":
+            run.errors.append(f"{r['nodeid']}: {r['message'][:200]}")
+    if fault is None:
+        if run.failing or run.errors:
+            run.problem = f"{len(run.failing)} failed and {len(run.errors)} errored against the faultless emulator"
+    else:
+        wrong = [t for t, ids in run.failing if not set(ids) & set(rules)]
+        if not run.failing:
+            run.problem = f"no test failed (fault breaks {', '.join(rules)})"
+        elif wrong:
+            run.problem = f"{len(wrong)} failing test(s) cite none of {', '.join(rules)}: {', '.join(wrong[:5])}"
+        elif run.errors:
+            run.problem = f"{len(run.errors)} test(s) errored: {run.errors[0]}"
+    return run
+
+
+def selftest(faults: list[str] | None = None, jobs: int | None = None, pytest_args: list[str] = (),
+             progress=None) -> list[FaultRun]:
+    names = [None] + list(faults if faults is not None else FAULTS)
+    jobs = jobs or max(os.cpu_count() or 1, 1)
+    out: list[FaultRun] = []
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        for run in pool.map(lambda f: run_suite(f, list(pytest_args)), names):
+            out.append(run)
+            if progress:
+                progress(run, len(out), len(names))
+    return out
+
+
+def table(runs: list[FaultRun]) -> str:
+    lines = ["| fault | rules | failing tests | verdict |", "|---|---|---|---|"]
+    for r in runs:
+        name = r.fault or "(none: faultless emulator)"
+        tests = "<br>".join(t.split("::", 1)[-1] for t, _ in r.failing[:8]) + (f"<br>... +{len(r.failing) - 8}" if len(r.failing) > 8 else "")
+        lines.append(f"| {name} | {' '.join(r.rules)} | {tests or '-'} | {'ok' if r.ok else 'PROBLEM: ' + r.problem} |")
+    return "\n".join(lines)
+
+
+def add_selftest_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("selftest", help="show that the suite passes the emulator and fails each of its faults",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--faults", help="comma-separated fault names (default: all)")
+    p.add_argument("--jobs", type=int, help="parallel suite runs (default: CPU count)")
+    p.add_argument("--out", help="write the fault -> failing tests table (Markdown) and JSON beside it")
+    p.set_defaults(handler=selftest_command)
+
+
+def selftest_command(args: argparse.Namespace) -> int:
+    faults = [f for f in args.faults.split(",") if f] if args.faults else None
+    unknown = set(faults or ()) - set(FAULTS)
+    if unknown:
+        print(f"ckesc selftest: unknown fault(s) {', '.join(sorted(unknown))}", file=sys.stderr)
+        return 2
+
+    def progress(run: FaultRun, i: int, n: int) -> None:
+        status = "ok" if run.ok else "PROBLEM"
+        print(f"[{i:>3}/{n}] {run.fault or '(faultless)':<34} {len(run.failing):>3} failing  {status}", flush=True)
+
+    runs = selftest(faults, args.jobs, progress=progress)
+    text = table(runs)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+        Path(args.out).with_suffix(".json").write_text(json.dumps([r.__dict__ for r in runs], indent=1))
+    bad = [r for r in runs if not r.ok]
+    for r in bad:
+        print(f"PROBLEM {r.fault or '(faultless)'}: {r.problem}", file=sys.stderr)
+    print(f"{len(runs) - len(bad)} of {len(runs)} runs as expected")
+    return 1 if bad else 0
