@@ -68,6 +68,7 @@ class Dut:
         self._sent: list[Sent] = []
         self._tasks: list[Any] = []
         self.record = Record()
+        self.lane_seconds = 0.0  # lane time the test took (set by the dut fixture)
         self.node_id = node_id if node_id is not None else self.discover()
         # every ESC that answered discovery (multi_dut); just the DUT when its id was given
         self.nodes: list[int] = getattr(self, "discovered", [self.node_id])

@@ -75,6 +75,7 @@ class Result:
     outcome: str = "PASS"  # PASS FAIL INCONCLUSIVE OBSERVED SKIPPED ERROR
     message: str = ""
     duration: float = 0.0
+    lane_seconds: float = 0.0  # lane time the test took: in the simulated lane, the waits the protocol imposes
     properties: dict[str, str] = field(default_factory=dict)
     observations: list[tuple[str, str]] = field(default_factory=list)
 
@@ -238,12 +239,14 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     if "esc_information" not in st.info:
         ex = d.request("esc_information", {"option": 0})
         st.info["esc_information"] = ex.response.physical() if ex.response else None
+    started = ckesc_lane.now()
     d.zero_throttle()
     snapshot = d.settings()
     request.node.stash[_DUT] = d
     try:
         yield d
     finally:
+        d.lane_seconds = ckesc_lane.now() - started
         d.zero_throttle()
         st.dut_frames.extend(f for f in d.trace if f.source == d.node_id)
         if d.node_id != st.node_id:
@@ -354,6 +357,7 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
         if rep.when != "teardown" or res.outcome != "FAIL":
             res.outcome, res.message = outcome, message
     if d is not None and rep.when in ("call", "teardown"):
+        res.lane_seconds = d.lane_seconds  # set when the dut fixture is torn down
         res.properties = {}
         for n, m in enumerate(d.record.measurements):
             res.properties.update(m.as_properties(n))
