@@ -32,13 +32,21 @@ class FlashStore:
             text = self.path.read_text(encoding="utf-8")
         except FileNotFoundError:
             return {}
+        except UnicodeDecodeError as exc:
+            raise FlashError(f"{self.path}: not a flash file (not UTF-8 text); move it away to start from factory state") from exc
         try:
             doc = json.loads(text)
         except json.JSONDecodeError as exc:
             raise FlashError(f"{self.path}: not a flash file ({exc}); move it away to start from factory state") from exc
         if not isinstance(doc, dict) or doc.get("format") != FORMAT or not isinstance(doc.get("slots"), dict):
             raise FlashError(f"{self.path}: not a {FORMAT} file; move it away to start from factory state")
-        return {int(k): v for k, v in doc["slots"].items()}
+        slots: dict[int, dict[str, Any]] = {}
+        for key, value in doc["slots"].items():
+            if not key.isdigit() or not isinstance(value, dict):
+                raise FlashError(f"{self.path}: slot {key!r} is not a slot number with a settings table; "
+                                 "move the file away to start from factory state")
+            slots[int(key)] = value
+        return slots
 
     def save(self, slots: dict[int, dict[str, Any]]) -> None:
         doc = {"format": FORMAT, "slots": {str(k): v for k, v in sorted(slots.items())}}

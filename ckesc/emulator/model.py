@@ -40,9 +40,9 @@ from ..protocol.catalogue import (
     Status,
 )
 from ..protocol.codecs import codec_for, unpack_throttle12
-from ..protocol.errors import DecodeError
+from ..protocol.errors import DecodeError, UnknownTypeError
 from ..protocol.frame import Decoder, Frame, WireFrame, encode
-from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, Priority, message_id
+from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, Priority, message_id, service_id
 from ..protocol.transfer import TransferIdCounter, tail_byte
 from . import faults as _faults
 
@@ -190,6 +190,9 @@ class EscModel:
         self.temps = {"mos": 25.0, "cap": 25.0, "mcu": 30.0, "motor": 25.0}
         self.current = 0.0
         self.self_test_fault = self.config.self_test_fault
+        if "self_test_undefined_code" in self.faults:
+            self.self_test_fault = 0x30  # a failed self-test whose code the attachment does not define
+        self._pwm_seen = False  # a PWM signal was in use (fault 'pwm_no_fallback')
         self.test_mode = False
         self._outbox: list[tuple[float, int, WireFrame]] = []
         self._seq = 0
@@ -271,8 +274,9 @@ class EscModel:
             except DecodeError as exc:
                 decoded = exc
         if isinstance(decoded, DecodeError):
-            self.counters["rx_malformed"] += 1
-            return False
+            # another protocol's type id (DroneCAN NodeStatus, ...) is foreign; anything else malformed
+            self.counters["rx_foreign" if isinstance(decoded, UnknownTypeError) else "rx_malformed"] += 1
+            return "dronecan_node_info" in self.faults and self._dronecan_node_info(msg, now)
         frame = decoded
         if frame.spec is None:
             self.counters["rx_foreign"] += 1
@@ -363,6 +367,10 @@ class EscModel:
     def _update(self, now: float) -> None:
         dt = now - self._last_update
         if dt <= 0:
+            # no time passed, but a deadline may have come due without it (Throttle Select back to CAN
+            # long after the last command): without this the comm-loss deadline stays in the past and
+            # the lane polls at the same instant for ever
+            self._refresh_throttle(now)
             return
         self._last_update = now
         self._refresh_throttle(now)
@@ -404,6 +412,10 @@ class EscModel:
         if self._active_source_is_pwm():
             self.throttle = min(max(self.pwm_input or 0, 0), THROTTLE_MAX)
             self.comm_fault = False
+            self._pwm_seen = True
+            return
+        if "pwm_no_fallback" in self.faults and self._pwm_seen and self.nvm["throttle_source"] == 1:
+            self.throttle = 0  # the lost PWM signal is not replaced by the CAN throttle
             return
         if self._comm_loss_due(now):
             self.comm_fault = True
@@ -527,6 +539,10 @@ class EscModel:
         elif which == "msg3":
             for name, fields in self.exp_frames():
                 self._emit(due, name, fields)
+            if "debug_frames_reserved_source" in self.faults:  # F7: a debug frame from a hard-coded node id
+                spec = cat.BY_NAME["msg_exp2"]
+                data = bytes(spec.layouts[0].size) + bytes((tail_byte(self._tids.next(spec.name)),))
+                self._push(due, WireFrame(message_id(spec.priority, spec.type_id, 0x7F), data, due))
 
     def exp_frames(self) -> list[tuple[str, dict]]:
         n = self.nvm
@@ -749,9 +765,11 @@ class EscModel:
         self._respond(f, now, {"source": self.nvm["throttle_source"]})
 
     def _on_self_test(self, f: Frame, now: float) -> None:
-        if not self._addressed(f):
+        if not self._addressed(f) or "self_test_unanswered" in self.faults:
             return
         failed = self.self_test_fault != 0 and "self_test_always_passes" not in self.faults
+        if "self_test_inverted" in self.faults:
+            failed = not failed
         self._respond(f, now, {"status": int(failed)})
 
     def _on_expand_set(self, f: Frame, now: float) -> None:
@@ -760,9 +778,9 @@ class EscModel:
         code, part = f.fields["set_cmd"], f.fields["part"]
         if "expand_set_big_endian" in self.faults:
             code = int.from_bytes(f.data[:2], "big")
-        if "expand_set_answered" in self.faults:
-            self._emit(now + self.config.service_delay, "expand_set_part", {"set_cmd": code, "part": part},
-                       kind=Kind.RESPONSE, destination=f.source, transfer_id=f.transfer_id or 0)  # type: ignore[arg-type]
+        if "expand_set_answered" in self.faults:  # the catalogue has no response layout (R14): echo the request
+            can_id = service_id(int(f.spec.priority), f.type_id, False, f.source, self.node_id)  # type: ignore[union-attr, arg-type]
+            self._push(now + self.config.service_delay, WireFrame(can_id, f.data))
         command = EXPAND_COMMANDS.get(code)
         if command is None or part not in command.parts or command.reserved:
             self.counters["rx_ignored"] += 1
@@ -818,6 +836,8 @@ class EscModel:
             return
         c = self.config
         year, month, day = c.firmware_date
+        if "esc_information_bcd_date" in self.faults:  # October -> 0x10 = 16
+            year, month, day = (int(str(v), 16) for v in (year, month, day))
         self._respond(f, now, {"max_cells": c.max_cells, "max_current": c.max_current_10a,
                                "hardware_version": c.hardware_version, "protocol_version": c.protocol_version,
                                "firmware_year": year, "firmware_month": month, "firmware_day": day})
@@ -840,6 +860,23 @@ class EscModel:
             self.counters["rx_ignored"] += 1
             return
         self._respond(f, now, fields, layout=f"response_option_{option}")
+        if "maintenance_info_7_missing" in self.faults:  # drop Info_7 from the answer just queued
+            for i, (due, seq, wire) in enumerate(self._outbox):
+                if seq == self._seq:
+                    self._outbox[i] = (due, seq, wire._replace(data=wire.data[:6] + wire.data[7:]))
+
+    def _dronecan_node_info(self, msg: Any, now: float) -> bool:
+        """Fault 'dronecan_node_info': answer DroneCAN GetNodeInfo (service 1), announcing a
+        NodeStatus (message 341) first: ids outside the CKESC vendor ranges (4.3.1)."""
+        can_id, data = msg.arbitration_id, bytes(msg.data)
+        if not (can_id & 0x8080 == 0x8080 and (can_id >> 16) & 0xFF == 1 and (can_id >> 8) & 0x7F == self.node_id):
+            return False
+        due = now + self.config.service_delay
+        status = bytes(7) + bytes((tail_byte(self._tids.next("dronecan341")),))
+        self._push(due, WireFrame(message_id(Priority.LOW, 341, self.node_id), status, due))
+        answer = bytes(7) + bytes((tail_byte(data[-1] & 0x1F if data else 0),))
+        self._push(due, WireFrame(service_id(Priority.LOW, 1, False, can_id & 0x7F, self.node_id), answer, due))
+        return True
 
     def _on_major_config(self, f: Frame, now: float) -> None:
         if not self._addressed(f):

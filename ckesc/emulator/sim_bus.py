@@ -56,10 +56,12 @@ class SimClock:
 
 
 class _Pending:
-    __slots__ = ("ready", "seq", "wire", "origin", "bitrate")
+    __slots__ = ("ready", "seq", "wire", "origin", "bitrate", "flags")
 
-    def __init__(self, ready: float, seq: int, wire: WireFrame, origin: Any, bitrate: int) -> None:
+    def __init__(self, ready: float, seq: int, wire: WireFrame, origin: Any, bitrate: int,
+                 flags: dict[str, bool] | None = None) -> None:
         self.ready, self.seq, self.wire, self.origin, self.bitrate = ready, seq, wire, origin, bitrate
+        self.flags = flags  # a host's remote or error frame: not a data frame, whatever its bytes
 
 
 INF = float("inf")
@@ -136,8 +138,8 @@ class SimWorld:
                 return
             self.step(t)
 
-    def _queue(self, wire: WireFrame, origin: Any, bitrate: int, ready: float) -> None:
-        p = _Pending(max(ready, self.now), next(self._seq), wire, origin, bitrate)
+    def _queue(self, wire: WireFrame, origin: Any, bitrate: int, ready: float, flags: dict[str, bool] | None = None) -> None:
+        p = _Pending(max(ready, self.now), next(self._seq), wire, origin, bitrate, flags)
         if p.ready <= self.now:
             heapq.heappush(self._ready, (wire.arbitration_id, p.seq, p))
         else:
@@ -163,22 +165,25 @@ class SimWorld:
         self.stats["frames"] += 1
         wire = p.wire._replace(timestamp=end)
         sender = p.origin if isinstance(p.origin, EscModel) else None
-        self.bench.deliver(wire, end, p.bitrate, sender=sender)
+        flags = p.flags or {}
+        heard = wire if not flags else can.Message(timestamp=end, arbitration_id=wire.arbitration_id, data=wire.data,
+                                                   is_extended_id=wire.is_extended_id, **flags)
+        self.bench.deliver(heard, end, p.bitrate, sender=sender)  # the ESCs' decoder rejects remote/error frames
         for bus in self.buses:
             if bus.bitrate != p.bitrate:
                 continue
             if bus is p.origin and not bus.receive_own_messages:
                 continue
-            bus._deliver(wire, is_rx=bus is not p.origin)
+            bus._deliver(wire, is_rx=bus is not p.origin, **flags)
 
     # ------------------------------------------------------------------ host side
     def send(self, bus: SimEscBus, msg: can.Message) -> None:
-        if not msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
-            # the ESCs ignore such frames; they still occupy the bus
-            wire = WireFrame(msg.arbitration_id, bytes(msg.data), is_extended_id=msg.is_extended_id)
-        else:
-            wire = WireFrame(msg.arbitration_id, bytes(msg.data))
-        self._queue(wire, bus, bus.bitrate, ready=self.now)
+        flags = None
+        if msg.is_remote_frame or msg.is_error_frame:
+            flags = {"is_remote_frame": msg.is_remote_frame, "is_error_frame": msg.is_error_frame}
+        # the ESCs ignore standard-id, remote and error frames; they still occupy the bus
+        wire = WireFrame(msg.arbitration_id, bytes(msg.data), is_extended_id=msg.is_extended_id)
+        self._queue(wire, bus, bus.bitrate, ready=self.now, flags=flags)
 
     # ------------------------------------------------------------------ power
     def power_off(self) -> None:
@@ -295,9 +300,9 @@ class SimEscBus(can.BusABC):
         self.world.bench.set_fault(name, on, node)
 
     # ---------------------------------------------------------------- BusABC
-    def _deliver(self, wire: WireFrame, is_rx: bool) -> None:
+    def _deliver(self, wire: WireFrame, is_rx: bool, **flags: bool) -> None:
         msg = can.Message(timestamp=wire.timestamp, arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id,
-                          data=wire.data, is_rx=is_rx, channel=self.channel)
+                          data=wire.data, is_rx=is_rx, channel=self.channel, **flags)
         if self._matches_filters(msg):
             self._rx.append(msg)
 
