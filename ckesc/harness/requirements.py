@@ -29,7 +29,7 @@ SECTION_TITLES = MappingProxyType(
         "4.3.1": "ID domain assignment",
         "4.3.2": "Data frame type table",
         "attachment": "Fault code definitions",
-        **{s.section: s.title for s in CATALOGUE},
+        **{s.section: s.title for s in reversed(CATALOGUE)},  # a shared section (4.4.25) takes its first frame's title
         "4.4.8": "MSG_EXP2-6",
     }
 )
