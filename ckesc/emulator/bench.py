@@ -77,6 +77,8 @@ class Bench:
     # faults -----------------------------------------------------------------------------------
     def set_fault(self, name: str, on: bool = True, node: int | None = None) -> None:
         _faults.check([name])
+        if node is not None:
+            self.esc(node)  # raises KeyError naming the node ids on the bench
         for esc in self.escs:
             if node is None or esc.node_id == node:
                 (esc.faults.add if on else esc.faults.discard)(name)

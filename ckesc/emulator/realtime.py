@@ -1,0 +1,1054 @@
+"""Lane 2: a bench of emulated ESCs in real time, meant to run in its own process (``ckesc emulate``).
+
+One thread drives everything: it waits in ``select()`` on all its inputs (the bus, the socketcand
+clients, the control connections, a wake-up pipe) with a timeout that ends at the earliest absolute
+deadline of the ESCs and of its own timers, and then does the work that is due. The :class:`Bench`
+and its models are touched from that thread only; other threads (a bus reader for buses without a
+file descriptor, callers of :meth:`RealtimeEmulator.request`) hand work over through a queue and the
+wake-up pipe. On Linux the thread's timer slack is set to 1 ns (``prctl(PR_SET_TIMERSLACK)``) and
+the interpreter's switch interval to 0.5 ms while it runs (see the transport timing notes).
+
+Time bases
+    The models run on ``time.monotonic()`` seconds (CLOCK_MONOTONIC, shared by every process on
+    the machine). Frames on the bus carry wall-clock stamps (``time.time()`` base, as SocketCAN,
+    socketcand and python-can's virtual bus use): ``bus = monotonic + offset``, with ``offset``
+    measured once at start-up so that intervals between stamps are exact. With ``stamp="due"``
+    (the default) an ESC frame is stamped with the time it was due, so report intervals and
+    answer delays seen in bus timestamps are the model's, not this machine's scheduling noise;
+    ``stamp="send"`` stamps the time it was actually handed to the bus. Either way the lateness
+    of every frame (send time - due time) is counted (:meth:`RealtimeEmulator.stats`).
+    A frame from the host is given to the ESCs at the time it arrived: the socketcand read time,
+    or the bus's own receive stamp where it is plausible (SocketCAN's kernel stamp).
+
+Buses
+    ``bus``: any python-can bus. Frames the ESCs send go out with ``bus.send``; frames read from it
+    go to the ESCs. A bus with ``fileno()`` (socketcan) is waited on directly; any other (virtual,
+    a socketcand client, ...) is read by one helper thread that only queues frames.
+    ``socketcand_port``: serve the socketcand ASCII protocol on 127.0.0.1, as a hub: python-can's
+    stock ``can.Bus(interface="socketcand", host="127.0.0.1", port=P, channel="can0")`` connects.
+    Handshake ``< hi >``, ``< open NAME >`` (any name) -> ``< ok >``, ``< rawmode >`` -> ``< ok >``;
+    then frames go out as ``< frame ID SEC.USEC DATA >`` (ID 8 hex digits for 29-bit ids, 3 for
+    11-bit; DATA hex, no spaces) and come in as ``< send ID LEN B0 B1 ... >``. A client gets no
+    frames during the first 50 ms after its rawmode ``< ok >`` (python-can reads each handshake
+    reply with a single ``recv()``), unless it sends a frame first. Every frame a client sends is
+    echoed to every client, the sender included, stamped with its arrival time, so that a client
+    can measure answer delays from bus timestamps at both ends (set ``echo_own=False`` for
+    SocketCAN's default, where the sender does not see its own frames). ``< echo >`` is answered;
+    other commands are ignored. Classic CAN only. Both may be given: the emulator then also
+    bridges the two.
+    The emulated bus has one bit rate (``bitrate``): an ESC at another bit rate (after Set Baud and
+    a power cycle) neither hears nor is heard. Arbitration and frame durations are not modelled
+    here: frames leave in due order as soon as they are due.
+
+Control channel (``control_port``), for harness power switching and fault injection
+    Line-based JSON on 127.0.0.1: one request object per line, one answer object per line, on a
+    connection that may stay open. Every answer has ``"ok": true`` or ``"ok": false`` with
+    ``"error"``. Requests:
+
+    ``{"cmd": "status"}``
+        power state, bit rate, uptime, clients, frame counts, lateness summary, and per ESC: slot,
+        node id, powered, ready, bitrate, reporting state, faults, counters, power-up count.
+    ``{"cmd": "power", "action": "off" | "on" | "cycle", "off_time": 1.0}``
+        ``cycle`` answers once power is back on (after ``off_time`` seconds). Power-off writes the
+        flash file.
+    ``{"cmd": "fault", "name": "answer_late", "on": true, "node": 3}``
+        ``node`` optional (default: every ESC). An unknown name is an error listing the known ones.
+    ``{"cmd": "faults"}``: the known faults with their rules and descriptions.
+    ``{"cmd": "bitrate", "bitrate": 250000}``: the emulated bus's bit rate from now on.
+    ``{"cmd": "stats", "reset": false}``: the lateness summary (and start a new one).
+    ``{"cmd": "save"}``: write the flash file now.
+    ``{"cmd": "stop"}``: stop the emulator (power off, flash saved), as SIGTERM does.
+
+    :func:`control_request` is the client; ``ckesc control`` wraps it.
+"""
+
+from __future__ import annotations
+
+import bisect
+import ctypes
+import errno
+import itertools
+import json
+import math
+import os
+import select
+import socket
+import sys
+import threading
+import time
+from collections import deque
+from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeout
+from typing import Any, Callable
+
+import can
+
+from ..protocol.catalogue import DEFAULT_BITRATE
+from ..protocol.frame import WireFrame
+from . import faults as _faults
+from .bench import Bench
+from .model import EscModel
+
+LOCALHOST = "127.0.0.1"
+RAWMODE_QUIET_S = 0.050  # no frames to a client for this long after its rawmode "< ok >"
+TIMER_SLACK_NS = 1
+SWITCH_INTERVAL_S = 5e-4
+MAX_CLIENT_BACKLOG = 4 << 20  # bytes queued for a client that does not read: it is dropped
+MAX_LINE = 1 << 16  # longest control line / socketcand command accepted
+READER_POLL_S = 0.1  # how often the bus reader thread looks at the stop flag
+PLAUSIBLE_RX_STAMP_S = 1.0  # a bus receive stamp further back than this is not trusted
+MAX_POLL_ROUNDS = 100  # polls of the due ESCs at one instant (frames they hear from one another can make more due)
+
+_PR_SET_TIMERSLACK = 29
+_PR_GET_TIMERSLACK = 30
+
+Reply = Callable[[dict], None]
+
+
+# ---------------------------------------------------------------------------------------------------
+# small helpers
+
+
+def set_timer_slack(ns: int) -> int | None:
+    """Set the calling thread's timer slack (Linux); the previous value, or None where unsupported."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        prctl = libc.prctl
+    except (OSError, AttributeError):
+        return None
+    prctl.restype = ctypes.c_int
+    prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong]
+    old = prctl(_PR_GET_TIMERSLACK, 0, 0, 0, 0)
+    if old < 0 or prctl(_PR_SET_TIMERSLACK, ns, 0, 0, 0) != 0:
+        return None
+    return old
+
+
+def stagger_boot(bench: Bench, spread: float) -> None:
+    """Make ESC k of n boot ``k/n x spread`` seconds later than the first (its ``boot_time``), every
+    power-up. Real ESCs on one supply do not boot in lockstep; identical models would report in
+    lockstep forever, and a batch of n reports due at the same instant leaves the last one late by
+    n poll times. ``spread`` = one MSG1 interval (0.02 s) spaces their reports evenly."""
+    n = len(bench.escs)
+    for k, esc in enumerate(bench.escs):
+        esc.config.boot_time += spread * k / n
+
+
+def clock_offset() -> float:
+    """``time.time() - time.monotonic()``, read so that the two clocks are sampled together."""
+    best = None
+    for _ in range(5):
+        a = time.monotonic()
+        w = time.time()
+        b = time.monotonic()
+        if best is None or b - a < best[0]:
+            best = (b - a, w - (a + b) / 2)
+    return best[1]  # type: ignore[index]
+
+
+class Histogram:
+    """Durations in 1 µs bins up to 10 ms, 1 ms bins up to 1 s (the exact maximum is kept): O(1) to
+    add and cheap to summarise, so a status query never stalls the scheduler with a sort."""
+
+    FINE = 10_000  # 1 µs bins: 0 .. 10 ms
+    COARSE = 990  # 1 ms bins: 10 ms .. 1 s, then one overflow bin
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.counts = [0] * (self.FINE + self.COARSE + 1)
+        self.n = 0
+        self.max = 0.0
+        self.total = 0.0
+
+    def add(self, seconds: float) -> None:
+        if seconds < 0.0:
+            seconds = 0.0
+        us = int(seconds * 1e6)
+        if us < self.FINE:
+            self.counts[us] += 1
+        else:
+            self.counts[self.FINE + min(us // 1000 - 10, self.COARSE)] += 1
+        self.n += 1
+        self.total += seconds
+        if seconds > self.max:
+            self.max = seconds
+
+    def _upper_edge(self, i: int) -> float:
+        if i < self.FINE:
+            return (i + 1) * 1e-6
+        return (i - self.FINE + 11) * 1e-3 if i < self.FINE + self.COARSE else math.inf
+
+    def summary(self) -> dict[str, Any]:
+        """count, mean, p50/p90/p99/p99.9 (the upper edge of the bin, never above the maximum) and max
+        in µs; over_1ms / over_5ms: how many took 1 ms / 5 ms or more."""
+        out: dict[str, Any] = {"count": self.n}
+        cum = list(itertools.accumulate(self.counts))
+        for key, q in (("p50_us", 0.5), ("p90_us", 0.9), ("p99_us", 0.99), ("p999_us", 0.999)):
+            if not self.n:
+                out[key] = None
+                continue
+            i = bisect.bisect_left(cum, max(1, math.ceil(q * self.n)))
+            out[key] = round(min(self._upper_edge(i), self.max) * 1e6, 1)
+        out["mean_us"] = round(self.total / self.n * 1e6, 1) if self.n else None
+        out["max_us"] = round(self.max * 1e6, 1) if self.n else None
+        out["over_1ms"] = self.n - cum[999]
+        out["over_5ms"] = self.n - cum[4999]
+        return out
+
+
+def _fmt_frame(wire: Any, stamp: float) -> bytes:
+    """``< frame ID SEC.USEC DATA >`` as socketcand writes it."""
+    sec, usec = divmod(round(stamp * 1e6), 1_000_000)
+    can_id = f"{wire.arbitration_id & 0x1FFFFFFF:08X}" if wire.is_extended_id else f"{wire.arbitration_id & 0x7FF:03X}"
+    return f"< frame {can_id} {sec}.{usec:06d} {bytes(wire.data).hex().upper()} >".encode("ascii")
+
+
+def _parse_send(words: list[str]) -> WireFrame | None:
+    """``send ID LEN B0 B1 ...`` (python-can writes bytes without zero padding) -> a frame, None if malformed."""
+    try:
+        id_text = words[1]
+        can_id = int(id_text, 16)
+        length = int(words[2], 16)
+        data = bytes(int(b, 16) for b in words[3:])
+    except (IndexError, ValueError):
+        return None
+    extended = len(id_text) > 3 or can_id > 0x7FF
+    if length != len(data) or length > 8 or can_id > 0x1FFFFFFF:
+        return None
+    return WireFrame(can_id, data, 0.0, is_extended_id=extended)
+
+
+class _Conn:
+    """A TCP connection served by the loop: input buffer, output backlog."""
+
+    __slots__ = ("sock", "peer", "inbuf", "out", "state", "quiet_until", "rx", "tx", "dropped")
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        try:
+            host, port = sock.getpeername()[:2]
+            self.peer = f"{host}:{port}"
+        except OSError:
+            self.peer = "?"
+        self.inbuf = bytearray()
+        self.out = bytearray()
+        self.state = "hi"  # socketcand: hi -> open -> raw
+        self.quiet_until = 0.0
+        self.rx = self.tx = self.dropped = 0
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
+
+class _Input:
+    __slots__ = ("t", "msg", "wire", "origin")
+
+    def __init__(self, t: float, msg: Any, wire: WireFrame, origin: Any) -> None:
+        self.t, self.msg, self.wire, self.origin = t, msg, wire, origin
+
+
+# ---------------------------------------------------------------------------------------------------
+# the emulator
+
+
+class RealtimeEmulator:
+    """A :class:`Bench` driven in real time on a python-can bus and/or as a socketcand hub.
+
+    ``run()`` drives it in the calling thread until :meth:`stop` (the CLI: main thread, signals call
+    ``stop``); ``start()`` runs it in a background thread (tests). Listening sockets are opened by
+    the constructor, so the ports are known (and a port in use raises ``OSError``) before it runs.
+    """
+
+    def __init__(
+        self,
+        bench: Bench,
+        *,
+        bus: can.BusABC | None = None,
+        own_bus: bool = False,
+        socketcand_port: int | None = None,
+        control_port: int | None = None,
+        bitrate: int = DEFAULT_BITRATE,
+        stamp: str = "due",
+        echo_own: bool = True,
+        rt_priority: int | None = None,
+        log: Callable[[str], None] | None = None,
+    ) -> None:
+        if stamp not in ("due", "send"):
+            raise ValueError(f"stamp must be 'due' or 'send', not {stamp!r}")
+        if bus is None and socketcand_port is None:
+            raise ValueError("nothing to talk to: give a python-can bus or a socketcand port")
+        self.bench = bench
+        self.bus = bus
+        self._own_bus = own_bus
+        self.bitrate = int(bitrate)
+        self.stamp = stamp
+        self.echo_own = echo_own
+        self.rt_priority = rt_priority
+        self.scheduling = "normal"
+        self._log = log or (lambda text: print(f"ckesc emulate: {text}", file=sys.stderr, flush=True))
+        self.offset = clock_offset()
+        self.lateness = Histogram()  # per frame: handed to the bus - due
+        self.wakeup = Histogram()  # per timed wake: select() returned - the deadline it waited for
+        self.counters = {"tx": 0, "rx": 0, "tx_other_bitrate": 0, "tx_errors": 0, "rx_malformed": 0, "clients": 0}
+        self._escs: list[EscModel] = list(bench.escs)
+        self._deadlines: list[float | None] = [None] * len(self._escs)
+        self._deadlines_stale = True
+        self._model_time = 0.0
+        self._stuck_logged = False
+        self._inputs: list[_Input] = []
+        self._posted: deque[tuple[Callable[..., Any], tuple]] = deque()
+        self._rx_queue: deque[tuple[Any, float]] = deque()
+        self._stopping = False
+        self._started = threading.Event()
+        self._finished = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._loop_ident: int | None = None
+        self._power_on_at: float | None = None
+        self._power_waiters: list[Reply] = []
+        self._stop_at: float | None = None
+        self._t_start = time.monotonic()
+        self._clients: list[_Conn] = []
+        self._controls: list[_Conn] = []
+        self._reader: threading.Thread | None = None
+        self._bus_fd: int | None = None
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
+        os.set_blocking(self._wake_w, False)
+        self._sc_listener: socket.socket | None = None
+        self._ctl_listener: socket.socket | None = None
+        try:
+            if socketcand_port is not None:
+                self._sc_listener = self._listen(socketcand_port)
+            if control_port is not None:
+                self._ctl_listener = self._listen(control_port)
+        except OSError:
+            self._close_sockets()
+            raise
+        if bus is not None:
+            try:
+                fd = bus.fileno()
+                self._bus_fd = fd if isinstance(fd, int) and fd >= 0 else None
+            except (NotImplementedError, AttributeError, OSError):
+                self._bus_fd = None
+
+    # ------------------------------------------------------------------ addresses
+
+    @staticmethod
+    def _listen(port: int) -> socket.socket:
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        try:
+            s.bind((LOCALHOST, port))
+            s.listen(16)
+            s.setblocking(False)
+        except OSError:
+            s.close()
+            raise
+        return s
+
+    @property
+    def socketcand_address(self) -> tuple[str, int] | None:
+        return None if self._sc_listener is None else self._sc_listener.getsockname()[:2]
+
+    @property
+    def control_address(self) -> tuple[str, int] | None:
+        return None if self._ctl_listener is None else self._ctl_listener.getsockname()[:2]
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def run(self, *, duration: float | None = None, power_on: bool = True) -> None:
+        """Drive the bench in the calling thread until :meth:`stop` (or ``duration`` seconds).
+        On the way out the bench is powered off (the flash file written) and every socket closed."""
+        old_slack = set_timer_slack(TIMER_SLACK_NS)
+        old_switch = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL_S)
+        old_policy = self._set_rt_priority()
+        self._loop_ident = threading.get_ident()
+        try:
+            now = time.monotonic()
+            self._t_start = now
+            self._model_time = now
+            if duration is not None:
+                self._stop_at = now + duration
+            if power_on:
+                self.bench.power_on(now)
+                self._deadlines_stale = True
+            if self.bus is not None and self._bus_fd is None:
+                self._reader = threading.Thread(target=self._read_bus, name="ckesc-bus-reader", daemon=True)
+                self._reader.start()
+            self._started.set()
+            self._loop()
+        finally:
+            try:
+                self._shutdown()
+            finally:
+                sys.setswitchinterval(old_switch)
+                if old_slack is not None:
+                    set_timer_slack(old_slack)
+                if old_policy is not None:
+                    os.sched_setscheduler(0, *old_policy)
+                self._finished.set()
+
+    def _set_rt_priority(self) -> tuple[int, os.sched_param] | None:
+        """SCHED_FIFO for the calling thread when asked (and permitted); the policy to restore."""
+        if self.rt_priority is None:
+            return None
+        if not hasattr(os, "sched_setscheduler"):
+            self._log("--rt-priority: this platform has no SCHED_FIFO; running at normal priority")
+            return None
+        old = (os.sched_getscheduler(0), os.sched_getparam(0))
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
+        except (PermissionError, OSError) as exc:
+            self._log(f"--rt-priority {self.rt_priority}: SCHED_FIFO not permitted ({exc.strerror or exc}); running at normal priority")
+            return None
+        self.scheduling = f"SCHED_FIFO {self.rt_priority}"
+        return old
+
+    def start(self, **kwargs: Any) -> RealtimeEmulator:
+        """Run in a background thread; returns once the loop has started."""
+        self._thread = threading.Thread(target=self.run, kwargs=kwargs, name="ckesc-realtime", daemon=True)
+        self._thread.start()
+        while not self._started.wait(0.05):
+            if not self._thread.is_alive():
+                raise RuntimeError("the real-time emulator thread died while starting")
+        return self
+
+    def stop(self) -> None:
+        """Ask the loop to stop (any thread, or a signal handler)."""
+        self._stopping = True
+        self._wake()
+
+    def join(self, timeout: float | None = None) -> bool:
+        if self._thread is not None:
+            self._thread.join(timeout)
+        return self._finished.is_set()
+
+    def close(self, timeout: float = 10.0) -> None:
+        self.stop()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        elif not self._started.is_set():  # never run: nothing else will close the sockets
+            self._close_sockets()
+
+    def __enter__(self) -> RealtimeEmulator:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ cross-thread requests
+
+    def request(self, req: dict, timeout: float | None = None) -> dict:
+        """One control request (see the module docstring), from any thread; the answer dict."""
+        if threading.get_ident() == self._loop_ident:
+            raise RuntimeError("request() from the loop thread would wait on itself")
+        if self._finished.is_set() or not self._started.is_set():
+            raise RuntimeError("the real-time emulator is not running")
+        fut: Future = Future()
+
+        def reply(answer: dict) -> None:
+            if not fut.done():
+                fut.set_result(answer)
+
+        self._posted.append((self._dispatch, (req, reply)))
+        self._wake()
+        if timeout is None:
+            timeout = 10.0 + float(req.get("off_time") or 0.0)
+        end = time.monotonic() + timeout
+        while True:
+            try:
+                return fut.result(min(0.2, max(0.0, end - time.monotonic())))
+            except FutureTimeout:
+                if self._finished.is_set():
+                    raise RuntimeError(f"the real-time emulator stopped before answering {req}") from None
+                if time.monotonic() >= end:
+                    raise TimeoutError(f"no answer from the emulator loop to {req} within {timeout} s") from None
+
+    def status(self) -> dict:
+        return self.request({"cmd": "status"})
+
+    def power_off(self) -> dict:
+        return self.request({"cmd": "power", "action": "off"})
+
+    def power_on(self) -> dict:
+        return self.request({"cmd": "power", "action": "on"})
+
+    def power_cycle(self, off_time: float = 1.0) -> dict:
+        return self.request({"cmd": "power", "action": "cycle", "off_time": off_time})
+
+    def set_fault(self, name: str, on: bool = True, node: int | None = None) -> dict:
+        return self.request({"cmd": "fault", "name": name, "on": on, "node": node})
+
+    def stats(self, reset: bool = False) -> dict:
+        return self.request({"cmd": "stats", "reset": reset})
+
+    def _wake(self) -> None:
+        try:
+            os.write(self._wake_w, b"\0")
+        except (BlockingIOError, OSError):  # pipe full: a wake-up is pending anyway; closed: stopping
+            pass
+
+    # ------------------------------------------------------------------ the loop
+
+    def _refresh_deadlines(self) -> None:
+        if self._deadlines_stale:
+            self._deadlines = [esc.next_deadline() for esc in self._escs]
+            self._deadlines_stale = False
+
+    def _next_wake(self) -> float | None:
+        self._refresh_deadlines()
+        times = [t for t in self._deadlines if t is not None]
+        for t in (self._power_on_at, self._stop_at):
+            if t is not None:
+                times.append(t)
+        return min(times) if times else None
+
+    def _loop(self) -> None:
+        mono = time.monotonic
+        while not self._stopping:
+            deadline = self._next_wake()
+            rlist: list[Any] = [self._wake_r, *self._clients, *self._controls]
+            if self._sc_listener is not None:
+                rlist.append(self._sc_listener)
+            if self._ctl_listener is not None:
+                rlist.append(self._ctl_listener)
+            if self._bus_fd is not None:
+                rlist.append(self._bus_fd)
+            wlist = [c for c in itertools.chain(self._clients, self._controls) if c.out]
+            timeout = None if deadline is None else max(0.0, deadline - mono())
+            readable, writable, _ = select.select(rlist, wlist, [], timeout)
+            now = mono()
+            if not readable and not writable and deadline is not None:
+                self.wakeup.add(now - deadline)
+            for c in writable:
+                self._flush(c)
+            for r in readable:
+                self._on_readable(r, now)
+            self._process()
+
+    def _on_readable(self, r: Any, now: float) -> None:
+        if r == self._wake_r:
+            try:
+                while os.read(self._wake_r, 4096):
+                    pass
+            except BlockingIOError:
+                pass
+            while self._rx_queue:
+                msg, t = self._rx_queue.popleft()
+                self._bus_input(msg, t)
+        elif r is self._sc_listener or r is self._ctl_listener:
+            self._accept(r)
+        elif r == self._bus_fd:
+            while True:
+                msg = self.bus.recv(0)  # type: ignore[union-attr]
+                if msg is None:
+                    break
+                self._bus_input(msg, now)
+        elif isinstance(r, _Conn):
+            self._read_conn(r, now)
+
+    def _process(self) -> None:
+        """Feed the frames heard in arrival order (emitting what fell due before each), then the
+        requests (control), then the timers, then send everything due now."""
+        if self._inputs:
+            inputs, self._inputs = self._inputs, []
+            inputs.sort(key=lambda item: item.t)  # bus reader and socketcand clients interleave
+            for item in inputs:
+                t = min(max(item.t, self._model_time), time.monotonic())
+                self._emit_due(t)
+                self._model_time = t
+                self._host_frame(item, t)
+        while self._posted:
+            fn, args = self._posted.popleft()
+            fn(*args)
+        now = time.monotonic()
+        if self._power_on_at is not None and now >= self._power_on_at:
+            self._do_power_on(self._power_on_at)
+        if self._stop_at is not None and now >= self._stop_at:
+            self._stopping = True
+        self._emit_due(time.monotonic())
+
+    # ------------------------------------------------------------------ ESC output
+
+    def _emit_due(self, t: float) -> None:
+        """Poll the ESCs whose deadline has come by ``t``, earliest first, and put what each sends on
+        the bus at once; then let the other ESCs hear those frames (which may make more due: again)."""
+        for _ in range(MAX_POLL_ROUNDS):
+            self._refresh_deadlines()
+            due = sorted((d, i) for i, d in enumerate(self._deadlines) if d is not None and d <= t)
+            if not due:
+                return
+            sent: list[tuple[EscModel, WireFrame]] = []
+            for _, i in due:
+                esc = self._escs[i]
+                frames = esc.poll(t)
+                self._deadlines[i] = esc.next_deadline()
+                if frames:
+                    self._transmit(esc, frames)
+                    sent.extend((esc, w) for w in frames)
+            if t > self._model_time:
+                self._model_time = t
+            for esc, w in sent:  # the other ESCs on the bus hear them too (after the sends: off the hot path)
+                self.bench.deliver(w, w.timestamp, esc.bitrate, sender=esc)
+            self._deadlines_stale = True
+        if not self._stuck_logged:  # a model whose deadline does not move past a poll: say so once
+            self._stuck_logged = True
+            self._log(f"an ESC model stays due after {MAX_POLL_ROUNDS} polls at t={t:.6f}; its next_deadline() does not advance")
+
+    def _transmit(self, esc: EscModel, frames: list[WireFrame]) -> None:
+        """One ESC's frames, in due order, onto the bus: lateness counted per frame."""
+        if esc.bitrate != self.bitrate:
+            self.counters["tx_other_bitrate"] += len(frames)
+            return
+        t_send = time.monotonic()
+        due_stamps = self.stamp == "due"
+        if self._clients:
+            data = b"".join(_fmt_frame(w, (w.timestamp if due_stamps else t_send) + self.offset) for w in frames)
+            self._to_clients(data, None, t_send)
+        for w in frames:
+            if self.bus is not None:
+                t_send = time.monotonic()
+                self._bus_send(w, (w.timestamp if due_stamps else t_send) + self.offset)
+            self.lateness.add(t_send - w.timestamp)
+        self.counters["tx"] += len(frames)
+
+    def _bus_send(self, wire: WireFrame, stamp: float) -> None:
+        msg = can.Message(timestamp=stamp, arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id,
+                          data=wire.data)
+        try:
+            self.bus.send(msg)  # type: ignore[union-attr]
+        except can.CanError as exc:
+            self.counters["tx_errors"] += 1
+            if self.counters["tx_errors"] in (1, 10, 100, 1000) or self.counters["tx_errors"] % 10000 == 0:
+                self._log(f"bus send failed ({self.counters['tx_errors']} so far): {exc}")
+
+    # ------------------------------------------------------------------ host input
+
+    def _bus_input(self, msg: can.Message, t_read: float) -> None:
+        """A frame read from the python-can bus (loop thread)."""
+        if msg.is_error_frame:
+            return
+        t = t_read
+        stamp = getattr(msg, "timestamp", 0.0) or 0.0
+        if stamp:
+            t_bus = stamp - self.offset
+            if t_read - PLAUSIBLE_RX_STAMP_S <= t_bus <= t_read:
+                t = t_bus
+        wire = WireFrame(msg.arbitration_id, bytes(msg.data), 0.0, is_extended_id=msg.is_extended_id)
+        self._inputs.append(_Input(t, msg, wire, self.bus))
+
+    def _host_frame(self, item: _Input, t: float) -> None:
+        self.counters["rx"] += 1
+        self.bench.deliver(item.msg, t, self.bitrate)
+        self._deadlines_stale = True
+        if item.origin is not self.bus and self.bus is not None:  # bridge: a socketcand client's frame
+            self._bus_send(item.wire, t + self.offset)
+        if self._clients and not getattr(item.msg, "is_remote_frame", False):
+            skip = None if self.echo_own or not isinstance(item.origin, _Conn) else item.origin
+            self._to_clients(_fmt_frame(item.wire, t + self.offset), skip, time.monotonic())
+
+    def _read_bus(self) -> None:
+        """Helper thread for buses without a file descriptor: only reads and queues."""
+        bus = self.bus
+        assert bus is not None
+        while not self._stopping:
+            try:
+                msg = bus.recv(READER_POLL_S)
+            except Exception as exc:  # noqa: BLE001 - a dead bus must not kill the process silently
+                if not self._stopping:
+                    self._posted.append((self._log, (f"reading the bus failed, frames from the host are no longer heard: {exc}",)))
+                    self._wake()
+                return
+            if msg is not None:
+                self._rx_queue.append((msg, time.monotonic()))
+                self._wake()
+
+    # ------------------------------------------------------------------ sockets
+
+    def _accept(self, listener: socket.socket) -> None:
+        try:
+            sock, _ = listener.accept()
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:
+            self._log(f"accept failed: {exc}")
+            return
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        conn = _Conn(sock)
+        if listener is self._sc_listener:
+            self._clients.append(conn)
+            self.counters["clients"] += 1
+            self._write(conn, b"< hi >")
+        else:
+            self._controls.append(conn)
+
+    def _read_conn(self, conn: _Conn, now: float) -> None:
+        try:
+            data = conn.sock.recv(65536)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            data = b""
+        if not data:
+            self._drop(conn)
+            return
+        conn.inbuf += data
+        if conn in self._clients:
+            self._socketcand_commands(conn, now)
+        else:
+            self._control_lines(conn)
+        if len(conn.inbuf) > MAX_LINE:
+            self._log(f"{conn.peer}: more than {MAX_LINE} bytes without a complete command; dropped")
+            self._drop(conn)
+
+    def _socketcand_commands(self, conn: _Conn, now: float) -> None:
+        buf = conn.inbuf
+        while True:
+            start = buf.find(b"<")
+            if start < 0:
+                buf.clear()
+                return
+            end = buf.find(b">", start)
+            if end < 0:
+                del buf[:start]
+                return
+            words = buf[start + 1 : end].decode("ascii", "replace").split()
+            del buf[: end + 1]
+            if not words:
+                continue
+            cmd = words[0]
+            if cmd == "send" and conn.state in ("open", "raw"):
+                wire = _parse_send(words)
+                if wire is None:
+                    self.counters["rx_malformed"] += 1
+                    continue
+                conn.rx += 1
+                conn.quiet_until = 0.0  # it has read our "< ok >": frames may flow
+                msg = can.Message(arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id, data=wire.data)
+                self._inputs.append(_Input(now, msg, wire, conn))
+            elif cmd == "open" and conn.state == "hi" and len(words) == 2:
+                conn.state = "open"
+                self._write(conn, b"< ok >")
+            elif cmd == "rawmode" and conn.state in ("open", "raw"):
+                conn.state = "raw"
+                conn.quiet_until = time.monotonic() + RAWMODE_QUIET_S
+                self._write(conn, b"< ok >")
+            elif cmd == "echo":
+                self._write(conn, b"< echo >")
+            # anything else (bcmmode commands, filters, ...) is ignored: python-can never sends it,
+            # and an "< error >" line would be read by its client as a CAN error frame
+
+    def _to_clients(self, data: bytes, skip: _Conn | None, now: float) -> None:
+        for c in list(self._clients):
+            if c is skip or c.state != "raw":
+                continue
+            if now < c.quiet_until:
+                c.dropped += 1
+                continue
+            c.tx += 1
+            self._write(c, data)
+
+    def _write(self, conn: _Conn, data: bytes) -> None:
+        conn.out += data
+        self._flush(conn)
+
+    def _flush(self, conn: _Conn) -> None:
+        if not conn.out:
+            return
+        try:
+            n = conn.sock.send(conn.out)
+        except (BlockingIOError, InterruptedError):
+            n = 0
+        except OSError:
+            self._drop(conn)
+            return
+        del conn.out[:n]
+        if len(conn.out) > MAX_CLIENT_BACKLOG:
+            self._log(f"{conn.peer}: does not read its frames ({len(conn.out)} bytes queued); dropped")
+            self._drop(conn)
+
+    def _drop(self, conn: _Conn) -> None:
+        for group in (self._clients, self._controls):
+            if conn in group:
+                group.remove(conn)
+        try:
+            conn.sock.close()
+        except OSError:
+            pass
+
+    # ------------------------------------------------------------------ control
+
+    def _control_lines(self, conn: _Conn) -> None:
+        while True:
+            nl = conn.inbuf.find(b"\n")
+            if nl < 0:
+                return
+            line = bytes(conn.inbuf[:nl]).strip()
+            del conn.inbuf[: nl + 1]
+            if not line:
+                continue
+
+            def reply(answer: dict, conn: _Conn = conn) -> None:
+                if conn in self._controls:
+                    self._write(conn, json.dumps(answer).encode() + b"\n")
+
+            try:
+                req = json.loads(line)
+            except ValueError as exc:
+                reply({"ok": False, "error": f"not a JSON object: {exc}"})
+                continue
+            self._posted.append((self._dispatch, (req, reply)))
+
+    def _dispatch(self, req: Any, reply: Reply) -> None:
+        """One control request, in the loop thread. ``reply`` is called once (maybe later: power cycle)."""
+        try:
+            if not isinstance(req, dict):
+                raise ValueError("a request is a JSON object such as {\"cmd\": \"status\"}")
+            cmd = req.get("cmd")
+            handler = _COMMANDS.get(cmd)  # type: ignore[arg-type]
+            if handler is None:
+                raise ValueError(f"unknown command {cmd!r}; known: {', '.join(_COMMANDS)}")
+            answer = handler(self, req, reply)
+        except (ValueError, TypeError, KeyError) as exc:
+            text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+            reply({"ok": False, "error": str(text)})
+            return
+        if answer is not None:
+            reply({"ok": True, **answer})
+
+    def _cmd_status(self, req: dict, reply: Reply) -> dict:
+        now = time.monotonic()
+        escs = []
+        for esc in self._escs:
+            escs.append({
+                "slot": esc.config.slot,
+                "node_id": esc.node_id,
+                "powered": esc.powered,
+                "ready": esc.powered and now >= esc.ready_at,
+                "bitrate": esc.bitrate,
+                "on_bus": esc.bitrate == self.bitrate,
+                "reporting": esc.reporting,
+                "can_test": esc.can_test,
+                "comm_fault": esc.comm_fault,
+                "throttle": esc.throttle,
+                "faults": sorted(esc.faults),
+                "counters": dict(esc.counters),
+                "power_ups": esc.nvm.get("power_ups"),
+            })
+        return {
+            "powered": self.bench.powered,
+            "power_on_in": None if self._power_on_at is None else round(self._power_on_at - now, 6),
+            "bitrate": self.bitrate,
+            "uptime": round(now - self._t_start, 6),
+            "monotonic": now,
+            "clock_offset": self.offset,
+            "stamp": self.stamp,
+            "scheduling": self.scheduling,
+            "flash": None if self.bench.flash is None else str(self.bench.flash.path),
+            "socketcand": _addr(self.socketcand_address),
+            "clients": len(self._clients),
+            "counters": dict(self.counters),
+            "lateness": self.lateness.summary(),
+            "wakeup": self.wakeup.summary(),
+            "escs": escs,
+        }
+
+    def _cmd_power(self, req: dict, reply: Reply) -> dict | None:
+        action = req.get("action")
+        now = time.monotonic()
+        if action == "off":
+            self._emit_due(now)
+            self._cancel_power_on("power switched off")
+            err = self._do_power_off(now)
+            return {"powered": False, **({"flash_error": err} if err else {})}
+        if action == "on":
+            self._cancel_power_on("power switched on")
+            self._do_power_on(now)
+            return {"powered": True}
+        if action == "cycle":
+            off_time = req.get("off_time", 1.0)
+            if isinstance(off_time, bool) or not isinstance(off_time, (int, float)) or not 0 <= off_time <= 3600:
+                raise ValueError(f"off_time must be a number of seconds 0..3600, not {off_time!r}")
+            self._emit_due(now)
+            self._cancel_power_on("power cycled again")
+            err = self._do_power_off(now)
+            self._power_on_at = now + off_time
+            self._power_waiters.append(lambda answer: reply({**answer, **({"flash_error": err} if err else {})}))
+            return None  # answered at power-on
+        raise ValueError(f"power action must be off, on or cycle, not {action!r}")
+
+    def _do_power_off(self, now: float) -> str | None:
+        self._deadlines_stale = True
+        try:
+            self.bench.power_off(now)  # writes the flash file
+        except OSError as exc:
+            self._log(f"could not write the flash file: {exc}")
+            return str(exc)
+        return None
+
+    def _do_power_on(self, at: float) -> None:
+        self._power_on_at = None
+        self.bench.power_on(at)
+        self._deadlines_stale = True
+        waiters, self._power_waiters = self._power_waiters, []
+        for w in waiters:
+            w({"ok": True, "powered": True})
+
+    def _cancel_power_on(self, why: str) -> None:
+        self._power_on_at = None
+        waiters, self._power_waiters = self._power_waiters, []
+        for w in waiters:
+            w({"ok": False, "error": f"power cycle interrupted: {why}"})
+
+    def _cmd_fault(self, req: dict, reply: Reply) -> dict:
+        name, node = req.get("name"), req.get("node")
+        on = req.get("on", True)
+        if not isinstance(name, str):
+            raise ValueError(f"fault name must be a string, not {name!r}; known: {', '.join(sorted(_faults.FAULTS))}")
+        if not isinstance(on, bool):
+            raise ValueError(f"'on' must be true or false, not {on!r}")
+        if node is not None:
+            if isinstance(node, bool) or not isinstance(node, int):
+                raise ValueError(f"node must be a node id, not {node!r}")
+            self.bench.esc(node)  # KeyError naming the node ids present
+        self.bench.set_fault(name, on, node)  # ValueError listing the known names
+        self._deadlines_stale = True
+        return {"faults": {str(esc.node_id): sorted(esc.faults) for esc in self._escs}}
+
+    def _cmd_faults(self, req: dict, reply: Reply) -> dict:
+        return {"faults": {f.name: {"rules": list(f.rules), "description": f.description} for f in _faults.FAULTS.values()}}
+
+    def _cmd_bitrate(self, req: dict, reply: Reply) -> dict:
+        value = req.get("bitrate")
+        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+            raise ValueError(f"bitrate must be a positive integer (bit/s), not {value!r}")
+        self.bitrate = value
+        return {"bitrate": value}
+
+    def _cmd_stats(self, req: dict, reply: Reply) -> dict:
+        out = {"lateness": self.lateness.summary(), "wakeup": self.wakeup.summary(), "counters": dict(self.counters)}
+        if req.get("reset"):
+            self.lateness.reset()
+            self.wakeup.reset()
+        return out
+
+    def _cmd_save(self, req: dict, reply: Reply) -> dict:
+        self.bench.persist()
+        return {"flash": None if self.bench.flash is None else str(self.bench.flash.path)}
+
+    def _cmd_stop(self, req: dict, reply: Reply) -> dict:
+        self._stopping = True
+        return {"stopping": True}
+
+    # ------------------------------------------------------------------ shutdown
+
+    def _shutdown(self) -> None:
+        now = time.monotonic()
+        self._cancel_power_on("the emulator stopped")
+        try:
+            if self.bench.powered:
+                self.bench.power_off(now)
+            else:
+                self.bench.persist()
+        finally:
+            for conn in self._controls:  # answers already queued (e.g. to "stop") still go out
+                try:
+                    conn.sock.setblocking(True)
+                    conn.sock.settimeout(0.5)
+                    conn.sock.sendall(conn.out)
+                except OSError:
+                    pass
+            self._stopping = True
+            if self._reader is not None:
+                self._reader.join(READER_POLL_S * 5)
+            self._close_sockets()
+            if self._own_bus and self.bus is not None:
+                self.bus.shutdown()
+
+    def _close_sockets(self) -> None:
+        for conn in [*self._clients, *self._controls]:
+            self._drop(conn)
+        for s in (self._sc_listener, self._ctl_listener):
+            if s is not None:
+                s.close()
+        for fd in (self._wake_r, self._wake_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self._wake_r = self._wake_w = -1
+
+
+_COMMANDS: dict[str, Callable[[RealtimeEmulator, dict, Reply], dict | None]] = {
+    "status": RealtimeEmulator._cmd_status,
+    "power": RealtimeEmulator._cmd_power,
+    "fault": RealtimeEmulator._cmd_fault,
+    "faults": RealtimeEmulator._cmd_faults,
+    "bitrate": RealtimeEmulator._cmd_bitrate,
+    "stats": RealtimeEmulator._cmd_stats,
+    "save": RealtimeEmulator._cmd_save,
+    "stop": RealtimeEmulator._cmd_stop,
+}
+
+
+def _addr(address: tuple[str, int] | None) -> str | None:
+    return None if address is None else f"{address[0]}:{address[1]}"
+
+
+# ---------------------------------------------------------------------------------------------------
+# the control client
+
+
+class ControlError(RuntimeError):
+    """The emulator is not reachable, or it answered ``ok: false``; the message says which."""
+
+    def __init__(self, message: str, *, unreachable: bool = False) -> None:
+        super().__init__(message)
+        self.unreachable = unreachable
+
+
+def control_request(port: int, req: dict, *, host: str = LOCALHOST, timeout: float | None = None) -> dict:
+    """Send one request to a running emulator's control port and return its answer (``ok`` true).
+    Raises :class:`ControlError` when nothing listens there, the connection fails, or the answer is an error."""
+    if timeout is None:
+        timeout = 10.0 + float(req.get("off_time") or 0.0)
+    where = f"{host}:{port}"
+    try:
+        sock = socket.create_connection((host, port), timeout=timeout)
+    except ConnectionRefusedError:
+        raise ControlError(f"no emulator is running with its control channel on {where} (connection refused); "
+                           f"start one with 'ckesc emulate --control {port} ...'", unreachable=True) from None
+    except OSError as exc:
+        raise ControlError(f"cannot reach the emulator's control channel on {where}: {exc.strerror or exc}",
+                           unreachable=True) from None
+    with sock:
+        try:
+            sock.sendall(json.dumps(req).encode() + b"\n")
+            data = bytearray()
+            while b"\n" not in data:
+                chunk = sock.recv(65536)
+                if not chunk:
+                    break
+                data += chunk
+        except TimeoutError:
+            raise ControlError(f"no answer from the emulator on {where} within {timeout} s", unreachable=True) from None
+        except OSError as exc:
+            if exc.errno in (errno.ECONNRESET, errno.EPIPE):
+                raise ControlError(f"the emulator on {where} closed the connection", unreachable=True) from None
+            raise ControlError(f"control connection to {where} failed: {exc}", unreachable=True) from None
+    line = bytes(data).split(b"\n", 1)[0]
+    if not line:
+        raise ControlError(f"the emulator on {where} closed the connection without answering", unreachable=True)
+    try:
+        answer = json.loads(line)
+    except ValueError:
+        raise ControlError(f"{where} answered something that is not JSON: {line[:200]!r}") from None
+    if not isinstance(answer, dict) or not answer.get("ok"):
+        error = answer.get("error") if isinstance(answer, dict) else answer
+        raise ControlError(str(error))
+    return answer
