@@ -1,9 +1,9 @@
 """Switchable faults: each makes an emulated ESC break one rule in one way.
 
 The suite's self-test switches each fault on and checks that the tests citing the rules the fault
-names fail, and only those. Rule ids are those of ``spec/INTERPRETATIONS.md`` (F.., R..) and
-``S<section>`` for the document's own numbered clarifications that INTERPRETATIONS.md does not
-restate (e.g. ``S4.4.5`` for MSG2's units).
+names fail, and only those. Rule ids are requirement ids of ``ckesc/harness/requirements.toml``:
+``F..``/``R..`` from ``spec/INTERPRETATIONS.md``, ``4.4.5-T`` for a section's parameter table,
+``4.4.2-4`` for a numbered clarification of the document.
 """
 
 from __future__ import annotations
@@ -38,29 +38,40 @@ _FAULTS = (
     Fault("get_esc_id_with_option", ("R1",), "GET_ESC_ID replies carry [option, node_id, channel]"),
     Fault("get_esc_id_wrong_node", ("R1",), "GET_ESC_ID replies name node id + 1"),
     Fault("msg_control_answer_echo", ("R2",), "MSG Control is answered with the command echoed, not 0"),
-    Fault("msg_control_no_answer", ("R2", "S4.4.2"), "MSG Control is not answered"),
-    Fault("suspend_ignored", ("S4.4.2",), "MSG Control 0x55555555 does not stop active reporting"),
-    Fault("resume_ignored", ("S4.4.2",), "MSG Control 0xAAAAAAAA does not restart active reporting"),
+    Fault("msg_control_no_answer", ("R2", "4.4.2-4"), "MSG Control is not answered"),
+    Fault("resume_exp_ignored", ("4.4.2-T",), "MSG Control 0xEEEEEEEE is answered but starts no MSG_EXP reporting"),
+    Fault("suspend_ignored", ("4.4.2-1", "4.4.2-T", "4.4.2-3", "R12", "4.4.20-6"), "MSG Control 0x55555555 does not stop active reporting"),
+    Fault("resume_ignored", ("4.4.2-1", "4.4.2-T"), "MSG Control 0xAAAAAAAA does not restart active reporting"),
     # reports (4.4.4 - 4.4.14)
     Fault("report_interval_wrong", ("R9",), "MSG1 comes every N x 3 ms instead of N x 2 ms"),
     Fault("report_jitter", ("R9",), "report intervals jitter by up to +-30 %"),
     Fault("msg2_interval_ignores_setting", ("R9",), "MSG2 keeps its default interval after Set Freq"),
     Fault("status_direction_bit14", ("R7",), "MSG1 reports the direction on bit 14 instead of bit 15"),
     Fault("status_running_wrong", ("R7",), "MSG1 bit 8 (run/stop) stays 0 while the motor runs"),
-    Fault("msg2_scale_tenths", ("S4.4.5",), "MSG2 voltage and current are in 0.1 units instead of 0.01"),
-    Fault("msg3_short", ("S4.4.6",), "MSG3 is sent with 3 payload bytes (Hobbywing's length)"),
-    Fault("speed_ignores_throttle", ("S4.4.4",), "MSG1 PWM stays 0 whatever the throttle"),
+    Fault("msg2_scale_tenths", ("4.4.5-T",), "MSG2 voltage and current are in 0.1 units instead of 0.01"),
+    Fault("msg3_short", ("4.4.6-T",), "MSG3 is sent with 3 payload bytes (Hobbywing's length)"),
+    Fault("reports_padded", ("4.4.4-1", "4.4.5-1"), "MSG1 and MSG2 are zero-padded to 8 data bytes (7 payload bytes)"),
+    Fault("exp1_scale_tenths", ("4.4.7-T",), "MSG_EXP1 voltage and current are in 0.1 units instead of 0.01"),
+    Fault("exp7_direction_zero_based", ("4.4.9-T",), "MSG_EXP7 reports the direction as 0 forward / 1 reverse instead of 1 / 2"),
+    Fault("exp8_power_ups_from_zero", ("4.4.10-T",), "MSG_EXP8 counts power-ups from zero (one less than 241 option 2)"),
+    Fault("exp_run_times_ms", ("4.4.11-T", "4.4.12-T"), "MSG_EXP9 and MSG_EXP10 running times are in milliseconds instead of seconds"),
+    Fault("exp11_msg3_order", ("4.4.13-T",), "MSG_EXP11 carries MSG3's order (MOS, CAP, motor, MCU) instead of MOS, MCU, CAP, motor"),
+    Fault("speed_ignores_throttle", ("4.4.4-T",), "MSG1 PWM stays 0 whatever the throttle"),
     # comm loss (R8)
     Fault("comm_loss_late", ("R8",), "the comm-loss flag is set 400 ms after the last command"),
     Fault("comm_loss_early", ("R8",), "the comm-loss flag is set 100 ms after the last command"),
     Fault("comm_loss_never", ("R8",), "the comm-loss flag is never set"),
     Fault("comm_loss_sticky", ("R8",), "the comm-loss flag is not cleared by the next command"),
     # throttle (4.4.15 - 4.4.17)
-    Fault("throttle_channel_ignored", ("S4.4.18",), "the ESC always follows channel 1, not its own throttle channel"),
+    Fault("throttle_channel_ignored", ("4.4.18-6",), "the ESC always follows channel 1, not its own throttle channel"),
     Fault("twelve_bit_nibbles_swapped", ("R4",), "RawCommand_12b is read with the nibbles of p1/p4 swapped"),
     Fault("twelve_bit_group_ignored", ("R4",), "RawCommand_12b is applied whatever its group id"),
     Fault("ten_bit_not_doubled", ("R5",), "RawCommand_10b values are used as 0..1000 instead of doubled"),
     Fault("fourteen_bit_byte_order", ("R3",), "RawCommand_14b is read as little-endian 14-bit fields"),
+    Fault("throttle_answered", ("4.4.15-1", "4.4.16-1", "4.4.17-1"),
+          "every RawCommand addressed to the ESC is answered at once with an extra MSG1"),
+    Fault("ten_bit_tail_checked", ("4.4.17-3", "R5"),
+          "RawCommand_10b is dropped unless the high nibble of payload[7] is 0b1100 (read as a tail byte)"),
     # settings and rejects (R10 - R13)
     Fault("set_freq_accepts_illegal", ("R10",), "Set Freq applies values outside 10..250 (1..9, 251..255; 0 stays refused)"),
     Fault("set_freq_partial", ("R10",), "Set Freq applies the legal values of a partly illegal request"),
@@ -72,6 +83,10 @@ _FAULTS = (
     Fault("set_baud_after_window", ("R11",), "Set Baud is applied after the 120 s window"),
     Fault("set_baud_immediate", ("R11",), "Set Baud changes the bit rate at once instead of at the next power-up"),
     Fault("set_id_needs_destination", ("R11",), "Set ID is obeyed only when addressed to the ESC's own node id"),
+    Fault("config_window_short", ("R11",), "Set ID and Set Baud take effect only within 60 s of power-up, not 120 s"),
+    Fault("set_id_channel_ignored", ("4.4.18-1", "4.4.18-6"), "Set ID changes the node id but keeps the throttle channel"),
+    Fault("rotation_ignored", ("4.4.21-1", "4.4.21-T"), "Set Rotation 0 / 1 is answered but never changes the direction"),
+    Fault("throttle_select_ignored", ("4.4.23-1",), "Throttle Select is answered but never changes the source"),
     Fault("settings_while_suspended", ("R12",), "Set Led, Set Rotation and Set Freq take effect while reporting is suspended"),
     Fault("rotation_while_running", ("R12",), "Set Rotation and Throttle Select take effect while the motor runs"),
     Fault("intervals_not_persisted", ("R13",), "report intervals are lost at power-off"),
@@ -83,7 +98,7 @@ _FAULTS = (
     Fault("baud_not_persisted", ("R13",), "the Set Baud code is lost at power-off"),
     Fault("expand_not_persisted", ("R13",), "Expand Set Part settings are lost at power-off"),
     Fault("suspend_persisted", ("R13",), "MSG Control suspension survives power-off"),
-    Fault("power_up_counter_stuck", ("S4.4.27",), "the power-up counter does not count power-ups"),
+    Fault("power_up_counter_stuck", ("4.4.27-T", "4.4.10-T"), "the power-up counter does not count power-ups"),
     # other services
     Fault("expand_set_answered", ("R14",), "Expand Set Part is answered"),
     Fault("expand_set_big_endian", ("R14",), "Expand Set Part's Set_cmd is read big-endian"),
@@ -91,18 +106,21 @@ _FAULTS = (
     Fault("clear_rec_ignored", ("R15",), "Clear Rec leaves the temperature records"),
     Fault("can_test_count_skips", ("R16",), "CAN Test counts up by 2 per frame"),
     Fault("can_test_reports_continue", ("R16",), "other reports continue in CAN Test mode"),
+    Fault("can_test_off_ignored", ("R16", "4.4.1-3"), "CAN Test 0x55 does not end test mode"),
+    Fault("can_test_off_resumes_reporting", ("R16", "4.4.1-3"),
+          "leaving CAN Test starts normal reporting whatever the state before (suspended, MSG_EXP mode)"),
     Fault("can_test_persisted", ("R16", "R13"), "CAN Test mode survives power-off"),
-    Fault("self_test_always_passes", ("S4.4.24",), "Self Test answers 0 even when the power-up self-test failed"),
+    Fault("self_test_always_passes", ("4.4.24-1", "4.2.1-1"), "Self Test answers 0 even when the power-up self-test failed"),
     Fault("self_test_unanswered", ("4.1.1-2", "4.2.1-1", "4.4.24-1"), "Self Test requests are not answered"),
     Fault("self_test_inverted", ("4.2.1-1", "4.4.24-1"), "Self Test answers 1 (failed) for a passed power-up self-test and 0 for a failed one"),
     Fault("self_test_undefined_code", ("A-1",), "the power-up self-test fails with fault code 0x30, which the attachment does not define"),
     Fault("pwm_no_fallback", ("4.2-1",), "PWM+CAN: when the PWM signal is lost the CAN throttle does not take over (the motor stops)"),
     Fault("esc_information_bcd_date", ("4.4.26-T",), "240 answers the firmware date in BCD (October -> 0x10 = 16)"),
     Fault("maintenance_info_7_missing", ("4.4.27-T",), "241 answers have 6 payload bytes: Info_7 is missing"),
-    Fault("set_led_no_echo", ("S4.4.20",), "Set Led is answered with zeros"),
-    Fault("set_freq_read_wrong", ("S4.4.22",), "Set/Get Freq read answers the defaults, not the settings"),
-    Fault("major_config_bits_swapped", ("S4.4.28",), "242 puts the direction in bit 6 and the source in bit 7"),
-    Fault("maintenance_counts_wrong", ("S4.4.27",), "241 option 2 swaps the power-up and stop counters"),
+    Fault("set_led_no_echo", ("4.4.20-T",), "Set Led is answered with zeros"),
+    Fault("set_freq_read_wrong", ("4.4.22-2",), "Set/Get Freq read answers the defaults, not the settings"),
+    Fault("major_config_bits_swapped", ("4.4.28-1",), "242 puts the direction in bit 6 and the source in bit 7"),
+    Fault("maintenance_counts_wrong", ("4.4.27-T",), "241 option 2 swaps the power-up and stop counters"),
 )
 
 FAULTS = MappingProxyType({f.name: f for f in _FAULTS})

@@ -12,6 +12,9 @@ bit arrived as ``timestamp``, like SocketCAN. An ESC whose bit rate differs from
 hears nor is heard. Nothing here reads the wall clock or sleeps, so a run is deterministic for a
 given seed and a 120 s window costs milliseconds.
 
+The flash file (``flash_path``) is written at power-off and when the bus shuts down or the world
+is discarded; within the process the ESCs keep their settings across power cycles anyway.
+
 A world lives as long as the process (like a bench that stays plugged in): a second ``can.Bus`` on
 the same channel joins it - which is how the harness reopens the host at another bit rate after
 Set Baud. :func:`discard` removes it.
@@ -34,7 +37,6 @@ from .model import EscModel
 
 _WORLDS: dict[str, SimWorld] = {}
 
-FLASH_SAVE_PERIOD_S = 0.5  # simulated seconds between flash writes of changed counters (settings too)
 
 
 def frame_bits(dlc: int) -> int:
@@ -84,7 +86,6 @@ class SimWorld:
         self._in_flight: tuple[float, _Pending] | None = None
         self._seq = itertools.count()
         self._tasks: list[SimCyclicTask] = []
-        self._next_flash = FLASH_SAVE_PERIOD_S
         self.stats = {"frames": 0, "busy_s": 0.0}
         if power_on:
             bench.power_on(0.0)
@@ -123,9 +124,6 @@ class SimWorld:
                 self._queue(wire, esc, esc.bitrate, ready=wire.timestamp)
         if self._in_flight is None:
             self._start_transmission()
-        if self.bench.flash is not None and t >= self._next_flash:
-            self.bench.persist()
-            self._next_flash = t + FLASH_SAVE_PERIOD_S
         return True
 
     def run_until(self, t_end: float, stop: Callable[[], bool] | None = None) -> None:

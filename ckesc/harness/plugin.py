@@ -175,12 +175,12 @@ def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
     faults = [f for f in config.getoption("emulator_faults").split(",") if f]
     nodes = [int(n, 0) for n in (config.getoption("nodes") or "1").split(",")]
     if dut_kind == "emulator":
-        flash = Path(tempfile.mkdtemp(prefix="ckesc-flash-")) / "flash.json"
         if config.getoption("lane") == "realtime":
+            flash = Path(tempfile.mkdtemp(prefix="ckesc-flash-")) / "flash.json"  # survives the emulator's process
             return RealtimeEmulatorLane(nodes=nodes, faults=faults, flash_path=str(flash),
                                         seed=config.getoption("emulator_seed"), timing_error=max(profile.error_s, 0.002))
-        return SimLane(nodes=nodes, faults=faults, flash_path=str(flash), seed=config.getoption("emulator_seed"),
-                       esc_config={"boot_time": 0.25})
+        # in one process the emulated ESCs keep their flash contents across power cycles: no file needed
+        return SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"), esc_config={"boot_time": 0.25})
     power_kind = config.getoption("power") or "none"
     if power_kind == "command":
         power = CommandPower(config.getoption("power_off_cmd"), config.getoption("power_on_cmd"))
