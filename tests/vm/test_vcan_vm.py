@@ -1,0 +1,115 @@
+"""tools/vcan-vm: a command runs in a qemu VM whose kernel has SocketCAN, with vcan0 up.
+
+Each test boots a VM (about 5-10 s under TCG, more on a loaded machine) unless it only checks the
+dependency report. The tests skip, with the tool's own list of what is missing, when qemu, the kernel
+or busybox-static is not installed; ``sudo tools/vcan-vm --install --check`` installs them.
+The Python inside the VM is this test run's own interpreter (its venv lives on the host's root,
+which the VM mounts over 9p), so python-can is the one under test.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.vm, pytest.mark.timeout(900)]
+
+ROOT = Path(__file__).resolve().parents[2]
+TOOL = ROOT / "tools" / "vcan-vm"
+VM_TIMEOUT = 600  # the tool's own --timeout: a loaded CI machine under TCG is slow, never hang
+
+EXIT_MISSING, EXIT_TIMEOUT, EXIT_VM = 69, 124, 125
+
+
+def vcan_vm(*args: str, cwd: Path = ROOT, timeout: float = VM_TIMEOUT + 60) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(TOOL), *args], cwd=cwd, capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL
+    )
+
+
+@pytest.fixture(scope="module")
+def vm_ready() -> None:
+    if not sys.platform.startswith("linux"):
+        pytest.skip("tools/vcan-vm runs qemu on a Linux host")
+    check = vcan_vm("--check", timeout=120)
+    if check.returncode == EXIT_MISSING:
+        pytest.skip("tools/vcan-vm cannot run here: " + " ".join(line for line in check.stderr.splitlines() if "missing" in line))
+    assert check.returncode == 0, check.stdout + check.stderr
+
+
+def run_in_vm(*cmd: str, opts: tuple[str, ...] = ("--read-only",), cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    r = vcan_vm("--timeout", str(VM_TIMEOUT), *opts, "--", *cmd, cwd=cwd)
+    if r.returncode in (EXIT_TIMEOUT, EXIT_VM):
+        pytest.fail(f"the VM itself failed (exit {r.returncode}):\n{r.stderr}")
+    return r
+
+
+def test_af_can_raw_socket_binds_vcan0(vm_ready):
+    code = (
+        "import socket; s = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW); "
+        "s.bind(('vcan0',)); print('ok')"
+    )
+    r = run_in_vm(sys.executable, "-c", code)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "ok"
+
+
+def test_python_can_round_trip_on_vcan0(vm_ready):
+    code = (
+        "import can\n"
+        "a = can.Bus(interface='socketcan', channel='vcan0', receive_own_messages=True)\n"
+        "b = can.Bus(interface='socketcan', channel='vcan0')\n"
+        "a.send(can.Message(arbitration_id=0x123, data=[1], is_extended_id=True))\n"
+        "own, other = a.recv(5), b.recv(5)\n"
+        "for m in (own, other):\n"
+        "    print(m.channel, hex(m.arbitration_id), m.is_extended_id, m.data.hex())\n"
+        "a.shutdown(); b.shutdown()\n"
+    )
+    r = run_in_vm(sys.executable, "-c", code)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == ["vcan0 0x123 True 01", "vcan0 0x123 True 01"], r.stdout + r.stderr
+
+
+def test_exit_status_and_streams_pass_through(vm_ready):
+    r = run_in_vm("sh", "-c", "echo out; echo err >&2; exit 7")
+    assert r.returncode == 7, r.stderr
+    assert r.stdout == "out\n"
+    assert "err\n" in r.stderr
+    assert "@@vcan-vm" not in r.stdout + r.stderr
+
+
+def test_cwd_env_and_read_write_share(vm_ready, tmp_path):
+    script = 'printf "%s %s %s\\n" "$PWD" "$VCAN_VM" "$CKESC_VM_PROBE" > out.txt; ip -o link show vcan0 >> out.txt'
+    r = run_in_vm("sh", "-c", script, opts=("--share-rw", str(tmp_path), "--env", "CKESC_VM_PROBE=42"), cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    lines = (tmp_path / "out.txt").read_text().splitlines()
+    assert lines[0] == f"{os.path.realpath(tmp_path)} 1 42"
+    assert "vcan0" in lines[1] and "UP" in lines[1]
+
+
+def test_missing_kernel_is_reported_not_run(tmp_path):
+    r = vcan_vm("--kernel", "0.0-no-such-kernel", "--result-file", str(tmp_path / "result"), "--", "true", timeout=120)
+    assert r.returncode == EXIT_MISSING, r.stderr
+    assert "linux-image-amd64" in r.stderr
+    assert (tmp_path / "result").read_text().strip() == "missing-dependency"
+
+
+def test_timeout_kills_the_vm(vm_ready, tmp_path):
+    t0 = time.monotonic()
+    r = vcan_vm("--timeout", "3", "--read-only", "--result-file", str(tmp_path / "result"), "--", "sleep", "600")
+    assert r.returncode == EXIT_TIMEOUT, r.stderr
+    assert (tmp_path / "result").read_text().strip() == "timeout"
+    assert time.monotonic() - t0 < 60
+
+
+def test_vm_failure_is_125_with_the_console_log(vm_ready, tmp_path):
+    # a 9p message size the kernel refuses: the init cannot mount its control share and powers off
+    r = vcan_vm("--msize", "512", "--read-only", "--result-file", str(tmp_path / "result"), "--", "true")
+    assert r.returncode == EXIT_VM, r.stderr
+    assert "failed to boot" in r.stderr and "VM console" in r.stderr
+    assert (tmp_path / "result").read_text().strip() == "vm-failure"
