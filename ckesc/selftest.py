@@ -23,6 +23,8 @@ from pathlib import Path
 
 from .emulator.faults import FAULTS
 
+RUN_TIMEOUT_S = 600  # one suite run takes seconds in the simulated lane; this only stops a hang
+
 
 @dataclass
 class FaultRun:
@@ -46,7 +48,12 @@ def run_suite(fault: str | None, pytest_args: list[str] = ()) -> FaultRun:
                "--ckesc-reports", tmp, *pytest_args]
         if fault:
             cmd += ["--emulator-faults", fault]
-        done = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONHASHSEED": "0"})
+        try:
+            done = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONHASHSEED": "0"},
+                                  timeout=RUN_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            run.problem = f"the suite run did not finish in {RUN_TIMEOUT_S} s (a hang in the emulator or the suite)"
+            return run
         reports = sorted(Path(tmp).glob("*/results.json"))
         if not reports:
             run.problem = f"no report (pytest exit {done.returncode}): {done.stdout[-800:]}{done.stderr[-800:]}"

@@ -39,7 +39,7 @@ from ..protocol.catalogue import (
     THROTTLE_MAX,
     Status,
 )
-from ..protocol.codecs import codec_for, unpack_throttle12
+from ..protocol.codecs import TAIL_BITS_10B, codec_for, unpack_throttle12
 from ..protocol.errors import DecodeError, UnknownTypeError
 from ..protocol.frame import Decoder, Frame, WireFrame, encode
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, Priority, message_id, service_id
@@ -414,13 +414,12 @@ class EscModel:
             self.comm_fault = False
             self._pwm_seen = True
             return
-        if "pwm_no_fallback" in self.faults and self._pwm_seen and self.nvm["throttle_source"] == 1:
-            self.throttle = 0  # the lost PWM signal is not replaced by the CAN throttle
-            return
         if self._comm_loss_due(now):
             self.comm_fault = True
             self.can_throttle = 0  # lost-signal protection: throttle to zero
         self.throttle = self.can_throttle
+        if "pwm_no_fallback" in self.faults and self._pwm_seen and self.nvm["throttle_source"] == 1:
+            self.throttle = 0  # the lost PWM signal is not replaced by the CAN throttle
 
     def _comm_loss_timeout(self) -> float | None:
         if "comm_loss_never" in self.faults:
@@ -505,12 +504,17 @@ class EscModel:
             return
         if which == "msg1":
             pwm = 0 if "speed_ignores_throttle" in self.faults else self.throttle
-            self._emit(due, "msg1", {"speed": int(self.rpm), "pwm": pwm, "status": self.status_word()}, priority=prio)
+            fields = {"speed": int(self.rpm), "pwm": pwm, "status": self.status_word()}
         elif which == "msg2":
             volts, amps = self._electrical()
             scale = 10 if "msg2_scale_tenths" in self.faults else 100
-            self._emit(due, "msg2", {"voltage": round(volts * scale), "current": round(amps * scale),
-                                     "temperature": int(self.temps["mos"])}, priority=prio)
+            fields = {"voltage": round(volts * scale), "current": round(amps * scale), "temperature": int(self.temps["mos"])}
+        if which in ("msg1", "msg2"):
+            if "reports_padded" in self.faults:  # the payload zero-padded to 7 bytes: a full 8-byte frame
+                spec = cat.BY_NAME[which]
+                self._emit_raw(due, spec.type_id, codec_for(spec.layouts[0]).encode(fields).ljust(7, b"\0"), prio or Priority.LOWEST)
+            else:
+                self._emit(due, which, fields, priority=prio)
         else:
             fields = {"mos_t": int(self.temps["mos"]), "cap_t": int(self.temps["cap"]),
                       "motor_t": int(self.temps["motor"]) if self.config.has_motor_sensor else 0,
@@ -535,7 +539,8 @@ class EscModel:
         EXP7..EXP11 at MSG3's."""
         if which == "msg1":
             volts, amps = self._electrical()
-            self._emit(due, "msg_exp1", {"speed": int(self.rpm), "voltage": round(volts * 100), "current": round(amps * 100)})
+            scale = 10 if "exp1_scale_tenths" in self.faults else 100
+            self._emit(due, "msg_exp1", {"speed": int(self.rpm), "voltage": round(volts * scale), "current": round(amps * scale)})
         elif which == "msg3":
             for name, fields in self.exp_frames():
                 self._emit(due, name, fields)
@@ -547,17 +552,24 @@ class EscModel:
     def exp_frames(self) -> list[tuple[str, dict]]:
         n = self.nvm
         led_code = {0: 0, 4: 1, 2: 2, 1: 3}.get(self.led_color, 0)
+        direction = (2 if n["rotation"] else 1) - ("exp7_direction_zero_based" in self.faults)
+        power_ups = (n["power_ups"] - ("exp8_power_ups_from_zero" in self.faults)) & 0xFFFF
+        unit = 1000 if "exp_run_times_ms" in self.faults else 1  # seconds, or milliseconds
+        temps = {k: int(v) for k, v in self.temps.items()}
+        if not self.config.has_motor_sensor:
+            temps["motor"] = 0
+        exp11 = (temps["mos"], temps["mcu"], temps["cap"], temps["motor"])
+        if "exp11_msg3_order" in self.faults:
+            exp11 = (temps["mos"], temps["cap"], temps["motor"], temps["mcu"])
         return [
-            ("msg_exp7", {"direction": 2 if n["rotation"] else 1, "led": led_code,
+            ("msg_exp7", {"direction": direction, "led": led_code,
                           "comm_interface": 2 if n["throttle_source"] else 3, "active_freewheel": n["active_freewheel"],
                           "prop_lock": n["prop_lock"], "startup_acceleration": n["startup_acceleration"],
                           "lost_signal_protection": n["lost_signal_reduction"]}),
-            ("msg_exp8", {"power_ups": n["power_ups"], "starts": n["starts"], "stops": n["stops"]}),
-            ("msg_exp9", {"total_run_time": int(n["total_run_time"]), "fault_code_1": self.self_test_fault}),
-            ("msg_exp10", {"run_time": int(self.run_time), "fault_code_2": 0}),
-            ("msg_exp11", {"mos_t": int(self.temps["mos"]), "mcu_t": int(self.temps["mcu"]),
-                           "cap_t": int(self.temps["cap"]),
-                           "motor_t": int(self.temps["motor"]) if self.config.has_motor_sensor else 0}),
+            ("msg_exp8", {"power_ups": power_ups, "starts": n["starts"], "stops": n["stops"]}),
+            ("msg_exp9", {"total_run_time": int(n["total_run_time"] * unit) & 0xFFFFFFFF, "fault_code_1": self.self_test_fault}),
+            ("msg_exp10", {"run_time": int(self.run_time * unit) & 0xFFFFFFFF, "fault_code_2": 0}),
+            ("msg_exp11", dict(zip(("mos_t", "mcu_t", "cap_t", "motor_t"), exp11))),
         ]
 
     def _emit_can_test(self, due: float) -> None:
@@ -573,8 +585,10 @@ class EscModel:
         if option == CAN_TEST_ON and not self.can_test:
             self.can_test = True
             self._next_can_test = now
-        elif option == CAN_TEST_OFF and self.can_test:
+        elif option == CAN_TEST_OFF and self.can_test and "can_test_off_ignored" not in self.faults:
             self.can_test = False  # R16: back to the state before; reporting state was kept
+            if "can_test_off_resumes_reporting" in self.faults:
+                self.reporting = REPORTING
             for k in self._next_report:
                 self._next_report[k] = now
 
@@ -589,7 +603,8 @@ class EscModel:
         elif command == MSG_CONTROL_RESUME and "resume_ignored" not in self.faults:
             self.reporting = REPORTING
         elif command == MSG_CONTROL_RESUME_EXP:
-            self.reporting = EXP_MODE
+            if "resume_exp_ignored" not in self.faults:
+                self.reporting = EXP_MODE
         elif command not in (MSG_CONTROL_SUSPEND, MSG_CONTROL_RESUME):
             self.counters["rx_ignored"] += 1
             return  # the answer packet (0) or an unknown command: nothing to do
@@ -647,17 +662,22 @@ class EscModel:
             elif 4 * group - 3 <= channel <= 4 * group:
                 value = channels[channel - 4 * group + 3]
         else:  # raw_command_10b
+            if "ten_bit_tail_checked" in self.faults and f.fields["tail_bits"] != TAIL_BITS_10B:
+                return False  # the high nibble of payload[7] read as a tail byte, and this one refused
             if 1 <= channel <= 6:
                 raw = min(f.fields["channels"][channel - 1], THROTTLE_10B_MAX)
                 value = raw if "ten_bit_not_doubled" in self.faults else raw * 2
         if value is None:
             return False  # not addressed to this ESC's channel: not a command for it
         value = min(value, THROTTLE_MAX)
+        answered = "throttle_answered" in self.faults
+        if answered:  # the broadcast taken for a request: a report at once, as its answer
+            self._emit_report("msg1", now + self.config.service_delay)
         if value == self.can_throttle and not self.comm_fault:
             # the same command again: only the comm-loss deadline moves, and later, so nothing is due
             # earlier than before; the motor's first-order lag integrates exactly over the longer step
             self.last_command = now
-            return False
+            return answered  # an answer was queued: the ESC's next deadline moved
         self._update(now)
         self.can_throttle = value  # R6: above 2000 is OBSERVE; this ESC clamps
         self.last_command = now
@@ -679,7 +699,8 @@ class EscModel:
         return (self.running or self.throttle > 0) and "rotation_while_running" not in self.faults
 
     def _in_window(self, now: float, fault: str) -> bool:
-        return now - self.powered_at <= CONFIG_WINDOW_S or fault in self.faults
+        window = CONFIG_WINDOW_S / 2 if "config_window_short" in self.faults else CONFIG_WINDOW_S
+        return now - self.powered_at <= window or fault in self.faults
 
     def _set_nvm(self, **values: Any) -> None:
         self.nvm.update(values)
@@ -692,6 +713,8 @@ class EscModel:
         legal = 1 <= node <= 0x7D or ("set_id_accepts_illegal" in self.faults and node <= 0x7F)
         legal = legal and 1 <= channel <= 20
         if legal and self._in_window(now, "set_id_after_window") and not self._settings_locked():
+            if "set_id_channel_ignored" in self.faults:
+                channel = self.nvm["throttle_channel"]
             self._set_nvm(node_id=node, throttle_channel=channel)
         self._respond(f, now, {"node_id": self.node_id, "throttle_channel": self.nvm["throttle_channel"]})
 
@@ -727,7 +750,8 @@ class EscModel:
         rotation = f.fields["rotation"]
         if rotation != 0xFF and not self._settings_locked() and not self._motor_busy():
             if rotation in (0, 1):
-                self._set_nvm(rotation=rotation)
+                if "rotation_ignored" not in self.faults:
+                    self._set_nvm(rotation=rotation)
             elif "rotation_accepts_illegal" in self.faults:
                 self._set_nvm(rotation=1)
         self._respond(f, now, {"rotation": self.nvm["rotation"]})
@@ -760,7 +784,7 @@ class EscModel:
             return
         source = f.fields["source"]
         legal = source in (0, 1) or "throttle_select_accepts_illegal" in self.faults
-        if legal and not self._settings_locked() and not self._motor_busy():
+        if legal and not self._settings_locked() and not self._motor_busy() and "throttle_select_ignored" not in self.faults:
             self._set_nvm(throttle_source=source)
         self._respond(f, now, {"source": self.nvm["throttle_source"]})
 
@@ -885,7 +909,8 @@ class EscModel:
         direction, source = n["rotation"], n["throttle_source"]
         if "major_config_bits_swapped" in self.faults:
             direction, source = source, direction
-        self._respond(f, now, {"direction": direction, "throttle_source": source,
+        # one-bit fields: a value stored by throttle_select_accepts_illegal (2, 255) must not crash the model
+        self._respond(f, now, {"direction": direction & 1, "throttle_source": source & 1,
                                "throttle_channel": n["throttle_channel"] & 0x3F, "led_blink": self.led_blink & 0x1F,
                                "led_color": self.led_color & 0x07, "msg1_interval": n["msg1_interval"],
                                "msg2_interval": n["msg2_interval"], "msg3_interval": n["msg3_interval"]})

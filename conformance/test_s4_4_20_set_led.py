@@ -1,0 +1,213 @@
+"""Spec section 4.4.20: Set Led (212) - colour (low three bits RGB) and blink, saved with option 1.
+
+What is in force is read back with Get Major Configuration (242: ``led_color``, ``led_blink``). Each
+test first sets something different from what it then sets, so that a command that does nothing
+shows. The ``dut`` fixture restores (option 1) and verifies the LED it found.
+"""
+
+import pytest
+
+from ckesc.harness.verdict import Inconclusive
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.frame import classify
+from ckesc.protocol.ids import Kind
+from ckesc.protocol.legality import illegal_cases
+
+SECTION = "4.4.20"
+REPORT_IDS = frozenset(s.type_id for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
+SPEC = cat.spec("set_led")
+COLOR = SPEC.request.field("color")
+COLOURS = range(COLOR.legal[0], COLOR.legal[1] + 1)  # 4.4.20-3: RGB in the low three bits
+COLOUR_MASK = COLOR.legal[1]  # "the lower three bits of Color are valid"
+BLINKS = sorted(cat.LED_BLINK)  # 0x00, 0x01, 0x02, 0x05
+#: colours with high bits set: the catalogue's out-of-range values, and a few with every low pattern
+HIGH_COLOURS = sorted({c.value for c in illegal_cases(SPEC, only_enforced=False) if c.field == "color"}
+                      | {(COLOUR_MASK + 1) | 5, 0xF0 | 3, 0xA8 | 6})
+UNASSIGNED_BLINKS = [c.value for c in illegal_cases(SPEC, only_enforced=False) if c.field == "blink"]
+SAVE, NO_SAVE = 1, 0  # Option: "0: do not save, 1: save"
+
+
+def _name(colour):
+    return "+".join(m.name for m in reversed(cat.LedColor) if m and colour & m) or "off"  # R, G, B as the table
+
+
+def _led(dut):
+    s = dut.settings()
+    return s["led_color"], s["led_blink"]
+
+
+def _other_colour(colour):
+    return COLOURS[(colour - COLOURS[0] + 3) % len(COLOURS)]
+
+
+def _other_blink(blink):
+    return BLINKS[(BLINKS.index(blink) + 1) % len(BLINKS)] if blink in BLINKS else BLINKS[1]
+
+
+def _set(dut, option, colour, blink):
+    return dut.request("set_led", {"option": option, "color": colour, "blink": blink})
+
+
+def _check_echo(ex, option, colour, blink):
+    assert ex.response is not None, "no answer to Set Led"
+    got = ex.response.fields
+    assert (got["option"], got["color"] & COLOUR_MASK, got["blink"]) == (option, colour, blink), (
+        f"Set Led ({option}, {colour}, {blink}) answered {got} (4.4.20-T: the answer carries Option, Color, Blink)")
+
+
+def _ensure(dut, option, colour, blink):
+    """Setup: the LED at (colour, blink) (Inconclusive if Set Led cannot get it there: that is what
+    test_colour_is_set / test_blink_is_set judge)."""
+    _set(dut, option, colour, blink)
+    if _led(dut) != (colour, blink):
+        raise Inconclusive(f"Set Led ({option}, {colour}, {blink}) did not take with reporting on: 242 shows "
+                           f"{_led(dut)}; this test cannot be judged")
+
+
+def _reports_heard(dut, seconds):
+    """How many report frames the DUT sends in the next ``seconds``, decoded or not (their format is
+    4.4.4 - 4.4.14's business; here only whether it reports counts)."""
+    start = dut.now()
+    dut.wait(seconds)
+    heard = [f for f in dut.frames(source=dut.node_id, kind=Kind.MESSAGE, since=start) if f.type_id in REPORT_IDS]
+    heard += [g for g in dut.garbled if (g.msg.timestamp or 0.0) > start and (g.msg.arbitration_id & 0x7F) == dut.node_id
+              and classify(g.msg.arbitration_id)[:2] in {(Kind.MESSAGE, t) for t in REPORT_IDS}]
+    return len(heard)
+
+
+def _report_interval(dut):
+    return dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
+
+
+def _suspend(dut):
+    """MSG Control 0x55555555; INCONCLUSIVE unless the reports stop (that is 4.4.2's business)."""
+    interval = _report_interval(dut)
+    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND})
+    dut.wait(cat.ANSWER_DELAY_MAX_S)
+    if _reports_heard(dut, 2 * interval):
+        _resume(dut)
+        raise Inconclusive("MSG Control 0x55555555 did not stop the reports (see 4.4.2): suspension cannot be tested")
+
+
+def _resume(dut):
+    """MSG Control 0xAAAAAAAA; if the reports do not come back (4.4.2's business) the DUT is power-cycled
+    back to reporting (suspension is not kept, R13) and the test is INCONCLUSIVE."""
+    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+    dut.wait(cat.ANSWER_DELAY_MAX_S)
+    if _reports_heard(dut, 2 * _report_interval(dut)):
+        return
+    if dut.lane.power.available:
+        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    raise Inconclusive("MSG Control 0xAAAAAAAA did not bring the reports back (see 4.4.2): this test cannot be judged")
+
+
+# ------------------------------------------------------------------------------------------ tests
+@pytest.mark.requirement("4.4.20-1", "4.4.20-3", "4.4.20-T")
+@pytest.mark.parametrize("colour", COLOURS, ids=_name)
+def test_colour_is_set(dut, colour):
+    """Each of the eight RGB combinations is taken, answered and shown by 242."""
+    _, blink = _led(dut)
+    _set(dut, NO_SAVE, _other_colour(colour), blink)
+    ex = _set(dut, SAVE, colour, blink)
+    _check_echo(ex, SAVE, colour, blink)
+    assert _led(dut) == (colour, blink), f"242 shows {_led(dut)} after Set Led colour {colour}"
+
+
+@pytest.mark.requirement("4.4.20-1", "4.4.20-T")
+@pytest.mark.parametrize("blink", BLINKS, ids=lambda b: cat.LED_BLINK[b].replace(" ", ""))
+def test_blink_is_set(dut, blink):
+    """Each blink code (steady, 1, 2, 5 Hz) is taken, answered and shown by 242."""
+    colour, _ = _led(dut)
+    _set(dut, NO_SAVE, colour, _other_blink(blink))
+    ex = _set(dut, SAVE, colour, blink)
+    _check_echo(ex, SAVE, colour, blink)
+    assert _led(dut) == (colour, blink), f"242 shows {_led(dut)} after Set Led blink {blink}"
+
+
+@pytest.mark.requirement("4.4.20-3", "4.4.20-T")
+@pytest.mark.parametrize("value", HIGH_COLOURS, ids=lambda v: f"color{v:#04x}")
+def test_only_the_low_three_bits_of_colour_count(dut, value):
+    """'the lower 3Bit is valid': a colour byte with high bits set is taken by its low three bits."""
+    want = value & COLOUR_MASK
+    blink = BLINKS[1]
+    _set(dut, NO_SAVE, _other_colour(want), blink)
+    ex = _set(dut, NO_SAVE, value, blink)
+    dut.record.observe("colour answered", ex.response.fields["color"] if ex.response else "none")
+    _check_echo(ex, NO_SAVE, want, blink)
+    assert _led(dut) == (want, blink), f"242 shows {_led(dut)} after colour {value:#04x} (low bits {want})"
+
+
+@pytest.mark.requirement("4.4.20-2", "R13")
+@pytest.mark.power_cycle
+def test_unsaved_setting_is_lost_at_power_off(dut):
+    """Option 0: the LED changes at once, and after a power cycle the saved setting is back."""
+    saved = _led(dut)
+    _ensure(dut, SAVE, *saved)  # what the power cycle must bring back is saved
+    colour, blink = _other_colour(saved[0]), _other_blink(saved[1])
+    _set(dut, NO_SAVE, colour, blink)
+    assert _led(dut) == (colour, blink), f"option 0 did not update the LED at once: 242 shows {_led(dut)}"
+    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    assert _led(dut) == saved, f"after a power cycle 242 shows {_led(dut)}, the saved setting is {saved}"
+
+
+@pytest.mark.requirement("4.4.20-2", "4.4.20-5", "R13")
+@pytest.mark.power_cycle
+def test_saved_setting_survives_power_off(dut):
+    """Option 1: the LED changes at once and is still so after a power cycle."""
+    before = _led(dut)
+    colour, blink = _other_colour(before[0]), _other_blink(before[1])
+    _set(dut, SAVE, colour, blink)
+    assert _led(dut) == (colour, blink), f"option 1 did not update the LED at once: 242 shows {_led(dut)}"
+    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    assert _led(dut) == (colour, blink), f"after a power cycle 242 shows {_led(dut)}, saved was {(colour, blink)}"
+
+
+@pytest.mark.requirement("4.4.20-6", "4.4.2-3", "R12")
+@pytest.mark.parametrize("option", [NO_SAVE, SAVE], ids=["no-save", "save"])
+def test_not_set_while_reporting_is_suspended(dut, option):
+    """Suspended by MSG Control, Set Led takes no effect (not even once reporting resumes). First shown
+    to work with reporting on, so that a command that never works does not pass."""
+    before = _led(dut)
+    colour, blink = _other_colour(before[0]), _other_blink(before[1])
+    _ensure(dut, option, colour, blink)
+    _ensure(dut, option, *before)
+    _suspend(dut)
+    try:
+        ex = _set(dut, option, colour, blink)
+        dut.record.observe("answer while suspended", ex.response.fields if ex.response else "none")
+    finally:
+        _resume(dut)
+    assert _led(dut) == before, f"Set Led while suspended took effect: 242 shows {_led(dut)}, was {before}"
+
+
+@pytest.mark.requirement("4.4.20-4")
+@pytest.mark.parametrize("blink", UNASSIGNED_BLINKS, ids=lambda b: f"blink{b:#04x}")
+def test_observe_unassigned_blink_codes(dut, blink):
+    """'other: No operation is performed, no blinking': what the DUT makes of it is recorded."""
+    colour, before = _led(dut)
+    if before == 0:
+        _set(dut, NO_SAVE, colour, BLINKS[1])
+        before = BLINKS[1]
+    ex = _set(dut, NO_SAVE, colour, blink)
+    after = _led(dut)[1]
+    dut.record.observe(f"blink {blink:#04x}: answer", ex.response.fields if ex.response else "none")
+    dut.record.observe(f"blink {blink:#04x}: 242 blink before -> after", f"{before} -> {after}")
+    assert after == 0, f"blink code {blink:#04x}: 242 blink {after} (read as 'no blinking')"
+
+
+@pytest.mark.requirement("4.4.20-4")
+def test_observe_current_led_against_factory_default(dut):
+    """Factory default: green, no blink (a DUT in the field may differ: recorded, never failed)."""
+    colour, blink = _led(dut)
+    dut.record.observe("LED colour, blink", (_name(colour), cat.LED_BLINK.get(blink, blink)))
+    assert (colour, blink) == (COLOR.default, SPEC.request.field("blink").default), "not at the factory default"
+
+
+@pytest.mark.requirement("4.4.20-7")
+def test_observe_led_support(dut):
+    """'only valid for ESC with LED': whether the DUT answers Set Led (the current setting, unsaved)."""
+    colour, blink = _led(dut)
+    ex = _set(dut, NO_SAVE, colour, blink)
+    dut.record.observe("profile says LED", dut.profile.has("led"))
+    dut.record.observe("answer to Set Led", ex.response.fields if ex.response else "none")
+    assert ex.response is not None, "no answer to Set Led"

@@ -1,0 +1,288 @@
+"""Spec section 4.4.23: Throttle Select (215) - throttle source 0 CAN / 1 PWM+CAN, set at zero throttle.
+
+What is in force is read back with Get Major Configuration (242, ``throttle_source``). Each setting
+is reached from the other source, so a command that does nothing shows. The valid throttle ranges of
+clarification 5 (4.4.23-5) are checked by the RawCommand modules (4.4.15 - 4.4.17). The PWM input of
+clarification 6 is driven through the simulated lane's bench (``dut.lane.sim.bench.set_pwm_input``);
+lanes without such a control skip those tests. The ``dut`` fixture restores (and verifies) the source
+it found.
+"""
+
+import pytest
+
+from ckesc.harness.verdict import Inconclusive
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.codecs import codec_for
+from ckesc.protocol.frame import classify
+from ckesc.protocol.ids import Kind
+from ckesc.protocol.legality import illegal_cases
+
+SECTION = "4.4.23"
+REPORT_IDS = frozenset(s.type_id for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
+SPEC = cat.spec("throttle_select")
+SOURCES = sorted(SPEC.request.field("source").codes)  # 0 CAN, 1 PWM+CAN
+CAN, PWM_CAN = (next(v for v, n in SPEC.request.field("source").codes.items() if n == name) for name in ("CAN", "PWM+CAN"))
+ILLEGAL = illegal_cases(SPEC)  # R10: anything but 0 and 1
+_12B = cat.spec("raw_command_12b").layouts[0]
+PER_GROUP = len(codec_for(_12B).decode(bytes(_12B.size))["channels"])  # 4.4.16-3: four channels per group
+#: a modest throttle whose 12-bit packing is the same in both nibble orders (bits 11..8 and 3..0 zero),
+#: so that these tests do not depend on R4
+RUN_VALUE = 0xF0
+STOP_TIMEOUT_S = 5.0  # how long a motor may take to spin down; not a protocol fact
+SETTLE_S = 0.2  # time given to the output to follow a new input; not a protocol fact
+
+
+def _name(source):
+    return SPEC.request.field("source").codes.get(source, hex(source))
+
+
+def _other(source):
+    return SOURCES[(SOURCES.index(source) + 1) % len(SOURCES)] if source in SOURCES else SOURCES[0]
+
+
+def _source(dut):
+    return dut.settings()["throttle_source"]
+
+
+def _select(dut, source):
+    """Select ``source`` and check the answer and 242 show it."""
+    ex = dut.request("throttle_select", {"source": source})
+    assert ex.response is not None, f"no answer to Throttle Select {source}"
+    assert ex.response.fields["source"] == source, f"Throttle Select {source} answered {ex.response.fields}"
+    assert _source(dut) == source, f"after Throttle Select {source} 242 shows {_source(dut)}"
+
+
+def _ensure(dut, source):
+    """Setup: ``source`` in force (Inconclusive if Throttle Select cannot get it there: that is what
+    test_source_is_selected judges)."""
+    dut.request("throttle_select", {"source": source})
+    if _source(dut) != source:
+        raise Inconclusive(f"Throttle Select {source} did not take at zero throttle with reporting on "
+                           "(see test_source_is_selected): this test cannot be judged")
+
+
+def _running(f):
+    """MSG1 shows the motor running: the run bit, or a speed (either will do: R7 is 4.4.4's business)."""
+    return bool(f.fields["status"] & cat.Status.RUNNING) or f.fields["speed"] > 0
+
+
+def _stopped(f):
+    return f.fields["speed"] == 0 and f.fields["pwm"] == 0
+
+
+def _wait_stopped(dut):
+    """Zero throttle, then until MSG1 shows the motor stopped (or STOP_TIMEOUT_S, when it cannot be seen)."""
+    dut.zero_throttle()
+    dut.wait_for("msg1", STOP_TIMEOUT_S, where=_stopped)
+
+
+@pytest.fixture(autouse=True)
+def _motor_stopped(request):
+    """The motor stopped before each test (settings need it, R12) and after it (the DUT left as found)."""
+    if "dut" not in request.fixturenames:
+        yield
+        return
+    dut = request.getfixturevalue("dut")
+    _wait_stopped(dut)
+    yield
+    _wait_stopped(dut)
+
+
+def _own_group_frame(dut, value):
+    channel = dut.settings()["throttle_channel"]
+    group, pos = (channel - 1) // PER_GROUP + 1, (channel - 1) % PER_GROUP
+    return {"channels": [value if i == pos else 0 for i in range(PER_GROUP)], "group": group}
+
+
+def _stop_motor(dut):
+    dut.zero_throttle()
+    if dut.wait_for("msg1", STOP_TIMEOUT_S, where=_stopped) is None:
+        raise Inconclusive(f"the motor still runs {STOP_TIMEOUT_S} s after zero throttle (MSG1 speed, pwm)")
+
+
+def _msg1_interval(dut):
+    return dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
+
+
+@pytest.fixture
+def pwm_input(dut):
+    """Sets the DUT's analog throttle input (0..2000 as the lane models it; None: no signal); the
+    input is removed after the test."""
+    bench = getattr(getattr(dut.lane, "sim", None), "bench", None)
+    if bench is None:
+        pytest.skip(f"the {dut.lane.name} lane has no control of the DUT's PWM input")
+
+    def set_input(value):
+        bench.set_pwm_input(value, node=dut.node_id)
+
+    try:
+        yield set_input
+    finally:
+        set_input(None)
+        dut.zero_throttle()
+        dut.wait_for("msg1", STOP_TIMEOUT_S, where=_stopped)  # let the motor spin down, seen or not
+
+
+def _reports_heard(dut, seconds):
+    """How many report frames the DUT sends in the next ``seconds``, decoded or not (their format is
+    4.4.4 - 4.4.14's business; here only whether it reports counts)."""
+    start = dut.now()
+    dut.wait(seconds)
+    heard = [f for f in dut.frames(source=dut.node_id, kind=Kind.MESSAGE, since=start) if f.type_id in REPORT_IDS]
+    heard += [g for g in dut.garbled if (g.msg.timestamp or 0.0) > start and (g.msg.arbitration_id & 0x7F) == dut.node_id
+              and classify(g.msg.arbitration_id)[:2] in {(Kind.MESSAGE, t) for t in REPORT_IDS}]
+    return len(heard)
+
+
+def _report_interval(dut):
+    return dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
+
+
+def _suspend(dut):
+    """MSG Control 0x55555555; INCONCLUSIVE unless the reports stop (that is 4.4.2's business)."""
+    interval = _report_interval(dut)
+    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND})
+    dut.wait(cat.ANSWER_DELAY_MAX_S)
+    if _reports_heard(dut, 2 * interval):
+        _resume(dut)
+        raise Inconclusive("MSG Control 0x55555555 did not stop the reports (see 4.4.2): suspension cannot be tested")
+
+
+def _resume(dut):
+    """MSG Control 0xAAAAAAAA; if the reports do not come back (4.4.2's business) the DUT is power-cycled
+    back to reporting (suspension is not kept, R13) and the test is INCONCLUSIVE."""
+    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+    dut.wait(cat.ANSWER_DELAY_MAX_S)
+    if _reports_heard(dut, 2 * _report_interval(dut)):
+        return
+    if dut.lane.power.available:
+        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    raise Inconclusive("MSG Control 0xAAAAAAAA did not bring the reports back (see 4.4.2): this test cannot be judged")
+
+
+# ------------------------------------------------------------------------------------------ tests
+@pytest.mark.requirement("4.4.23-1")
+@pytest.mark.parametrize("source", SOURCES, ids=_name)
+def test_source_is_selected(dut, source):
+    """Throttle Select 0 / 1 is answered with the source and 242 shows it - reached from the other."""
+    _select(dut, _other(source))
+    _select(dut, source)
+
+
+@pytest.mark.requirement("4.4.23-3", "R12")
+@pytest.mark.spins_motor
+def test_not_selected_while_the_throttle_is_not_zero(dut):
+    """'To set this command, set it at zero throttle': with the motor running, nothing changes (not
+    later either). First shown to work at zero throttle."""
+    before = _source(dut)
+    _ensure(dut, _other(before))
+    _ensure(dut, before)
+    dut.throttle_stream("raw_command_12b", _own_group_frame(dut, RUN_VALUE))
+    try:
+        if dut.wait_for("msg1", STOP_TIMEOUT_S, where=_running) is None:  # _stop_motor below lets it spin down
+            raise Inconclusive("the motor did not start (no MSG1 showed it running): the test cannot be judged")
+        ex = dut.request("throttle_select", {"source": _other(before)})
+        dut.record.observe("answer at non-zero throttle", ex.response.fields if ex.response else "none")
+        during = _source(dut)
+    finally:
+        _stop_motor(dut)
+    assert during == before, f"Throttle Select at non-zero throttle took effect: 242 shows {during}"
+    assert _source(dut) == before, f"Throttle Select sent at non-zero throttle took effect later: 242 {_source(dut)}"
+
+
+@pytest.mark.requirement("R12", "4.4.2-3")
+def test_not_selected_while_reporting_is_suspended(dut):
+    """'parameter changes do not take effect when the active data reporting command is suspended' (not
+    even once reporting resumes). First shown to work with reporting on."""
+    before = _source(dut)
+    _ensure(dut, _other(before))
+    _ensure(dut, before)
+    _suspend(dut)
+    try:
+        ex = dut.request("throttle_select", {"source": _other(before)})
+        dut.record.observe("answer while suspended", ex.response.fields if ex.response else "none")
+    finally:
+        _resume(dut)
+    assert _source(dut) == before, f"Throttle Select while suspended took effect: 242 shows {_source(dut)}"
+
+
+@pytest.mark.requirement("R10", "R10-answer", "4.4.23-1")
+@pytest.mark.parametrize("start", SOURCES, ids=lambda s: f"from-{_name(s)}")
+@pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
+def test_illegal_source_changes_nothing(dut, case, start):
+    """A source other than 0 / 1 is ignored, whichever source is in force."""
+    _ensure(dut, start)
+    try:
+        ex = dut.request("throttle_select", {"source": case.value})
+        dut.record.observe("answer to the illegal source (R10-answer)", ex.response.fields if ex.response else "none")
+        assert _source(dut) == start, f"Throttle Select {case.value:#04x} changed the source from {start}: {_source(dut)}"
+    finally:
+        dut.request("throttle_select", {"source": start})  # whatever the DUT stored, a legal value again
+
+
+@pytest.mark.requirement("R10", "4.4.23-4", "R13")
+@pytest.mark.power_cycle
+@pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
+def test_illegal_source_changes_nothing_after_power_cycle(dut, case):
+    """Nothing of an illegal source surfaces after a power cycle either (from the source the illegal
+    value's low bit does not name, so a device that keeps only bit 0 shows)."""
+    start = _other(case.value & 1)
+    _ensure(dut, start)
+    try:
+        dut.request("throttle_select", {"source": case.value})
+        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+        assert _source(dut) == start, f"after {case.value:#04x} and a power cycle 242 shows {_source(dut)}"
+    finally:
+        dut.request("throttle_select", {"source": start})
+
+
+@pytest.mark.requirement("4.4.23-4", "R13")
+@pytest.mark.power_cycle
+def test_source_persists_across_power_cycle(dut):
+    """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""
+    source = _other(_source(dut))
+    _ensure(dut, source)
+    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    assert _source(dut) == source, f"after a power cycle 242 shows {_source(dut)}, selected was {source}"
+
+
+@pytest.mark.requirement("4.4.23-6", "4.4.23-1", "4.4.4-T")
+@pytest.mark.spins_motor
+@pytest.mark.parametrize("value", [cat.THROTTLE_MAX // 4, cat.THROTTLE_MAX], ids=lambda v: f"pwm{v}")
+def test_pwm_input_drives_the_output_with_source_pwm_can(dut, pwm_input, value):
+    """With PWM+CAN selected and no CAN throttle, the analog input (1..2 ms = 0..2000) is the output."""
+    _select(dut, PWM_CAN)
+    pwm_input(value)
+    interval = _msg1_interval(dut)
+    dut.wait(SETTLE_S + interval)
+    pwms = [f.fields["pwm"] for f in dut.reports("msg1", 3 * interval)]
+    if not pwms:
+        raise Inconclusive("no MSG1 decoded: the output cannot be read (see 4.4.4)")
+    assert all(p == value for p in pwms), f"PWM input {value} with source PWM+CAN: MSG1 pwm {pwms}"
+
+
+@pytest.mark.requirement("4.4.23-6", "4.4.23-1", "4.4.4-T")
+@pytest.mark.spins_motor
+def test_pwm_input_is_ignored_with_source_can(dut, pwm_input):
+    """With CAN selected the analog input commands nothing; the CAN throttle does."""
+    _select(dut, CAN)
+    pwm_input(cat.THROTTLE_MAX)
+    interval = _msg1_interval(dut)
+    dut.throttle_stream("raw_command_12b", _own_group_frame(dut, RUN_VALUE))
+    try:
+        dut.wait(SETTLE_S + interval)
+        pwms = [f.fields["pwm"] for f in dut.reports("msg1", 3 * interval)]
+    finally:
+        dut.stop_throttle()
+    if not pwms:
+        raise Inconclusive("no MSG1 decoded: the output cannot be read (see 4.4.4)")
+    assert all(p == RUN_VALUE for p in pwms), (
+        f"source CAN, CAN throttle {RUN_VALUE}, PWM input {cat.THROTTLE_MAX}: MSG1 pwm {pwms}")
+
+
+@pytest.mark.requirement("4.4.23-2")
+def test_observe_current_source(dut):
+    """'Default CAN digital throttle': the DUT's source is recorded (a DUT in the field may differ)."""
+    source = _source(dut)
+    dut.record.observe("throttle source", _name(source))
+    assert source == CAN, "not at the factory default (CAN)"

@@ -1,0 +1,87 @@
+"""Spec section 4.4.3: FRAME_MSG_GET_ESC_ID (20013) - every ESC replies [node_id, throttle_channel] in its slot."""
+
+from __future__ import annotations
+
+import pytest
+
+from ckesc.harness.verdict import Inconclusive
+from ckesc.protocol import catalogue as cat
+
+from .test_s4_4_2_msg_control import check_answer_slot, describe_garbled, garbled, ms, settle, with_emulator_faults
+
+SECTION = "4.4.3"
+#: between queries: not a multiple of any report interval, so each query meets the reports at another phase
+PHASE_STEP_S = 0.007
+
+
+@pytest.fixture
+def bench(multi_dut, request):
+    """Several ESCs on one bus (``multi_dut``), with the run's emulator faults."""
+    return with_emulator_faults(multi_dut, request.config)
+
+
+def _query(dut):
+    """Broadcast the query and read every answer the 64 ms window (and as long again) brings."""
+    settle(dut)
+    sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
+    dut.wait(2 * cat.ANSWER_DELAY_MAX_S)  # a late reply is seen, and measured
+    return sent
+
+
+def _replies(dut, sent, node: int) -> list:
+    return [f for f in dut.frames("get_esc_id", since=sent.time, source=node) if f.layout is not None and f.layout.name == "reply"]
+
+
+def _check_reply(dut, sent, node: int) -> object:
+    """R1: exactly one reply from ``node``, 2 payload bytes [node_id, throttle_channel], node_id = source,
+    the channel the node's own configuration (242) names."""
+    bad = garbled(dut, "get_esc_id", source=node, since=sent.time)
+    assert not bad, (f"[R1 READING] node {node}: GET_ESC_ID reply is not [node_id, throttle_channel] + tail: "
+                     f"{describe_garbled(bad)}")
+    replies = _replies(dut, sent, node)
+    assert replies, f"node {node}: no GET_ESC_ID reply within {ms(2 * cat.ANSWER_DELAY_MAX_S)} ms of the broadcast query"
+    assert len(replies) == 1, f"node {node}: {len(replies)} replies to one query"
+    r = replies[0]
+    assert r.fields["node_id"] == r.source == node, (
+        f"[R1 READING] reply names node {r.fields['node_id']} but comes from node {r.source} (expected {node})")
+    channel = dut.ask("get_major_configuration", {"option": 0}, destination=node)["throttle_channel"]
+    assert r.fields["throttle_channel"] == channel, (
+        f"node {node}: reply names throttle channel {r.fields['throttle_channel']}, its configuration (242) {channel}")
+    return r
+
+
+@pytest.mark.requirement("4.4.3-1", "4.4.3-3", "R1")
+def test_reply_is_node_id_and_throttle_channel(dut):
+    """The broadcast query is answered with exactly [node_id, throttle_channel]: no option byte
+    (4.4.3-3 read as R1), node_id equal to the frame's source."""
+    sent = _query(dut)
+    r = _check_reply(dut, sent, dut.node_id)
+    dut.record.observe("reply", r.fields)
+
+
+@pytest.mark.requirement("4.4.3-4", "R2")
+def test_reply_comes_in_the_node_slot(dut):
+    """The reply starts (node_id % 32) x 2 ms after the query, within that 2 ms slot, never later than
+    64 ms. Three queries, each meeting the periodic reports at another phase."""
+    for n in range(3):
+        dut.wait(n * PHASE_STEP_S)
+        sent = _query(dut)
+        # a malformed reply (R1, its own test) still has a time
+        replies = _replies(dut, sent, dut.node_id) or [g.msg for g in garbled(dut, "get_esc_id", source=dut.node_id, since=sent.time)]
+        assert replies, f"query {n + 1}: no GET_ESC_ID reply within {ms(2 * cat.ANSWER_DELAY_MAX_S)} ms"
+        check_answer_slot(dut, replies[0], sent, dut.node_id, f"GET_ESC_ID query {n + 1}", "4.4.3-4")
+
+
+@pytest.mark.requirement("4.4.3-2", "4.4.3-4", "R1", "R2")
+def test_every_esc_replies_in_its_slot(bench):
+    """All ESCs on the bus reply, each once, with its own id and channel, each in its own slot
+    (node ids sharing node_id % 32 share a slot and go out by arbitration)."""
+    nodes = bench.nodes
+    if len(nodes) < 2:
+        raise Inconclusive(f"only node(s) {nodes} answered GET_ESC_ID: 'all ESCs' needs two or more")
+    sent = _query(bench)
+    heard = sorted({f.source for f in bench.frames("get_esc_id", since=sent.time) if f.source != bench.host_node})
+    bench.record.observe("nodes", {"discovered": nodes, "replied": heard})
+    for node in sorted(set(nodes) | set(heard)):  # each node discovery found, and any it missed
+        r = _check_reply(bench, sent, node)
+        check_answer_slot(bench, r, sent, node, "GET_ESC_ID", "4.4.3-4")

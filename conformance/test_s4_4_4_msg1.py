@@ -1,0 +1,313 @@
+"""Spec section 4.4.4: MSG1 (20050) - speed, throttle output (PWM) and the status word."""
+
+from __future__ import annotations
+
+import pytest
+
+from ckesc.harness.verdict import Inconclusive
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.catalogue import Status
+
+from .test_s4_4_2_msg_control import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
+
+SECTION = "4.4.4"
+
+#: One throttle frame per period, as a flight controller sends it (400 Hz)
+STREAM_PERIOD_S = 0.0025
+#: Throttle formats by the channels they carry: 4.4.15-4 (1-4), 4.4.17-4 (1-6); 12-bit: the DUT's group
+#: (4.4.16-3). The catalogue names no channel count per format, so it is written here once.
+FORMAT_CHANNELS = {"raw_command_14b": 4, "raw_command_12b": 4, "raw_command_10b": 6}
+#: Test allowance for the motor and the ESC's throttle ramp to settle before MSG1 is compared
+SPIN_SETTLE_S = 0.5
+PAYLOAD = cat.spec("msg1").layouts[0].size
+
+
+def _group(channel: int) -> int:
+    """4.4.16-3: group g carries channels 4g-3..4g."""
+    per = FORMAT_CHANNELS["raw_command_12b"]
+    return (channel - 1) // per + 1
+
+
+def command_for(name: str, channel: int, value: int = 0) -> dict | None:
+    """Fields of a throttle frame that commands ``value`` on ``channel`` (0 elsewhere); None when the
+    format cannot address that channel."""
+    n = FORMAT_CHANNELS[name]
+    if name == "raw_command_12b":
+        if _group(channel) not in cat.THROTTLE_GROUPS:
+            return None
+        channels = [0] * n
+        channels[(channel - 1) % n] = value
+        return {"channels": channels, "group": _group(channel)}
+    if not 1 <= channel <= n:
+        return None
+    channels = [0] * n
+    channels[channel - 1] = value
+    return {"channels": channels}
+
+
+def _msg1_after(dut, t: float) -> list:
+    return [f for f in dut.frames("msg1", source=dut.node_id) if frame_start(dut, f) >= t]
+
+
+def _comm_fault(f) -> bool:
+    return bool(f.fields["status"] & Status.COMM_FAULT)
+
+
+# ------------------------------------------------------------------------------------------ 4.4.4-1
+@pytest.mark.requirement("4.4.4-1")
+def test_msg1_is_six_bytes(dut):
+    """Every MSG1 carries 6 payload bytes (7 data bytes with the tail)."""
+    s = dut.settings()
+    start = dut.now()
+    frames = dut.reports("msg1", 4 * interval_s(s, "msg1"))
+    bad = garbled(dut, "msg1", source=dut.node_id, since=start)
+    assert not bad, f"{len(bad)} MSG1 frames are not {PAYLOAD} payload bytes + tail: {describe_garbled(bad)}"
+    assert frames, f"no MSG1 in {ms(4 * interval_s(s, 'msg1'))} ms"
+    lengths = sorted({len(f.data) - 1 for f in frames})
+    assert lengths == [PAYLOAD], f"MSG1 payload lengths {lengths}, expected {PAYLOAD}"
+
+
+# ------------------------------------------------------------------------------------------ 4.4.4-2, R7
+def _check_direction(dut, frames: list, rotation: int, what: str, since: float) -> None:
+    assert need_decoded(dut, "msg1", frames, since, "the direction bit"), f"{what}: no MSG1"
+    source_pwm = dut.settings()["throttle_source"] == 1
+    for f in frames:
+        st = f.fields["status"]
+        assert bool(st & Status.DIRECTION_CCW) == bool(rotation), (
+            f"{what}: MSG1 status 0x{st:04X} bit15 (direction) = {int(bool(st & Status.DIRECTION_CCW))}, "
+            f"the saved rotation is {rotation} (R7: bit15 direction, bit14 throttle source)")
+        if not source_pwm:
+            assert not st & Status.THROTTLE_PWM, f"{what}: MSG1 status 0x{st:04X} bit14 (PWM throttle) set under CAN throttle (R7)"
+
+
+@pytest.mark.requirement("4.4.4-2", "R7")
+def test_direction_bit_follows_the_rotation(dut):
+    """Status bit 15 is the saved rotation (0 forward/CW, 1 reverse/CCW), both ways; bit 14 stays 0
+    under CAN throttle."""
+    s = dut.settings()
+    codes = sorted(cat.spec("set_rotation").response.field("rotation").codes)
+    for rotation in sorted(codes, key=lambda r: r == s["rotation"]):  # the other direction first, then back
+        answer = dut.ask("set_rotation", {"rotation": rotation})
+        t = dut.now()
+        if dut.settings()["rotation"] != rotation:
+            raise Inconclusive(f"Set Rotation {rotation} did not take effect (answer {answer}): cannot compare")
+        dut.wait(3 * interval_s(s, "msg1"))
+        _check_direction(dut, _msg1_after(dut, t + REACT_S), rotation, f"after Set Rotation {rotation}", t)
+
+
+@pytest.mark.requirement("4.4.4-2", "R7", "R13")
+@pytest.mark.power_cycle
+def test_direction_reported_at_power_up_is_the_saved_one(dut):
+    """After a power cycle, MSG1 reports the rotation saved before it, from the first frame on."""
+    s = dut.settings()
+    saved = next(c for c in sorted(cat.spec("set_rotation").response.field("rotation").codes) if c != s["rotation"])
+    dut.ask("set_rotation", {"rotation": saved})
+    if dut.settings()["rotation"] != saved:
+        raise Inconclusive(f"Set Rotation {saved} did not take effect: nothing saved to report")
+    t = dut.now()
+    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    dut.wait(2 * interval_s(s, "msg1"))
+    frames = _msg1_after(dut, t)
+    dut.record.observe("first MSG1 after power-up", frames[0].fields if frames else "none")
+    _check_direction(dut, frames, saved, "after a power cycle", t)
+
+
+def _require(dut, settings: dict) -> None:
+    """Precondition: the settings a test made are in force (242), else INCONCLUSIVE."""
+    now = dut.settings()
+    if any(now[k] != v for k, v in settings.items()):
+        raise Inconclusive(f"the DUT did not take {settings} (now {now}): the case cannot be set up")
+
+
+def _pwm_input(dut):
+    """The DUT's analog throttle input, where the lane can drive it: the emulated bench of the simulated
+    lane (the harness has no call for it; real benches and the real-time lane have none)."""
+    setter = getattr(getattr(getattr(dut.lane, "sim", None), "bench", None), "set_pwm_input", None)
+    if setter is None:
+        raise Inconclusive(f"the {dut.lane.name} lane cannot drive the DUT's PWM input")
+    return lambda value: setter(value, dut.node_id)
+
+
+@pytest.mark.requirement("R7", "4.4.4-T")
+@pytest.mark.parametrize("source", ["CAN", "PWM"])
+def test_throttle_source_bit(dut, source):
+    """Bit 14 is 0 while the ESC takes CAN throttle - with the motor reversed too, as DroneCAN's GUI reads
+    the direction from bit 14 - and 1 while it takes PWM throttle (PWM+CAN selected, a PWM signal at zero
+    throttle present)."""
+    s = dut.settings()
+    codes = {v: k for k, v in cat.spec("throttle_select").response.field("source").codes.items()}
+    interval = interval_s(s, "msg1")
+    fields = command_for("raw_command_12b", s["throttle_channel"])
+    if source == "CAN":
+        reverse = {v: k for k, v in cat.spec("set_rotation").response.field("rotation").codes.items()}["reverse"]
+        dut.ask("set_rotation", {"rotation": reverse})
+        dut.ask("throttle_select", {"source": codes["CAN"]})
+        _require(dut, {"throttle_source": codes["CAN"]})
+        dut.throttle_stream("raw_command_12b", fields, STREAM_PERIOD_S)
+        t = dut.now()
+        dut.wait(3 * interval)
+        dut.stop_throttle()
+    else:
+        if not dut.profile.has("pwm_input"):
+            pytest.skip(f"the DUT profile {dut.profile.name!r} lacks capability 'pwm_input'")
+        set_pwm = _pwm_input(dut)
+        dut.ask("throttle_select", {"source": codes["PWM+CAN"]})
+        _require(dut, {"throttle_source": codes["PWM+CAN"]})
+        try:
+            set_pwm(0)
+            dut.wait(interval)
+            t = dut.now()
+            dut.wait(3 * interval)
+        finally:
+            set_pwm(None)
+    frames = need_decoded(dut, "msg1", _msg1_after(dut, t + REACT_S), t, "the throttle source bit")
+    assert frames, "no MSG1"
+    bits = sorted({int(bool(f.fields["status"] & Status.THROTTLE_PWM)) for f in frames})
+    assert bits == [int(source == "PWM")], f"MSG1 bit14 (throttle source) {bits} while the ESC takes {source} throttle (R7)"
+
+
+# ------------------------------------------------------------------------------------------ 4.4.4-3, R8
+def _can_throttle(dut) -> dict:
+    s = dut.settings()
+    if s["throttle_source"] != 0:
+        dut.ask("throttle_select", {"source": 0})  # "under CAN throttle condition"; the fixture restores it
+        s = dut.settings()
+    return s
+
+
+@pytest.mark.requirement("4.4.4-3", "R8")
+@pytest.mark.parametrize("name", list(FORMAT_CHANNELS), ids=lambda n: n.rsplit("_", 1)[1])
+def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
+    """Under a zero-throttle stream bit 13 is clear; from the last command it is set no earlier than
+    200 ms and no later than 200 ms + one MSG1 interval; the next command clears it."""
+    s = _can_throttle(dut)
+    fields = command_for(name, s["throttle_channel"])
+    if fields is None:
+        pytest.skip(f"{name} cannot address the DUT's throttle channel {s['throttle_channel']}")
+    err = dut.lane.timing_error * 1000
+    t0 = dut.now()
+    dut.throttle_stream(name, fields, STREAM_PERIOD_S)
+    dut.wait(2 * interval_s(s, "msg1"))  # the first command clears a flag left from before the test
+    t1 = dut.now()
+    dut.wait(4 * interval_s(s, "msg1"))
+    dut.stop_throttle()
+    under = need_decoded(dut, "msg1", _msg1_after(dut, t1), t1, "the comm fault bit")
+    assert len(under) >= 2, f"only {len(under)} MSG1 in {ms(dut.now() - t1)} ms"
+    flagged = [f for f in under if _comm_fault(f)]
+    assert not flagged, f"bit13 (comm fault) set in MSG1 under a {STREAM_PERIOD_S * 1000} ms command stream"
+    dut.wait(REACT_S)  # the stream's last frame comes back from the bus
+    sent = dut.frames(name, since=t0, source=dut.host_node)
+    assert sent, "harness: the throttle stream sent nothing"
+    last = sent[-1].timestamp
+    # "one MSG1 interval" (R8) is the DUT's own: the configured one, or the gap it actually leaves
+    gaps = [frame_start(dut, b) - frame_start(dut, a) for a, b in zip(under, under[1:])]
+    interval = max([interval_s(s, "msg1")] + gaps)
+    first = dut.wait_for("msg1", 2 * cat.COMM_LOSS_TIMEOUT_S + 3 * interval, where=_comm_fault)  # a late flag is measured
+    assert first is not None, (f"no MSG1 with bit13 (comm fault) within {ms(dut.now() - last)} ms of the last command "
+                               f"(R8: set after {ms(cat.COMM_LOSS_TIMEOUT_S)} ms)")
+    before = [f for f in _msg1_after(dut, last) if f.timestamp < first.timestamp]
+    if before:
+        interval = max(interval, frame_start(dut, first) - frame_start(dut, before[-1]))
+    onset = frame_start(dut, first) - last
+    dut.record.measure("comm fault flag: first MSG1 with bit13 after the last command", ms(onset),
+                       limit=ms(cat.COMM_LOSS_TIMEOUT_S), op=">=", unit="ms", clock=dut.clock, error=err,
+                       requirement="R8", strength="READING")
+    dut.record.measure("comm fault flag: first MSG1 with bit13 after the last command", ms(onset),
+                       limit=ms(cat.COMM_LOSS_TIMEOUT_S + interval), unit="ms", clock=dut.clock, error=err,
+                       requirement="R8", strength="READING")
+    again = dut.broadcast(name, fields)
+    cleared = dut.wait_for("msg1", 3 * interval, where=lambda f: not _comm_fault(f))
+    assert cleared is not None, f"bit13 still set {ms(dut.now() - again.time)} ms after a new command (4.4.4-3: cleared)"
+    # the next MSG1 the DUT prepares after the command (REACT_S) shows the flag clear: within one interval
+    dut.record.measure("comm fault flag: first MSG1 without bit13 after a new command", ms(frame_start(dut, cleared) - again.time),
+                       limit=ms(interval + REACT_S), unit="ms", clock=dut.clock, error=err, requirement="4.4.4-3")
+
+
+# ------------------------------------------------------------------------------------------ 4.4.4-T, R7
+#: The throttle formats tried in turn, the recommended one (4.4.16-5) first, with the factor a value is
+#: sent with (RawCommand_10b carries half the throttle, doubled by the ESC: 4.4.17-2)
+FORMATS = (("raw_command_12b", 1), ("raw_command_14b", 1), ("raw_command_10b", cat.THROTTLE_10B_MAX / cat.THROTTLE_MAX))
+
+
+def _spin(dut, name: str, fields: dict, zero: dict, interval: float) -> tuple[list, list]:
+    """MSG1 at a throttle (after the settle time), then at zero throttle again."""
+    dut.throttle_stream(name, fields, STREAM_PERIOD_S)
+    dut.wait(SPIN_SETTLE_S)
+    spinning = dut.reports("msg1", 3 * interval)
+    dut.stop_throttle()
+    dut.throttle_stream(name, zero, STREAM_PERIOD_S)
+    dut.wait(SPIN_SETTLE_S)
+    stopped = dut.reports("msg1", 2 * interval)
+    dut.stop_throttle()
+    assert spinning and stopped, f"no MSG1 while the {name} stream ran"
+    return spinning, stopped
+
+
+@pytest.mark.requirement("4.4.4-T", "R7")
+@pytest.mark.spins_motor
+@pytest.mark.parametrize("throttle", [100, 1000, cat.THROTTLE_MAX])
+def test_pwm_field_follows_the_throttle(dut, throttle):
+    """MSG1's PWM field is the commanded throttle of the DUT's channel; with a motor the speed rises
+    and bit 8 (running) is set while it runs, clear at rest; back at zero throttle PWM is 0 again.
+    Commanded in RawCommand_12b; should PWM differ, the other formats are tried: a DUT that shows the
+    value from one of them reads the first format wrongly (that format's own tests judge it), and
+    this test is INCONCLUSIVE; from none of them, it fails."""
+    s = _can_throttle(dut)
+    interval = interval_s(s, "msg1")
+    channel = s["throttle_channel"]
+    motor = dut.profile.has("motor")
+    t = dut.now()
+    rest = need_decoded(dut, "msg1", dut.reports("msg1", 2 * interval), t, "the PWM field")
+    assert rest, "no MSG1"
+    if motor and rest[-1].fields["speed"] == 0:
+        assert not rest[-1].fields["status"] & Status.RUNNING, f"bit8 (running) set at rest: status 0x{rest[-1].fields['status']:04X} (R7)"
+    seen = {}
+    for name, factor in FORMATS:
+        fields = command_for(name, channel, round(throttle * factor))
+        if fields is None:
+            continue
+        spinning, stopped = _spin(dut, name, fields, command_for(name, channel, 0), interval)
+        seen[name] = sorted({f.fields["pwm"] for f in spinning})
+        if seen[name] == [throttle]:
+            break
+    else:
+        assert seen, f"no throttle format addresses channel {channel}"
+        pytest.fail(f"MSG1 PWM {seen} (per format) while channel {channel} is commanded {throttle} (4.4.4-T)")
+    if name != FORMATS[0][0]:
+        raise Inconclusive(f"MSG1 PWM follows {name} but not {FORMATS[0][0]} ({seen}): the DUT reads {FORMATS[0][0]} "
+                           "differently (its own section's tests judge that)")
+    dut.record.observe("MSG1 at throttle", spinning[-1].physical())
+    assert {f.fields["pwm"] for f in stopped} == {0}, f"MSG1 PWM {[f.fields['pwm'] for f in stopped]} at zero throttle"
+    if motor:
+        assert all(f.fields["speed"] > 0 for f in spinning), f"speed {[f.fields['speed'] for f in spinning]} rpm at throttle {throttle}"
+        status = [f.fields["status"] for f in spinning]
+        assert all(st & Status.RUNNING for st in status), f"bit8 (running) clear while the motor runs: {[hex(x) for x in status]} (R7)"
+
+
+# ------------------------------------------------------------------------------------------ shared
+#: Throttle for run_motor: a gentle spin, enough to count running time
+RUN_THROTTLE = 500
+#: Test allowance for a motor to coast to a stop
+COAST_S = 5.0
+
+
+def run_motor(dut, seconds: float) -> bool:
+    """Spin the motor for ``seconds`` and wait until it has stopped (MSG1 speed 0), so that the
+    running-time counters move (MSG_EXP9/10, 241). Only with --allow-motor-spin and a motor; returns
+    whether it ran."""
+    if not (dut.allow_motor_spin and dut.profile.has("motor")):
+        dut.record.observe("motor", "not run (needs --allow-motor-spin and capability motor)")
+        return False
+    s = _can_throttle(dut)
+    dut.throttle_stream("raw_command_12b", command_for("raw_command_12b", s["throttle_channel"], RUN_THROTTLE), STREAM_PERIOD_S)
+    dut.wait(seconds)
+    dut.stop_throttle()
+    dut.throttle_stream("raw_command_12b", command_for("raw_command_12b", s["throttle_channel"], 0), STREAM_PERIOD_S)
+    t = dut.now()
+    stopped = dut.wait_for("msg1", COAST_S, where=lambda f: f.fields["speed"] == 0)
+    dut.stop_throttle()
+    if stopped is None:
+        need_decoded(dut, "msg1", [], t, "the motor speed")
+        raise Inconclusive(f"the motor did not stop within {COAST_S} s of zero throttle")
+    dut.record.observe("motor", f"run {seconds} s at throttle {RUN_THROTTLE}, stopped")
+    return True
