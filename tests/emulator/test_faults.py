@@ -233,6 +233,18 @@ def reports_after_resume(host) -> int:
 
 case("resume_ignored", reports_after_resume, 10, 0)
 
+
+def exp_reports(host, name: str | tuple, seconds: float = 0.5) -> list:
+    """The ``name`` frames heard after MSG Control 0xEEEEEEEE (MSG_EXP mode) at 300 ms: MSG_EXP1 every
+    20 ms, MSG_EXP7..11 every 500 ms (MSG3's interval; the next due at 750 ms)."""
+    host.wait_until(0.3)
+    host.send("msg_control", {"option": 0, "command": RESUME_EXP})
+    names = (name,) if isinstance(name, str) else name
+    return [f for f in host.collect(host.now + seconds) if f.name in names]
+
+
+case("resume_exp_ignored", lambda h: len(exp_reports(h, "msg_exp1", 0.1)), 5, 0)
+
 # --------------------------------------------------------------------------------------------------
 # reports (R7, R9, 4.4.4-4.4.6)
 
@@ -272,6 +284,30 @@ def running_bit(host) -> bool:
 case("status_running_wrong", running_bit, True, False)
 case("msg2_scale_tenths", lambda h: h.of(h.collect(0.3), "msg2")[0].fields["voltage"] // 100, 50, 5)
 case("msg3_short", lambda h: {len(m.data) for m in raw_msgs(h, 20052, 0.3)}, {8}, {4})
+case("reports_padded",
+     lambda h: sorted({(msg_type(m), len(m.data)) for m in h.collect_raw(0.3) if msg_type(m) in (20050, 20051)}),
+     [(20050, 7), (20051, 6)], [(20050, 8), (20051, 8)])
+case("exp1_scale_tenths", lambda h: exp_reports(h, "msg_exp1", 0.1)[0].fields["voltage"] // 100, 50, 5)
+case("exp7_direction_zero_based", lambda h: exp_reports(h, "msg_exp7")[0].fields["direction"], 1, 0)
+case("exp8_power_ups_from_zero", lambda h: exp_reports(h, "msg_exp8")[0].fields["power_ups"], 1, 0)
+
+
+def exp_run_times(host) -> tuple:
+    host.wait_until(0.3)
+    host.esc(1).nvm["total_run_time"] = 12.5  # an ESC with a past: 12.5 s in all, 3.25 s this session
+    host.esc(1).run_time = 3.25
+    exp9, exp10 = exp_reports(host, ("msg_exp9", "msg_exp10"))
+    return exp9.fields["total_run_time"], exp10.fields["run_time"]
+
+
+def exp11_temperatures(host) -> tuple:
+    """MSG_EXP11 (MOS, MCU, CAP, motor) at rest: MOS and CAP 25 degC, MCU 30 degC, no motor sensor (0)."""
+    f = exp_reports(host, "msg_exp11")[0].fields
+    return f["mos_t"], f["mcu_t"], f["cap_t"], f["motor_t"]
+
+
+case("exp_run_times_ms", exp_run_times, (12, 3), (12500, 3250))
+case("exp11_msg3_order", exp11_temperatures, (25, 30, 25, 0), (25, 25, 0, 30))
 case("speed_ignores_throttle", lambda h: throttle(h, "raw_command_14b", {"channels": [1000, 0, 0, 0]}), 1000, 0)
 
 # --------------------------------------------------------------------------------------------------
@@ -293,6 +329,18 @@ case("twelve_bit_nibbles_swapped",
 case("twelve_bit_group_ignored",
      lambda h: throttle(h, "raw_command_12b", {"channels": [500, 600, 700, 800], "group": 2}), 0, 500)
 case("ten_bit_not_doubled", lambda h: throttle(h, "raw_command_10b", {"channels": [400, 0, 0, 0, 0, 0]}), 800, 400)
+case("ten_bit_tail_checked",
+     lambda h: throttle(h, "raw_command_10b", {"channels": [400, 0, 0, 0, 0, 0], "tail_bits": 0}), 800, 0)
+
+
+def msg1_after_throttle(host) -> int:
+    """MSG1 frames heard within 10 ms of a RawCommand, sent 5 ms after an MSG1 tick (the next is at 20 ms)."""
+    quiet(host)
+    host.send("raw_command_14b", {"channels": [100, 0, 0, 0]})
+    return len(msg1(host, 0.01))
+
+
+case("throttle_answered", msg1_after_throttle, 0, 1)
 
 
 def fourteen_bit_little_endian(host):
@@ -330,6 +378,12 @@ case("rotation_accepts_illegal",
                      read=lambda h: h.call("get_major_configuration", {"option": 0}).fields["direction"]), 0, 1)
 case("throttle_select_accepts_illegal",
      booted(lambda h: h.call("throttle_select", {"source": 2}).fields["source"]), 0, 2)
+case("rotation_ignored",
+     lambda h: after(h, "set_rotation", {"rotation": 1},
+                     read=lambda h: h.call("get_major_configuration", {"option": 0}).fields["direction"]), 1, 0)
+case("throttle_select_ignored",
+     lambda h: after(h, "throttle_select", {"source": 1},
+                     read=lambda h: h.call("get_major_configuration", {"option": 0}).fields["throttle_source"]), 1, 0)
 
 # --------------------------------------------------------------------------------------------------
 # the 120 s window, Set Baud at power-up, pseudo-broadcast (R11)
@@ -347,6 +401,12 @@ def late_set_baud(host):
 
 case("set_id_after_window", late_set_id, 0x7D, 5, nodes=(0x7D,))
 case("set_baud_after_window", late_set_baud, 1, 2, nodes=(0x7D,))
+case("config_window_short",
+     lambda h: (h.wait_until(90.0), h.call("set_id", {"node_id": 5, "throttle_channel": 5}, 0x7D).source)[1],
+     5, 0x7D, nodes=(0x7D,))
+case("set_id_channel_ignored",
+     booted(lambda h: h.call("set_id", {"node_id": 1, "throttle_channel": 6}).fields),
+     {"node_id": 1, "throttle_channel": 6}, {"node_id": 1, "throttle_channel": 1})
 case("set_baud_immediate",
      lambda h: after(h, "set_baud", {"baud": 2}, read=lambda h: len(msg1(h))), 10, 0)
 case("set_id_needs_destination",
@@ -472,6 +532,23 @@ def reports_in_can_test(host) -> int:
     return len(msg1(host))
 
 
+def can_test_frames_after_off(host) -> int:
+    quiet(host)
+    host.send("can_test", {"option": 0xAA, "count": 0})
+    host.wait(0.05)
+    host.send("can_test", {"option": 0x55, "count": 0})
+    host.wait(0.001)
+    return len(can_test_frames(host))
+
+
+def reports_after_can_test_while_suspended(host) -> int:
+    suspend_answers(host)
+    host.send("can_test", {"option": 0xAA, "count": 0})
+    host.wait(0.05)
+    host.send("can_test", {"option": 0x55, "count": 0})
+    return len(msg1(host))
+
+
 def can_test_after_power_cycle(host) -> bool:
     host.wait_until(0.3)
     host.send("can_test", {"option": 0xAA, "count": 0})
@@ -487,6 +564,8 @@ case("clear_rec_ignored", record_kept_after_clear, False, True)
 case("can_test_count_skips", can_test_counts, [0, 1, 2, 3], [0, 2, 4, 6])
 case("can_test_reports_continue", reports_in_can_test, 0, 10)
 case("can_test_persisted", can_test_after_power_cycle, False, True)
+case("can_test_off_ignored", can_test_frames_after_off, 0, 5)
+case("can_test_off_resumes_reporting", reports_after_can_test_while_suspended, 0, 10)
 case("self_test_always_passes", booted(lambda h: h.call("self_test").fields["status"]), 1, 0,
      esc_config={"self_test_fault": 0x11})
 case("set_led_no_echo",
