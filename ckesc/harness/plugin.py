@@ -40,6 +40,11 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     g.addoption("--can-bitrate", type=int, help="bit rate of the host's bus (else can.conf / CAN_BITRATE)")
     g.addoption("--can-config", action="append", default=[], metavar="KEY=VALUE",
                 help="extra python-can bus argument (repeatable)")
+    g.addoption("--can-bitrate-cmd", metavar="CMD",
+                help="--dut bus: command that moves the bus to another bit rate when a test needs it (Set Baud); "
+                     "{bitrate} is replaced. python-can cannot set a SocketCAN bit rate: e.g. a script running "
+                     "`ip link set can0 down; ip link set can0 type can bitrate {bitrate}; ip link set can0 up`, or "
+                     "`ckesc control --port P bitrate {bitrate}` for the emulator on vcan0")
     g.addoption("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
     g.addoption("--nodes", help="emulator: node ids of the emulated bench (default 1); the DUT is the first")
     g.addoption("--profile", help="DUT profile name in fixtures/duts or a path (default: emulator / ckesc-generic)")
@@ -190,7 +195,7 @@ def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
         power = NoPower()
     else:
         raise pytest.UsageError("--power emulator works only with --dut emulator")
-    return BusLane(_bus_kwargs(config), power, timing_error=profile.error_s)
+    return BusLane(_bus_kwargs(config), power, timing_error=profile.error_s, bitrate_cmd=config.getoption("can_bitrate_cmd"))
 
 
 @pytest.fixture(scope="session")
@@ -277,7 +282,9 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
         if config.getoption("lane") == "realtime":
             lane: Lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=ckesc_lane.timing_error)
         else:
-            lane = SimLane(nodes=MULTI_NODES, esc_config={"boot_time": 0.25})
+            faults = [f for f in config.getoption("emulator_faults").split(",") if f]
+            lane = SimLane(nodes=MULTI_NODES, faults=faults, seed=config.getoption("emulator_seed"),
+                           esc_config={"boot_time": 0.25})
         own = True
     else:
         if not profile.has("multi_node"):
@@ -366,6 +373,8 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
 
 def _outcome(rep: pytest.TestReport, strength: str, d: Dut | None) -> tuple[str, str]:
     text = _longrepr_text(rep)
+    if rep.failed and "DutError" in text:  # the harness could not do what the test needed: no verdict on the DUT
+        return "ERROR", text
     if rep.passed:
         if strength == "OBSERVE":
             return "OBSERVED", ""
