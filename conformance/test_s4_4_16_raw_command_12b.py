@@ -123,14 +123,9 @@ def _on_channel(dut, channel):
 
 
 @pytest.fixture
-def bench(multi_dut, request):
-    """``multi_dut`` with the run's --emulator-faults switched on (the harness opens its private
-    emulator bench without them: reported as a harness gap), and ``bench.channels``, each ESC's
-    throttle channel (read here: an ESC that cannot say is a setup error, not a verdict)."""
-    sim = getattr(multi_dut.lane, "sim", None)
-    for name in filter(None, (request.config.getoption("emulator_faults") or "").split(",")):
-        if sim is not None:
-            sim.set_fault(name)
+def bench(multi_dut):
+    """``multi_dut`` with ``bench.channels`` (each ESC's throttle channel) and ``bench.intervals`` (its
+    MSG1 interval), read here: an ESC that cannot say is a setup error, not a verdict."""
     multi_dut.channels = {n: multi_dut.ask("get_major_configuration", {"option": 0}, destination=n)["throttle_channel"]
                           for n in multi_dut.nodes}
     multi_dut.intervals = {n: _msg1_interval(multi_dut, n) for n in multi_dut.nodes}

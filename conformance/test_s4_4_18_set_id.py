@@ -131,19 +131,8 @@ def original(dut):
         _restore(dut, node, channel)
 
 
-@pytest.fixture
-def bench(multi_dut, request):
-    """``multi_dut`` with the run's --emulator-faults switched on: the harness opens its private
-    emulator bench without them (reported as a harness gap)."""
-    sim = getattr(multi_dut.lane, "sim", None)
-    for name in filter(None, (request.config.getoption("emulator_faults") or "").split(",")):
-        if sim is not None:
-            sim.set_fault(name)
-    return multi_dut
-
-
 # ------------------------------------------------------------------------------------------ tests
-@pytest.mark.requirement("4.4.18-1", "4.4.18-5", "R11")
+@pytest.mark.requirement("4.4.18-1", "4.4.18-5", "R11", "4.4.28-1")
 @pytest.mark.power_cycle
 @pytest.mark.parametrize("target", TARGETS, ids=lambda t: f"id{t}")
 def test_set_id_gives_the_dut_its_id_and_channel(dut, original, target):
@@ -183,23 +172,23 @@ def test_destination_is_ignored(dut, original, destination):
 
 @pytest.mark.requirement("4.4.18-2", "R11")
 @pytest.mark.power_cycle
-def test_several_escs_are_set_to_the_same_id(bench, ckesc_lane):
+def test_several_escs_are_set_to_the_same_id(multi_dut, ckesc_lane):
     """'if more than one is connected, they will be uniformly set to the same ID'."""
-    if bench.lane is ckesc_lane:
+    if multi_dut.lane is ckesc_lane:
         pytest.skip("only on a private bench: on a real bus this would merge every ESC's node id for good")
-    if len(bench.nodes) < 2:
-        pytest.skip(f"only {bench.nodes} answered GET_ESC_ID")
-    bench.power_cycle(bench.profile.off_s, bench.profile.boot_s)
-    if sorted(n for n, _ in _replies(bench)) != sorted(bench.nodes):
-        raise Inconclusive(f"GET_ESC_ID does not list the ESCs {bench.nodes} (see 4.4.3): the result cannot be read")
-    target = max(bench.nodes) + 1
-    sent = bench.request("set_id", {"node_id": target, "throttle_channel": 1}, destination=bench.nodes[0])
-    answers = [f for f in bench.frames("set_id", since=sent.sent.time) if f.kind is Kind.RESPONSE]
-    bench.record.observe("Set ID answers (source)", [f.source for f in answers])
-    bench.node_id = target
-    sources = sorted(n for n, _ in _replies(bench))
-    assert sources == [target] * len(bench.nodes), (f"{len(bench.nodes)} ESCs ({bench.nodes}) after Set ID {target}: "
-                                                    f"GET_ESC_ID answered from {sources}")
+    if len(multi_dut.nodes) < 2:
+        pytest.skip(f"only {multi_dut.nodes} answered GET_ESC_ID")
+    multi_dut.power_cycle(multi_dut.profile.off_s, multi_dut.profile.boot_s)
+    if sorted(n for n, _ in _replies(multi_dut)) != sorted(multi_dut.nodes):
+        raise Inconclusive(f"GET_ESC_ID does not list the ESCs {multi_dut.nodes} (see 4.4.3): the result cannot be read")
+    target = max(multi_dut.nodes) + 1
+    sent = multi_dut.request("set_id", {"node_id": target, "throttle_channel": 1}, destination=multi_dut.nodes[0])
+    answers = [f for f in multi_dut.frames("set_id", since=sent.sent.time) if f.kind is Kind.RESPONSE]
+    multi_dut.record.observe("Set ID answers (source)", [f.source for f in answers])
+    multi_dut.node_id = target
+    sources = sorted(n for n, _ in _replies(multi_dut))
+    assert sources == [target] * len(multi_dut.nodes), (
+        f"{len(multi_dut.nodes)} ESCs ({multi_dut.nodes}) after Set ID {target}: GET_ESC_ID answered from {sources}")
 
 
 @pytest.mark.requirement("4.4.18-4", "F7")

@@ -1,6 +1,7 @@
 """Spec section 4.4.20: Set Led (212) - colour (low three bits RGB) and blink, saved with option 1.
 
-What is in force is read back with Get Major Configuration (242: ``led_color``, ``led_blink``). Each
+What is in force is read back with Get Major Configuration (242: ``led_color``, ``led_blink``); tests
+whose verdict rests on that read-back also cite 4.4.28-1. Each
 test first sets something different from what it then sets, so that a command that does nothing
 shows. The ``dut`` fixture restores (option 1) and verifies the LED it found.
 """
@@ -102,7 +103,7 @@ def _resume(dut):
 
 
 # ------------------------------------------------------------------------------------------ tests
-@pytest.mark.requirement("4.4.20-1", "4.4.20-3", "4.4.20-T")
+@pytest.mark.requirement("4.4.20-1", "4.4.20-3", "4.4.20-T", "4.4.28-1")
 @pytest.mark.parametrize("colour", COLOURS, ids=_name)
 def test_colour_is_set(dut, colour):
     """Each of the eight RGB combinations is taken, answered and shown by 242."""
@@ -113,7 +114,7 @@ def test_colour_is_set(dut, colour):
     assert _led(dut) == (colour, blink), f"242 shows {_led(dut)} after Set Led colour {colour}"
 
 
-@pytest.mark.requirement("4.4.20-1", "4.4.20-T")
+@pytest.mark.requirement("4.4.20-1", "4.4.20-T", "4.4.28-1")
 @pytest.mark.parametrize("blink", BLINKS, ids=lambda b: cat.LED_BLINK[b].replace(" ", ""))
 def test_blink_is_set(dut, blink):
     """Each blink code (steady, 1, 2, 5 Hz) is taken, answered and shown by 242."""
@@ -124,7 +125,7 @@ def test_blink_is_set(dut, blink):
     assert _led(dut) == (colour, blink), f"242 shows {_led(dut)} after Set Led blink {blink}"
 
 
-@pytest.mark.requirement("4.4.20-3", "4.4.20-T")
+@pytest.mark.requirement("4.4.20-3", "4.4.20-T", "4.4.28-1")
 @pytest.mark.parametrize("value", HIGH_COLOURS, ids=lambda v: f"color{v:#04x}")
 def test_only_the_low_three_bits_of_colour_count(dut, value):
     """'the lower 3Bit is valid': a colour byte with high bits set is taken by its low three bits."""
@@ -137,7 +138,7 @@ def test_only_the_low_three_bits_of_colour_count(dut, value):
     assert _led(dut) == (want, blink), f"242 shows {_led(dut)} after colour {value:#04x} (low bits {want})"
 
 
-@pytest.mark.requirement("4.4.20-2", "R13")
+@pytest.mark.requirement("4.4.20-2", "R13", "4.4.28-1")
 @pytest.mark.power_cycle
 def test_unsaved_setting_is_lost_at_power_off(dut):
     """Option 0: the LED changes at once, and after a power cycle the saved setting is back."""
@@ -150,7 +151,7 @@ def test_unsaved_setting_is_lost_at_power_off(dut):
     assert _led(dut) == saved, f"after a power cycle 242 shows {_led(dut)}, the saved setting is {saved}"
 
 
-@pytest.mark.requirement("4.4.20-2", "4.4.20-5", "R13")
+@pytest.mark.requirement("4.4.20-2", "4.4.20-5", "R13", "4.4.28-1")
 @pytest.mark.power_cycle
 def test_saved_setting_survives_power_off(dut):
     """Option 1: the LED changes at once and is still so after a power cycle."""
@@ -162,7 +163,7 @@ def test_saved_setting_survives_power_off(dut):
     assert _led(dut) == (colour, blink), f"after a power cycle 242 shows {_led(dut)}, saved was {(colour, blink)}"
 
 
-@pytest.mark.requirement("4.4.20-6", "4.4.2-3", "R12")
+@pytest.mark.requirement("4.4.20-6", "4.4.2-3", "R12", "4.4.28-1")
 @pytest.mark.parametrize("option", [NO_SAVE, SAVE], ids=["no-save", "save"])
 def test_not_set_while_reporting_is_suspended(dut, option):
     """Suspended by MSG Control, Set Led takes no effect (not even once reporting resumes). First shown

@@ -1,6 +1,7 @@
 """Spec section 4.4.21: Set Rotation (213) - motor direction 0 forward / 1 reverse, 0xFF queries.
 
-What is in force is read back with the 0xFF query and with Get Major Configuration (242, ``direction``).
+What is in force is read back with the 0xFF query and with Get Major Configuration (242, ``direction``);
+tests whose verdict rests on 242 also cite 4.4.28-1.
 Each setting is reached from the other direction, so a command that does nothing shows. The ``dut``
 fixture restores (and verifies) the direction it found.
 """
@@ -147,7 +148,7 @@ def _resume(dut):
 
 
 # ------------------------------------------------------------------------------------------ tests
-@pytest.mark.requirement("4.4.21-1", "4.4.21-T")
+@pytest.mark.requirement("4.4.21-1", "4.4.21-T", "4.4.28-1")
 @pytest.mark.parametrize("direction", DIRECTIONS, ids=_name)
 def test_direction_is_set(dut, direction):
     """Set Rotation 0 / 1 is answered with the direction, and the query and 242 show it - reached
@@ -156,17 +157,17 @@ def test_direction_is_set(dut, direction):
     _set(dut, direction)
 
 
-@pytest.mark.requirement("4.4.21-T")
+@pytest.mark.requirement("4.4.21-T", "4.4.28-1")
 @pytest.mark.parametrize("direction", DIRECTIONS, ids=_name)
 def test_query_answers_the_direction_and_changes_nothing(dut, direction):
     """0xFF 'queries the current direction of rotation': answered with it, twice, nothing changed."""
-    _ensure(dut, _other(direction))
-    _ensure(dut, direction)
+    _set(dut, _other(direction))
+    _set(dut, direction)
     assert [_query(dut), _query(dut)] == [direction, direction]
     assert _direction(dut) == direction, f"the query changed the direction: 242 shows {_direction(dut)}"
 
 
-@pytest.mark.requirement("R10", "R10-answer", "4.4.21-T")
+@pytest.mark.requirement("R10", "R10-answer", "4.4.21-T", "4.4.28-1")
 @pytest.mark.parametrize("start", DIRECTIONS, ids=lambda d: f"from-{_name(d)}")
 @pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
 def test_illegal_value_changes_nothing(dut, case, start):
@@ -178,7 +179,7 @@ def test_illegal_value_changes_nothing(dut, case, start):
         f"Set Rotation {case.value:#04x} changed the direction from {start}: query {_query(dut)}, 242 {_direction(dut)}")
 
 
-@pytest.mark.requirement("R10", "4.4.21-4", "R13")
+@pytest.mark.requirement("R10", "4.4.21-4", "R13", "4.4.28-1")
 @pytest.mark.power_cycle
 @pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
 def test_illegal_value_changes_nothing_after_power_cycle(dut, case):
@@ -190,7 +191,7 @@ def test_illegal_value_changes_nothing_after_power_cycle(dut, case):
     assert (_query(dut), _direction(dut)) == (start, start), f"after {case.value:#04x} and a power cycle: {_direction(dut)}"
 
 
-@pytest.mark.requirement("4.4.21-2", "4.4.2-3", "R12")
+@pytest.mark.requirement("4.4.21-2", "4.4.2-3", "R12", "4.4.28-1")
 def test_not_set_while_reporting_is_suspended(dut):
     """'only ... when data reporting is on': suspended, Set Rotation takes no effect (not even once
     reporting resumes). First shown to work with reporting on, so that a command that never works
@@ -207,7 +208,7 @@ def test_not_set_while_reporting_is_suspended(dut):
     assert _direction(dut) == before, f"Set Rotation while suspended took effect: 242 shows {_direction(dut)}"
 
 
-@pytest.mark.requirement("4.4.21-2", "R12")
+@pytest.mark.requirement("4.4.21-2", "R12", "4.4.28-1")
 @pytest.mark.spins_motor
 def test_not_set_while_the_motor_runs(dut):
     """'only ... when ... the motor is stopped': running, Set Rotation takes no effect (not later either).
@@ -226,7 +227,7 @@ def test_not_set_while_the_motor_runs(dut):
     assert _direction(dut) == before, f"Set Rotation sent while running took effect later: 242 shows {_direction(dut)}"
 
 
-@pytest.mark.requirement("4.4.21-4", "R13")
+@pytest.mark.requirement("4.4.21-4", "R13", "4.4.28-1")
 @pytest.mark.power_cycle
 def test_direction_persists_across_power_cycle(dut):
     """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""

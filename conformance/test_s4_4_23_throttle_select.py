@@ -1,6 +1,7 @@
 """Spec section 4.4.23: Throttle Select (215) - throttle source 0 CAN / 1 PWM+CAN, set at zero throttle.
 
-What is in force is read back with Get Major Configuration (242, ``throttle_source``). Each setting
+What is in force is read back with Get Major Configuration (242, ``throttle_source``), so the tests
+also cite 4.4.28-1. Each setting
 is reached from the other source, so a command that does nothing shows. The valid throttle ranges of
 clarification 5 (4.4.23-5) are checked by the RawCommand modules (4.4.15 - 4.4.17). The PWM input of
 clarification 6 is driven through the simulated lane's bench (``dut.lane.sim.bench.set_pwm_input``);
@@ -161,7 +162,7 @@ def _resume(dut):
 
 
 # ------------------------------------------------------------------------------------------ tests
-@pytest.mark.requirement("4.4.23-1")
+@pytest.mark.requirement("4.4.23-1", "4.4.28-1")
 @pytest.mark.parametrize("source", SOURCES, ids=_name)
 def test_source_is_selected(dut, source):
     """Throttle Select 0 / 1 is answered with the source and 242 shows it - reached from the other."""
@@ -169,7 +170,7 @@ def test_source_is_selected(dut, source):
     _select(dut, source)
 
 
-@pytest.mark.requirement("4.4.23-3", "R12")
+@pytest.mark.requirement("4.4.23-3", "R12", "4.4.28-1")
 @pytest.mark.spins_motor
 def test_not_selected_while_the_throttle_is_not_zero(dut):
     """'To set this command, set it at zero throttle': with the motor running, nothing changes (not
@@ -190,7 +191,7 @@ def test_not_selected_while_the_throttle_is_not_zero(dut):
     assert _source(dut) == before, f"Throttle Select sent at non-zero throttle took effect later: 242 {_source(dut)}"
 
 
-@pytest.mark.requirement("R12", "4.4.2-3")
+@pytest.mark.requirement("R12", "4.4.2-3", "4.4.28-1")
 def test_not_selected_while_reporting_is_suspended(dut):
     """'parameter changes do not take effect when the active data reporting command is suspended' (not
     even once reporting resumes). First shown to work with reporting on."""
@@ -206,7 +207,7 @@ def test_not_selected_while_reporting_is_suspended(dut):
     assert _source(dut) == before, f"Throttle Select while suspended took effect: 242 shows {_source(dut)}"
 
 
-@pytest.mark.requirement("R10", "R10-answer", "4.4.23-1")
+@pytest.mark.requirement("R10", "R10-answer", "4.4.23-1", "4.4.28-1")
 @pytest.mark.parametrize("start", SOURCES, ids=lambda s: f"from-{_name(s)}")
 @pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
 def test_illegal_source_changes_nothing(dut, case, start):
@@ -220,7 +221,7 @@ def test_illegal_source_changes_nothing(dut, case, start):
         dut.request("throttle_select", {"source": start})  # whatever the DUT stored, a legal value again
 
 
-@pytest.mark.requirement("R10", "4.4.23-4", "R13")
+@pytest.mark.requirement("R10", "4.4.23-4", "R13", "4.4.28-1")
 @pytest.mark.power_cycle
 @pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
 def test_illegal_source_changes_nothing_after_power_cycle(dut, case):
@@ -236,7 +237,7 @@ def test_illegal_source_changes_nothing_after_power_cycle(dut, case):
         dut.request("throttle_select", {"source": start})
 
 
-@pytest.mark.requirement("4.4.23-4", "R13")
+@pytest.mark.requirement("4.4.23-4", "R13", "4.4.28-1")
 @pytest.mark.power_cycle
 def test_source_persists_across_power_cycle(dut):
     """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""
@@ -246,7 +247,7 @@ def test_source_persists_across_power_cycle(dut):
     assert _source(dut) == source, f"after a power cycle 242 shows {_source(dut)}, selected was {source}"
 
 
-@pytest.mark.requirement("4.4.23-6", "4.4.23-1", "4.4.4-T")
+@pytest.mark.requirement("4.4.23-6", "4.4.23-1", "4.4.4-T", "4.4.28-1")
 @pytest.mark.spins_motor
 @pytest.mark.parametrize("value", [cat.THROTTLE_MAX // 4, cat.THROTTLE_MAX], ids=lambda v: f"pwm{v}")
 def test_pwm_input_drives_the_output_with_source_pwm_can(dut, pwm_input, value):
@@ -261,7 +262,7 @@ def test_pwm_input_drives_the_output_with_source_pwm_can(dut, pwm_input, value):
     assert all(p == value for p in pwms), f"PWM input {value} with source PWM+CAN: MSG1 pwm {pwms}"
 
 
-@pytest.mark.requirement("4.4.23-6", "4.4.23-1", "4.4.4-T")
+@pytest.mark.requirement("4.4.23-6", "4.4.23-1", "4.4.4-T", "4.4.28-1")
 @pytest.mark.spins_motor
 def test_pwm_input_is_ignored_with_source_can(dut, pwm_input):
     """With CAN selected the analog input commands nothing; the CAN throttle does."""

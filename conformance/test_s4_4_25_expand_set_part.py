@@ -2,7 +2,8 @@
 
 A setting made with 222 must show where the general commands show theirs (4.4.25-2): direction in
 242 and the Set Rotation query, LED colour and throttle source in 242, and every setting in
-MSG_EXP7 (4.4.9), whose nibbles use the same codes as the Parts. MSG_EXP7 comes in MSG_EXP mode
+MSG_EXP7 (4.4.9), whose nibbles use the same codes as the Parts; tests whose verdict rests on those
+read-backs also cite 4.4.28-1 / 4.4.9-T. MSG_EXP7 comes in MSG_EXP mode
 (MSG Control 0xEEEEEEEE; the ``dut`` fixture resumes normal reporting afterwards). Settings that
 only MSG_EXP7 shows are put back by the tests that change them; the ``dut`` fixture restores the rest.
 Get Rec (223) and Clear Rec (224) are tested with 4.4.14.
@@ -258,7 +259,7 @@ def test_not_answered(dut):
     assert not answers and not garbled, f"Expand Set Part was answered: {answers or garbled}"
 
 
-@pytest.mark.requirement("R14", "4.4.25-T")
+@pytest.mark.requirement("R14", "4.4.25-T", "4.4.28-1")
 @pytest.mark.parametrize("direction", sorted(ROTATION), ids=lambda d: ROTATION[d])
 def test_set_cmd_is_little_endian(dut, put_back, direction):
     """Set_cmd 0xFFF0 sent low byte first (F0 FF) sets the direction - reached from the other one."""
@@ -269,7 +270,7 @@ def test_set_cmd_is_little_endian(dut, put_back, direction):
         assert dut.settings()["rotation"] == d, f"222 direction part {part}: 242 shows {dut.settings()['rotation']}"
 
 
-@pytest.mark.requirement("4.4.25-2", "4.4.25-T", "R14", "4.4.9-T")
+@pytest.mark.requirement("4.4.25-2", "4.4.25-T", "R14", "4.4.9-T", "4.4.28-1")
 @pytest.mark.parametrize("name,part", CASES, ids=[f"{n}-{CMD[n].parts[p].replace(' ', '')}" for n, p in CASES])
 def test_setting_shows_in_the_general_settings(dut, exp7_restored, name, part):
     """Each Part of each command shows in MSG_EXP7, and in 242 / the Set Rotation query where those
@@ -283,7 +284,7 @@ def test_setting_shows_in_the_general_settings(dut, exp7_restored, name, part):
         assert shown == want, f"222 {name} part {p} ({CMD[name].parts[p]}): shown {shown}, expected {want}"
 
 
-@pytest.mark.requirement("R13", "4.4.25-2", "4.4.9-T")
+@pytest.mark.requirement("R13", "4.4.25-2", "4.4.9-T", "4.4.28-1")
 @pytest.mark.power_cycle
 @pytest.mark.parametrize("name", ["direction", "prop_lock", "startup_acceleration"])
 def test_setting_persists_across_power_cycle(dut, exp7_restored, name):
@@ -301,7 +302,7 @@ def test_setting_persists_across_power_cycle(dut, exp7_restored, name):
     assert shown == {k: want[k] for k in shown}, f"after a power cycle {name} shows {shown}, set was {want} ({field.name})"
 
 
-@pytest.mark.requirement("4.4.25-1", "R12")
+@pytest.mark.requirement("4.4.25-1", "R12", "4.4.28-1")
 @pytest.mark.spins_motor
 def test_not_applied_while_the_motor_runs(dut, put_back):
     """'Expand Set Part is required when the motor is stopped': running, a direction change takes no
@@ -327,7 +328,7 @@ def test_not_applied_while_the_motor_runs(dut, put_back):
     assert dut.settings()["rotation"] == before, "222 direction sent while running took effect later"
 
 
-@pytest.mark.requirement("R12", "4.4.2-3")
+@pytest.mark.requirement("R12", "4.4.2-3", "4.4.28-1")
 def test_not_applied_while_reporting_is_suspended(dut, put_back):
     """'parameter changes do not take effect when the active data reporting command is suspended' (not
     even once reporting resumes). First shown to work with reporting on."""

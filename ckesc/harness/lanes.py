@@ -17,6 +17,7 @@ import subprocess
 import sys
 import time
 from abc import ABC, abstractmethod
+from collections import deque
 from typing import Any
 
 import can
@@ -44,6 +45,7 @@ class Lane(ABC):
     name: str
     clock: str  # the verdict clock label: "simulated" or "bus timestamp"
     timing_error: float = 0.0  # seconds: margins smaller than this are INCONCLUSIVE
+    can_change_bitrate: bool = True  # reopen() really moves the host to another bit rate (Set Baud's tests)
     bus: can.BusABC
     power: PowerControl
     bitrate: int
@@ -169,25 +171,74 @@ class BusLane(Lane):
     name = "bus"
     clock = "bus timestamp"
 
-    def __init__(self, bus_kwargs: dict[str, Any], power: PowerControl, *, timing_error: float) -> None:
+    def __init__(self, bus_kwargs: dict[str, Any], power: PowerControl, *, timing_error: float,
+                 bitrate_cmd: str | None = None) -> None:
         self.bus_kwargs = dict(bus_kwargs)
         self.bus_kwargs.setdefault("receive_own_messages", True)
         self.bus = can.Bus(**self.bus_kwargs)
         self.bitrate = int(self.bus_kwargs.get("bitrate") or DEFAULT_BITRATE)
         self.power = power
         self.timing_error = timing_error
+        # run by reopen() to move the bus itself to another bit rate ("{bitrate}" is replaced): python-can's
+        # socketcan interface cannot (`ip link set can0 type can bitrate N` does), and vcan has none (the
+        # emulator's `ckesc control bitrate N` decides who hears whom)
+        self.bitrate_cmd = bitrate_cmd
+        self._pending: deque[can.Message] = deque()  # arrived, seen by now(), not yet handed out by recv()
+        self._reading = False  # the last call was a recv() that handed out a frame: the host is in a read loop
+
+    @property
+    def can_change_bitrate(self) -> bool:
+        """Whether reopen() really moves the host to another bit rate (Set Baud's tests need it)."""
+        return bool(self.bitrate_cmd) or self.bus_kwargs.get("interface") != "socketcan"
 
     def now(self) -> float:
-        # SocketCAN and socketcand stamp frames with the epoch clock; the lane measures in that base
-        return time.time()
+        """Lane time: the epoch clock that SocketCAN (kernel receive stamps, and the host's own frames by
+        their receive_own_messages echo) and socketcand stamp frames with.
+
+        While the host is reading (right after recv() handed out a frame) lane time does not run past a
+        frame that has already arrived: a host that is slow or was descheduled (a loaded machine, a VM)
+        must read what the bus delivered meanwhile before it decides that a deadline has passed; a frame
+        stamped before the deadline is in time however late the host gets to it. Anywhere else (where a
+        test or the harness takes a start time or sends a request) lane time is the wall clock, so that
+        windows are anchored at the real send time, not at a backlog not yet read."""
+        wall = time.time()
+        if not self._reading:
+            return wall
+        self._reading = False
+        if not self._pending:
+            msg = self.bus.recv(timeout=0)
+            if msg is None:
+                return wall
+            self._pending.append(msg)
+        stamp = self._pending[0].timestamp
+        return min(wall, stamp) if stamp else wall
+
+    def recv(self, timeout: float) -> can.Message | None:
+        msg = self._pending.popleft() if self._pending else self.bus.recv(timeout=max(timeout, 0.0))
+        self._reading = msg is not None
+        return msg
 
     def wait_power(self, seconds: float) -> None:
+        self._pending.clear()
+        self._reading = False
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
             self.bus.recv(timeout=left)  # drain whatever a powered-off bus still shows
 
     def reopen(self, bitrate: int) -> None:
+        if not self.can_change_bitrate and bitrate != self.bitrate:
+            raise RuntimeError(f"the host cannot move {self.bus_kwargs.get('channel') or 'its SocketCAN interface'} to "
+                               f"{bitrate} bit/s: python-can does not set a SocketCAN bit rate (and vcan has none). Give "
+                               "--can-bitrate-cmd (see --help), or deselect the tests that change it (-k 'not set_baud')")
         self.bus.shutdown()
+        self._pending.clear()
+        self._reading = False
+        if self.bitrate_cmd:
+            cmd = self.bitrate_cmd.replace("{bitrate}", str(bitrate))
+            done = subprocess.run(shlex.split(cmd), capture_output=True, text=True, timeout=60)
+            if done.returncode != 0:
+                self.bus = can.Bus(**self.bus_kwargs)  # still usable at the old rate
+                raise RuntimeError(f"bit rate command {cmd!r} failed ({done.returncode}): {done.stderr.strip()}")
         kwargs = dict(self.bus_kwargs, bitrate=bitrate)
         self.bus = can.Bus(**kwargs)
         self.bus_kwargs = kwargs

@@ -1,0 +1,31 @@
+"""The suite tests itself: it passes the faultless emulator, and each emulator fault makes it fail
+in the tests that cite the rules the fault breaks (and only those). Writes the fault -> failing
+tests table to reports/selftest/ (a CI artifact)."""
+
+import os
+from pathlib import Path
+
+import pytest
+
+from ckesc.emulator.faults import FAULTS
+from ckesc.selftest import selftest, table
+
+#: Faults whose self-test result is known to be off, with why; each must still be off (so that a fix
+#: is noticed and the entry removed). Empty is the goal.
+KNOWN: dict[str, str] = {}
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600)
+def test_suite_against_every_fault():
+    runs = selftest(list(FAULTS), jobs=os.cpu_count() or 2)
+    out = Path(__file__).resolve().parents[2] / "reports" / "selftest"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "table.md").write_text(table(runs) + "\n")
+    baseline = runs[0]
+    assert baseline.fault is None and baseline.ok, f"against the faultless emulator: {baseline.problem}"
+    problems = {r.fault: r.problem for r in runs[1:] if not r.ok}
+    unexpected = {f: p for f, p in problems.items() if f not in KNOWN}
+    fixed = sorted(set(KNOWN) - set(problems))
+    assert not unexpected, "faults the suite does not catch cleanly:\n" + "\n".join(f"{f}: {p}" for f, p in unexpected.items())
+    assert not fixed, f"these faults are caught cleanly now: remove them from KNOWN: {fixed}"
