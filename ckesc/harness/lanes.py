@@ -11,6 +11,7 @@ Tests never read the wall clock or sleep: they ask the lane (through the ``dut``
 from __future__ import annotations
 
 import itertools
+import math
 import os
 import shlex
 import subprocess
@@ -167,6 +168,23 @@ class NoPower(PowerControl):
     on = off
 
 
+class _SendTap:
+    """A python-can bus whose send() tells the lane when the host sent a frame (everything else is the
+    bus's own; periodic tasks send on the bus itself and are not noted)."""
+
+    def __init__(self, bus: can.BusABC, on_send) -> None:
+        self._bus = bus
+        self._on_send = on_send
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        t = time.time()  # the kernel stamps the frame (and its echo) after this
+        self._bus.send(msg, timeout)
+        self._on_send(t)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._bus, name)
+
+
 class BusLane(Lane):
     name = "bus"
     clock = "bus timestamp"
@@ -175,7 +193,9 @@ class BusLane(Lane):
                  bitrate_cmd: str | None = None) -> None:
         self.bus_kwargs = dict(bus_kwargs)
         self.bus_kwargs.setdefault("receive_own_messages", True)
-        self.bus = can.Bus(**self.bus_kwargs)
+        self._pending: deque[can.Message] = deque()  # arrived, seen by now(), not yet handed out by recv()
+        self._hold: float | None = None  # see now(): after a read -inf, after a send its time, else None
+        self.bus = self._open(self.bus_kwargs)
         self.bitrate = int(self.bus_kwargs.get("bitrate") or DEFAULT_BITRATE)
         self.power = power
         self.timing_error = timing_error
@@ -183,8 +203,14 @@ class BusLane(Lane):
         # socketcan interface cannot (`ip link set can0 type can bitrate N` does), and vcan has none (the
         # emulator's `ckesc control bitrate N` decides who hears whom)
         self.bitrate_cmd = bitrate_cmd
-        self._pending: deque[can.Message] = deque()  # arrived, seen by now(), not yet handed out by recv()
-        self._reading = False  # the last call was a recv() that handed out a frame: the host is in a read loop
+
+    def _open(self, kwargs: dict[str, Any]) -> Any:
+        self._pending.clear()
+        self._hold = None
+        return _SendTap(can.Bus(**kwargs), self._sent)
+
+    def _sent(self, t: float) -> None:
+        self._hold = t
 
     @property
     def can_change_bitrate(self) -> bool:
@@ -193,34 +219,39 @@ class BusLane(Lane):
 
     def now(self) -> float:
         """Lane time: the epoch clock that SocketCAN (kernel receive stamps, and the host's own frames by
-        their receive_own_messages echo) and socketcand stamp frames with.
+        their receive_own_messages echo) and socketcand stamp frames with, except where the host is
+        behind the bus. A host that is slow or was descheduled (a loaded machine, a VM) may read the
+        clock after frames have arrived that it has not read yet:
 
-        While the host is reading (right after recv() handed out a frame) lane time does not run past a
-        frame that has already arrived: a host that is slow or was descheduled (a loaded machine, a VM)
-        must read what the bus delivered meanwhile before it decides that a deadline has passed; a frame
-        stamped before the deadline is in time however late the host gets to it. Anywhere else (where a
-        test or the harness takes a start time or sends a request) lane time is the wall clock, so that
-        windows are anchored at the real send time, not at a backlog not yet read."""
+        * right after recv() handed out a frame (the host is reading), lane time does not run past a
+          frame that has already arrived: a frame stamped before a deadline is read before the deadline
+          is judged passed, however late the host gets to it;
+        * right after the host sent a frame, lane time does not run past a frame that arrived after
+          that send: a window started "now" after a command includes the answers to it.
+
+        Anywhere else (a test's start time, a request's send time) it is the wall clock, so that
+        windows are anchored at the real time, not at a backlog not yet read. Each hold is for one
+        reading of the clock."""
         wall = time.time()
-        if not self._reading:
+        hold, self._hold = self._hold, None
+        if hold is None:
             return wall
-        self._reading = False
         if not self._pending:
             msg = self.bus.recv(timeout=0)
             if msg is None:
                 return wall
             self._pending.append(msg)
         stamp = self._pending[0].timestamp
-        return min(wall, stamp) if stamp else wall
+        return min(wall, max(hold, stamp)) if stamp else wall
 
     def recv(self, timeout: float) -> can.Message | None:
         msg = self._pending.popleft() if self._pending else self.bus.recv(timeout=max(timeout, 0.0))
-        self._reading = msg is not None
+        self._hold = -math.inf if msg is not None else None
         return msg
 
     def wait_power(self, seconds: float) -> None:
         self._pending.clear()
-        self._reading = False
+        self._hold = None
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
             self.bus.recv(timeout=left)  # drain whatever a powered-off bus still shows
@@ -231,16 +262,14 @@ class BusLane(Lane):
                                f"{bitrate} bit/s: python-can does not set a SocketCAN bit rate (and vcan has none). Give "
                                "--can-bitrate-cmd (see --help), or deselect the tests that change it (-k 'not set_baud')")
         self.bus.shutdown()
-        self._pending.clear()
-        self._reading = False
         if self.bitrate_cmd:
             cmd = self.bitrate_cmd.replace("{bitrate}", str(bitrate))
             done = subprocess.run(shlex.split(cmd), capture_output=True, text=True, timeout=60)
             if done.returncode != 0:
-                self.bus = can.Bus(**self.bus_kwargs)  # still usable at the old rate
+                self.bus = self._open(self.bus_kwargs)  # still usable at the old rate
                 raise RuntimeError(f"bit rate command {cmd!r} failed ({done.returncode}): {done.stderr.strip()}")
         kwargs = dict(self.bus_kwargs, bitrate=bitrate)
-        self.bus = can.Bus(**kwargs)
+        self.bus = self._open(kwargs)
         self.bus_kwargs = kwargs
         self.bitrate = bitrate
 
