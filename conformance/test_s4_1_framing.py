@@ -10,7 +10,7 @@ Framing is judged on every frame the DUT sends, in two scopes (the ``scope`` par
   unbroken stretch, so the module means something when run alone. Frames that did not decode are
   judged too, from their raw CAN id and data.
 * ``run`` (marked ``last``): the same checks on every frame the DUT sent in the whole run (the
-  plugin's ``dut_frames``) plus a fresh provoked capture. The run-wide record holds decoded frames
+  plugin's ``dut_segments``) plus a fresh provoked capture. The run-wide record holds decoded frames
   only (see :func:`run_heard`).
 
 Also home of the wire helpers that section 4.3's module shares: :class:`Heard`, :func:`provoke`,
@@ -20,7 +20,7 @@ Also home of the wire helpers that section 4.3's module shares: :class:`Heard`, 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import pytest
@@ -91,6 +91,7 @@ class Heard:
     rx: bool = True  # False: the host's own frame, echoed back (when the adapter says)
     frame: Frame | None = None  # None: it did not decode
     error: str | None = None  # why it did not decode
+    segment: int = 0  # run-wide record: which test's capture it is from (frames between tests are in none)
 
     @classmethod
     def of_frame(cls, f: Frame) -> Heard:
@@ -282,7 +283,7 @@ def provoked_traffic(request: pytest.FixtureRequest, lane) -> Iterator[Traffic]:
     finally:
         d.zero_throttle()
         d.wait(cat.ANSWER_DELAY_MAX_S)  # read the echoes: the next test's host must not hear them as new
-        state(request.config).dut_frames.extend(f for f in d.trace if f.source == d.node_id)
+        state(request.config).dut_segments.append([f for f in d.trace if f.source == d.node_id])
 
 
 @pytest.fixture(scope="module")
@@ -293,12 +294,12 @@ def traffic(request: pytest.FixtureRequest, ckesc_lane) -> Iterator[Traffic]:
 def run_heard(config: pytest.Config) -> list[Heard]:
     """Every frame the DUT sent in the run so far, as the plugin collected them.
 
-    Harness gap: ``dut_frames`` keeps decoded frames only (a frame that did not decode - the very
+    Harness gap: ``dut_segments`` keeps decoded frames only (a frame that did not decode - the very
     frames framing faults produce - is in no record after its test), it keeps no frame heard while
     a test's settings are restored, and the frames of ``multi_dut``'s private bench come with that
     bench's own clock. The run-wide checks therefore add a fresh provoked capture, and the transfer
     id check looks only at pairs of frames that provably had nothing between them."""
-    return [Heard.of_frame(f) for f in state(config).dut_frames]
+    return [replace(Heard.of_frame(f), segment=i) for i, seg in enumerate(state(config).dut_segments) for f in seg]
 
 
 SCOPES = (pytest.param("provoked", id="provoked"), pytest.param("run", id="run", marks=pytest.mark.last))
@@ -389,16 +390,17 @@ def counting_problems(stream: list[Heard], adjacent: Callable[[Heard, Heard], bo
 
 def run_counting_problems(frames: list[Heard], error_s: float) -> list[tuple[Heard, str]]:
     """F3 on the run-wide record, where frames are missing between tests (see :func:`run_heard`). Only
-    MSG1/MSG2/MSG3 pairs are judged, and only pairs less than 1.5 shortest legal report intervals
-    apart: a report comes at least that interval after the last of its type (R9), so nothing of the
-    stream (nor a power cycle) can lie between them. The record is cut where time runs backwards
+    MSG1/MSG2/MSG3 pairs from one test's capture are judged (frames heard between tests are in no
+    record), and only pairs less than 1.5 shortest legal report intervals apart: a report comes at
+    least that interval after the last of its type (R9), so nothing of the stream (nor a power cycle)
+    can lie between them. The record is cut between tests and where time runs backwards
     (``multi_dut``'s bench has its own clock), and a stream with two frames closer than that interval
     is skipped: two ESCs sharing a node id (what Set ID does to a bench, 4.4.18-2), or a DUT whose
     intervals break R9 (section 4.4.22's verdict), where no pair is provably adjacent."""
     shortest = SHORTEST_S - error_s
     segments: list[list[Heard]] = [[]]
     for h in frames:
-        if segments[-1] and h.timestamp < segments[-1][-1].timestamp:
+        if segments[-1] and (h.timestamp < segments[-1][-1].timestamp or h.segment != segments[-1][-1].segment):
             segments.append([])
         segments[-1].append(h)
     problems: list[tuple[Heard, str]] = []

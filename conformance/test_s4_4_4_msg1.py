@@ -189,7 +189,9 @@ def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
     dut.throttle_stream(name, fields, STREAM_PERIOD_S)
     dut.wait(2 * interval_s(s, "msg1"))  # the first command clears a flag left from before the test
     t1 = dut.now()
-    dut.wait(4 * interval_s(s, "msg1"))
+    # four intervals, plus the lane's stated error: a DUT (or an emulator in a slow VM) that sends late
+    # still shows two MSG1 under the stream
+    dut.wait(4 * interval_s(s, "msg1") + dut.lane.timing_error)
     dut.stop_throttle()
     under = need_decoded(dut, "msg1", _msg1_after(dut, t1), t1, "the comm fault bit")
     assert len(under) >= 2, f"only {len(under)} MSG1 in {ms(dut.now() - t1)} ms"

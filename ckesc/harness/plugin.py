@@ -92,7 +92,9 @@ class _State:
     lane: Lane | None = None
     profile: DutProfile | None = None
     node_id: int | None = None
-    dut_frames: list = field(default_factory=list)  # every frame the DUT sent in the run (4.1 checks)
+    #: every frame the DUT sent in the run (4.1 checks), one list per test: frames between two tests
+    #: (restoring settings, other fixtures) are in none, so only frames of one list are known adjacent
+    dut_segments: list[list] = field(default_factory=list)
     started: float = field(default_factory=time.time)
     info: dict[str, Any] = field(default_factory=dict)
 
@@ -253,7 +255,7 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     finally:
         d.lane_seconds = ckesc_lane.now() - started
         d.zero_throttle()
-        st.dut_frames.extend(f for f in d.trace if f.source == d.node_id)
+        st.dut_segments.append([f for f in d.trace if f.source == d.node_id])
         if d.node_id != st.node_id:
             st.node_id = d.node_id
         problems = d.restore(snapshot)
@@ -296,7 +298,7 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
         yield d
     finally:
         d.zero_throttle()
-        st.dut_frames.extend(f for f in d.trace if f.source != d.host_node)
+        st.dut_segments.append([f for f in d.trace if f.source != d.host_node])
         if own:
             lane.close()
 
