@@ -59,8 +59,27 @@ class Lane(ABC):
     def wait_power(self, seconds: float) -> None:
         """Let ``seconds`` pass while the DUT is unpowered (no frames to read)."""
 
+    @property
+    def listeners(self) -> list[can.Listener]:
+        """python-can listeners (``can.BLFWriter``, ``can.ASCWriter``, a live rule checker) handed every
+        frame the lane reads off the bus, in order, as python-can gave it (lane timestamps, frames that
+        do not decode, error and remote frames): the DUT's frames and the host's own, which come back
+        as their ``receive_own_messages`` echo (``is_rx`` False) stamped when they left. A frame the
+        host sent that never reached the bus is, rightly, not seen."""
+        try:
+            return self.__dict__["_listeners"]
+        except KeyError:
+            return self.__dict__.setdefault("_listeners", [])
+
+    def heard(self, msg: can.Message | None) -> can.Message | None:
+        """Hand ``msg`` (if any) to the listeners; every lane calls it on each frame it reads."""
+        if msg is not None:
+            for listener in self.listeners:
+                listener.on_message_received(msg)
+        return msg
+
     def recv(self, timeout: float) -> can.Message | None:
-        return self.bus.recv(timeout=max(timeout, 0.0))
+        return self.heard(self.bus.recv(timeout=max(timeout, 0.0)))
 
     @abstractmethod
     def reopen(self, bitrate: int) -> None:
@@ -247,14 +266,15 @@ class BusLane(Lane):
     def recv(self, timeout: float) -> can.Message | None:
         msg = self._pending.popleft() if self._pending else self.bus.recv(timeout=max(timeout, 0.0))
         self._hold = -math.inf if msg is not None else None
-        return msg
+        return self.heard(msg)
 
     def wait_power(self, seconds: float) -> None:
-        self._pending.clear()
+        while self._pending:
+            self.heard(self._pending.popleft())
         self._hold = None
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
-            self.bus.recv(timeout=left)  # drain whatever a powered-off bus still shows
+            self.heard(self.bus.recv(timeout=left))  # drain whatever a powered-off bus still shows
 
     def reopen(self, bitrate: int) -> None:
         if not self.can_change_bitrate and bitrate != self.bitrate:
