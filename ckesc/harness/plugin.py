@@ -22,6 +22,7 @@ from .dut import Dut
 from .lanes import BusLane, CommandPower, Lane, ManualPower, NoPower, RealtimeEmulatorLane, SimLane
 from .profile import DutProfile
 from .requirements import REQUIREMENTS, requirement, strongest
+from .traces import TRACE_FORMATS, TestTraces
 from .verdict import Inconclusive
 
 CONFORMANCE_PACKAGE = "conformance"
@@ -60,6 +61,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                 help="write JUnit, JSON and text reports under DIR/<timestamp>/ (ckesc run sets reports/)")
     g.addoption("--ckesc-summary", action="store_true", default=False,
                 help="print the per-section summary at the end (ckesc run sets it)")
+    g.addoption("--ckesc-trace-format", choices=TRACE_FORMATS, default="blf",
+                help="with --ckesc-reports: each test's CAN traffic in <run>/traces/, written by python-can: blf "
+                     "(default; Vector BLF), asc (Vector ASCII), log (candump -L, `ckesc decode` reads it), none")
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -83,6 +87,9 @@ class Result:
     lane_seconds: float = 0.0  # lane time the test took: in the simulated lane, the waits the protocol imposes
     properties: dict[str, str] = field(default_factory=dict)
     observations: list[tuple[str, str]] = field(default_factory=list)
+    #: the test's CAN traces by lane ("": the DUT's, "bench": multi_dut's private bench), relative to the
+    #: run's report directory; a lane that heard no frame during the test has none
+    traces: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -97,6 +104,8 @@ class _State:
     dut_segments: list[list] = field(default_factory=list)
     started: float = field(default_factory=time.time)
     info: dict[str, Any] = field(default_factory=dict)
+    report_dir: Path | None = None  # reports/<run>/, made at the first test that writes into it
+    traces: TestTraces | None = None  # the per-test trace writer, on every lane the plugin opens
 
 
 _STATE = pytest.StashKey[_State]()
@@ -207,6 +216,7 @@ def ckesc_lane(request: pytest.FixtureRequest):
     profile = DutProfile.load(config.getoption("profile") or ("emulator" if config.getoption("dut") == "emulator"
                                                               else "ckesc-generic"))
     lane = make_lane(config, profile)
+    _trace_lane(config, lane, "")
     st.lane, st.profile = lane, profile
     st.info.update(dut=config.getoption("dut"), lane=lane.name, clock=lane.clock, profile=profile.name,
                    bitrate=lane.bitrate, power=lane.power.name, timing_error_s=lane.timing_error,
@@ -287,6 +297,7 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
             faults = [f for f in config.getoption("emulator_faults").split(",") if f]
             lane = SimLane(nodes=MULTI_NODES, faults=faults, seed=config.getoption("emulator_seed"),
                            esc_config={"boot_time": 0.25})
+        _trace_lane(config, lane, "bench")
         own = True
     else:
         if not profile.has("multi_node"):
@@ -325,6 +336,46 @@ def _install_signal_guard(config: pytest.Config) -> None:
         signal.signal(signal.SIGTERM, handler)
     except ValueError:  # not the main thread
         pass
+
+
+# ----------------------------------------------------------------------------------------- traces
+def report_dir(config: pytest.Config) -> Path | None:
+    """This run's report directory (made on first use), or None without --ckesc-reports."""
+    st = state(config)
+    base = config.getoption("ckesc_reports")
+    if st.report_dir is None and base:
+        st.report_dir = _report.run_dir(Path(base), st.started)
+    return st.report_dir
+
+
+def _traces(config: pytest.Config) -> TestTraces | None:
+    st = state(config)
+    if st.traces is None and config.getoption("ckesc_trace_format") != "none" and (out := report_dir(config)):
+        st.traces = TestTraces(out / "traces", config.getoption("ckesc_trace_format"))
+    return st.traces
+
+
+def _trace_lane(config: pytest.Config, lane: Lane, name: str) -> None:
+    traces = state(config).traces
+    if traces is not None:
+        lane.listeners.append(traces.listener(name))
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
+    """A conformance test's trace spans its setup, call and teardown; it is closed on every way out
+    (failure, timeout, Ctrl-C)."""
+    traces = _traces(item.config) if _is_conformance(item) else None
+    if traces is None:
+        return (yield)
+    traces.begin(item.nodeid)
+    try:
+        return (yield)
+    finally:
+        paths = traces.end()
+        res = state(item.config).results.get(item.nodeid)
+        if res is not None:
+            res.traces = {lane: p.relative_to(traces.directory.parent).as_posix() for lane, p in paths.items()}
 
 
 # ----------------------------------------------------------------------------------------- verdicts
@@ -401,11 +452,13 @@ def _longrepr_text(rep: pytest.TestReport) -> str:
 # ----------------------------------------------------------------------------------------- reports
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     st = state(session.config)
+    if st.traces is not None:
+        st.traces.end()
     if not st.conformance or not st.results:
         return
-    base = session.config.getoption("ckesc_reports")
-    if base:
-        out = _report.write_reports(Path(base), list(st.results.values()), st.info, started=st.started)
+    out = report_dir(session.config)
+    if out is not None:
+        _report.write_reports(out, list(st.results.values()), st.info)
         st.info["report_dir"] = str(out)
 
 

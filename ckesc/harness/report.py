@@ -31,13 +31,17 @@ def _section_key(section: str) -> tuple:
 def _properties(r) -> dict[str, str]:
     props = {"requirements": " ".join(r.requirements), "strength": r.strength, "verdict": r.outcome,
              "section": r.section}
+    for lane, path in r.traces.items():
+        props[f"trace.{lane}" if lane else "trace"] = path
     props.update(r.properties)
     for n, (what, value) in enumerate(r.observations):
         props[f"observation.{n}"] = f"{what}: {value}"
     return props
 
 
-def junit_xml(results: list, info: dict[str, Any]) -> str:
+def junit_xml(results: list, info: dict[str, Any], out: Path | None = None) -> str:
+    """The JUnit document; with ``out`` (the run's directory) each of a test's traces is also an
+    ``[[ATTACHMENT|/absolute/path]]`` line (Jenkins' JUnit attachments plugin wants it absolute)."""
     by_section: dict[str, list] = defaultdict(list)
     for r in results:
         by_section[r.section].append(r)
@@ -48,6 +52,8 @@ def junit_xml(results: list, info: dict[str, Any]) -> str:
         for r in by_section[section]:
             props = _properties(r)
             lines = "\n".join(f"[[PROPERTY|{k}={v}]]" for k, v in props.items())
+            if out is not None:
+                lines += "".join(f"\n[[ATTACHMENT|{(out / path).resolve()}]]" for path in r.traces.values())
             tc = TestCase(f"{r.name} [{' '.join(r.requirements)}]", classname=f"ckesc.{section} {SECTION_TITLES.get(section, '')}".strip(),
                           elapsed_sec=round(r.duration, 6), stdout=lines, status=r.outcome)
             if r.outcome == "FAIL":
@@ -111,15 +117,24 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def write_reports(base: Path, results: list, info: dict[str, Any], *, started: float) -> Path:
+def run_dir(base: Path, started: float) -> Path:
+    """A new directory ``base/<UTC timestamp>[-n]/`` for a run that started at ``started``."""
     stamp = datetime.fromtimestamp(started, UTC).strftime("%Y%m%dT%H%M%SZ")
     out = base / stamp
     n = 1
-    while out.exists():
-        n += 1
-        out = base / f"{stamp}-{n}"
-    out.mkdir(parents=True)
-    (out / "junit.xml").write_text(junit_xml(results, info), encoding="utf-8")
+    while True:
+        try:
+            out.mkdir(parents=True)
+            return out
+        except FileExistsError:
+            n += 1
+            out = base / f"{stamp}-{n}"
+
+
+def write_reports(out: Path, results: list, info: dict[str, Any]) -> Path:
+    """Write the run's reports into ``out`` (from :func:`run_dir`) and point ``latest`` at it."""
+    base = out.parent
+    (out / "junit.xml").write_text(junit_xml(results, info, out), encoding="utf-8")
     (out / "results.json").write_text(json.dumps({"info": info, "coverage": coverage(results),
                                                   "results": [r.__dict__ for r in results]}, indent=1, default=str),
                                       encoding="utf-8")
