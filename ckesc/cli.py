@@ -25,6 +25,7 @@ from typing import IO, Any, Callable, Iterable, Iterator, NamedTuple, Sequence
 import can
 
 from . import __version__
+from .evidence.checklog import add_check_log_command
 from .protocol import catalogue as cat
 from .protocol.catalogue import Field, FrameSpec, Layout
 from .protocol.errors import DecodeError, EncodeError
@@ -766,6 +767,7 @@ COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
     add_run_command,
     add_selftest_command,
     add_decode_command,
+    add_check_log_command,
     add_encode_command,
     add_frames_command,
     add_emulate_command,

@@ -1,0 +1,307 @@
+"""The bus rules one by one, on hand-built frames: each rule catches its violation and stays silent on
+legal traffic. Frames are built from the catalogue (``encode``), one field changed where a test needs a
+bad one. Timestamps are frame ends; at 500 kbit/s an 8-byte frame takes 262 us."""
+
+from __future__ import annotations
+
+import pytest
+
+from ckesc.emulator.sim_bus import frame_bits
+from ckesc.evidence import BusRules
+from ckesc.evidence.rules import RESTART_SILENCE_S, SHORTEST_S, Intervals
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.frame import encode
+from ckesc.protocol.ids import Priority, message_id, service_id
+from ckesc.protocol.transfer import tail_byte
+
+BITRATE = 500_000
+MSG1 = {"speed": 0, "pwm": 0, "status": 0}
+READ = {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}
+INTERVALS = {"msg1_interval": 10, "msg2_interval": 50, "msg3_interval": 250}  # 20 / 100 / 500 ms
+
+
+def feed(rules: BusRules, wire, ts: float, **kw):
+    return list(rules.feed(wire.arbitration_id, wire.data, ts, **kw))
+
+
+def msg1(node: int, tid: int, **kw):
+    return encode("msg1", MSG1, source=node, transfer_id=tid, **kw)
+
+
+def checks(violations) -> list[str]:
+    return [v.check for v in violations]
+
+
+def stated(rules: BusRules, node: int, ts: float, intervals=INTERVALS, tid: int = 0) -> float:
+    """The host reads node's intervals and node answers (R9 then knows its periods). Returns the time after."""
+    feed(rules, encode("set_freq", READ, source=0, destination=node, transfer_id=tid), ts)
+    feed(rules, encode("set_freq", {"option": 0, **intervals}, kind="response", source=node, destination=0, transfer_id=tid),
+         ts + 0.001)
+    return ts + 0.002
+
+
+def stream(rules: BusRules, node: int, times, tids=None, start_tid: int = 0, **kw) -> list:
+    out = []
+    for i, t in enumerate(times):
+        tid = (start_tid + i) % 32 if tids is None else tids[i]
+        out += feed(rules, msg1(node, tid, **kw), t)
+    return out
+
+
+# ------------------------------------------------------------------------------------------ legal traffic
+def test_a_steady_esc_is_silent():
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0)
+    assert stream(rules, 1, [t + 0.02 * i for i in range(100)]) == []
+    s = rules.summary()
+    st = s["nodes"]["1"]["intervals"]["msg1"]
+    assert st["count"] == 99 and st["min_ms"] == pytest.approx(20.0) and st["max_ms"] == pytest.approx(20.0)
+    assert st["expected_ms"] == 20.0
+    assert s["nodes"]["1"]["role"] == "esc" and s["nodes"]["0"]["role"] == "host"
+    assert s["violations"]["count"] == 0
+
+
+# ------------------------------------------------------------------------------------------ F2
+@pytest.mark.parametrize(("tail", "rules_cited"), [(0xE0, {"F2", "4.1.3-toggle"}), (0x80, {"F2", "4.1.3-end"}),
+                                                    (0x40, {"F2", "4.1.3-start"})])
+def test_tail_byte_of_an_esc_frame(tail, rules_cited):
+    rules = BusRules()
+    good = msg1(1, 3)
+    bad = good._replace(data=good.data[:-1] + bytes([tail | 4]))  # transfer id 3 + 4 = 7: F3 would count 4
+    assert feed(rules, good, 0.0) == []
+    (v,) = feed(rules, bad, 0.02 + 3 * 0.02)  # three frames missing from the capture: tid 3 -> 7
+    assert v.check == "tail-byte" and set(v.rules) == rules_cited and v.strength == "SHALL" and v.node == 1
+    assert f"{bad.arbitration_id:08X}#{bad.data.hex().upper()}" in v.frames[0]
+
+
+def test_host_frames_are_not_judged():
+    """The host's frames (a request with a broken tail, sent on purpose by a suite) move state only."""
+    rules = BusRules()
+    req = encode("set_freq", READ, source=0, destination=1)
+    assert feed(rules, req._replace(data=req.data[:-1] + b"\x20"), 0.0) == []
+    assert feed(rules, msg1(1, 0)._replace(data=b"\x00" * 6 + b"\xe0"), 0.01, own=True) == []  # our own echo
+
+
+# ------------------------------------------------------------------------------------------ F3
+def test_transfer_ids_count_per_type():
+    rules = BusRules(complete=True)
+    vs = stream(rules, 1, [0.02 * i for i in range(6)], tids=[30, 31, 0, 1, 1, 3])
+    assert checks(vs) == ["transfer-id", "transfer-id"]
+    assert "transfer id 1 after 1" in vs[0].message and set(vs[0].rules) == {"F3", "4.1.3-tid"}
+    assert len(vs[0].frames) == 2  # the pair, quoted
+
+
+def test_transfer_ids_restart_after_a_silence():
+    """A power cycle restarts the counter: frames across a silence are not compared."""
+    rules = BusRules(complete=True)
+    t = RESTART_SILENCE_S + 0.01
+    assert stream(rules, 1, [0.0, 0.02, 0.02 + t, 0.04 + t], tids=[7, 8, 0, 1]) == []
+    assert rules.summary()["nodes"]["1"]["silences"] == 1
+
+
+def test_a_lost_frame_is_an_observation_unless_the_capture_is_complete():
+    lossy = BusRules(bitrate=BITRATE)
+    t = stated(lossy, 1, 0.0)
+    assert stream(lossy, 1, [t, t + 0.02, t + 0.06], tids=[0, 1, 3]) == []  # one MSG1 missing: tid +2 after 40 ms
+    assert {o["check"] for o in lossy.summary()["observations"]} >= {"lost-frames"}
+    complete = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(complete, 1, 0.0)
+    assert "transfer-id" in checks(stream(complete, 1, [t, t + 0.02, t + 0.06], tids=[0, 1, 3]))
+
+
+# ------------------------------------------------------------------------------------------ F4
+def test_response_keeps_the_request_transfer_id():
+    rules = BusRules()
+    feed(rules, encode("self_test", {}, source=0, destination=1, transfer_id=5), 0.0)
+    ok = encode("self_test", {"status": 0}, kind="response", source=1, destination=0, transfer_id=5)
+    assert feed(rules, ok, 0.001) == []
+    feed(rules, encode("self_test", {}, source=0, destination=1, transfer_id=6), 0.1)
+    (v,) = feed(rules, ok._replace(data=ok.data[:-1] + bytes([tail_byte(7)])), 0.101)
+    assert v.check == "response-match" and v.rules == ("F4",) and "transfer id 7" in v.message
+
+
+def test_response_to_a_node_that_asked_nothing():
+    answer = encode("self_test", {"status": 0}, kind="response", source=1, destination=127, transfer_id=0)
+    lossy = BusRules()
+    feed(lossy, encode("self_test", {}, source=0, destination=1, transfer_id=0), 0.0)
+    assert feed(lossy, answer, 0.001) == []  # the request may be missing from a capture: observed
+    assert any(o["check"] == "response-unmatched" for o in lossy.summary()["observations"])
+    complete = BusRules(complete=True)
+    feed(complete, encode("self_test", {}, source=0, destination=1, transfer_id=0), 0.0)
+    (v,) = feed(complete, answer, 0.001)
+    assert v.check == "response-match" and "node(s) [0] did" in v.message
+
+
+def test_set_id_is_answered_by_every_esc():
+    """Set ID is a pseudo-broadcast (R11): any ESC answers, from its new node id."""
+    rules = BusRules(complete=True)
+    feed(rules, encode("set_id", {"node_id": 9, "throttle_channel": 1}, source=0, destination=3, transfer_id=2), 0.0)
+    for node in (9, 4):
+        answer = encode("set_id", {"node_id": node, "throttle_channel": 1}, kind="response", source=node, destination=0,
+                        transfer_id=2)
+        assert feed(rules, answer, 0.001 * node) == []
+
+
+# ------------------------------------------------------------------------------------------ F1
+def test_an_esc_sends_no_requests_and_no_remote_frames():
+    rules = BusRules()
+    feed(rules, msg1(1, 0), 0.0)  # node 1 is an ESC
+    (v,) = feed(rules, encode("self_test", {}, kind="request", source=1, destination=0), 0.01)
+    assert v.check == "frame-layout" and set(v.rules) == {"F1", "F4"}
+    (v,) = feed(rules, msg1(1, 1)._replace(data=b""), 0.02, remote=True)
+    assert v.check == "frame-layout" and "remote frame" in v.message and v.frames[0].split()[1].endswith("#R")
+
+
+# ------------------------------------------------------------------------------------------ F5
+def test_priority_is_the_tables():
+    rules = BusRules()
+    (v,) = feed(rules, msg1(1, 0, priority=Priority.MEDIUM), 0.0)
+    assert v.check == "priority" and v.rules == ("F5",) and "31 (LOWEST)" in v.message
+    feed(rules, encode("esc_information", {"option": 0}, source=0, destination=1), 0.1)
+    answer = encode("esc_information", dict.fromkeys(cat.spec("esc_information").response.field_names, 1), kind="response",
+                    source=1, destination=0, priority=Priority.LOW)
+    assert feed(rules, answer, 0.101) == []  # 240 lists no priority: recorded, never failed
+    (o,) = [o for o in rules.summary()["observations"] if o["check"] == "priority-unlisted"]
+    assert o["rules"] == ["F5-unlisted"] and o["strength"] == "OBSERVE"
+
+
+# ------------------------------------------------------------------------------------------ F7
+def test_reserved_and_default_node_ids():
+    rules = BusRules()
+    (v,) = feed(rules, msg1(0x7F, 0), 0.0)
+    assert v.check == "reserved-node" and set(v.rules) == {"F7", "4.1.2-N2"}
+    (v,) = feed(rules, msg1(0x7D, 0), 0.01)
+    assert v.check == "default-node-reports" and v.rules == ("F7",)
+    feed(rules, encode("set_freq", READ, source=0, destination=0x7D), 0.02)
+    answer = encode("set_freq", {"option": 0, **INTERVALS}, kind="response", source=0x7D, destination=0)
+    assert feed(rules, answer, 0.021) == []  # answering at 0x7D is fine: only reports on its own are not
+
+
+# ------------------------------------------------------------------------------------------ R9
+def test_report_interval_as_the_node_stated():
+    rules = BusRules(bitrate=BITRATE)
+    t = stated(rules, 1, 0.0, {"msg1_interval": 15, "msg2_interval": 50, "msg3_interval": 250})  # 30 ms
+    vs = stream(rules, 1, [t, t + 0.03, t + 0.05, t + 0.08, t + 0.115])
+    assert checks(vs) == ["report-interval", "report-interval"]  # 20 ms: early; 35 ms: late
+    assert "expected 30.000 ms" in vs[0].message and "read answer" in vs[0].message
+    assert set(vs[0].rules) == {"R9", "4.4.22-2"}  # or the read answer was wrong
+
+
+def test_report_interval_allows_bus_queueing():
+    """A report that waited for the bus is late by the wait, never judged late or early for it."""
+    rules = BusRules(bitrate=BITRATE)
+    t = stated(rules, 1, 0.0)
+    d8 = frame_bits(8) / BITRATE
+    assert stream(rules, 1, [t, t + 0.02]) == []
+    d7 = frame_bits(7) / BITRATE
+    due = t + 0.04 - d7  # the reports so far started (were due) at t - d7, t + 0.02 - d7
+    # three throttle frames back to back from the next due time: MSG1 goes after them, 786 us late
+    for i in range(3):
+        feed(rules, encode("raw_command_12b", {"channels": [0] * 4, "group": 1}, source=0), due + (i + 1) * d8)
+    assert feed(rules, msg1(1, 2), due + 3 * d8 + d7) == []
+    assert feed(rules, msg1(1, 3), t + 0.06) == []  # back on time: 19.2 ms after the delayed one
+
+
+def test_a_missing_report_in_a_lossy_capture_is_observed():
+    rules = BusRules(bitrate=BITRATE)
+    t = stated(rules, 1, 0.0)
+    assert stream(rules, 1, [t, t + 0.02, t + 0.06], tids=[0, 1, 3]) == []
+    complete = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(complete, 1, 0.0)
+    assert "report-interval" in checks(stream(complete, 1, [t, t + 0.02, t + 0.06], tids=[0, 1, 2]))
+
+
+def test_without_a_stated_interval_only_the_shortest_legal_one_is_judged():
+    rules = BusRules(bitrate=BITRATE)
+    assert stream(rules, 1, [0.0, 0.03, 0.06, 0.4]) == []  # any legal interval: 30 ms, then 340 ms
+    (v,) = stream(rules, 1, [0.41], start_tid=4)
+    assert v.check == "report-interval" and f"{SHORTEST_S * 1000:.3f} ms" in v.message
+
+
+def test_cadence_restarts_with_what_the_host_says():
+    """Suspend and resume (MSG Control), and a Set Freq write, restart the cadence they concern."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0)
+    stream(rules, 1, [t, t + 0.02])
+    feed(rules, encode("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND}, source=0), t + 0.025)
+    feed(rules, encode("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME}, source=0), t + 0.03)
+    assert stream(rules, 1, [t + 0.031, t + 0.051], start_tid=2) == []  # "immediate recovery": 11 ms after the last
+    feed(rules, encode("set_freq", {"option": 1, **INTERVALS, "msg1_interval": 25}, source=0, destination=1, transfer_id=1),
+         t + 0.06)
+    assert stream(rules, 1, [t + 0.0605], start_tid=4) == []  # the new interval counts from the write
+    feed(rules, encode("set_freq", {"option": 1, **INTERVALS, "msg1_interval": 25}, kind="response", source=1, destination=0,
+                       transfer_id=1), t + 0.061)
+    assert stream(rules, 1, [t + 0.1105, t + 0.1605], start_tid=5) == []  # 50 ms now
+    assert rules.summary()["nodes"]["1"]["intervals"]["msg1"]["expected_ms"] == 50.0
+
+
+def test_set_id_makes_every_interval_unknown():
+    rules = BusRules(bitrate=BITRATE)
+    t = stated(rules, 1, 0.0, {"msg1_interval": 15, "msg2_interval": 50, "msg3_interval": 250})
+    feed(rules, encode("set_id", {"node_id": 1, "throttle_channel": 1}, source=0, destination=2), t)
+    assert stream(rules, 1, [t + 0.001, t + 0.021, t + 0.041]) == []  # 20 ms is legal; 30 ms was only said before
+
+
+def test_an_illegal_interval_in_an_answer_stops_the_floor():
+    """An answer to an illegal write may say anything (R10-answer, OBSERVE): nothing is judged on it."""
+    rules = BusRules(bitrate=BITRATE)
+    t = stated(rules, 1, 0.0, {"msg1_interval": 5, "msg2_interval": 50, "msg3_interval": 250})
+    assert stream(rules, 1, [t + 0.01 * i for i in range(5)]) == []
+
+
+# ------------------------------------------------------------------------------------------ not CKESC
+def test_foreign_traffic_is_counted_not_judged():
+    rules = BusRules(bitrate=1_000_000)
+    node_status = message_id(Priority.LOW, 341, 50)  # DroneCAN NodeStatus from a GPS
+    ardupilot_safety = message_id(Priority.MEDIUM, 20000, 10)  # ArduPilot SafetyState: 20000, 1 byte + tail
+    battery = message_id(Priority.MEDIUM, 20010, 10)  # ArduPilot BatteryContinuous: 20010, a multi-frame transfer
+    get_node_info = service_id(Priority.LOW, 1, True, 50, 10)
+    frames = [(node_status, bytes(7) + bytes([0xC0])), (ardupilot_safety, b"\xff\xc1"),
+              (battery, bytes(7) + bytes([0x82])), (battery, bytes(7) + bytes([0x22])), (battery, b"\x00" * 5 + bytes([0x42])),
+              (get_node_info, bytes([0xC3]))]
+    out = []
+    for i, (can_id, data) in enumerate(frames * 20):
+        out += rules.feed(can_id, data, 0.001 * i)
+    assert out == []
+    s = rules.summary()
+    assert s["nodes"]["50"]["by_type"] == {"foreign message 341": 20}
+    assert s["nodes"]["10"]["by_type"]["msg_control"] == 60 and s["nodes"]["10"]["by_type"]["can_test"] == 20
+
+
+def test_error_and_standard_frames_are_counted():
+    rules = BusRules()
+    assert list(rules.feed(0x123, b"\x01", 0.0, extended=False)) == []
+    assert list(rules.feed(0x20000004, bytes(8), 0.01, error=True)) == []
+    s = rules.summary()
+    assert s["standard_id_frames"] == 1 and s["error_frames"] == {"count": 1, "first": [0.01]}
+
+
+def test_time_going_back_restarts_the_comparisons():
+    rules = BusRules(complete=True)
+    assert stream(rules, 1, [10.0, 10.02, 5.0, 5.02], tids=[0, 1, 0, 1]) == []
+    assert rules.summary()["time_jumps"] == 1
+
+
+# ------------------------------------------------------------------------------------------ comm loss and memory
+def test_comm_loss_events():
+    rules = BusRules()
+    fault = int(cat.Status.COMM_FAULT)
+    for i, status in enumerate([0, 0, fault, fault, 0]):
+        feed(rules, encode("msg1", {**MSG1, "status": status}, source=1, transfer_id=i), 0.02 * i)
+    events = rules.summary()["nodes"]["1"]["comm_loss"]
+    assert [e["event"] for e in events] == ["set", "cleared"]
+    assert [e["timestamp"] for e in events] == [pytest.approx(0.04), pytest.approx(0.08)]
+
+
+def test_memory_is_bounded():
+    """Statistics are fixed-size; a capture of ever new CAN ids does not grow the id cache without bound."""
+    from ckesc.evidence import rules as rules_module
+
+    stats = Intervals()
+    for i in range(10_000):
+        stats.add(i * 0.001)
+    assert len(stats.hist) == rules_module._HIST_BINS + 1 and stats.to_json()["histogram"]["overflow"] == 9400
+    engine = BusRules()
+    for i in range(rules_module._ID_CACHE + 1000):
+        engine.feed(0x10000000 | i << 8 | 5, b"\xc0", i * 1e-4)
+    assert len(engine._ids) == rules_module._ID_CACHE
