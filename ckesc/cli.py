@@ -26,6 +26,7 @@ import can
 
 from . import __version__
 from .evidence.checklog import add_check_log_command
+from .harness.html_report import add_report_command
 from .protocol import catalogue as cat
 from .protocol.catalogue import Field, FrameSpec, Layout
 from .protocol.errors import DecodeError, EncodeError
@@ -766,6 +767,7 @@ def add_control_command(sub: argparse._SubParsersAction) -> None:
 COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
     add_run_command,
     add_selftest_command,
+    add_report_command,
     add_decode_command,
     add_check_log_command,
     add_encode_command,

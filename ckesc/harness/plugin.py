@@ -90,6 +90,9 @@ class Result:
     #: the test's CAN traces by lane ("": the DUT's, "bench": multi_dut's private bench), relative to the
     #: run's report directory; a lane that heard no frame during the test has none
     traces: dict[str, str] = field(default_factory=dict)
+    #: what the test's traffic shows, for the HTML report's plots (answer delays, report intervals, R8
+    #: timeline): see report.evidence
+    evidence: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -422,6 +425,9 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
         for n, m in enumerate(d.record.measurements):
             res.properties.update(m.as_properties(n))
         res.observations = [(w, str(v)) for w, v in d.record.observations]
+    if d is not None and rep.when == "teardown":
+        res.evidence = _report.evidence(d.trace, host=d.host_node, node=d.node_id, comm_loss="R8" in ids)
+        st.info.setdefault("interval_tolerance_ms", d.interval_tolerance_ms)
 
 
 def _outcome(rep: pytest.TestReport, strength: str, d: Dut | None) -> tuple[str, str]:

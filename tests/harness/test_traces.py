@@ -177,7 +177,7 @@ def test_a_run_writes_each_tests_traffic_and_junit_links_it(tmp_path):
                      "-k", "test_s4_1_framing and tail_byte or test_s4_4_22 and read_answers_the_current "
                            "or test_every_esc_replies_in_its_slot")
     results = {r["nodeid"]: r for r in json.loads((out / "results.json").read_text())["results"]}
-    assert len(results) == 4 and {r["outcome"] for r in results.values()} == {"FAIL", "PASS"}
+    assert len(results) == 4 and "FAIL" in {r["outcome"] for r in results.values()}, "failing tests keep their traces"
     multi = next(r for n, r in results.items() if "every_esc_replies" in n)
     assert set(multi["traces"]) == {"bench"}, "multi_dut's private bench has its own trace"
     bench = {parse_can_id(m.arbitration_id).source for m in can.LogReader(out / multi["traces"]["bench"])}

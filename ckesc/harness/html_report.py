@@ -1,0 +1,368 @@
+"""The HTML conformance report: ``reports/<run>/report.html``, one self-contained file per run.
+
+Built from what the run recorded (``results.json``), so ``ckesc report DIR`` can rebuild it:
+
+* the DUT's identity (ESC Information 240, node id, profile, lane, clock, bit rate, power, faults);
+* a matrix of spec sections by verdict;
+* what failed, with its evidence (measurements with limit, margin, clock; observations; traces);
+* plots (matplotlib, inlined as SVG): answer delay per node against the 64 ms limit, report
+  intervals against their targets, the comm-loss (R8) timelines;
+* every requirement of the table with its result, the tests that checked it and their evidence.
+
+Inline CSS and SVG only, no script and no external URL; traces are linked relative to the file.
+"""
+
+from __future__ import annotations
+
+import html
+import io
+import json
+import sys
+from collections import Counter, defaultdict
+from pathlib import Path
+from typing import Any
+
+from ..protocol import catalogue as cat
+from .report import VERDICTS, _section_key
+from .requirements import REQUIREMENTS, SECTION_TITLES
+
+#: how a requirement's result is drawn from its tests' verdicts: the first that occurs
+_WORST_FIRST = ("FAIL", "ERROR", "INCONCLUSIVE", "PASS", "OBSERVED", "SKIPPED")
+_COLOURS = {"PASS": "#1a7f37", "FAIL": "#cf222e", "ERROR": "#8250df", "INCONCLUSIVE": "#bf8700", "OBSERVED": "#0969da",
+            "SKIPPED": "#6e7781", "NOT CHECKED": "#6e7781"}
+
+
+def build(out: Path) -> Path:
+    """Write ``out/report.html`` from ``out/results.json``; returns its path."""
+    doc = json.loads((out / "results.json").read_text(encoding="utf-8"))
+    page = render(doc, run=out.name)
+    path = out / "report.html"
+    path.write_text(page, encoding="utf-8")
+    return path
+
+
+def add_report_command(sub) -> None:
+    p = sub.add_parser("report", help="(re)build report.html of a run from its results.json",
+                       description="Build REPORT_DIR/report.html from REPORT_DIR/results.json (what `ckesc run` wrote), "
+                                   "e.g. after an upgrade, or for a run copied from another machine.")
+    p.add_argument("report_dir", metavar="REPORT_DIR", help="a run's directory, e.g. reports/latest")
+    p.set_defaults(handler=_report_command)
+
+
+def _report_command(args) -> int:
+    out = Path(args.report_dir)
+    if not (out / "results.json").is_file():
+        print(f"ckesc report: no results.json in {out} (give a run's directory, e.g. reports/latest)", file=sys.stderr)
+        return 2
+    try:
+        path = build(out)
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:  # JSONDecodeError is a ValueError
+        print(f"ckesc report: {out / 'results.json'} is not a results record this version reads: {exc!r}", file=sys.stderr)
+        return 2
+    print(path)
+    return 0
+
+
+# ----------------------------------------------------------------------------------------- page
+def render(doc: dict[str, Any], *, run: str = "") -> str:
+    info: dict[str, Any] = doc.get("info", {})
+    results: list[dict[str, Any]] = doc.get("results", [])
+    counts = Counter(r["outcome"] for r in results)
+    overall = "FAIL" if counts["FAIL"] or counts["ERROR"] else "PASS"
+    parts = [
+        f"<header><h1>CKESC conformance report</h1><p class=run>run {_e(run)} &middot; "
+        f"{_badge(overall)} {len(results)} tests: "
+        + ", ".join(f"{counts[v]} {v}" for v in VERDICTS if counts[v]) + "</p></header>",
+        _identity(info),
+        _matrix(results),
+        _failures(results),
+        _plots(results, info),
+        _requirements(results),
+        _tests(results),
+    ]
+    return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC conformance report {_e(run)}</title>"
+            f"<style>{_CSS}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
+
+
+def _e(value: Any) -> str:
+    return html.escape(str(value), quote=True)
+
+
+def _badge(verdict: str) -> str:
+    return f'<span class="v v-{verdict.replace(" ", "-")}">{_e(verdict)}</span>'
+
+
+def _identity(info: dict[str, Any]) -> str:
+    rows = [("DUT", info.get("dut")), ("node id", info.get("node_id")), ("profile", info.get("profile")),
+            ("lane", info.get("lane")), ("clock", info.get("clock")), ("bit rate", f"{info['bitrate']} bit/s" if info.get("bitrate") else None),
+            ("power control", info.get("power")), ("timing error", f"{info['timing_error_s'] * 1000:g} ms" if "timing_error_s" in info else None),
+            ("emulator faults", info.get("faults") or None)]
+    esc = info.get("esc_information")
+    if isinstance(esc, dict):
+        y, m, d = esc.get("firmware_year"), esc.get("firmware_month"), esc.get("firmware_day")
+        if None not in (y, m, d):
+            rows.append(("firmware date", f"20{int(y):02d}-{int(m):02d}-{int(d):02d}"))
+        rows += [(k.replace("_", " "), v) for k, v in esc.items() if not k.startswith("firmware_")]
+    elif "esc_information" in info:
+        rows.append(("ESC information (240)", "no answer"))
+    body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows if v not in (None, ""))
+    return f'<section id=dut><h2>Device under test</h2><table class="kv">{body}</table></section>'
+
+
+def _matrix(results: list[dict[str, Any]]) -> str:
+    rows: dict[str, Counter] = defaultdict(Counter)
+    for r in results:
+        rows[r["section"]][r["outcome"]] += 1
+    head = "<tr><th>section</th><th>title</th>" + "".join(f"<th>{_badge(v)}</th>" for v in VERDICTS) + "</tr>"
+    body = []
+    total: Counter = Counter()
+    for section in sorted(rows, key=_section_key):
+        c = rows[section]
+        total.update(c)
+        body.append(f'<tr data-section="{_e(section)}"><td>{_e(section)}</td><td>{_e(SECTION_TITLES.get(section, ""))}</td>'
+                    + "".join(_count_cell(v, c[v]) for v in VERDICTS) + "</tr>")
+    body.append('<tr class=total data-section=all><td>all</td><td></td>' + "".join(_count_cell(v, total[v]) for v in VERDICTS) + "</tr>")
+    return f"<section id=matrix><h2>Sections by verdict</h2><table class=matrix>{head}{''.join(body)}</table></section>"
+
+
+def _count_cell(verdict: str, n: int) -> str:
+    cls = f"n c-{verdict}" if n else "n zero"
+    return f'<td class="{cls}" data-verdict="{verdict}">{n}</td>'
+
+
+def _measurements(r: dict[str, Any]) -> list[dict[str, str]]:
+    """The test's measurements, from its ``measurement.<n>.<key>`` properties."""
+    found: dict[int, dict[str, str]] = defaultdict(dict)
+    for key, value in r.get("properties", {}).items():
+        parts = key.split(".")
+        if len(parts) == 3 and parts[0] == "measurement" and parts[1].isdigit():
+            found[int(parts[1])][parts[2]] = value
+    return [found[i] for i in sorted(found)]
+
+
+def _evidence(r: dict[str, Any]) -> str:
+    out = []
+    ms = _measurements(r)
+    if ms:
+        rows = "".join(f"<tr><td>{_e(m.get('name', ''))}</td><td>{_e(m.get('value', ''))}</td><td>{_e(m.get('limit', ''))}</td>"
+                       f"<td>{_e(m.get('margin', ''))}</td><td>{_e(m.get('clock', ''))}{_e(' ' + m['error']) if 'error' in m else ''}</td>"
+                       f"<td>{_badge(m.get('verdict', ''))}</td></tr>" for m in ms)
+        out.append("<table class=meas><tr><th>measured</th><th>value</th><th>limit</th><th>margin</th><th>clock</th><th></th></tr>"
+                   f"{rows}</table>")
+    obs = r.get("observations") or []
+    if obs:
+        out.append("<ul class=obs>" + "".join(f"<li><b>{_e(w)}</b>: {_e(v)}</li>" for w, v in obs) + "</ul>")
+    traces = r.get("traces") or {}
+    if traces:
+        out.append("<p class=traces>trace: " + " ".join(f'<a href="{_e(p)}">{_e(lane or "DUT")}: {_e(Path(p).name)}</a>'
+                                                       for lane, p in traces.items()) + "</p>")
+    return "".join(out)
+
+
+def _failures(results: list[dict[str, Any]]) -> str:
+    bad = [r for r in results if r["outcome"] in ("FAIL", "ERROR", "INCONCLUSIVE")]
+    if not bad:
+        return "<section id=failures><h2>Failures</h2><p>No test failed, errored or was inconclusive.</p></section>"
+    items = []
+    for r in sorted(bad, key=lambda r: (_WORST_FIRST.index(r["outcome"]), _section_key(r["section"]))):
+        reqs = ", ".join(f'<a href="#req-{_e(i)}">{_e(i)}</a>' for i in r["requirements"])
+        items.append(f'<article class="fail" data-nodeid="{_e(r["nodeid"])}"><h3>{_badge(r["outcome"])} {_e(r["nodeid"])}</h3>'
+                     f"<p>{_e(r['section'])} {_e(SECTION_TITLES.get(r['section'], ''))} &middot; {reqs} ({_e(r['strength'])})</p>"
+                     f"<pre>{_e(r.get('message', ''))}</pre>{_evidence(r)}</article>")
+    return f"<section id=failures><h2>Failures ({len(bad)})</h2>{''.join(items)}</section>"
+
+
+def _requirement_result(outcomes: list[str]) -> str:
+    for v in _WORST_FIRST:
+        if v in outcomes:
+            return v
+    return "NOT CHECKED"
+
+
+def _requirements(results: list[dict[str, Any]]) -> str:
+    by_req: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for r in results:
+        for rid in r["requirements"]:
+            by_req[rid].append(r)
+    rows = []
+    for rid, req in sorted(REQUIREMENTS.items(), key=lambda kv: (_section_key(kv[1].section), kv[0])):
+        tests = by_req.get(rid, [])
+        result = _requirement_result([t["outcome"] for t in tests])
+        listed = "".join(f'<li>{_badge(t["outcome"])} <a href="#t-{_anchor(t["nodeid"])}">{_e(t["name"])}</a></li>' for t in tests)
+        rows.append(f'<tr id="req-{_e(rid)}" data-result="{_e(result)}"><td>{_e(rid)}</td><td>{_e(req.strength)}</td>'
+                    f"<td>{_e(req.section)}</td><td>{_badge(result)}</td><td><q>{_e(req.quote)}</q>"
+                    + (f"<div class=note>{_e(req.note)}</div>" if req.note else "")
+                    + (f"<ul class=tests>{listed}</ul>" if listed else "") + "</td></tr>")
+    return ("<section id=requirements><h2>Requirements</h2><table class=reqs><tr><th>id</th><th>strength</th><th>section</th>"
+            f"<th>result</th><th>requirement and tests</th></tr>{''.join(rows)}</table></section>")
+
+
+def _anchor(nodeid: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in nodeid)
+
+
+def _tests(results: list[dict[str, Any]]) -> str:
+    rows = []
+    for r in sorted(results, key=lambda r: _section_key(r["section"])):
+        rows.append(f'<tr id="t-{_anchor(r["nodeid"])}"><td>{_badge(r["outcome"])}</td><td>{_e(r["nodeid"])}'
+                    + (f"<div class=msg>{_e(r['message'].splitlines()[0][:300])}</div>" if r.get("message") else "")
+                    + f"{_evidence(r)}</td><td>{_e(r['section'])}</td><td>{r.get('lane_seconds', 0):.3f} s</td></tr>")
+    return ("<section id=tests><h2>Tests and their evidence</h2><table class=tests><tr><th>verdict</th><th>test</th>"
+            f"<th>section</th><th>lane time</th></tr>{''.join(rows)}</table></section>")
+
+
+# ----------------------------------------------------------------------------------------- plots
+def _plots(results: list[dict[str, Any]], info: dict[str, Any]) -> str:
+    clock = info.get("clock", "")
+    parts = ["<section id=plots><h2>Timing</h2>"]
+    answers: dict[int, list[float]] = defaultdict(list)
+    intervals: dict[tuple[str, float], list[float]] = defaultdict(list)
+    timelines = []
+    for r in results:
+        ev = r.get("evidence") or {}
+        for node, by_request in ev.get("answers", {}).items():
+            for delays in by_request.values():
+                answers[int(node)].extend(delays)
+        for report, by_target in ev.get("intervals", {}).items():
+            for target, gaps in by_target.items():
+                intervals[(report, float(target))].extend(gaps)
+        if "comm_loss" in ev:
+            timelines.append((r, ev["comm_loss"]))
+    parts.append(_figure("answer-delay", "Answer delay per node", _answer_plot(answers),
+                         f"Every service request the suite made and its answer, request on the bus to the answer's last bit "
+                         f"({_e(clock)} clock). Dashed: the {cat.ANSWER_DELAY_MAX_S * 1000:g} ms limit (4.4.2-4, 4.4.3-4).")
+                 if answers else "<p>No answered request was recorded.</p>")
+    parts.append(_figure("report-intervals", "Report intervals against their targets", _interval_plot(intervals),
+                         "Time between consecutive MSG1/MSG2/MSG3 of the DUT, grouped by the interval its latest Set/Get Freq "
+                         "answer stated (red tick: the target; box: quartiles; whiskers: min and max). Intervals across a "
+                         "power cycle or suspension are the long outliers.")
+                 if intervals else "<p>No report interval was recorded.</p>")
+    if timelines:
+        parts.append(_figure("comm-loss", "Comm-loss timelines (R8)", _comm_loss_plot(timelines),
+                             f"MSG1 around the end of a throttle stream: grey ticks are commands, dots MSG1 with bit 13 "
+                             f"(comm fault) clear or set. Dashed: {cat.COMM_LOSS_TIMEOUT_S * 1000:g} ms after the last command."))
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def _figure(fid: str, title: str, svg: str, caption: str) -> str:
+    return f'<figure id="{fid}"><figcaption><b>{_e(title)}.</b> {caption}</figcaption>{svg}</figure>'
+
+
+def _svg(fig) -> str:
+    buf = io.StringIO()
+    fig.savefig(buf, format="svg", bbox_inches="tight", metadata={"Date": None, "Creator": None})
+    text = buf.getvalue()
+    return text[text.index("<svg"):]
+
+
+def _new_figure(width: float, height: float):
+    import matplotlib
+
+    matplotlib.rcParams.update({"svg.fonttype": "none", "svg.hashsalt": "ckesc", "font.size": 9})
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width, height))
+
+
+def _answer_plot(answers: dict[int, list[float]]) -> str:
+    import numpy as np
+
+    nodes = sorted(answers)
+    fig = _new_figure(max(4.0, 1.0 + 0.9 * len(nodes)), 3.2)
+    ax = fig.add_subplot()
+    data = [np.array(answers[n]) * 1000 for n in nodes]
+    ax.boxplot(data, whis=(0, 100), widths=0.5, showfliers=False)
+    rng = np.random.default_rng(0)
+    for i, d in enumerate(data, start=1):
+        ax.scatter(i + rng.uniform(-0.18, 0.18, len(d)), d, s=6, alpha=0.35, color="#0969da", linewidths=0,
+                   rasterized=len(d) > 400)
+        ax.annotate(f"max {d.max():.2f}", (i, d.max()), textcoords="offset points", xytext=(0, 4), ha="center", fontsize=7)
+    limit = cat.ANSWER_DELAY_MAX_S * 1000
+    line = ax.axhline(limit, color="#cf222e", linestyle="--", linewidth=1.2)
+    line.set_gid("answer-delay-limit")
+    ax.text(0.55, limit, f" limit {limit:g} ms", va="bottom", color="#cf222e", fontsize=8)
+    ax.set_xticks(range(1, len(nodes) + 1), [f"node {n}\nn={len(answers[n])}" for n in nodes])
+    ax.set_ylabel("answer delay (ms)")
+    ax.set_ylim(0, max(limit * 1.15, max(d.max() for d in data) * 1.1))
+    ax.grid(axis="y", alpha=0.3)
+    return _svg(fig)
+
+
+def _interval_plot(intervals: dict[tuple[str, float], list[float]]) -> str:
+    import numpy as np
+
+    keys = sorted(intervals)
+    fig = _new_figure(max(5.0, 1.0 + 0.75 * len(keys)), 3.6)
+    ax = fig.add_subplot()
+    data = [np.array(intervals[k]) * 1000 for k in keys]
+    ax.boxplot(data, whis=(0, 100), widths=0.5, showfliers=False)
+    for i, (k, d) in enumerate(zip(keys, data), start=1):
+        tick = ax.hlines(k[1] * 1000, i - 0.35, i + 0.35, color="#cf222e", linewidth=2)
+        tick.set_gid(f"target-{k[0]}-{k[1] * 1000:g}ms")
+        off = d[np.abs(d - k[1] * 1000) > max(0.05 * k[1] * 1000, 1.0)]
+        if len(off):
+            ax.scatter(np.full(len(off), i), off, s=8, color="#bf8700", zorder=3)
+    ax.set_yscale("log")
+    ax.set_xticks(range(1, len(keys) + 1), [f"{k[0].upper()}\n{k[1] * 1000:g} ms\nn={len(intervals[k])}" for k in keys], fontsize=7)
+    ax.set_ylabel("interval (ms, log)")
+    ax.grid(axis="y", alpha=0.3, which="both")
+    return _svg(fig)
+
+
+def _comm_loss_plot(timelines: list[tuple[dict[str, Any], dict[str, Any]]]) -> str:
+    fig = _new_figure(7.0, 0.6 + 0.75 * len(timelines))
+    axes = fig.subplots(len(timelines), 1, sharex=True, squeeze=False)[:, 0]
+    timeout = cat.COMM_LOSS_TIMEOUT_S * 1000
+    for ax, (r, tl) in zip(axes, timelines):
+        commands = sorted(tl.get("commands", []))
+        msg1 = tl.get("msg1", [])
+        last = _last_command(commands)
+        ax.set_yticks([])
+        ax.set_ylabel(r["name"].split("[")[-1].rstrip("]") or r["name"], rotation=0, ha="right", va="center", fontsize=8)
+        if last is None:
+            ax.text(0.5, 0.5, "no throttle command recorded", transform=ax.transAxes, ha="center")
+            continue
+        ax.vlines([(t - last) * 1000 for t in commands], 0.6, 0.9, color="#6e7781", linewidth=0.6)
+        for flagged, colour in ((False, "#1a7f37"), (True, "#cf222e")):
+            xs = [(t - last) * 1000 for t, f in msg1 if bool(f) is flagged]
+            ax.scatter(xs, [0.3] * len(xs), s=14, color=colour, label="bit 13 set" if flagged else "bit 13 clear")
+        line = ax.axvline(timeout, color="#cf222e", linestyle="--", linewidth=1)
+        line.set_gid("comm-loss-timeout")
+        ax.axvline(0, color="#6e7781", linewidth=0.8)
+        ax.set_ylim(0, 1)
+    axes[0].legend(loc="upper right", fontsize=7, ncols=2)
+    axes[-1].set_xlim(-150, timeout + 250)
+    axes[-1].set_xlabel("time since the last command of the stream (ms)")
+    return _svg(fig)
+
+
+def _last_command(commands: list[float]) -> float | None:
+    """The last command of the stream: the one before the longest pause (or the last one)."""
+    if not commands:
+        return None
+    gaps = [(b - a, a) for a, b in zip(commands, commands[1:])]
+    return max(gaps)[1] if gaps and max(gaps)[0] > cat.COMM_LOSS_TIMEOUT_S / 2 else commands[-1]
+
+
+_CSS = """
+body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:1.5rem auto;max-width:72rem;padding:0 1rem;color:#1f2328}
+h1{font-size:1.6rem;margin:0}h2{font-size:1.25rem;border-bottom:1px solid #d0d7de;padding-bottom:.2rem;margin-top:2rem}
+h3{font-size:1rem;margin:.2rem 0}.run{color:#57606a}
+table{border-collapse:collapse;margin:.4rem 0}th,td{border:1px solid #d0d7de;padding:.2rem .45rem;vertical-align:top;text-align:left}
+th{background:#f6f8fa}.kv th{width:12rem}
+.matrix td.n{text-align:right;font-variant-numeric:tabular-nums}.matrix td.zero{color:#afb8c1}
+.matrix .total td{font-weight:600;border-top:2px solid #57606a}
+.c-PASS{background:#dafbe1}.c-FAIL{background:#ffebe9;font-weight:700}.c-ERROR{background:#fbefff;font-weight:700}
+.c-INCONCLUSIVE{background:#fff8c5}.c-OBSERVED{background:#ddf4ff}.c-SKIPPED{background:#f6f8fa}
+.v{display:inline-block;padding:0 .35rem;border-radius:.6rem;color:#fff;font-size:.75rem;font-weight:600;white-space:nowrap}
+""" + "".join(f".v-{k.replace(' ', '-')}{{background:{c}}}" for k, c in _COLOURS.items()) + """
+article.fail{border-left:4px solid #cf222e;padding:.2rem .8rem;margin:.8rem 0;background:#fffafa}
+pre{white-space:pre-wrap;font-size:.8rem;background:#f6f8fa;padding:.4rem;max-height:14rem;overflow:auto}
+.meas{font-size:.8rem}.obs{font-size:.8rem;margin:.2rem 0}.traces{font-size:.8rem;margin:.2rem 0}.msg{color:#cf222e;font-size:.8rem}
+.reqs q{quotes:none;font-style:italic}.note{color:#57606a;font-size:.8rem}.tests{margin:.2rem 0;padding-left:1rem;font-size:.8rem}
+figure{margin:1rem 0;break-inside:avoid}figure svg{max-width:100%;height:auto}figcaption{font-size:.85rem;color:#57606a}
+.tests td{font-size:.85rem}
+@media print{body{max-width:none;margin:0;font-size:11px}a{color:inherit;text-decoration:none}pre{max-height:none}
+ section{break-inside:auto}tr,article{break-inside:avoid}h2{break-after:avoid}}
+"""
