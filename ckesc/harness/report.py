@@ -146,14 +146,15 @@ def evidence(frames: list, *, host: int, node: int | None, comm_loss: bool = Fal
 
     * ``answers``: ``{node: {request: [delay]}}`` for every service request of the host that an ESC
       answered (same service and transfer id, to the host, from the node asked or else - Set ID
-      answers from its new id - the latest such request): from the request on the bus (its echo)
-      to the answer's last bit;
+      answers from its new id - the latest such request), and each ESC's first reply to a broadcast
+      query (GET_ESC_ID): from the request on the bus (its echo) to the answer's last bit;
     * ``intervals``: ``{report: {target: [interval]}}`` between consecutive MSG1/2/3 of ``node``, the
       target being the one its latest Set/Get Freq answer stated (none before the first; an interval
       that spans a change, or a MSG Control command, bridges two schedules and is left out);
     * with ``comm_loss``: ``{"commands": [t], "msg1": [[t, comm fault bit]]}`` (R8's timeline).
     """
     pending: dict[tuple, tuple[str, float]] = {}
+    queries: dict[str, tuple[float, set[int]]] = {}
     answers: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     target: dict[str, float] = {}
     last: dict[str, float] = {}  # the previous report of each kind on the current schedule
@@ -182,6 +183,13 @@ def evidence(frames: list, *, host: int, node: int | None, comm_loss: bool = Fal
                     if isinstance(value, int) and lo <= value <= hi and target.get(report) != value * cat.INTERVAL_UNIT_S:
                         target[report] = value * cat.INTERVAL_UNIT_S
                         last.pop(report, None)
+        elif f.kind is Kind.MESSAGE and f.source == host and f.layout is not None and f.layout.name == "query":
+            queries[f.name] = (t, set())  # GET_ESC_ID: a broadcast query every ESC replies to
+        elif f.kind is Kind.MESSAGE and f.layout is not None and f.layout.name == "reply" and f.name in queries:
+            asked_at, replied = queries[f.name]
+            if f.source not in replied:
+                replied.add(f.source)
+                answers[str(f.source)][f.name].append(round(t - asked_at, 9))
         elif f.kind is Kind.MESSAGE and f.source == host and f.name.startswith("raw_command"):
             commands.append(t)
         elif f.kind is Kind.MESSAGE and f.source == node and f.name in _INTERVAL_OF:
