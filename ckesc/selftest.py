@@ -3,7 +3,7 @@
 Against the faultless emulator every conformance test must pass. For every fault switch, the
 suite run against it must fail, and every failing test must cite one of the requirement ids the
 fault names (``ckesc/emulator/faults.py``): a fault that fails nothing means a rule the suite does
-not really check; a failing test that does not cite the broken rule means a test that fails for
+not really check (except a fault that breaks only OBSERVE rules, which must fail nothing); a failing test that does not cite the broken rule means a test that fails for
 the wrong reason, or cites the wrong clause. The result is the table fault -> failing tests.
 
 Each run is a separate ``pytest`` process (the simulated lane is deterministic), ``--jobs`` at a time.
@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .emulator.faults import FAULTS
+from .harness.requirements import requirement
 
 RUN_TIMEOUT_S = 600  # one suite run takes seconds in the simulated lane; this only stops a hang
 
@@ -63,12 +64,19 @@ def run_suite(fault: str | None, pytest_args: list[str] = ()) -> FaultRun:
     run.ran = len(results)
     for r in results:
         if r["outcome"] == "FAIL":
-            run.failing.append((r["nodeid"], r["requirements"]))
+            # a test failed by the bus rules (ckesc/evidence) also cites the ids of the rules the traffic broke
+            run.failing.append((r["nodeid"], list(dict.fromkeys(r["requirements"] + r.get("bus_rules", [])))))
         elif r["outcome"] == "ERROR":
             run.errors.append(f"{r['nodeid']}: {r['message'][:200]}")
     if fault is None:
         if run.failing or run.errors:
             run.problem = f"{len(run.failing)} failed and {len(run.errors)} errored against the faultless emulator"
+    elif observe_only(rules):
+        # an OBSERVE rule is recorded, never failed: the fault must fail nothing
+        if run.failing:
+            run.problem = f"{len(run.failing)} test(s) failed for a fault that breaks only OBSERVE rule(s) {', '.join(rules)}"
+        elif run.errors:
+            run.problem = f"{len(run.errors)} test(s) errored: {run.errors[0]}"
     else:
         wrong = [t for t, ids in run.failing if not set(ids) & set(rules)]
         if not run.failing:
@@ -78,6 +86,11 @@ def run_suite(fault: str | None, pytest_args: list[str] = ()) -> FaultRun:
         elif run.errors:
             run.problem = f"{len(run.errors)} test(s) errored: {run.errors[0]}"
     return run
+
+
+def observe_only(rules: tuple[str, ...]) -> bool:
+    """Whether every rule a fault breaks is OBSERVE: no test may fail for it."""
+    return bool(rules) and all(requirement(r).strength == "OBSERVE" for r in rules)
 
 
 def selftest(faults: list[str] | None = None, jobs: int | None = None, pytest_args: list[str] = (),
@@ -98,7 +111,8 @@ def table(runs: list[FaultRun]) -> str:
     for r in runs:
         name = r.fault or "(none: faultless emulator)"
         tests = "<br>".join(t.split("::", 1)[-1] for t, _ in r.failing[:8]) + (f"<br>... +{len(r.failing) - 8}" if len(r.failing) > 8 else "")
-        lines.append(f"| {name} | {' '.join(r.rules)} | {tests or '-'} | {'ok' if r.ok else 'PROBLEM: ' + r.problem} |")
+        verdict = ("ok (OBSERVE only: recorded, never failed)" if observe_only(r.rules) else "ok") if r.ok else "PROBLEM: " + r.problem
+        lines.append(f"| {name} | {' '.join(r.rules)} | {tests or '-'} | {verdict} |")
     return "\n".join(lines)
 
 

@@ -1,8 +1,10 @@
 """Spec section 4.4.24: Self Test (216) - the query of the power-up self-test's status.
 
-A suite cannot make a DUT fail its power-up self-test, so the answer is judged against the other
-places the ESC reports that self-test: 241 option 2's power-on self-test fault code (4.4.27), MSG_EXP9's
-fault code 1 (4.4.11) and MSG1's self-test error bits 7..0 (4.4.4, R7)."""
+The answer is judged against the other places the ESC reports that self-test: 241 option 2's
+power-on self-test fault code (4.4.27), MSG_EXP9's fault code 1 (4.4.11) and MSG1's self-test error
+bits 7..0 (4.4.4, R7). A suite cannot make a real DUT fail its power-up self-test over the bus; where
+the bench can (the emulator's, in the simulated lane), a failed self-test is provoked and must be
+answered "failed"."""
 
 from __future__ import annotations
 
@@ -66,3 +68,37 @@ def test_self_test_agrees_with_the_reported_fault_codes(dut):
     if not failed and any(bits):
         problems.append(f"MSG1 reports self-test error bits {[f'{b:#04x}' for b in bits if b]}")
     assert not problems, f"Self Test says {_label(status)}, but " + "; ".join(problems)
+
+
+def self_test_bench(dut):
+    """The bench's control of what the DUT's next power-up self-test finds (fault code 1, 0: passed),
+    if the lane has one: the emulator's bench in the simulated lane. Real benches have none yet."""
+    bench = getattr(getattr(dut.lane, "sim", None), "bench", None)
+    setter = getattr(bench, "set_self_test_fault", None)
+    if setter is None:
+        raise Inconclusive(f"the {dut.lane.name} lane cannot make the DUT's power-up self-test fail (only the simulated lane's bench can)")
+    return lambda fault_code: setter(fault_code, dut.node_id)
+
+
+#: a fault code 1 the attachment defines (the first that is not "normal")
+FAILING_CODE = next(c for c in cat.FAULT_CODES_1 if c)
+
+
+@pytest.mark.requirement("4.4.24-1", "4.2.1-1")
+@pytest.mark.power_cycle
+def test_failed_power_up_self_test_is_answered_failed(dut):
+    """After a power-up whose self-test found a fault, Self Test answers failed (1). (Whether 241 and
+    MSG_EXP9 name that fault is their sections' verdict.)"""
+    set_fault = self_test_bench(dut)
+    try:
+        set_fault(FAILING_CODE)
+        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+        ex = dut.request("self_test", {})
+        assert ex.response is not None, f"no answer to Self Test from node {dut.node_id}"
+        status = ex.response.fields["status"]
+        dut.record.observe("self-test status after a failed power-up self-test", _label(status))
+        assert status == FAILED, (f"Self Test answers {_label(status)} after a power-up self-test that found fault "
+                                  f"{FAILING_CODE:#04x} ({cat.FAULT_CODES_1[FAILING_CODE]})")
+    finally:
+        set_fault(0)
+        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)

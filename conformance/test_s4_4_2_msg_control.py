@@ -130,6 +130,13 @@ def report_starts(dut, name: str, since: float) -> list[float]:
     return [t for n, t in reported(dut, since - REACT_S, source=dut.node_id, names=(name,))]
 
 
+def answer_window_s(dut) -> float:
+    """How long a test reads for the answer to a broadcast command: twice the 64 ms limit, plus the
+    lane's stated timing error, so that an answer late by up to that error is seen and measured
+    (INCONCLUSIVE there), not taken for no answer."""
+    return 2 * cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error
+
+
 def settle(dut) -> None:
     """Let any answer to an earlier broadcast (the fixture's own MSG Control, a late one) arrive first."""
     dut.wait(2 * cat.ANSWER_DELAY_MAX_S)
@@ -266,13 +273,13 @@ def test_answer_is_command_zero_in_the_node_slot(dut, command):
     settle(dut)
     try:
         sent = msg_control(dut, COMMANDS[command])
-        dut.wait(2 * cat.ANSWER_DELAY_MAX_S)  # a late answer is seen, and measured
+        dut.wait(answer_window_s(dut))  # a late answer is seen, and measured
         answers = [f for f in dut.frames("msg_control", since=sent.time, source=dut.node_id)]
         bad = garbled(dut, "msg_control", source=dut.node_id, since=sent.time)
     finally:
         resume(dut)
     assert not bad, f"MSG Control answer does not decode: {describe_garbled(bad)}"
-    assert answers, f"no answer to MSG Control {command} (0x{COMMANDS[command]:08X}) within {ms(2 * cat.ANSWER_DELAY_MAX_S)} ms"
+    assert answers, f"no answer to MSG Control {command} (0x{COMMANDS[command]:08X}) within {ms(answer_window_s(dut))} ms"
     assert len(answers) == 1, f"{len(answers)} answers to one MSG Control command: {answers}"
     a = answers[0]
     assert (a.fields["option"], a.fields["command"]) == (0, cat.MSG_CONTROL_ANSWER), (
@@ -287,19 +294,44 @@ def test_suspend_stops_and_resume_restarts_reporting(dut):
     (its first frame within one of its intervals)."""
     s = dut.settings()
     longest = max(interval_s(s, w) for w in REPORTS)
+    err = dut.lane.timing_error
     try:
         off = msg_control(dut, cat.MSG_CONTROL_SUSPEND)
-        dut.wait(2 * longest)
+        dut.wait(2 * longest + err)
         leaked = reported(dut, off.time, source=dut.node_id)
-        assert not leaked, f"{len(leaked)} reports while suspended, first {leaked[0][0]} {ms(leaked[0][1] - off.time)} ms after 0x55555555"
+        if leaked:  # measured: on a lane with a timing error, a report due before the command may start after it
+            dut.record.measure(f"start of the last of {len(leaked)} reports while suspended ({leaked[0][0]} first) after "
+                               "0x55555555", ms(leaked[-1][1] - off.time), limit=ms(REACT_S), unit="ms", clock=dut.clock,
+                               error=err * 1000, requirement="4.4.2-1")
         on = msg_control(dut, cat.MSG_CONTROL_RESUME)
-        dut.wait(longest + REACT_S)
+        dut.wait(longest + REACT_S + err)
         back = reported(dut, on.time - REACT_S, source=dut.node_id, names=REPORTS)
         for which in REPORTS:
             first = next((t for n, t in back if n == which), None)
-            assert first is not None, f"no {which.upper()} within {ms(longest + REACT_S)} ms of 0xAAAAAAAA"
+            assert first is not None, f"no {which.upper()} within {ms(longest + REACT_S + err)} ms of 0xAAAAAAAA"
             dut.record.measure(f"first {which.upper()} after resume", ms(first - on.time), limit=ms(interval_s(s, which)),
-                               unit="ms", clock=dut.clock, error=dut.lane.timing_error * 1000, requirement="4.4.2-T")
+                               unit="ms", clock=dut.clock, error=err * 1000, requirement="4.4.2-T")
+    finally:
+        resume(dut)
+
+
+@pytest.mark.requirement("R13", "4.4.2-1")
+@pytest.mark.power_cycle
+def test_suspension_is_lost_at_power_off(dut):
+    """MSG Control suspension is not persisted (R13): after 0x55555555 and a power cycle the ESC
+    reports MSG1/MSG2/MSG3 again without being told to resume."""
+    s = dut.settings()
+    longest = max(interval_s(s, w) for w in REPORTS)
+    try:
+        off = msg_control(dut, cat.MSG_CONTROL_SUSPEND)
+        check_suspended(dut, off.time, s)
+        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+        since = dut.now()
+        dut.wait(2 * longest + dut.lane.timing_error)
+        back = {n for n, _ in reported(dut, since, source=dut.node_id, names=REPORTS)}
+        missing = [w.upper() for w in REPORTS if w not in back]
+        assert not missing, (f"no {', '.join(missing)} within {ms(2 * longest)} ms after a power cycle that followed "
+                             "0x55555555: the suspension survived power-off (R13: not persisted)")
     finally:
         resume(dut)
 

@@ -7,6 +7,8 @@ the flash file, which it writes only when told to (:meth:`persist`).
 
 from __future__ import annotations
 
+import dataclasses
+
 from typing import Any, Iterable, Mapping
 
 from ..protocol.errors import DecodeError
@@ -82,6 +84,14 @@ class Bench:
         for esc in self.escs:
             if node is None or esc.node_id == node:
                 (esc.faults.add if on else esc.faults.discard)(name)
+        self.touch()
+
+    def set_self_test_fault(self, code: int, node: int | None = None) -> None:
+        """What the power-up self-test of one ESC or all will find from the next power-up on (fault
+        code 1, 0: passed): a bench that can make the self-test fail, e.g. a phase left open."""
+        for esc in self.escs:
+            if node is None or esc.node_id == node:
+                esc.config = dataclasses.replace(esc.config, self_test_fault=code)
         self.touch()
 
     def set_pwm_input(self, value: int | None, node: int | None = None) -> None:

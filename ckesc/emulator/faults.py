@@ -103,7 +103,8 @@ _FAULTS = (
     Fault("expand_set_answered", ("R14",), "Expand Set Part is answered"),
     Fault("expand_set_big_endian", ("R14",), "Expand Set Part's Set_cmd is read big-endian"),
     Fault("get_rec_untagged", ("R15",), "MSG_EXP12 records carry tail 0xC0 instead of 0xC1..0xC5"),
-    Fault("clear_rec_ignored", ("R15",), "Clear Rec leaves the temperature records"),
+    # Clear Rec's effect is no rule (R15 is Get Rec's; 224's payload and answer are OBSERVE): recorded, never failed
+    Fault("clear_rec_ignored", ("R15-payload",), "Clear Rec leaves the temperature records"),
     Fault("can_test_count_skips", ("R16",), "CAN Test counts up by 2 per frame"),
     Fault("can_test_reports_continue", ("R16",), "other reports continue in CAN Test mode"),
     Fault("can_test_off_ignored", ("R16", "4.4.1-3"), "CAN Test 0x55 does not end test mode"),
