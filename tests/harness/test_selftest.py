@@ -12,7 +12,15 @@ from ckesc.selftest import selftest, table
 
 #: Faults whose self-test result is known to be off, with why; each must still be off (so that a fix
 #: is noticed and the entry removed). Empty is the goal.
-KNOWN: dict[str, str] = {}
+KNOWN: dict[str, str] = {
+    # A DUT that flags its answers as requests cannot be talked to: the 4.1 framing tests FAIL on F1/F4,
+    # every test that needs an answer ERRORs, saying that the answer came with the request bit set.
+    "response_as_request": "every test that needs an answer errors (the error names F1/F4); 4.1 fails on F1/F4",
+    # 242 is the only read of the throttle source, so a DUT whose 242 misplaces its bits cannot have
+    # rotation and source restored and verified: tests that change them ERROR in teardown with "settings
+    # could not be restored", which is what an operator must be told; 4.4.28's tests FAIL on 4.4.28-1.
+    "major_config_bits_swapped": "tests that change rotation or source error in teardown: 242 is the read-back",
+}
 
 
 @pytest.mark.slow
