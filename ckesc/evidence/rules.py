@@ -96,6 +96,7 @@ for _name, _field, _value in (("can_test", "option", cat.CAN_TEST_REPORT), ("msg
     _f = cat.spec(_name).layouts[0].field(_field)
     _ESC_VALUE[cat.spec(_name).type_id] = (_f.offset, _f.size, _value)
 _MSG_CONTROL = cat.spec("msg_control")
+_GET_ESC_ID = cat.spec("get_esc_id")
 _MSG_CONTROL_COMMAND = _MSG_CONTROL.layouts[0].field("command")
 _CAN_TEST = cat.spec("can_test")
 _CAN_TEST_OPTION = _CAN_TEST.layouts[0].field("option")
@@ -227,7 +228,7 @@ class Intervals:
 
 class _Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
-                 "from_read", "before_silence", "comm_fault", "comm_events", "comm_dropped", "silences", "noted")
+                 "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -241,6 +242,7 @@ class _Node:
         self.period_note = ""  # where the periods come from (for messages)
         self.from_read = False  # the periods come from a read answer (4.4.22-2 says it tells the settings)
         self.before_silence = False  # ... stated before a silence that may have been a power cycle (R13 keeps them)
+        self.shared = False  # two ESCs answered one broadcast from this node id: its frames are two ESCs' (4.4.18-2)
         self.floor = True  # judge reports against the shortest legal interval while the periods are unknown
         self.comm_fault: bool | None = None
         self.comm_events: list[dict[str, Any]] = []
@@ -339,6 +341,7 @@ class BusRules:
         self._observed: dict[tuple[int | None, str], _Tally] = {}
         self._by_rule: dict[str, int] = {}
         self._last_throttle: tuple[float, str, int] | None = None
+        self._answered: set[int] = set()  # nodes that answered the last Set ID / GET_ESC_ID (a second answer: shared id)
         self._bus_end = -math.inf
         self._busy_from = -math.inf
         self.set_bitrate(bitrate)
@@ -467,6 +470,7 @@ class BusRules:
             looks_esc = layout is not None and layout.sender == "esc"
             if looks_esc and info.source not in self._host_nodes and not node.host:
                 node.esc = True
+                self._answer(node, ts)
         if node.esc and not node.host:
             return self._esc_frame(info, node, data, ts, start, busy_from, remote)
         if not looks_esc:
@@ -539,7 +543,7 @@ class BusRules:
 
     # ------------------------------------------------------------------------------------- F3 and R9
     def _stream(self, out, st: _Stream, info: _Id, node: _Node, data, ts: float, start: float, busy_from: float, tid: int):
-        if st.ts is not None and st.chain == node.chain:
+        if st.ts is not None and st.chain == node.chain and not node.shared:
             gap = start - st.start
             advance = (tid - st.tid) % TRANSFER_ID_MODULO
             period = None
@@ -645,6 +649,8 @@ class BusRules:
             if type_id in _THROTTLE:
                 self._last_throttle = (ts, info.label, type_id)
                 return
+            if type_id == _GET_ESC_ID.type_id:
+                self._answered.clear()  # a query: every ESC answers once
             switch = _REPORTING_SWITCHES.get(type_id)
             if switch is not None and len(data) > switch[0].offset + switch[0].size and _field(data, switch[0]) in switch[1]:
                 self._reset_all()  # reporting stops, resumes or switches on every ESC: cadence restarts
@@ -654,9 +660,11 @@ class BusRules:
         tid = data[-1] & 0x1F
         if type_id in _PSEUDO_BROADCAST:
             key = (info.source, None, type_id)
+            self._answered.clear()
             for node in self._nodes.values():  # may re-address any ESC: nobody's intervals are known now
                 node.periods = [None] * len(_INTERVAL_FIELDS)
                 node.reset += 1
+                node.shared = False  # ... nor whether two of them share an id
         else:
             key = (info.source, info.dest, type_id)
             if type_id == _SET_FREQ.type_id and _field(data, _SET_FREQ_OPTION) == _SET_FREQ_WRITE:
@@ -674,6 +682,8 @@ class BusRules:
         requester = info.dest
         key = (requester, None if service in _PSEUDO_BROADCAST else info.source, service)
         asked = [t for t, when in self._requests.get(key, ()) if 0 <= ts - when <= RESPONSE_WINDOW_S]
+        if service in _PSEUDO_BROADCAST:
+            self._answer(node, ts)
         if tid in asked:
             if service == _SET_FREQ.type_id:
                 self._set_freq_answer(node, data, ts)
@@ -693,6 +703,16 @@ class BusRules:
                                    frames)
         self._observe(("F4",), ts, node.id, "response-unmatched", text + " (the capture may have missed it)", frames)
         return out or _NONE
+
+    def _answer(self, node: _Node, ts: float) -> None:
+        """An answer to a broadcast every ESC answers once (Set ID, GET_ESC_ID): a second one from the same
+        node id means two ESCs share it (Set ID sets every ESC on the bus, 4.4.18-2)."""
+        if node.id not in self._answered:
+            self._answered.add(node.id)
+        elif not node.shared:
+            node.shared = True
+            self._observe(("4.4.18-2",), ts, node.id, "shared-node-id",
+                          f"two ESCs answer from node id {node.id}: its reports are not compared with one another")
 
     def _set_freq_answer(self, node: _Node, data, ts: float) -> None:
         layout = _SET_FREQ.response

@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 
+from ..evidence.live import LaneRules, failure_text
 from . import report as _report
 from .dut import Dut
 from .lanes import BusLane, CommandPower, Lane, ManualPower, NoPower, RealtimeEmulatorLane, SimLane
@@ -93,6 +94,9 @@ class Result:
     #: what the test's traffic shows, for the HTML report's plots (answer delays, report intervals, R8
     #: timeline): see report.evidence
     evidence: dict[str, Any] = field(default_factory=dict)
+    #: requirement ids of the bus rules (ckesc/evidence) the traffic broke while the test ran: such a test
+    #: FAILs, quoting the frames, and these ids are what it cites besides its own
+    bus_rules: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -109,6 +113,7 @@ class _State:
     info: dict[str, Any] = field(default_factory=dict)
     report_dir: Path | None = None  # reports/<run>/, made at the first test that writes into it
     traces: TestTraces | None = None  # the per-test trace writer, on every lane the plugin opens
+    bus_rules: list[LaneRules] = field(default_factory=list)  # the bus rules on every lane the plugin opens
 
 
 _STATE = pytest.StashKey[_State]()
@@ -220,6 +225,7 @@ def ckesc_lane(request: pytest.FixtureRequest):
                                                               else "ckesc-generic"))
     lane = make_lane(config, profile)
     _trace_lane(config, lane, "")
+    _watch_lane(config, lane)
     st.lane, st.profile = lane, profile
     st.info.update(dut=config.getoption("dut"), lane=lane.name, clock=lane.clock, profile=profile.name,
                    bitrate=lane.bitrate, power=lane.power.name, timing_error_s=lane.timing_error,
@@ -301,6 +307,7 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
             lane = SimLane(nodes=MULTI_NODES, faults=faults, seed=config.getoption("emulator_seed"),
                            esc_config={"boot_time": 0.25})
         _trace_lane(config, lane, "bench")
+        _watch_lane(config, lane)
         own = True
     else:
         if not profile.has("multi_node"):
@@ -381,6 +388,47 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
             res.traces = {lane: p.relative_to(traces.directory.parent).as_posix() for lane, p in paths.items()}
 
 
+# ----------------------------------------------------------------------------------------- bus rules
+_BUS_RULES = pytest.StashKey[list]()  # requirement ids of the bus rules broken while the test ran
+_BUS_TEARDOWN = pytest.StashKey[bool]()  # the bus rules failed the test at teardown (a FAIL, not an ERROR)
+
+
+def _watch_lane(config: pytest.Config, lane: Lane) -> None:
+    """The bus rules that hold at all times (ckesc/evidence/rules.py) over every frame the lane reads."""
+    watcher = LaneRules(lane)
+    lane.listeners.append(watcher)
+    state(config).bus_rules.append(watcher)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    if _is_conformance(item):
+        st = state(item.config)
+        st.bus_rules = [w for w in st.bus_rules if not w.closed]  # multi_dut's private benches are gone
+        for watcher in st.bus_rules:
+            watcher.begin()
+
+
+def _bus_rules_verdict(item: pytest.Item, rep: pytest.TestReport) -> None:
+    """A test during which the bus broke a rule fails, whatever its own verdict, with the frames quoted."""
+    if rep.when not in ("call", "teardown"):
+        return
+    found, count = [], 0
+    for watcher in state(item.config).bus_rules:
+        f, c = watcher.take()
+        found, count = found + f, count + c
+    if not count:
+        return
+    text, ids = failure_text(found, count)
+    item.stash[_BUS_RULES] = list(dict.fromkeys(item.stash.get(_BUS_RULES, []) + ids))
+    if rep.failed:
+        rep.sections.append(("bus rules", text))
+        return
+    rep.outcome, rep.longrepr = "failed", text
+    if rep.when == "teardown":
+        item.stash[_BUS_TEARDOWN] = True
+
+
 # ----------------------------------------------------------------------------------------- verdicts
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
@@ -402,6 +450,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
         elif rep.passed and d is not None and d.record.inconclusive:
             rep.outcome = "skipped"
             rep.longrepr = (str(item.path), item.location[1] or 0, "INCONCLUSIVE: " + "; ".join(d.record.inconclusive))
+    _bus_rules_verdict(item, rep)
     _collect(item, rep, ids, strength, d)
     return rep
 
@@ -415,10 +464,11 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
     res.duration += rep.duration
     if rep.when == "call" or (rep.when == "setup" and not rep.passed) or (rep.when == "teardown" and rep.failed):
         outcome, message = _outcome(rep, strength, d)
-        if rep.when == "teardown" and res.outcome not in ("FAIL",):
+        if rep.when == "teardown" and res.outcome not in ("FAIL",) and not item.stash.get(_BUS_TEARDOWN, False):
             outcome = "ERROR"
         if rep.when != "teardown" or res.outcome != "FAIL":
             res.outcome, res.message = outcome, message
+    res.bus_rules = item.stash.get(_BUS_RULES, [])
     if d is not None and rep.when in ("call", "teardown"):
         res.lane_seconds = d.lane_seconds  # set when the dut fixture is torn down
         res.properties = {}

@@ -305,3 +305,16 @@ def test_memory_is_bounded():
     for i in range(rules_module._ID_CACHE + 1000):
         engine.feed(0x10000000 | i << 8 | 5, b"\xc0", i * 1e-4)
     assert len(engine._ids) == rules_module._ID_CACHE
+
+
+def test_two_escs_sharing_a_node_id_are_not_compared():
+    """Set ID sets every ESC on the bus (4.4.18-2): two answers from one node id mean two ESCs report from
+    it, two transfer-id counters and two cadences in one stream: observed, not judged."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    feed(rules, encode("set_id", {"node_id": 9, "throttle_channel": 1}, source=0, destination=1, transfer_id=0), 0.0)
+    for i in range(2):
+        answer = encode("set_id", {"node_id": 9, "throttle_channel": 1}, kind="response", source=9, destination=0)
+        assert feed(rules, answer, 0.001 + 0.0003 * i) == []
+    assert stream(rules, 9, [0.01, 0.013, 0.03, 0.033], tids=[0, 5, 1, 6]) == []
+    (o,) = [o for o in rules.summary()["observations"] if o["check"] == "shared-node-id"]
+    assert o["node"] == 9
