@@ -12,6 +12,7 @@ from typing import Any, Callable, Mapping
 
 import can
 
+from ..emulator.sim_bus import frame_bits
 from ..protocol import catalogue as cat
 from ..protocol.errors import TailError
 from ..protocol.frame import Frame, WireFrame, classify
@@ -86,9 +87,13 @@ class Dut:
 
     @property
     def interval_tolerance_ms(self) -> float:
-        """How far one report interval may stray from its target: exact (float rounding) in the
-        simulated lane; one report-scheduling tick (1 ms) plus the lane's error in real time."""
-        return 1e-6 if self.clock == "simulated" else 1.0 + self.lane.timing_error * 1000
+        """How far one report interval may stray from its target. In the simulated lane: bus access
+        only, two of the longest frames at the lane's bit rate (a report due while a frame is on the
+        bus waits for it, and for one that wins arbitration); in real time: one report-scheduling tick
+        (1 ms) plus the lane's error."""
+        if self.clock == "simulated":
+            return 2 * frame_bits(8) / self.lane.bitrate * 1000
+        return 1.0 + self.lane.timing_error * 1000
 
     def wait(self, seconds: float) -> None:
         """Let lane time pass, reading the bus (nothing is lost)."""
