@@ -68,7 +68,7 @@ _FAULTS = (
     Fault("twelve_bit_group_ignored", ("R4",), "RawCommand_12b is applied whatever its group id"),
     Fault("ten_bit_not_doubled", ("R5",), "RawCommand_10b values are used as 0..1000 instead of doubled"),
     Fault("fourteen_bit_byte_order", ("R3",), "RawCommand_14b is read as little-endian 14-bit fields"),
-    Fault("throttle_answered", ("4.4.15-1", "4.4.16-1", "4.4.17-1"),
+    Fault("throttle_answered", ("4.4.15-1", "4.4.16-1", "4.4.17-1", "R9"),  # the extra MSG1s break its interval
           "every RawCommand addressed to the ESC is answered at once with an extra MSG1"),
     Fault("ten_bit_tail_checked", ("4.4.17-3", "R5"),
           "RawCommand_10b is dropped unless the high nibble of payload[7] is 0b1100 (read as a tail byte)"),
