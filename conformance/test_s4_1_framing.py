@@ -239,10 +239,11 @@ def provoke(d: Recorder) -> Traffic:
         ex = d.request(name, fields)
         asked[label] = Asked(label, name, ex.pending.transfer_id, ex.sent.time, d.now())
     windows: dict[str, tuple[float, float]] = {}
+    answer_window = BROADCAST_WINDOW_S + d.lane.timing_error  # an answer late by the lane's error is still one
     d.broadcast("get_esc_id", {"option": 0}, layout="query")
-    windows["get_esc_id"] = _window(d, BROADCAST_WINDOW_S)
+    windows["get_esc_id"] = _window(d, answer_window)
     d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
-    windows["msg_control"] = _window(d, BROADCAST_WINDOW_S)
+    windows["msg_control"] = _window(d, answer_window)
     try:  # MSG_EXP mode: the MSG_EXP frames (which ones come is OBSERVE, R9-exp)
         d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME_EXP})
         d.wait(LONGEST_S + BROADCAST_WINDOW_S)
@@ -468,7 +469,8 @@ def test_broadcast_commands_reach_the_esc(traffic):
     """A message frame is a broadcast that every node receives: the DUT answers the broadcast
     commands GET_ESC_ID and MSG Control (addressed to no node) with message frames."""
     missing = [cat.spec(name).title for name, answers in traffic.broadcasts.items() if not answers]
-    assert not missing, f"no answer to the broadcast {', '.join(missing)} within {BROADCAST_WINDOW_S * 1000:.0f} ms"
+    assert not missing, (f"no answer to the broadcast {', '.join(missing)} within {BROADCAST_WINDOW_S * 1000:.0f} ms "
+                         "(plus the lane's timing error)")
 
 
 @pytest.mark.requirement("4.1.1-2")

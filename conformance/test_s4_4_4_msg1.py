@@ -49,6 +49,13 @@ def _msg1_after(dut, t: float) -> list:
     return [f for f in dut.frames("msg1", source=dut.node_id) if frame_start(dut, f) >= t]
 
 
+def _stream_pause_s(dut, name: str, since: float, until: float) -> float:
+    """The longest time between ``since`` and ``until`` without a frame of the host's own ``name`` stream
+    (their echoes' bus stamps). The stream is the harness's: a host starved of CPU may pause it."""
+    stamps = [since, *(f.timestamp for f in dut.frames(name, since=since, until=until, source=dut.host_node)), until]
+    return max(b - a for a, b in zip(stamps, stamps[1:]))
+
+
 def _comm_fault(f) -> bool:
     return bool(f.fields["status"] & Status.COMM_FAULT)
 
@@ -196,6 +203,9 @@ def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
     under = need_decoded(dut, "msg1", _msg1_after(dut, t1), t1, "the comm fault bit")
     assert len(under) >= 2, f"only {len(under)} MSG1 in {ms(dut.now() - t1)} ms"
     flagged = [f for f in under if _comm_fault(f)]
+    if flagged and (pause := _stream_pause_s(dut, name, t0, flagged[0].timestamp)) >= cat.COMM_LOSS_TIMEOUT_S - dut.lane.timing_error:
+        raise Inconclusive(f"bit13 (comm fault) set in MSG1 after the host's {STREAM_PERIOD_S * 1000} ms command stream "
+                           f"paused {ms(pause)} ms (within the lane's error of the timeout, or longer): the flag may be right")
     assert not flagged, f"bit13 (comm fault) set in MSG1 under a {STREAM_PERIOD_S * 1000} ms command stream"
     dut.wait(REACT_S)  # the stream's last frame comes back from the bus
     sent = dut.frames(name, since=t0, source=dut.host_node)
