@@ -58,6 +58,11 @@ def main() -> None:
                            "outcomes": {o: sum(1 for r in rt_doc["results"] if r["outcome"] == o)
                                         for o in {r["outcome"] for r in rt_doc["results"]}}}
         print(f"real-time lane: {rt_wall:.1f} s wall = {ratio:.2f} x the protocol's waits (target <= 1.2)")
+        odd = [r for r in rt_doc["results"] if r["outcome"] not in ("PASS", "OBSERVED")]
+        out["realtime"]["not_passed"] = [{"nodeid": r["nodeid"], "outcome": r["outcome"], "message": r["message"][:300]}
+                                         for r in odd]
+        for r in odd:  # INCONCLUSIVE (a margin under the lane's error), SKIPPED, FAIL, ERROR: which and why
+            print(f"  {r['outcome']:<12} {r['nodeid']}: {r['message'][:200]}")
     Path(__file__).with_name("results").mkdir(exist_ok=True)
     (Path(__file__).with_name("results") / "suite.json").write_text(json.dumps(out, indent=1) + "\n")
 
