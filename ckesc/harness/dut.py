@@ -372,6 +372,104 @@ class Dut:
             self.send_wire(self.proto.message("raw_command_12b", {"channels": [0] * 4, "group": group}))
         self.send_wire(self.proto.message("raw_command_10b", {"channels": [0] * 6}))
 
+    # ------------------------------------------------------------------ operations the suites share
+    #: How long a motor may take to start or to spin down: a test allowance, not a protocol fact
+    MOTOR_STOP_S = 5.0
+    #: Time given to the throttle output to follow a new command (a real ESC may ramp): not a protocol fact
+    OUTPUT_SETTLE_S = 0.2
+
+    def reports_heard(self, seconds: float) -> int:
+        """How many report frames the DUT sends in the next ``seconds``, decoded or not (their format is
+        4.4.4 - 4.4.14's business; here only whether it reports counts)."""
+        report_ids = {s.type_id for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts)}
+        start = self.now()
+        self.wait(seconds)
+        heard = [f for f in self.frames(source=self.node_id, kind=Kind.MESSAGE, since=start) if f.type_id in report_ids]
+        heard += [g for g in self.garbled if (g.msg.timestamp or 0.0) > start and (g.msg.arbitration_id & 0x7F) == self.node_id
+                  and classify(g.msg.arbitration_id)[:2] in {(Kind.MESSAGE, t) for t in report_ids}]
+        return len(heard)
+
+    def suspend_reporting(self) -> None:
+        """MSG Control 0x55555555, verified: INCONCLUSIVE (reporting resumed first) unless the reports
+        stop, for whether they do is 4.4.2's verdict, not the verdict of a test that needs them stopped."""
+        interval = self.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
+        self.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND})
+        self.wait(cat.ANSWER_DELAY_MAX_S)
+        if self.reports_heard(2 * interval):
+            self.resume_reporting()
+            raise Inconclusive("MSG Control 0x55555555 did not stop the reports (see 4.4.2): suspension cannot be tested")
+
+    def resume_reporting(self) -> None:
+        """MSG Control 0xAAAAAAAA, verified: if the reports do not come back (4.4.2's verdict) the DUT is
+        power-cycled back to reporting where the lane can (suspension is not kept, R13) and the test is
+        INCONCLUSIVE."""
+        self.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+        self.wait(cat.ANSWER_DELAY_MAX_S)
+        if self.reports_heard(2 * self.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S):
+            return
+        if self.lane.power.available:
+            self.power_cycle(self.profile.off_s, self.profile.boot_s)
+        raise Inconclusive("MSG Control 0xAAAAAAAA did not bring the reports back (see 4.4.2): this test cannot be judged")
+
+    def wait_motor_stopped(self) -> Frame | None:
+        """Zero throttle, then read until MSG1 shows the motor stopped (speed and pwm 0): that MSG1, or
+        None when none did within MOTOR_STOP_S (the motor may have stopped unseen)."""
+        self.zero_throttle()
+        return self.wait_for("msg1", self.MOTOR_STOP_S, where=lambda f: f.fields["speed"] == 0 and f.fields["pwm"] == 0)
+
+    def stop_motor(self) -> None:
+        """:meth:`wait_motor_stopped`, INCONCLUSIVE when no MSG1 shows the motor stopped."""
+        if self.wait_motor_stopped() is None:
+            raise Inconclusive(f"the motor still runs {self.MOTOR_STOP_S} s after zero throttle (MSG1 speed, pwm)")
+
+    def start_motor(self, name: str, fields: Mapping[str, Any]) -> None:
+        """Stream throttle frame ``name`` with ``fields`` until MSG1 shows the motor running (the run bit or
+        a speed: either will do, R7 is 4.4.4's business); when none does within MOTOR_STOP_S, the motor is
+        let spin down and the test is INCONCLUSIVE. The caller stops it (:meth:`stop_motor`)."""
+        self.throttle_stream(name, fields)
+        if self.wait_for("msg1", self.MOTOR_STOP_S,
+                         where=lambda f: bool(f.fields["status"] & cat.Status.RUNNING) or f.fields["speed"] > 0) is None:
+            self.wait_motor_stopped()
+            raise Inconclusive("the motor did not start (no MSG1 showed it running): the test cannot be judged")
+
+    def msg1_interval(self, node: int | None = None) -> float:
+        """The MSG1 report interval (s) of ``node`` (default: the DUT), read with Set/Get Freq."""
+        freq = self.ask("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0},
+                        destination=self.node_id if node is None else node)
+        return freq["msg1_interval"] * cat.INTERVAL_UNIT_S
+
+    def read_output(self, *, nodes: list[int] | None = None, intervals: Mapping[int, float] | None = None
+                    ) -> dict[int, list[int]]:
+        """The throttle output (MSG1 ``pwm``, 4.4.4) of each of ``nodes`` (default: the DUT) under whatever
+        commands them now: OUTPUT_SETTLE_S and one MSG1 interval for it to settle, then {node: [pwm, ...]}
+        of the next three intervals' MSG1. INCONCLUSIVE when a node's MSG1 did not decode. ``intervals``:
+        the nodes' MSG1 intervals where already read (else asked)."""
+        nodes = [self.node_id] if nodes is None else nodes
+        known = intervals or {}
+        interval = max(known[n] if n in known else self.msg1_interval(n) for n in nodes)
+        self.wait(self.OUTPUT_SETTLE_S + interval)
+        start = self.now()
+        self.wait(3 * interval + cat.INTERVAL_UNIT_S)
+        out = {n: [f.fields["pwm"] for f in self.frames("msg1", since=start, source=n)] for n in nodes}
+        for n, pwms in out.items():
+            if not pwms:
+                raise Inconclusive(f"no MSG1 decoded from node {n}: its throttle output cannot be read (see 4.4.4)")
+        return out
+
+    def throttle_output(self, name: str, frames: list[Mapping[str, Any]], *, nodes: list[int] | None = None,
+                        intervals: Mapping[int, float] | None = None) -> dict[int, list[int]]:
+        """:meth:`read_output` while each field dict of ``frames`` is streamed as throttle frame ``name``
+        (in that order, every period); the streams are stopped afterwards."""
+        nodes = [self.node_id] if nodes is None else nodes
+        known = intervals or {}
+        known = {n: known[n] if n in known else self.msg1_interval(n) for n in nodes}  # read before the throttle runs
+        for fields in frames:
+            self.throttle_stream(name, fields)
+        try:
+            return self.read_output(nodes=nodes, intervals=known)
+        finally:
+            self.stop_throttle()
+
 
 class DutError(RuntimeError):
     """The harness could not do what a test needed (not a verdict on the DUT)."""
