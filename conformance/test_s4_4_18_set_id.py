@@ -11,19 +11,19 @@ import pytest
 from ckesc.harness.dut import DutError
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.codecs import codec_for
 from ckesc.protocol.frame import classify
 from ckesc.protocol.host import HostProtocol
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, HOST_NODE_ID, RESERVED_NODE_IDS, Kind
 from ckesc.protocol.legality import field_cases, illegal_cases
+
+from .test_s4_4_16_raw_command_12b import FORMAT as RAW_12B
+from .test_s4_4_16_raw_command_12b import VALUES as RAW_12B_VALUES
 
 SECTION = "4.4.18"
 SPEC = cat.spec("set_id")
 NODE_FIELD = SPEC.request.field("node_id")
 ID_MIN, ID_MAX = NODE_FIELD.legal  # 4.4.18-5: 1..0x7D
 CHANNELS = cat.THROTTLE_CHANNELS
-_12B = cat.spec("raw_command_12b").layouts[0]
-PER_GROUP = len(codec_for(_12B).decode(bytes(_12B.size))["channels"])  # 4.4.16-3: four channels per group
 #: 4.4.18-5 / R10: the reserved ids (0, 0x7E, 0x7F) and the catalogue's illegal neighbours
 ILLEGAL_IDS = sorted({c.value for c in illegal_cases(SPEC) if c.field == "node_id"} | RESERVED_NODE_IDS | {HOST_NODE_ID})
 #: legal targets: the range's ends (the top one, 0x7D, is the silent default: its own test) and a middle one
@@ -32,7 +32,6 @@ TARGETS = sorted({c.value for c in field_cases(SPEC, NODE_FIELD) if c.legal and 
 ARDUPILOT_NODE = 10  # F6: the node id ArduPilot sends from (INTERPRETATIONS.md), not a protocol constant
 MARGIN_S = 1.0  # how far inside / outside the 120 s window the window tests send (lane time)
 WINDOW_TEST_TIMEOUT_S = int(3 * cat.CONFIG_WINDOW_S)  # they wait the window out: in real time, minutes
-SETTLE_S = 0.2  # time given to the throttle output to follow a new command; not a protocol fact
 REPORT_NAMES = frozenset(s.name for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
 REPORT_IDS = frozenset(cat.spec(name).type_id for name in REPORT_NAMES)
 
@@ -244,22 +243,11 @@ def test_channel_selects_the_throttle_value(dut, original, channel):
     node, _ = original
     _open_window(dut)
     dut.request("set_id", {"node_id": node, "throttle_channel": channel})
-    values = {c: 198 + 64 * c for c in CHANNELS}  # one distinct value per channel, inside 0..2000
-    own = (channel - 1) // PER_GROUP + 1
-    for g in [own] + [g for g in cat.THROTTLE_GROUPS if g != own]:
-        dut.throttle_stream("raw_command_12b", {"channels": [values[(g - 1) * PER_GROUP + i + 1] for i in range(PER_GROUP)],
-                                                "group": g})
-    interval = dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
+    values = RAW_12B_VALUES  # one distinct value per channel, inside 0..2000
     try:
-        dut.wait(SETTLE_S + interval)
-        start = dut.now()
-        dut.wait(3 * interval + cat.INTERVAL_UNIT_S)
+        pwms = RAW_12B.output(dut, RAW_12B.frames(values, channel), nodes=[node])[node]
     finally:
-        dut.stop_throttle()
         dut.zero_throttle()
-    pwms = [f.fields["pwm"] for f in dut.frames("msg1", since=start, source=node)]
-    if not pwms:
-        raise Inconclusive("no MSG1 decoded: the throttle output cannot be read (see 4.4.4)")
     assert all(p == values[channel] for p in pwms), (
         f"after Set ID channel {channel} MSG1 pwm {pwms}, expected channel {channel}'s {values[channel]}")
 
