@@ -10,12 +10,9 @@ import pytest
 
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.frame import classify
-from ckesc.protocol.ids import Kind
 from ckesc.protocol.legality import illegal_cases
 
 SECTION = "4.4.20"
-REPORT_IDS = frozenset(s.type_id for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
 SPEC = cat.spec("set_led")
 COLOR = SPEC.request.field("color")
 COLOURS = range(COLOR.legal[0], COLOR.legal[1] + 1)  # 4.4.20-3: RGB in the low three bits
@@ -63,43 +60,6 @@ def _ensure(dut, option, colour, blink):
     if _led(dut) != (colour, blink):
         raise Inconclusive(f"Set Led ({option}, {colour}, {blink}) did not take with reporting on: 242 shows "
                            f"{_led(dut)}; this test cannot be judged")
-
-
-def _reports_heard(dut, seconds):
-    """How many report frames the DUT sends in the next ``seconds``, decoded or not (their format is
-    4.4.4 - 4.4.14's business; here only whether it reports counts)."""
-    start = dut.now()
-    dut.wait(seconds)
-    heard = [f for f in dut.frames(source=dut.node_id, kind=Kind.MESSAGE, since=start) if f.type_id in REPORT_IDS]
-    heard += [g for g in dut.garbled if (g.msg.timestamp or 0.0) > start and (g.msg.arbitration_id & 0x7F) == dut.node_id
-              and classify(g.msg.arbitration_id)[:2] in {(Kind.MESSAGE, t) for t in REPORT_IDS}]
-    return len(heard)
-
-
-def _report_interval(dut):
-    return dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
-
-
-def _suspend(dut):
-    """MSG Control 0x55555555; INCONCLUSIVE unless the reports stop (that is 4.4.2's business)."""
-    interval = _report_interval(dut)
-    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND})
-    dut.wait(cat.ANSWER_DELAY_MAX_S)
-    if _reports_heard(dut, 2 * interval):
-        _resume(dut)
-        raise Inconclusive("MSG Control 0x55555555 did not stop the reports (see 4.4.2): suspension cannot be tested")
-
-
-def _resume(dut):
-    """MSG Control 0xAAAAAAAA; if the reports do not come back (4.4.2's business) the DUT is power-cycled
-    back to reporting (suspension is not kept, R13) and the test is INCONCLUSIVE."""
-    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
-    dut.wait(cat.ANSWER_DELAY_MAX_S)
-    if _reports_heard(dut, 2 * _report_interval(dut)):
-        return
-    if dut.lane.power.available:
-        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
-    raise Inconclusive("MSG Control 0xAAAAAAAA did not bring the reports back (see 4.4.2): this test cannot be judged")
 
 
 # ------------------------------------------------------------------------------------------ tests
@@ -172,12 +132,12 @@ def test_not_set_while_reporting_is_suspended(dut, option):
     colour, blink = _other_colour(before[0]), _other_blink(before[1])
     _ensure(dut, option, colour, blink)
     _ensure(dut, option, *before)
-    _suspend(dut)
+    dut.suspend_reporting()
     try:
         ex = _set(dut, option, colour, blink)
         dut.record.observe("answer while suspended", ex.response.fields if ex.response else "none")
     finally:
-        _resume(dut)
+        dut.resume_reporting()
     assert _led(dut) == before, f"Set Led while suspended took effect: 242 shows {_led(dut)}, was {before}"
 
 

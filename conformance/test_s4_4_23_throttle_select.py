@@ -13,24 +13,16 @@ import pytest
 
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.codecs import codec_for
-from ckesc.protocol.frame import classify
-from ckesc.protocol.ids import Kind
 from ckesc.protocol.legality import illegal_cases
 
+from . import throttle
+
 SECTION = "4.4.23"
-REPORT_IDS = frozenset(s.type_id for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
 SPEC = cat.spec("throttle_select")
 SOURCES = sorted(SPEC.request.field("source").codes)  # 0 CAN, 1 PWM+CAN
 CAN, PWM_CAN = (next(v for v, n in SPEC.request.field("source").codes.items() if n == name) for name in ("CAN", "PWM+CAN"))
 ILLEGAL = illegal_cases(SPEC)  # R10: anything but 0 and 1
-_12B = cat.spec("raw_command_12b").layouts[0]
-PER_GROUP = len(codec_for(_12B).decode(bytes(_12B.size))["channels"])  # 4.4.16-3: four channels per group
-#: a modest throttle whose 12-bit packing is the same in both nibble orders (bits 11..8 and 3..0 zero),
-#: so that these tests do not depend on R4
-RUN_VALUE = 0xF0
-STOP_TIMEOUT_S = 5.0  # how long a motor may take to spin down; not a protocol fact
-SETTLE_S = 0.2  # time given to the output to follow a new input; not a protocol fact
+motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
 
 
 def _name(source):
@@ -62,49 +54,6 @@ def _ensure(dut, source):
                            "(see test_source_is_selected): this test cannot be judged")
 
 
-def _running(f):
-    """MSG1 shows the motor running: the run bit, or a speed (either will do: R7 is 4.4.4's business)."""
-    return bool(f.fields["status"] & cat.Status.RUNNING) or f.fields["speed"] > 0
-
-
-def _stopped(f):
-    return f.fields["speed"] == 0 and f.fields["pwm"] == 0
-
-
-def _wait_stopped(dut):
-    """Zero throttle, then until MSG1 shows the motor stopped (or STOP_TIMEOUT_S, when it cannot be seen)."""
-    dut.zero_throttle()
-    dut.wait_for("msg1", STOP_TIMEOUT_S, where=_stopped)
-
-
-@pytest.fixture(autouse=True)
-def _motor_stopped(request):
-    """The motor stopped before each test (settings need it, R12) and after it (the DUT left as found)."""
-    if "dut" not in request.fixturenames:
-        yield
-        return
-    dut = request.getfixturevalue("dut")
-    _wait_stopped(dut)
-    yield
-    _wait_stopped(dut)
-
-
-def _own_group_frame(dut, value):
-    channel = dut.settings()["throttle_channel"]
-    group, pos = (channel - 1) // PER_GROUP + 1, (channel - 1) % PER_GROUP
-    return {"channels": [value if i == pos else 0 for i in range(PER_GROUP)], "group": group}
-
-
-def _stop_motor(dut):
-    dut.zero_throttle()
-    if dut.wait_for("msg1", STOP_TIMEOUT_S, where=_stopped) is None:
-        raise Inconclusive(f"the motor still runs {STOP_TIMEOUT_S} s after zero throttle (MSG1 speed, pwm)")
-
-
-def _msg1_interval(dut):
-    return dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
-
-
 @pytest.fixture
 def pwm_input(dut):
     """Sets the DUT's analog throttle input (0..2000 as the lane models it; None: no signal); the
@@ -120,45 +69,7 @@ def pwm_input(dut):
         yield set_input
     finally:
         set_input(None)
-        dut.zero_throttle()
-        dut.wait_for("msg1", STOP_TIMEOUT_S, where=_stopped)  # let the motor spin down, seen or not
-
-
-def _reports_heard(dut, seconds):
-    """How many report frames the DUT sends in the next ``seconds``, decoded or not (their format is
-    4.4.4 - 4.4.14's business; here only whether it reports counts)."""
-    start = dut.now()
-    dut.wait(seconds)
-    heard = [f for f in dut.frames(source=dut.node_id, kind=Kind.MESSAGE, since=start) if f.type_id in REPORT_IDS]
-    heard += [g for g in dut.garbled if (g.msg.timestamp or 0.0) > start and (g.msg.arbitration_id & 0x7F) == dut.node_id
-              and classify(g.msg.arbitration_id)[:2] in {(Kind.MESSAGE, t) for t in REPORT_IDS}]
-    return len(heard)
-
-
-def _report_interval(dut):
-    return dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
-
-
-def _suspend(dut):
-    """MSG Control 0x55555555; INCONCLUSIVE unless the reports stop (that is 4.4.2's business)."""
-    interval = _report_interval(dut)
-    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND})
-    dut.wait(cat.ANSWER_DELAY_MAX_S)
-    if _reports_heard(dut, 2 * interval):
-        _resume(dut)
-        raise Inconclusive("MSG Control 0x55555555 did not stop the reports (see 4.4.2): suspension cannot be tested")
-
-
-def _resume(dut):
-    """MSG Control 0xAAAAAAAA; if the reports do not come back (4.4.2's business) the DUT is power-cycled
-    back to reporting (suspension is not kept, R13) and the test is INCONCLUSIVE."""
-    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
-    dut.wait(cat.ANSWER_DELAY_MAX_S)
-    if _reports_heard(dut, 2 * _report_interval(dut)):
-        return
-    if dut.lane.power.available:
-        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
-    raise Inconclusive("MSG Control 0xAAAAAAAA did not bring the reports back (see 4.4.2): this test cannot be judged")
+        dut.wait_motor_stopped()  # let the motor spin down, seen or not
 
 
 # ------------------------------------------------------------------------------------------ tests
@@ -178,15 +89,13 @@ def test_not_selected_while_the_throttle_is_not_zero(dut):
     before = _source(dut)
     _ensure(dut, _other(before))
     _ensure(dut, before)
-    dut.throttle_stream("raw_command_12b", _own_group_frame(dut, RUN_VALUE))
+    throttle.start_motor(dut)
     try:
-        if dut.wait_for("msg1", STOP_TIMEOUT_S, where=_running) is None:  # _stop_motor below lets it spin down
-            raise Inconclusive("the motor did not start (no MSG1 showed it running): the test cannot be judged")
         ex = dut.request("throttle_select", {"source": _other(before)})
         dut.record.observe("answer at non-zero throttle", ex.response.fields if ex.response else "none")
         during = _source(dut)
     finally:
-        _stop_motor(dut)
+        dut.stop_motor()
     assert during == before, f"Throttle Select at non-zero throttle took effect: 242 shows {during}"
     assert _source(dut) == before, f"Throttle Select sent at non-zero throttle took effect later: 242 {_source(dut)}"
 
@@ -198,12 +107,12 @@ def test_not_selected_while_reporting_is_suspended(dut):
     before = _source(dut)
     _ensure(dut, _other(before))
     _ensure(dut, before)
-    _suspend(dut)
+    dut.suspend_reporting()
     try:
         ex = dut.request("throttle_select", {"source": _other(before)})
         dut.record.observe("answer while suspended", ex.response.fields if ex.response else "none")
     finally:
-        _resume(dut)
+        dut.resume_reporting()
     assert _source(dut) == before, f"Throttle Select while suspended took effect: 242 shows {_source(dut)}"
 
 
@@ -254,11 +163,7 @@ def test_pwm_input_drives_the_output_with_source_pwm_can(dut, pwm_input, value):
     """With PWM+CAN selected and no CAN throttle, the analog input (1..2 ms = 0..2000) is the output."""
     _select(dut, PWM_CAN)
     pwm_input(value)
-    interval = _msg1_interval(dut)
-    dut.wait(SETTLE_S + interval)
-    pwms = [f.fields["pwm"] for f in dut.reports("msg1", 3 * interval)]
-    if not pwms:
-        raise Inconclusive("no MSG1 decoded: the output cannot be read (see 4.4.4)")
+    pwms = dut.read_output()[dut.node_id]
     assert all(p == value for p in pwms), f"PWM input {value} with source PWM+CAN: MSG1 pwm {pwms}"
 
 
@@ -268,17 +173,9 @@ def test_pwm_input_is_ignored_with_source_can(dut, pwm_input):
     """With CAN selected the analog input commands nothing; the CAN throttle does."""
     _select(dut, CAN)
     pwm_input(cat.THROTTLE_MAX)
-    interval = _msg1_interval(dut)
-    dut.throttle_stream("raw_command_12b", _own_group_frame(dut, RUN_VALUE))
-    try:
-        dut.wait(SETTLE_S + interval)
-        pwms = [f.fields["pwm"] for f in dut.reports("msg1", 3 * interval)]
-    finally:
-        dut.stop_throttle()
-    if not pwms:
-        raise Inconclusive("no MSG1 decoded: the output cannot be read (see 4.4.4)")
-    assert all(p == RUN_VALUE for p in pwms), (
-        f"source CAN, CAN throttle {RUN_VALUE}, PWM input {cat.THROTTLE_MAX}: MSG1 pwm {pwms}")
+    pwms = dut.throttle_output("raw_command_12b", [throttle.run_command(dut)])[dut.node_id]
+    assert all(p == throttle.RUN_VALUE for p in pwms), (
+        f"source CAN, CAN throttle {throttle.RUN_VALUE}, PWM input {cat.THROTTLE_MAX}: MSG1 pwm {pwms}")
 
 
 @pytest.mark.requirement("4.4.23-2")

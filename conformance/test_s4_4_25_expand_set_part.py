@@ -13,13 +13,13 @@ import pytest
 
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.codecs import codec_for
 from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import Kind
 from ckesc.protocol.legality import illegal_cases
 
+from . import throttle
+
 SECTION = "4.4.25"
-REPORT_IDS = frozenset(s.type_id for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
 SPEC = cat.spec("expand_set_part")
 CMD = {c.name: c for c in cat.EXPAND_COMMANDS.values()}
 EXP7 = {f.name: f for f in cat.spec("msg_exp7").layouts[0].fields}
@@ -27,10 +27,6 @@ ROTATION = cat.spec("set_rotation").response.field("rotation").codes  # 0 forwar
 SOURCE = cat.spec("throttle_select").request.field("source").codes  # 0 CAN, 1 PWM+CAN
 QUERY = next(v for v, n in cat.spec("set_rotation").request.field("rotation").codes.items() if n == "query")
 ACT_S = cat.ANSWER_DELAY_MAX_S  # time given to act on a request that is never answered (the longest delay named)
-#: a modest throttle whose 12-bit packing is the same in both nibble orders (bits 11..8 and 3..0 zero),
-#: so that these tests do not depend on R4
-RUN_VALUE = 0xF0
-STOP_TIMEOUT_S = 5.0  # how long a motor may take to spin down; not a protocol fact
 #: command -> its MSG_EXP7 nibble (same codes as the Parts); the document names two of them differently
 EXP7_FIELD = {"direction": "direction", "led": "led", "control_mode": "comm_interface",
               "active_freewheel": "active_freewheel", "prop_lock": "prop_lock",
@@ -74,8 +70,7 @@ BAD_PARTS = [("bad-part", CMD["direction"].code, max(CMD["direction"].parts) + 1
              ("bad-part", CMD["led"].code, max(CMD["led"].parts) + 1)]
 RESERVED = [("reserved", c.code, min(c.parts)) for c in cat.EXPAND_COMMANDS.values() if c.reserved]
 NOT_COMMANDS = SWAPPED + UNDEFINED + BAD_PARTS + RESERVED
-_12B = cat.spec("raw_command_12b").layouts[0]
-PER_GROUP = len(codec_for(_12B).decode(bytes(_12B.size))["channels"])  # 4.4.16-3: four channels per group
+motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
 
 
 def _send(dut, code, part):
@@ -164,33 +159,6 @@ def exp7_restored(dut, put_back):
         _put_back(dut, before)
 
 
-def _running(f):
-    """MSG1 shows the motor running: the run bit, or a speed (either will do: R7 is 4.4.4's business)."""
-    return bool(f.fields["status"] & cat.Status.RUNNING) or f.fields["speed"] > 0
-
-
-def _stopped(f):
-    return f.fields["speed"] == 0 and f.fields["pwm"] == 0
-
-
-def _wait_stopped(dut):
-    """Zero throttle, then until MSG1 shows the motor stopped (or STOP_TIMEOUT_S, when it cannot be seen)."""
-    dut.zero_throttle()
-    dut.wait_for("msg1", STOP_TIMEOUT_S, where=_stopped)
-
-
-@pytest.fixture(autouse=True)
-def _motor_stopped(request):
-    """The motor stopped before each test (settings need it, R12) and after it (the DUT left as found)."""
-    if "dut" not in request.fixturenames:
-        yield
-        return
-    dut = request.getfixturevalue("dut")
-    _wait_stopped(dut)
-    yield
-    _wait_stopped(dut)
-
-
 def _other_direction(direction):
     return next(d for d in sorted(ROTATION) if d != direction)
 
@@ -207,43 +175,6 @@ def _ensure_direction(dut, direction):
     if dut.settings()["rotation"] != direction:
         raise Inconclusive("222 direction did not take with the motor stopped and reporting on "
                            "(see test_setting_shows_in_the_general_settings): this test cannot be judged")
-
-
-def _reports_heard(dut, seconds):
-    """How many report frames the DUT sends in the next ``seconds``, decoded or not (their format is
-    4.4.4 - 4.4.14's business; here only whether it reports counts)."""
-    start = dut.now()
-    dut.wait(seconds)
-    heard = [f for f in dut.frames(source=dut.node_id, kind=Kind.MESSAGE, since=start) if f.type_id in REPORT_IDS]
-    heard += [g for g in dut.garbled if (g.msg.timestamp or 0.0) > start and (g.msg.arbitration_id & 0x7F) == dut.node_id
-              and classify(g.msg.arbitration_id)[:2] in {(Kind.MESSAGE, t) for t in REPORT_IDS}]
-    return len(heard)
-
-
-def _report_interval(dut):
-    return dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
-
-
-def _suspend(dut):
-    """MSG Control 0x55555555; INCONCLUSIVE unless the reports stop (that is 4.4.2's business)."""
-    interval = _report_interval(dut)
-    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND})
-    dut.wait(cat.ANSWER_DELAY_MAX_S)
-    if _reports_heard(dut, 2 * interval):
-        _resume(dut)
-        raise Inconclusive("MSG Control 0x55555555 did not stop the reports (see 4.4.2): suspension cannot be tested")
-
-
-def _resume(dut):
-    """MSG Control 0xAAAAAAAA; if the reports do not come back (4.4.2's business) the DUT is power-cycled
-    back to reporting (suspension is not kept, R13) and the test is INCONCLUSIVE."""
-    dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
-    dut.wait(cat.ANSWER_DELAY_MAX_S)
-    if _reports_heard(dut, 2 * _report_interval(dut)):
-        return
-    if dut.lane.power.available:
-        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
-    raise Inconclusive("MSG Control 0xAAAAAAAA did not bring the reports back (see 4.4.2): this test cannot be judged")
 
 
 # ------------------------------------------------------------------------------------------ tests
@@ -311,19 +242,12 @@ def test_not_applied_while_the_motor_runs(dut, put_back):
     other = _other_direction(before)
     _ensure_direction(dut, other)
     _ensure_direction(dut, before)
-    channel = dut.settings()["throttle_channel"]
-    group, pos = (channel - 1) // PER_GROUP + 1, (channel - 1) % PER_GROUP
-    dut.throttle_stream("raw_command_12b", {"channels": [RUN_VALUE if i == pos else 0 for i in range(PER_GROUP)],
-                                            "group": group})
+    throttle.start_motor(dut)
     try:
-        if dut.wait_for("msg1", STOP_TIMEOUT_S, where=_running) is None:  # the finally lets it spin down
-            raise Inconclusive("the motor did not start (no MSG1 showed it running): the test cannot be judged")
         _send(dut, CMD["direction"].code, _direction_part(other))
         during = dut.settings()["rotation"]
     finally:
-        dut.zero_throttle()
-        if dut.wait_for("msg1", STOP_TIMEOUT_S, where=_stopped) is None:
-            raise Inconclusive(f"the motor still runs {STOP_TIMEOUT_S} s after zero throttle (MSG1 speed, pwm)")
+        dut.stop_motor()
     assert during == before, f"222 direction while the motor ran took effect: 242 shows {during}"
     assert dut.settings()["rotation"] == before, "222 direction sent while running took effect later"
 
@@ -336,11 +260,11 @@ def test_not_applied_while_reporting_is_suspended(dut, put_back):
     other = _other_direction(before)
     _ensure_direction(dut, other)
     _ensure_direction(dut, before)
-    _suspend(dut)
+    dut.suspend_reporting()
     try:
         _send(dut, CMD["direction"].code, _direction_part(other))
     finally:
-        _resume(dut)
+        dut.resume_reporting()
     assert dut.settings()["rotation"] == before, f"222 direction while suspended took effect: {dut.settings()['rotation']}"
 
 
