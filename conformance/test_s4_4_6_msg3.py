@@ -6,7 +6,8 @@ import pytest
 
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import INTERVALS, REACT_S, describe_garbled, garbled, interval_s, ms, need_decoded, report_starts
+from .test_s4_4_2_msg_control import REACT_S, describe_garbled, garbled, interval_s, ms, need_decoded
+from .test_s4_4_5_msg2 import check_interval_follows_set_freq
 
 SECTION = "4.4.6"
 
@@ -32,18 +33,7 @@ def test_msg3_is_reported_unasked(dut):
 @pytest.mark.parametrize("interval", [10, 100])
 def test_msg3_interval_follows_set_freq(dut, interval):
     """After Set Freq, MSG3 comes every MSG3_SET x 2 ms."""
-    s = dut.settings()
-    fields = {k: s[k] for k in INTERVALS} | {"msg3_interval": interval}
-    dut.ask("set_freq", {"option": 1, **fields})
-    target = interval * cat.INTERVAL_UNIT_S
-    dut.wait(max(interval_s(s, "msg3"), target))  # the old schedule runs out
-    t = dut.now()
-    dut.wait(4 * target + target / 2)
-    stamps = report_starts(dut, "msg3", t)
-    assert len(stamps) >= 3, f"only {len(stamps)} MSG3 in {ms(4.5 * target)} ms at MSG3_SET {interval}"
-    worst = max(abs((b - a) - target) for a, b in zip(stamps, stamps[1:]))
-    dut.record.measure("MSG3 interval error", ms(worst), limit=dut.interval_tolerance_ms, unit="ms", clock=dut.clock,
-                       error=dut.lane.timing_error * 1000, requirement="R9")
+    check_interval_follows_set_freq(dut, "msg3", interval)
 
 
 @pytest.mark.requirement("4.4.6-T")
