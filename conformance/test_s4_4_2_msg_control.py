@@ -11,11 +11,10 @@ from typing import Any
 
 import pytest
 
-from ckesc.emulator.sim_bus import frame_bits
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.errors import TailError
-from ckesc.protocol.frame import classify
+from ckesc.protocol.frame import classify, frame_bits
 from ckesc.protocol.ids import Kind
 
 SECTION = "4.4.2"

@@ -8,7 +8,6 @@ the flash file, which it writes only when told to (:meth:`persist`).
 from __future__ import annotations
 
 import dataclasses
-
 from typing import Any, Iterable, Mapping
 
 from ..protocol.errors import DecodeError

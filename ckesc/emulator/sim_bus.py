@@ -31,17 +31,12 @@ import can
 from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
 
 from ..protocol.catalogue import DEFAULT_BITRATE
-from ..protocol.frame import WireFrame
+from ..protocol.frame import WireFrame, frame_bits  # noqa: F401 - frame_bits: also imported from here
 from .bench import Bench
 from .model import EscModel
 
 _WORLDS: dict[str, SimWorld] = {}
 
-
-
-def frame_bits(dlc: int) -> int:
-    """Bit times of an extended data frame with ``dlc`` data bytes, with the 3-bit interframe space."""
-    return 67 + 8 * dlc
 
 
 class SimClock:

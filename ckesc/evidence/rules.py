@@ -51,10 +51,9 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
-from ..emulator.sim_bus import frame_bits  # CAN frame length; TODO(protocol): belongs in ckesc.protocol
 from ..harness.requirements import strongest
 from ..protocol import catalogue as cat
-from ..protocol.frame import classify
+from ..protocol.frame import classify, frame_bits
 from ..protocol.ids import (
     DEFAULT_ESC_NODE_ID,
     ESC_NODE_IDS,

@@ -12,10 +12,9 @@ from typing import Any, Callable, Mapping
 
 import can
 
-from ..emulator.sim_bus import frame_bits
 from ..protocol import catalogue as cat
 from ..protocol.errors import TailError
-from ..protocol.frame import Frame, WireFrame, classify
+from ..protocol.frame import Frame, WireFrame, classify, frame_bits
 from ..protocol.host import Garbled, HostProtocol, Pending, Response
 from ..protocol.ids import Kind
 from .lanes import Lane

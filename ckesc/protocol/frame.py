@@ -149,6 +149,12 @@ def _flag_labels(flags: type[IntFlag]) -> tuple[tuple[int, str], ...]:
     return tuple((int(m), m.name.lower()) for m in flags if m)
 
 
+def frame_bits(dlc: int) -> int:
+    """Bit times on the wire of an extended (29-bit) data frame with ``dlc`` data bytes, with the 3-bit
+    interframe space (stuff bits not counted)."""
+    return 67 + 8 * dlc
+
+
 def classify(can_id: int) -> tuple[Kind, int, int, int | None, FrameSpec | None]:
     """Fast id classification: (kind, type id, source, destination, catalogue entry or None)."""
     if can_id & 0x80:

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.emulator.sim_bus import frame_bits
 from ckesc.evidence import BusRules
 from ckesc.evidence.rules import RESTART_SILENCE_S, SHORTEST_S, Intervals
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.frame import encode
+from ckesc.protocol.frame import encode, frame_bits
 from ckesc.protocol.ids import Priority, message_id, service_id
 from ckesc.protocol.transfer import tail_byte
 
