@@ -14,6 +14,7 @@ import itertools
 import math
 import os
 import shlex
+import socket
 import subprocess
 import sys
 import time
@@ -187,6 +188,24 @@ class NoPower(PowerControl):
     on = off
 
 
+#: The receive buffer a SocketCAN socket asks for. A host that is not scheduled for a while (a loaded
+#: machine, a VM) must not lose what arrives meanwhile: the kernel drops frames silently once a socket's
+#: buffer is full, and the default (~200 KB) holds about 200 frames, 50 ms of a busy 1 Mbit/s bus, or
+#: one burst of a late emulator; a lost frame reads as a transfer-id gap (F3) or a missing report.
+SOCKETCAN_RCVBUF = 8 << 20
+_SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)  # Linux: past net.core.rmem_max, with CAP_NET_ADMIN
+
+
+def enlarge_receive_buffer(sock: socket.socket, size: int = SOCKETCAN_RCVBUF) -> int:
+    """Ask for ``size`` bytes of receive buffer (forced where permitted, else up to rmem_max); returns
+    what the kernel granted."""
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, size)
+    except OSError:  # no CAP_NET_ADMIN: as much as net.core.rmem_max allows
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size)
+    return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+
+
 class _SendTap:
     """A python-can bus whose send() tells the lane when the host sent a frame (everything else is the
     bus's own; periodic tasks send on the bus itself and are not noted)."""
@@ -214,6 +233,7 @@ class BusLane(Lane):
         self.bus_kwargs.setdefault("receive_own_messages", True)
         self._pending: deque[can.Message] = deque()  # arrived, seen by now(), not yet handed out by recv()
         self._hold: float | None = None  # see now(): after a read -inf, after a send its time, else None
+        self.rcvbuf: int | None = None  # a SocketCAN socket's receive buffer, as the kernel granted it
         self.bus = self._open(self.bus_kwargs)
         self.bitrate = int(self.bus_kwargs.get("bitrate") or DEFAULT_BITRATE)
         self.power = power
@@ -226,7 +246,11 @@ class BusLane(Lane):
     def _open(self, kwargs: dict[str, Any]) -> Any:
         self._pending.clear()
         self._hold = None
-        return _SendTap(can.Bus(**kwargs), self._sent)
+        bus = can.Bus(**kwargs)
+        sock = getattr(bus, "socket", None)  # python-can's SocketcanBus
+        if isinstance(sock, socket.socket) and sock.family == getattr(socket, "AF_CAN", None):
+            self.rcvbuf = enlarge_receive_buffer(sock)
+        return _SendTap(bus, self._sent)
 
     def _sent(self, t: float) -> None:
         self._hold = t

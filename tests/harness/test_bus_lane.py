@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import itertools
 import shlex
+import socket
 import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import can
@@ -164,3 +166,15 @@ def test_socketcan_without_a_bitrate_command_refuses_another_rate(monkeypatch, c
         assert lane.bitrate == lanes.DEFAULT_BITRATE
     finally:
         lane.close()
+
+
+def test_a_socket_gets_a_receive_buffer_for_a_stalled_host():
+    # SocketCAN needs AF_CAN, which this kernel may lack: the same socket option on a UDP socket
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        default = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        granted = lanes.enlarge_receive_buffer(sock)
+        assert granted == sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        rmem = Path("/proc/sys/net/core/rmem_max")
+        rmem_max = int(rmem.read_text()) if rmem.exists() else 0
+        # forced (CAP_NET_ADMIN) the kernel doubles the request; else it is capped at rmem_max (doubled)
+        assert granted >= min(lanes.SOCKETCAN_RCVBUF, max(rmem_max, default)), (default, granted, rmem_max)

@@ -65,6 +65,27 @@ def test_python_can_round_trip_on_vcan0(vm_ready):
     assert r.stdout.splitlines() == ["vcan0 0x123 True 01", "vcan0 0x123 True 01"], r.stdout + r.stderr
 
 
+def test_bus_lane_on_vcan0_stamps_echoes_and_reopens(vm_ready):
+    """The harness's BusLane on real SocketCAN: a receive buffer for a stalled host, the host's frame
+    back as its receive_own_messages echo with a kernel stamp, a reopen through the bit rate command."""
+    code = (
+        "import sys, can\n"
+        "from ckesc.harness.lanes import BusLane, NoPower, SOCKETCAN_RCVBUF\n"
+        "lane = BusLane({'interface': 'socketcan', 'channel': 'vcan0'}, NoPower(), timing_error=0.0, bitrate_cmd='true')\n"
+        "assert lane.rcvbuf >= SOCKETCAN_RCVBUF, lane.rcvbuf\n"
+        "for rate in (500000, 1000000):\n"
+        "    lane.reopen(rate)\n"
+        "    lane.bus.send(can.Message(arbitration_id=0x1F4E5200, data=b'\\xc0', is_extended_id=True))\n"
+        "    echo = lane.recv(5)\n"
+        "    assert echo is not None and not echo.is_rx and 0 < echo.timestamp <= lane.now(), echo\n"
+        "    print(lane.bitrate, hex(echo.arbitration_id))\n"
+        "lane.close()\n"
+    )
+    r = run_in_vm(vm_ready, sys.executable, "-c", code)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == ["500000 0x1f4e5200", "1000000 0x1f4e5200"], r.stdout + r.stderr
+
+
 def test_exit_status_and_streams_pass_through(vm_ready):
     r = run_in_vm(vm_ready, "sh", "-c", "echo out; echo err >&2; exit 7")
     assert r.returncode == 7, r.stderr
