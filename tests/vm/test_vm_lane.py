@@ -3,7 +3,8 @@
 One test, one VM: the CI subset (``tools/vm-lane --list-sections``), 2-5 minutes under TCG on a
 2-core machine. It skips, with tools/vcan-vm's list of what is missing, when qemu, a kernel with the CAN
 modules or busybox-static is not installed (``sudo tools/vcan-vm --install --check`` installs them).
-The reports go to a temporary directory, which the VM gets read-write at the same path. A run that
+The reports go to the checkout's reports/vm/<timestamp>/, as in any run of the lane (CI collects the
+JUnit there; .gitignore keeps it out of git), the only directory the VM writes back. A run that
 failed while the emulator was later than the profile's stated error (a host that starved the VM of CPU:
 that run proves nothing either way) is repeated once, with a warning; any other failure fails at once.
 """
@@ -26,6 +27,7 @@ from ckesc.harness.profile import DutProfile
 ROOT = Path(__file__).resolve().parents[2]
 VM_LANE = ROOT / "tools" / "vm-lane"
 PROFILE = ROOT / "fixtures" / "duts" / "vcan-vm.toml"
+REPORTS = ROOT / "reports" / "vm"  # the inner run's JUnit lands in reports/vm/<timestamp>/ (kept out of git)
 #: vm-lane's own --timeout, boot included: the ci subset took 2-5 minutes on a loaded 2-core host; never hang
 LANE_TIMEOUT_S = 600
 EXIT_TIMEOUT, EXIT_VM = 124, 125
@@ -33,10 +35,13 @@ EXIT_TIMEOUT, EXIT_VM = 124, 125
 pytestmark = [pytest.mark.vm, pytest.mark.timeout(2 * (LANE_TIMEOUT_S + 90) + 60)]  # a second run when the first starved
 
 
-def run_lane(vm, reports: Path) -> subprocess.CompletedProcess:
-    """tools/vm-lane in its own session: should it outlive its own --timeout, the whole group (vcan-vm,
-    and qemu, which dies with it) is killed, never left running."""
-    cmd = [sys.executable, str(VM_LANE), "--timeout", str(LANE_TIMEOUT_S), "--reports", str(reports), "--quiet"]
+def run_lane(vm) -> tuple[subprocess.CompletedProcess, list[Path]]:
+    """tools/vm-lane (reports into the checkout's reports/vm/, where CI collects JUnit files), in its own
+    session: should it outlive its own --timeout, the whole group (vcan-vm, and qemu, which dies with
+    it) is killed, never left running. Returns what it did and the report directories it made."""
+    REPORTS.mkdir(parents=True, exist_ok=True)
+    before = set(REPORTS.iterdir())
+    cmd = [sys.executable, str(VM_LANE), "--timeout", str(LANE_TIMEOUT_S), "--reports", str(REPORTS), "--quiet"]
     with subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                           stdin=subprocess.DEVNULL, start_new_session=True) as proc:
         try:
@@ -47,40 +52,39 @@ def run_lane(vm, reports: Path) -> subprocess.CompletedProcess:
             vm.failed(f"tools/vm-lane did not stop after its own --timeout {LANE_TIMEOUT_S} s; killed", err[-6000:])
     if proc.returncode in (EXIT_TIMEOUT, EXIT_VM):
         vm.failed(f"the VM itself failed (tools/vm-lane exit {proc.returncode})", err[-6000:])
-    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+    made = sorted(d for d in set(REPORTS.iterdir()) - before if d.is_dir() and not d.is_symlink())
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err), made
 
 
-def lane_record(reports: Path) -> dict:
-    found = sorted(reports.glob("*/vm-lane.json"))
+def lane_record(made: list[Path]) -> dict:
+    found = [d / "vm-lane.json" for d in made if (d / "vm-lane.json").exists()]
     return json.loads(found[-1].read_text()) if found else {}
 
 
-def failure(r: subprocess.CompletedProcess, reports: Path) -> str:
-    why = lane_record(reports)
+def failure(r: subprocess.CompletedProcess, made: list[Path]) -> str:
+    why = lane_record(made)
     late = ""
     if why.get("late_within_error") is False:
         late = (f"\nthe emulator was {why['emulator_late_max_s'] * 1000:.0f} ms late at worst, beyond the profile's "
                 f"{why['profile_error_s'] * 1000:.0f} ms: the host starved the VM of CPU")
-    summary = sorted(reports.glob("*/summary.txt"))
-    return (f"exit {r.returncode}{late}\n--- summary\n{summary[-1].read_text() if summary else '(none)'}"
+    summary = [d / "summary.txt" for d in made if (d / "summary.txt").exists()]
+    return (f"exit {r.returncode}{late}; reports: {', '.join(map(str, made)) or 'none'}"
+            f"\n--- summary\n{summary[-1].read_text() if summary else '(none)'}"
             f"\n--- stdout\n{r.stdout[-6000:]}\n--- stderr\n{r.stderr[-4000:]}")
 
 
-def test_ci_subset_passes_and_writes_junit(vm_ready, tmp_path):
-    reports = tmp_path / "reports" / "vm"
-    r = run_lane(vm_ready, reports)
-    if r.returncode != 0 and lane_record(reports).get("late_within_error") is False:
+def test_ci_subset_passes_and_writes_junit(vm_ready):
+    r, made = run_lane(vm_ready)
+    if r.returncode != 0 and lane_record(made).get("late_within_error") is False:
         # The profile's stated error assumes the emulator is never later than it; a host that starved the VM
         # of CPU broke that premise, and this run's verdicts prove nothing either way. Once more, and said so.
-        warnings.warn(f"VM lane run 1 of 2 failed on a starved host; running again:\n{failure(r, reports)[:3000]}", stacklevel=1)
-        reports = tmp_path / "again" / "reports" / "vm"
-        r = run_lane(vm_ready, reports)
-    assert r.returncode == 0, failure(r, reports)
+        warnings.warn(f"VM lane run 1 of 2 failed on a starved host; running again:\n{failure(r, made)[:3000]}", stacklevel=1)
+        r, made = run_lane(vm_ready)
+    assert r.returncode == 0, failure(r, made)
 
-    runs = [d for d in reports.iterdir() if d.is_dir() and not d.is_symlink()]
-    assert len(runs) == 1, f"expected one <timestamp>/ report directory under {reports}: {sorted(p.name for p in reports.iterdir())}"
-    run = runs[0]
-    assert (reports / "latest").resolve() == run.resolve()
+    assert len(made) == 1, f"expected one new <timestamp>/ report directory under {REPORTS}: {made}"
+    run = made[0]
+    assert run.parent == REPORTS and (REPORTS / "latest").resolve() == run.resolve()
     junit = ET.parse(run / "junit.xml").getroot()
     suites = junit.findall("testsuite") if junit.tag == "testsuites" else [junit]
     cases = [c for s in suites for c in s.findall("testcase")]

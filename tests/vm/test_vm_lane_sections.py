@@ -68,7 +68,7 @@ def test_all_selects_everything_and_unknown_names_are_refused():
 @pytest.fixture
 def emulator(tmp_path):
     proc, port = vm_lane.start_emulator(sys.executable, tmp_path / "emulator.log", interface="virtual",
-                                        channel=f"vm-lane-test-{tmp_path.name}")
+                                        channel=f"vm-lane-test-{tmp_path.name}", rt_priority=None)
     yield port
     proc.send_signal(signal.SIGTERM)
     proc.wait(30)
