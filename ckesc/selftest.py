@@ -12,6 +12,7 @@ Each run is a separate ``pytest`` process (the simulated lane is deterministic),
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import os
 import subprocess
@@ -43,12 +44,44 @@ class FaultRun:
         return not self.problem
 
 
-def run_suite(fault: str | None, pytest_args: list[str] = ()) -> FaultRun:
+SCOPES = ("full", "cited")
+
+
+def citations() -> dict[str, set[str]]:
+    """requirement id -> the conformance modules (dotted) with a test citing it, read from the modules'
+    source (their ``@pytest.mark.requirement`` decorators) without a pytest run."""
+    import conformance
+
+    out: dict[str, set[str]] = {}
+    for path in sorted(Path(conformance.__file__).parent.glob("test_*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            if isinstance(node, ast.FunctionDef) and node.name.startswith("test"):
+                for deco in node.decorator_list:
+                    if (isinstance(deco, ast.Call) and isinstance(deco.func, ast.Attribute)
+                            and deco.func.attr == "requirement"):
+                        for arg in deco.args:
+                            if isinstance(arg, ast.Constant):
+                                out.setdefault(arg.value, set()).add(f"conformance.{path.stem}::{node.name}")
+    return out
+
+
+def scope_targets(fault: str | None, scope: str) -> list[str]:
+    """What a run covers: the whole suite, or (``cited``) the modules with a test citing one of the
+    fault's rules - where a caught fault must show; a test elsewhere failing for the wrong reason is
+    only seen by the full scope."""
+    if scope == "full" or fault is None:
+        return ["conformance"]
+    cited = citations()
+    modules = {t.split("::")[0] for rule in FAULTS[fault].rules for t in cited.get(rule, ())}
+    return sorted(modules) or ["conformance"]
+
+
+def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full") -> FaultRun:
     rules = FAULTS[fault].rules if fault else ()
     run = FaultRun(fault, rules)
     with tempfile.TemporaryDirectory(prefix="ckesc-selftest-") as tmp:
-        cmd = [sys.executable, "-m", "pytest", "--pyargs", "conformance", "-q", "-p", "no:cacheprovider",
-               "--ckesc-reports", tmp, *pytest_args]
+        cmd = [sys.executable, "-m", "pytest", "--pyargs", *scope_targets(fault, scope), "-q", "-p", "no:cacheprovider",
+               "--ckesc-reports", tmp, "--ckesc-trace-format", "none", "--ckesc-no-html", *pytest_args]  # results.json is read
         if fault:
             cmd += ["--emulator-faults", fault]
         try:
@@ -99,12 +132,12 @@ def observe_only(rules: tuple[str, ...]) -> bool:
 
 
 def selftest(faults: list[str] | None = None, jobs: int | None = None, pytest_args: list[str] = (),
-             progress=None) -> list[FaultRun]:
+             progress=None, scope: str = "full") -> list[FaultRun]:
     names = [None] + list(faults if faults is not None else FAULTS)
     jobs = jobs or max(os.cpu_count() or 1, 1)
     out: list[FaultRun] = []
     with ThreadPoolExecutor(max_workers=jobs) as pool:
-        for run in pool.map(lambda f: run_suite(f, list(pytest_args)), names):
+        for run in pool.map(lambda f: run_suite(f, list(pytest_args), scope), names):
             out.append(run)
             if progress:
                 progress(run, len(out), len(names))
@@ -133,6 +166,9 @@ def add_selftest_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--faults", help="comma-separated fault names (default: all)")
     p.add_argument("--jobs", type=int, help="parallel suite runs (default: CPU count)")
     p.add_argument("--out", help="write the fault -> failing tests table (Markdown) and JSON beside it")
+    p.add_argument("--scope", choices=SCOPES, default="full",
+                   help="full (default): the whole suite per fault; cited: per fault only the modules with a test "
+                   "citing its rules (fast: CI's check that every fault is caught there, by the right tests)")
     p.set_defaults(handler=selftest_command)
 
 
@@ -147,7 +183,7 @@ def selftest_command(args: argparse.Namespace) -> int:
         status = "ok" if run.ok else "PROBLEM"
         print(f"[{i:>3}/{n}] {run.fault or '(faultless)':<34} {len(run.failing):>3} failing  {status}", flush=True)
 
-    runs = selftest(faults, args.jobs, progress=progress)
+    runs = selftest(faults, args.jobs, progress=progress, scope=args.scope)
     text = table(runs)
     if args.out:
         Path(args.out).write_text(text + "\n")

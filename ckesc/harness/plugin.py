@@ -62,6 +62,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                 help="write JUnit, JSON and text reports under DIR/<timestamp>/ (ckesc run sets reports/)")
     g.addoption("--ckesc-summary", action="store_true", default=False,
                 help="print the per-section summary at the end (ckesc run sets it)")
+    g.addoption("--ckesc-no-html", action="store_true", default=False,
+                help="with --ckesc-reports: no report.html (machine readers only, e.g. ckesc selftest's runs)")
     g.addoption("--ckesc-trace-format", choices=TRACE_FORMATS, default="blf",
                 help="with --ckesc-reports: each test's CAN traffic in <run>/traces/, written by python-can: blf "
                      "(default; Vector BLF), asc (Vector ASCII), log (candump -L, `ckesc decode` reads it), none")
@@ -514,7 +516,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         return
     out = report_dir(session.config)
     if out is not None:
-        _report.write_reports(out, list(st.results.values()), st.info)
+        _report.write_reports(out, list(st.results.values()), st.info, html=not session.config.getoption("ckesc_no_html"))
         st.info["report_dir"] = str(out)
 
 

@@ -206,9 +206,9 @@ def evidence(frames: list, *, host: int, node: int | None, comm_loss: bool = Fal
     return out
 
 
-def write_reports(out: Path, results: list, info: dict[str, Any]) -> Path:
+def write_reports(out: Path, results: list, info: dict[str, Any], *, html: bool = True) -> Path:
     """Write the run's reports into ``out`` (from :func:`run_dir`), ``report.html`` last (built from
-    ``results.json``), and point ``latest`` at it."""
+    ``results.json``; ``html=False``: not at all), and point ``latest`` at it."""
     from . import html_report
 
     base = out.parent
@@ -226,5 +226,6 @@ def write_reports(out: Path, results: list, info: dict[str, Any]) -> Path:
         os.replace(tmp, latest)
     except OSError:  # no symlinks here: a text pointer instead
         (base / "LATEST").write_text(out.name + "\n")
-    html_report.build(out)
+    if html:
+        html_report.build(out)
     return out

@@ -1,31 +1,16 @@
 """The requirements table and the suites agree: every SHALL/READING requirement has a test, every
 cited id exists, every fault names known requirements."""
 
-import ast
-from pathlib import Path
-
 import pytest
 
 from ckesc.emulator.faults import FAULTS
 from ckesc.harness.requirements import REQUIREMENTS, STRENGTHS, strongest
-
-SUITES = Path(__file__).resolve().parents[2] / "conformance"
+from ckesc.selftest import citations
 
 
 def cited_ids() -> dict[str, set[str]]:
     """requirement id -> conformance tests citing it, read from the modules' source (no pytest run)."""
-    out: dict[str, set[str]] = {}
-    for path in sorted(SUITES.glob("test_*.py")):
-        tree = ast.parse(path.read_text(), filename=str(path))
-        for node in ast.walk(tree):
-            if isinstance(node, ast.FunctionDef) and node.name.startswith("test"):
-                for deco in node.decorator_list:
-                    if (isinstance(deco, ast.Call) and isinstance(deco.func, ast.Attribute)
-                            and deco.func.attr == "requirement"):
-                        for arg in deco.args:
-                            if isinstance(arg, ast.Constant):
-                                out.setdefault(arg.value, set()).add(f"{path.name}::{node.name}")
-    return out
+    return citations()
 
 
 def test_requirements_table_is_well_formed():
