@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import functools
 import json
 import os
 import subprocess
@@ -47,6 +48,7 @@ class FaultRun:
 SCOPES = ("full", "cited")
 
 
+@functools.lru_cache(maxsize=1)
 def citations() -> dict[str, set[str]]:
     """requirement id -> the conformance modules (dotted) with a test citing it, read from the modules'
     source (their ``@pytest.mark.requirement`` decorators) without a pytest run."""
@@ -134,6 +136,8 @@ def observe_only(rules: tuple[str, ...]) -> bool:
 def selftest(faults: list[str] | None = None, jobs: int | None = None, pytest_args: list[str] = (),
              progress=None, scope: str = "full") -> list[FaultRun]:
     names = [None] + list(faults if faults is not None else FAULTS)
+    if scope == "cited":
+        citations()  # read once, here: ast.parse from several threads at once can fail in CPython 3.11
     jobs = jobs or max(os.cpu_count() or 1, 1)
     out: list[FaultRun] = []
     with ThreadPoolExecutor(max_workers=jobs) as pool:
