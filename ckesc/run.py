@@ -16,6 +16,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from .harness.traces import TRACE_FORMATS
+
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
 
@@ -48,6 +50,8 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
     o = p.add_argument_group("output")
     o.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
     o.add_argument("--strict", action="store_true", help="INCONCLUSIVE results fail the run too")
+    o.add_argument("--trace-format", choices=TRACE_FORMATS, default="blf",
+                   help="each test's CAN traffic under <run>/traces/: blf (default), asc, log (candump), none")
     o.add_argument("-q", "--quiet", action="store_true", help="no per-test progress lines")
     p.add_argument("pytest_args", nargs=argparse.REMAINDER, help="after --: passed to pytest")
     p.set_defaults(handler=run_command)
@@ -55,7 +59,8 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
 
 def pytest_argv(args: argparse.Namespace) -> list[str]:
     argv = ["--pyargs", "conformance", "-p", "no:cacheprovider", "--ckesc-summary", "--ckesc-reports", args.reports,
-            "--dut", args.dut, "--lane", args.lane, "-o", "console_output_style=count"]
+            "--dut", args.dut, "--lane", args.lane, "--ckesc-trace-format", args.trace_format,
+            "-o", "console_output_style=count"]
     for opt in ("can_interface", "can_channel", "can_bitrate", "node_id", "nodes", "profile", "power", "power_off_cmd",
                 "power_on_cmd", "emulator_faults"):
         value = getattr(args, opt)

@@ -373,3 +373,18 @@ def test_installed_script_survives_a_closed_pipe(tmp_path):
     assert json.loads(first)["line"] == 1
     assert b"Traceback" not in err and err == b""
     assert proc.returncode == 141
+
+
+def test_run_passes_the_trace_format_to_the_plugin():
+    import argparse
+
+    from ckesc.run import add_run_command, pytest_argv
+
+    parser = argparse.ArgumentParser()
+    add_run_command(parser.add_subparsers())
+    argv = pytest_argv(parser.parse_args(["run", "--trace-format", "asc"]))
+    assert argv[argv.index("--ckesc-trace-format") + 1] == "asc"
+    default = pytest_argv(parser.parse_args(["run"]))
+    assert default[default.index("--ckesc-trace-format") + 1] == "blf"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["run", "--trace-format", "pcap"])
