@@ -50,15 +50,6 @@ def _ids(dut):
     return sorted(set(_replies(dut)))
 
 
-def _unproven_cycle(dut):
-    """Power off and on without proof: only to put things back (the state is verified afterwards)."""
-    dut.stop_throttle()
-    dut.lane.power.off()
-    dut.lane.wait_power(dut.profile.off_s)
-    dut.lane.power.on()
-    dut.wait(dut.profile.boot_s)
-
-
 def _proven_cycle(dut):
     """A power cycle proven by the power-up counter (241 option 2) asked at whichever node id answers
     GET_ESC_ID afterwards: ``dut.power_cycle`` asks at ``dut.node_id``, which is what these tests
@@ -66,7 +57,7 @@ def _proven_cycle(dut):
     if not dut.lane.power.available:
         raise Inconclusive("this test needs a power cycle and no power control was given (--power)")
     before = dut.power_up_count()
-    _unproven_cycle(dut)
+    dut.switch_power()
     found = _ids(dut)
     after = None
     if len(found) == 1:
@@ -87,7 +78,7 @@ def _restore(dut, node, channel):
     """Put the DUT back at ``node`` on ``channel`` (pseudo-broadcast Set ID in a fresh window) and verify."""
     found = _ids(dut)
     if found != [(node, channel)]:
-        _unproven_cycle(dut)  # a fresh 120 s window (R11)
+        dut.switch_power()  # a fresh 120 s window (R11)
         found = _ids(dut)
         for dest in dict.fromkeys([n for n, _ in found] + [node]):  # to each id it may listen at (R11 says any)
             dut.request("set_id", {"node_id": node, "throttle_channel": channel}, destination=dest)
@@ -215,7 +206,7 @@ def test_at_0x7d_nothing_is_reported(dut, original):
         start = dut.now()
         dut.wait(2 * s["msg1_interval"] * cat.INTERVAL_UNIT_S)
         if not dut.frames("msg1", since=start, source=node):
-            _unproven_cycle(dut)
+            dut.switch_power()
 
 
 @pytest.mark.requirement("4.4.18-5", "R10", "R10-answer")

@@ -49,14 +49,6 @@ def _find_rate(dut, first=None):
     return None
 
 
-def _unproven_cycle(dut):
-    dut.stop_throttle()
-    dut.lane.power.off()
-    dut.lane.wait_power(dut.profile.off_s)
-    dut.lane.power.on()
-    dut.wait(dut.profile.boot_s)
-
-
 def _cycle(dut, expect):
     """A power cycle after which the host listens at ``expect`` bit/s; proven by the power-up counter
     at whichever rate the DUT answers then (``dut.power_cycle`` asks only at the host's current rate).
@@ -64,7 +56,7 @@ def _cycle(dut, expect):
     if not dut.lane.power.available:
         raise Inconclusive("this test needs a power cycle and no power control was given (--power)")
     before = dut.power_up_count() if _find_rate(dut, first=dut.lane.bitrate) is not None else None
-    _unproven_cycle(dut)
+    dut.switch_power()
     rate = _find_rate(dut, first=expect)
     after = dut.power_up_count() if rate is not None else None
     dut.record.observe("power-up counter", f"{before} -> {after} (answering at {rate} bit/s)")
@@ -97,9 +89,9 @@ def _restore(dut, rate0):
         return
     if rate is None:
         raise DutError(f"the DUT answers at no rate of the code table; it was at {rate0} bit/s")
-    _unproven_cycle(dut)  # a fresh 120 s window (R11)
+    dut.switch_power()  # a fresh 120 s window (R11)
     _set_baud(dut, CODES[rate0])
-    _unproven_cycle(dut)
+    dut.switch_power()
     if _find_rate(dut, first=rate0) != rate0:
         raise DutError(f"could not put the DUT back at {rate0} bit/s (it answers at {dut.lane.bitrate})")
 

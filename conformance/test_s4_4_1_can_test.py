@@ -17,6 +17,7 @@ from .test_s4_4_2_msg_control import (
     msg_control,
     reported,
     resume,
+    several_escs,
     with_emulator_faults,
 )
 
@@ -160,9 +161,7 @@ def test_test_mode_is_lost_at_power_off(dut):
 @pytest.mark.requirement("4.4.1-1", "4.4.1-2", "4.4.1-3", "R16")
 def test_every_esc_enters_and_leaves_test_mode(bench):
     """The broadcast reaches every ESC: each counts, none reports otherwise; after 0x55 each reports again."""
-    nodes = bench.nodes
-    if len(nodes) < 2:
-        raise Inconclusive(f"only node(s) {nodes} answered GET_ESC_ID: 'every ESC' needs two or more")
+    nodes = several_escs(bench, "every ESC")
     window = max(_window(bench, n) for n in nodes)
     try:
         on = can_test(bench, cat.CAN_TEST_ON)

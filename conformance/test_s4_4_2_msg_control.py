@@ -247,6 +247,14 @@ def bench(multi_dut, request):
     return with_emulator_faults(multi_dut, request.config)
 
 
+def several_escs(bench, what: str) -> list[int]:
+    """The node ids on the bench, INCONCLUSIVE unless two or more answered GET_ESC_ID (``what`` is the
+    clause's own words, e.g. 'all ESCs')."""
+    if len(bench.nodes) < 2:
+        raise Inconclusive(f"only node(s) {bench.nodes} answered GET_ESC_ID: '{what}' needs two or more")
+    return bench.nodes
+
+
 def _other(codes, current: int) -> int:
     return next(c for c in sorted(codes) if c != current)
 
@@ -342,9 +350,7 @@ def test_suspension_is_lost_at_power_off(dut):
 @pytest.mark.requirement("4.4.2-1", "4.4.2-2", "4.4.2-4", "R2")
 def test_every_esc_answers_in_its_slot_and_obeys(bench):
     """All ESCs on the bus answer each command in their own slot and act on it."""
-    nodes = bench.nodes
-    if len(nodes) < 2:
-        raise Inconclusive(f"only node(s) {nodes} answered GET_ESC_ID: 'all ESCs' needs two or more")
+    nodes = several_escs(bench, "all ESCs")
     longest = max(longest_interval_s(bench, n) for n in nodes)
     settle(bench)
     try:

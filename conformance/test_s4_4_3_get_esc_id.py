@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.harness.verdict import Inconclusive
-
 from .test_s4_4_2_msg_control import (
     answer_window_s,
     check_answer_slot,
@@ -13,6 +11,7 @@ from .test_s4_4_2_msg_control import (
     garbled,
     ms,
     settle,
+    several_escs,
     with_emulator_faults,
 )
 
@@ -83,9 +82,7 @@ def test_reply_comes_in_the_node_slot(dut):
 def test_every_esc_replies_in_its_slot(bench):
     """All ESCs on the bus reply, each once, with its own id and channel, each in its own slot
     (node ids sharing node_id % 32 share a slot and go out by arbitration)."""
-    nodes = bench.nodes
-    if len(nodes) < 2:
-        raise Inconclusive(f"only node(s) {nodes} answered GET_ESC_ID: 'all ESCs' needs two or more")
+    nodes = several_escs(bench, "all ESCs")
     sent = _query(bench)
     heard = sorted({f.source for f in bench.frames("get_esc_id", since=sent.time) if f.source != bench.host_node})
     bench.record.observe("nodes", {"discovered": nodes, "replied": heard})

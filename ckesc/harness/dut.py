@@ -324,14 +324,21 @@ class Dut:
             raise Inconclusive("this test needs a power cycle and no power control was given (--power)")
         self.stop_throttle()
         before = self.power_up_count()
-        self.lane.power.off()
-        self.lane.wait_power(off_time)
-        self.lane.power.on()
-        self.wait(boot_wait)
+        self.switch_power(off_time, boot_wait)
         after = self.power_up_count()
         self.record.observe("power-up counter", f"{before} -> {after}")
         if before is None or after is None or after != (before + 1) & 0xFFFF:
             raise Inconclusive(f"power cycle not proven: power-up counter {before} -> {after} (241 option 2)")
+
+    def switch_power(self, off_time: float | None = None, boot_wait: float | None = None) -> None:
+        """Power off, wait, on, and wait for the boot (default: the profile's off and boot times), without
+        proof: :meth:`power_cycle` proves it; this alone only puts things back, where the state is
+        verified afterwards."""
+        self.stop_throttle()
+        self.lane.power.off()
+        self.lane.wait_power(self.profile.off_s if off_time is None else off_time)
+        self.lane.power.on()
+        self.wait(self.profile.boot_s if boot_wait is None else boot_wait)
 
     # ------------------------------------------------------------------ throttle (safety)
     def _check_throttle(self, name: str, fields: Mapping[str, Any]) -> None:
