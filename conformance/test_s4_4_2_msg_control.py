@@ -91,13 +91,7 @@ def undecoded(dut) -> list:
 
 def garbled(dut, name: str, *, source: int, since: float | None = None) -> list:
     """Frames of message ``name`` from ``source`` that did not decode (wrong length, ...; see undecoded)."""
-    out = []
-    for g in undecoded(dut):
-        kind, _, src, _, spec = classify(g.msg.arbitration_id)
-        if kind is Kind.MESSAGE and spec is not None and spec.name == name and src == source:
-            if since is None or (g.msg.timestamp or 0.0) >= since:
-                out.append(g)
-    return out
+    return [g for g in dut.undecoded(name, source=source, since=since, kind=Kind.MESSAGE) if not isinstance(g.error, TailError)]
 
 
 def describe_garbled(gs: list) -> str:

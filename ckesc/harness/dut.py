@@ -21,8 +21,6 @@ from .lanes import Lane
 from .profile import DutProfile
 from .verdict import Inconclusive, Record
 
-GET_ESC_ID = cat.spec("get_esc_id")
-
 
 @dataclass
 class Sent:
@@ -192,8 +190,7 @@ class Dut:
         if as_request:
             return (f" (it sent {len(as_request)} {spec.title} frame(s) with the request bit set, e.g. "
                     f"{as_request[0].can_id:08X}: an answer flagged as a request breaks F1/F4, see section 4.1)")
-        bad = [g for g in self.garbled if (g.msg.timestamp or 0.0) >= since and classify(g.msg.arbitration_id)[4] is spec
-               and g.msg.arbitration_id & 0x7F == node]
+        bad = self.undecoded(name, since=since, source=node)
         if bad and classify(bad[0].msg.arbitration_id)[0] is Kind.REQUEST:
             return (f" (it sent a {spec.title} frame with the request bit set, {bad[0].msg.arbitration_id:08X}: an answer "
                     "flagged as a request breaks F1/F4, see section 4.1)")
@@ -228,16 +225,25 @@ class Dut:
             out.append(f)
         return out
 
+    def undecoded(self, name: str | None = None, *, since: float | None = None, source: int | None = None,
+                  kind: Kind | None = None) -> list[Garbled]:
+        """The frames heard that did not decode (``garbled``), selected by what their CAN id says, as
+        :meth:`frames` selects the decoded ones."""
+        spec = cat.spec(name) if name is not None else None
+        out = []
+        for g in self.garbled:
+            gkind, _, src, _, gspec = classify(g.msg.arbitration_id)
+            if ((spec is None or gspec is spec) and (source is None or src == source) and (kind is None or gkind is kind)
+                    and (since is None or (g.msg.timestamp or 0.0) >= since)):
+                out.append(g)
+        return out
+
     def stamps(self, name: str, *, since: float, source: int) -> list[float]:
         """Timestamps of every ``name`` frame from ``source`` since ``since``, decoded or not: the CAN id
         says what a frame is, so the timing of a stream (R9) is judged even when its payload is wrong,
         which is another section's verdict."""
-        spec = cat.spec(name)
         out = {f.timestamp or 0.0 for f in self.frames(name, since=since, source=source)}
-        for g in self.garbled:
-            _, _, src, _, gspec = classify(g.msg.arbitration_id)
-            if gspec is spec and src == source and (g.msg.timestamp or 0.0) >= since:
-                out.add(g.msg.timestamp or 0.0)
+        out.update(g.msg.timestamp or 0.0 for g in self.undecoded(name, since=since, source=source))
         return sorted(out)
 
     def reports(self, name: str, seconds: float, *, source: int | None = None) -> list[Frame]:
@@ -261,17 +267,14 @@ class Dut:
         (plus a second) has passed: an ESC that is still booting hears nothing."""
         give_up = self.now() + self.profile.boot_s + 1.0
         while True:
-            garbled_before = len(self.garbled)
             sent = self.broadcast("get_esc_id", {"option": 0}, layout="query")
             self.wait(cat.ANSWER_DELAY_MAX_S * 2)  # every ESC answers within 64 ms (R2); read them all
             replies = [f.source for f in self.frames("get_esc_id", since=sent.host_time)
                        if f.layout is not None and f.layout.name == "reply"]
             # a reply whose payload does not decode still names its sender in its CAN id: what the
             # payload should be is section 4.4.3's verdict (R1), not a reason to stop every test
-            for g in self.garbled[garbled_before:]:
-                kind, _, source, _, spec = classify(g.msg.arbitration_id)
-                if spec is GET_ESC_ID and kind is Kind.MESSAGE and source != self.host_node:
-                    replies.append(source)
+            replies += [g.msg.arbitration_id & 0x7F for g in self.undecoded("get_esc_id", since=sent.host_time, kind=Kind.MESSAGE)
+                        if g.msg.arbitration_id & 0x7F != self.host_node]
             if replies:
                 self.discovered = sorted(set(replies))
                 return replies[0]
@@ -391,8 +394,8 @@ class Dut:
         start = self.now()
         self.wait(seconds)
         heard = [f for f in self.frames(source=self.node_id, kind=Kind.MESSAGE, since=start) if f.type_id in report_ids]
-        heard += [g for g in self.garbled if (g.msg.timestamp or 0.0) > start and (g.msg.arbitration_id & 0x7F) == self.node_id
-                  and classify(g.msg.arbitration_id)[:2] in {(Kind.MESSAGE, t) for t in report_ids}]
+        heard += [g for g in self.undecoded(source=self.node_id, kind=Kind.MESSAGE, since=start)
+                  if classify(g.msg.arbitration_id)[1] in report_ids]
         return len(heard)
 
     def suspend_reporting(self) -> None:
