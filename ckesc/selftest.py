@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .emulator.faults import FAULTS
-from .harness.requirements import requirement
+from .protocol.requirements import requirement
 
 RUN_TIMEOUT_S = 600  # one suite run takes seconds in the simulated lane; this only stops a hang
 

@@ -2,5 +2,5 @@
 
 Run them with ``ckesc run`` (or ``pytest --pyargs conformance``); the ``ckesc`` pytest plugin
 provides the ``dut`` fixture and the ``requirement`` marker. Every test cites the requirement ids
-it checks (``ckesc/harness/requirements.toml``).
+it checks (``ckesc/protocol/requirements.toml``).
 """

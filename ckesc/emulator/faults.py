@@ -1,7 +1,7 @@
 """Switchable faults: each makes an emulated ESC break one rule in one way.
 
 The suite's self-test switches each fault on and checks that the tests citing the rules the fault
-names fail, and only those. Rule ids are requirement ids of ``ckesc/harness/requirements.toml``:
+names fail, and only those. Rule ids are requirement ids of ``ckesc/protocol/requirements.toml``:
 ``F..``/``R..`` from ``spec/INTERPRETATIONS.md``, ``4.4.5-T`` for a section's parameter table,
 ``4.4.2-4`` for a numbered clarification of the document.
 """

@@ -5,7 +5,7 @@
         ...
     rules.summary()                                                     # per-node statistics, JSON-able
 
-The rules (ids from ``spec/INTERPRETATIONS.md`` / ``ckesc/harness/requirements.toml``):
+The rules (ids from ``spec/INTERPRETATIONS.md`` / ``ckesc/protocol/requirements.toml``):
 
 * F1  an ESC's frames are 29-bit data frames; its service frames are responses (request bit 0);
 * F2  every ESC frame with a tail byte is a single-frame transfer (start=1, end=1, toggle=0);
@@ -51,7 +51,6 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
-from ..harness.requirements import strongest
 from ..protocol import catalogue as cat
 from ..protocol.frame import classify, frame_bits
 from ..protocol.ids import (
@@ -63,6 +62,7 @@ from ..protocol.ids import (
     Kind,
     priority_name,
 )
+from ..protocol.requirements import strongest
 from ..protocol.transfer import SINGLE_FRAME, TRANSFER_ID_MODULO, parse_tail
 
 # ------------------------------------------------------------------------------------------ facts, derived

@@ -23,8 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from ..protocol import catalogue as cat
-from .report import VERDICTS, _section_key
-from .requirements import REQUIREMENTS, SECTION_TITLES
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
 
 #: how a requirement's result is drawn from its tests' verdicts: the first that occurs
 _WORST_FIRST = ("FAIL", "ERROR", "INCONCLUSIVE", "PASS", "OBSERVED", "SKIPPED")
@@ -116,7 +115,7 @@ def _matrix(results: list[dict[str, Any]]) -> str:
     head = "<tr><th>section</th><th>title</th>" + "".join(f"<th>{_badge(v)}</th>" for v in VERDICTS) + "</tr>"
     body = []
     total: Counter = Counter()
-    for section in sorted(rows, key=_section_key):
+    for section in sorted(rows, key=section_key):
         c = rows[section]
         total.update(c)
         body.append(f'<tr data-section="{_e(section)}"><td>{_e(section)}</td><td>{_e(SECTION_TITLES.get(section, ""))}</td>'
@@ -164,7 +163,7 @@ def _failures(results: list[dict[str, Any]]) -> str:
     if not bad:
         return "<section id=failures><h2>Failures</h2><p>No test failed, errored or was inconclusive.</p></section>"
     items = []
-    for r in sorted(bad, key=lambda r: (_WORST_FIRST.index(r["outcome"]), _section_key(r["section"]))):
+    for r in sorted(bad, key=lambda r: (_WORST_FIRST.index(r["outcome"]), section_key(r["section"]))):
         reqs = ", ".join(f'<a href="#req-{_e(i)}">{_e(i)}</a>' for i in r["requirements"])
         items.append(f'<article class="fail" data-nodeid="{_e(r["nodeid"])}"><h3>{_badge(r["outcome"])} {_e(r["nodeid"])}</h3>'
                      f"<p>{_e(r['section'])} {_e(SECTION_TITLES.get(r['section'], ''))} &middot; {reqs} ({_e(r['strength'])})</p>"
@@ -185,7 +184,7 @@ def _requirements(results: list[dict[str, Any]]) -> str:
         for rid in r["requirements"]:
             by_req[rid].append(r)
     rows = []
-    for rid, req in sorted(REQUIREMENTS.items(), key=lambda kv: (_section_key(kv[1].section), kv[0])):
+    for rid, req in sorted(REQUIREMENTS.items(), key=lambda kv: (section_key(kv[1].section), kv[0])):
         tests = by_req.get(rid, [])
         result = _requirement_result([t["outcome"] for t in tests])
         listed = "".join(f'<li>{_badge(t["outcome"])} <a href="#t-{_anchor(t["nodeid"])}">{_e(t["name"])}</a></li>' for t in tests)
@@ -203,7 +202,7 @@ def _anchor(nodeid: str) -> str:
 
 def _tests(results: list[dict[str, Any]]) -> str:
     rows = []
-    for r in sorted(results, key=lambda r: _section_key(r["section"])):
+    for r in sorted(results, key=lambda r: section_key(r["section"])):
         rows.append(f'<tr id="t-{_anchor(r["nodeid"])}"><td>{_badge(r["outcome"])}</td><td>{_e(r["nodeid"])}'
                     + (f"<div class=msg>{_e(r['message'].splitlines()[0][:300])}</div>" if r.get("message") else "")
                     + f"{_evidence(r)}</td><td>{_e(r['section'])}</td><td>{r.get('lane_seconds', 0):.3f} s</td></tr>")

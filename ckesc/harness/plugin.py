@@ -18,11 +18,11 @@ from typing import Any
 import pytest
 
 from ..evidence.live import LaneRules, failure_text
+from ..protocol.requirements import REQUIREMENTS, requirement, strongest
 from . import report as _report
 from .dut import Dut
 from .lanes import BusLane, CommandPower, Lane, ManualPower, NoPower, RealtimeEmulatorLane, SimLane
 from .profile import DutProfile
-from .requirements import REQUIREMENTS, requirement, strongest
 from .traces import TRACE_FORMATS, TestTraces
 from .verdict import Inconclusive
 

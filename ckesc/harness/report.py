@@ -21,13 +21,8 @@ from junit_xml import TestCase, TestSuite, to_xml_report_string
 
 from ..protocol import catalogue as cat
 from ..protocol.ids import Kind
-from .requirements import REQUIREMENTS, SECTION_TITLES
-
-VERDICTS = ("PASS", "FAIL", "INCONCLUSIVE", "OBSERVED", "SKIPPED", "ERROR")
-
-
-def _section_key(section: str) -> tuple:
-    return tuple(int(p) if p.isdigit() else 999 for p in section.replace("-", ".").split("."))
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
+from . import html_report
 
 
 def _properties(r) -> dict[str, str]:
@@ -49,7 +44,7 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None) -> s
         by_section[r.section].append(r)
     suites = []
     cases_props: list[dict[str, str]] = []
-    for section in sorted(by_section, key=_section_key):
+    for section in sorted(by_section, key=section_key):
         cases = []
         for r in by_section[section]:
             props = _properties(r)
@@ -101,7 +96,7 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
     head = f"{'section':<10} {'title':<26} " + " ".join(f"{v[:6]:>6}" for v in VERDICTS)
     lines = [head, "-" * len(head)]
     total = Counter()
-    for section in sorted(rows, key=_section_key):
+    for section in sorted(rows, key=section_key):
         c = rows[section]
         total.update(c)
         lines.append(f"{section:<10} {SECTION_TITLES.get(section, '')[:26]:<26} " + " ".join(f"{c[v]:>6}" for v in VERDICTS))
@@ -209,8 +204,6 @@ def evidence(frames: list, *, host: int, node: int | None, comm_loss: bool = Fal
 def write_reports(out: Path, results: list, info: dict[str, Any], *, html: bool = True) -> Path:
     """Write the run's reports into ``out`` (from :func:`run_dir`), ``report.html`` last (built from
     ``results.json``; ``html=False``: not at all), and point ``latest`` at it."""
-    from . import html_report
-
     base = out.parent
     (out / "junit.xml").write_text(junit_xml(results, info, out), encoding="utf-8")
     (out / "results.json").write_text(json.dumps({"info": info, "coverage": coverage(results),

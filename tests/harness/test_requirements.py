@@ -4,7 +4,7 @@ cited id exists, every fault names known requirements."""
 import pytest
 
 from ckesc.emulator.faults import FAULTS
-from ckesc.harness.requirements import REQUIREMENTS, STRENGTHS, strongest
+from ckesc.protocol.requirements import REQUIREMENTS, STRENGTHS, strongest
 from ckesc.selftest import citations
 
 

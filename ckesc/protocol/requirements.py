@@ -11,9 +11,17 @@ from dataclasses import dataclass
 from importlib import resources
 from types import MappingProxyType
 
-from ..protocol.catalogue import CATALOGUE
+from .catalogue import CATALOGUE
 
 STRENGTHS = ("SHALL", "READING", "OBSERVE")
+
+#: what a test can come out as: SHALL / READING tests PASS or FAIL, OBSERVE ones are OBSERVED
+VERDICTS = ("PASS", "FAIL", "INCONCLUSIVE", "OBSERVED", "SKIPPED", "ERROR")
+
+
+def section_key(section: str) -> tuple:
+    """Sort key of a section number in the document's order ("4.4.2" before "4.4.10")."""
+    return tuple(int(p) if p.isdigit() else 999 for p in section.replace("-", ".").split("."))
 
 #: Section titles as the document's contents page names them.
 SECTION_TITLES = MappingProxyType(
@@ -69,7 +77,7 @@ def requirement(req_id: str) -> Requirement:
     try:
         return REQUIREMENTS[req_id]
     except KeyError:
-        raise KeyError(f"unknown requirement id {req_id!r} (see ckesc/harness/requirements.toml)") from None
+        raise KeyError(f"unknown requirement id {req_id!r} (see ckesc/protocol/requirements.toml)") from None
 
 
 def strongest(ids) -> str:
