@@ -1,27 +1,109 @@
-"""DUT profiles (``fixtures/duts/*.toml``): what a device has, how precisely the lane can time it,
-and which READINGs it overrides.
+"""DUT profiles: what a device has, how precisely the lane can time it, and which READINGs it
+overrides. The profiles this package ships (``ckesc/harness/profiles/*.toml``: ``emulator``,
+``ckesc-generic``, ``vcan-vm``) are package data, found by name from any directory; a profile of
+your own is a path, or a name found in ``./fixtures/duts/``.
 
     [dut]          name, description
     [capabilities] led, motor, pwm_input, motor_temperature, multi_node   (true/false)
     [timing]       error_s: measurement error of the real-time lane; margins below it are INCONCLUSIVE
                    boot_s: power-on to first report; off_s: off time of a power cycle
     [readings]     R4 = "lsb" | "swapped"   (12-bit nibble order)
+
+A profile is checked against this schema (pydantic) when it is loaded: an unknown section or key, a
+wrong type or a value out of range is a :class:`ProfileError` naming the file, the key and, for an
+unknown key, the known ones with the closest match.
 """
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 CAPABILITIES = ("led", "motor", "pwm_input", "motor_temperature", "multi_node")
 
-#: Where profile names are looked up: the current project's fixtures/duts, then the ones shipped
-#: beside this source tree (an editable install or a checkout).
-PROFILE_DIRS = (Path.cwd() / "fixtures" / "duts", Path(__file__).resolve().parents[2] / "fixtures" / "duts")
+#: the profiles shipped inside the package (package data: there in a wheel as in a checkout)
+SHIPPED = resources.files(__package__).joinpath("profiles")
 
 
+def profile_dirs() -> tuple[Any, ...]:
+    """Where profile names are looked up: the current directory's ``fixtures/duts`` (a bench's own
+    profiles), then the shipped ones."""
+    return (Path.cwd() / "fixtures" / "duts", SHIPPED)
+
+
+class ProfileError(ValueError):
+    """A DUT profile that cannot be used: missing, not TOML, or not of the schema. The message names
+    the file (and the key)."""
+
+
+# ----------------------------------------------------------------------------------------- schema
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+
+class _Dut(_Section):
+    name: str | None = None
+    description: str = ""
+
+
+class _Capabilities(_Section):
+    led: bool = False
+    motor: bool = False
+    pwm_input: bool = False
+    motor_temperature: bool = False
+    multi_node: bool = False
+
+
+class _Timing(_Section):
+    model_config = ConfigDict(extra="forbid", strict=False)  # an int (2) is a float here, a string is not
+    error_s: float = Field(0.0, ge=0.0, le=10.0)
+    boot_s: float = Field(1.0, ge=0.0, le=600.0)
+    off_s: float = Field(1.0, ge=0.0, le=600.0)
+
+
+class _Readings(_Section):
+    R4: Literal["lsb", "swapped"] = "lsb"
+
+
+class _ProfileDoc(_Section):
+    dut: _Dut = _Dut()
+    capabilities: _Capabilities = _Capabilities()
+    timing: _Timing = _Timing()
+    readings: _Readings = _Readings()
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    model: Any = _ProfileDoc
+    for part in loc:
+        sub = model.model_fields.get(part) if isinstance(part, str) else None
+        if sub is None or not (isinstance(sub.annotation, type) and issubclass(sub.annotation, BaseModel)):
+            return model if part == loc[-1] else None
+        model = sub.annotation
+    return model
+
+
+def _describe(path: Path, err: dict[str, Any]) -> str:
+    loc = tuple(err["loc"])
+    where = ".".join(str(p) for p in loc)
+    if err["type"] == "extra_forbidden":
+        parent = _model_at(loc) or _ProfileDoc
+        known = list(parent.model_fields)
+        close = difflib.get_close_matches(str(loc[-1]), known, n=1)
+        what = "section" if len(loc) == 1 else "key"
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        prefix = f"[{'.'.join(map(str, loc[:-1]))}] " if len(loc) > 1 else ""
+        return f"{path}: {prefix}unknown {what} {str(loc[-1])!r} (known: {', '.join(known)}){hint}"
+    value = err.get("input")
+    return f"{path}: {where} = {value!r}: {err['msg'].lower()}"
+
+
+# ----------------------------------------------------------------------------------------- profile
 @dataclass
 class DutProfile:
     name: str = "unnamed"
@@ -44,27 +126,33 @@ class DutProfile:
 
     @classmethod
     def load(cls, name_or_path: str) -> DutProfile:
-        path = Path(name_or_path)
-        if not path.suffix:
-            candidates = [d / f"{name_or_path}.toml" for d in PROFILE_DIRS]
-            path = next((c for c in candidates if c.is_file()), candidates[-1])
+        path = _find(name_or_path)
         try:
-            doc: dict[str, Any] = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            known = sorted({p.stem for d in PROFILE_DIRS for p in d.glob("*.toml")})
-            raise FileNotFoundError(f"no DUT profile {name_or_path!r} (looked for {path}); known: {', '.join(known)}; "
-                                    "or give a path to a .toml file") from None
+            text = path.read_text(encoding="utf-8")
+        except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+            known = sorted({p.name.removesuffix(".toml") for d in profile_dirs() if d.is_dir()
+                            for p in d.iterdir() if p.name.endswith(".toml")})
+            raise ProfileError(f"no DUT profile {name_or_path!r} (looked for {path}); known by name: {', '.join(known)}; "
+                               "or give the path of a .toml file") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ProfileError(f"{path}: cannot read the DUT profile: {exc}") from None
+        try:
+            raw: dict[str, Any] = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
-            raise ValueError(f"{path}: {exc}") from None
-        caps = doc.get("capabilities", {})
-        unknown = set(caps) - set(CAPABILITIES)
-        if unknown:
-            raise ValueError(f"{path}: unknown capabilities {sorted(unknown)}; known: {', '.join(CAPABILITIES)}")
-        readings = doc.get("readings", {})
-        if readings.get("R4", "lsb") not in ("lsb", "swapped"):
-            raise ValueError(f"{path}: readings.R4 must be 'lsb' or 'swapped'")
-        timing = doc.get("timing", {})
-        return cls(name=doc.get("dut", {}).get("name", path.stem), description=doc.get("dut", {}).get("description", ""),
-                   capabilities=dict(caps), error_s=float(timing.get("error_s", 0.0)),
-                   boot_s=float(timing.get("boot_s", 1.0)), off_s=float(timing.get("off_s", 1.0)),
-                   readings=dict(readings), path=str(path))
+            raise ProfileError(f"{path}: not valid TOML: {exc}") from None
+        try:
+            doc = _ProfileDoc.model_validate(raw)
+        except ValidationError as exc:
+            raise ProfileError("; ".join(_describe(path, e) for e in exc.errors())) from None
+        return cls(name=doc.dut.name or path.name.removesuffix(".toml"), description=doc.dut.description,
+                   capabilities=doc.capabilities.model_dump(), error_s=doc.timing.error_s, boot_s=doc.timing.boot_s,
+                   off_s=doc.timing.off_s, readings=doc.readings.model_dump(), path=str(path))
+
+
+def _find(name_or_path: str) -> Any:
+    """A path as given; a bare name (no suffix, no directory) in :func:`profile_dirs`."""
+    path = Path(name_or_path)
+    if path.suffix or len(path.parts) > 1:
+        return path
+    candidates = [d.joinpath(f"{name_or_path}.toml") for d in profile_dirs()]
+    return next((c for c in candidates if c.is_file()), candidates[-1])
