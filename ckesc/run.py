@@ -14,11 +14,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from .harness.traces import TRACE_FORMATS
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ABORTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
 def add_run_command(sub: argparse._SubParsersAction) -> None:
@@ -60,7 +59,9 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
 def pytest_argv(args: argparse.Namespace) -> list[str]:
     argv = ["--pyargs", "conformance", "-p", "no:cacheprovider", "--ckesc-summary", "--ckesc-reports", args.reports,
             "--dut", args.dut, "--lane", args.lane, "--ckesc-trace-format", args.trace_format,
-            "-o", "console_output_style=count"]
+            "-o", "console_output_style=count",
+            # ckesc itself is the plugin and is imported before pytest starts: nothing of it needs rewriting
+            "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning"]
     for opt in ("can_interface", "can_channel", "can_bitrate", "node_id", "nodes", "profile", "power", "power_off_cmd",
                 "power_on_cmd", "emulator_faults"):
         value = getattr(args, opt)
@@ -82,13 +83,15 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
 def run_command(args: argparse.Namespace) -> int:
     import pytest
 
-    Path(args.reports).mkdir(parents=True, exist_ok=True)
     collector = _Collector()
     code = pytest.main(pytest_argv(args), plugins=[collector])
+    stopped = collector.stopped or ""
+    if stopped.startswith("aborted"):  # the DUT did not answer, or the bench went away
+        return EXIT_ABORTED
+    if stopped.startswith("interrupted") or code == pytest.ExitCode.INTERRUPTED:
+        return EXIT_INTERRUPTED
     if code in (pytest.ExitCode.USAGE_ERROR, pytest.ExitCode.INTERNAL_ERROR):
         return EXIT_USAGE
-    if code == pytest.ExitCode.INTERRUPTED:
-        return 130
     results = collector.results
     if not results:
         print("ckesc run: no conformance test ran", file=sys.stderr)
@@ -104,8 +107,11 @@ class _Collector:
     """Keeps the plugin's results once the session ends."""
 
     results: list = []
+    stopped: str | None = None
 
     def pytest_sessionfinish(self, session):
         from .harness.plugin import state
 
-        self.results = list(state(session.config).results.values())
+        st = state(session.config)
+        self.results = list(st.results.values())
+        self.stopped = st.stopped

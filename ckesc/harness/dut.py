@@ -279,7 +279,7 @@ class Dut:
                 self.discovered = sorted(set(replies))
                 return replies[0]
             if self.now() >= give_up:
-                raise DutError(f"no ESC answered GET_ESC_ID for {self.profile.boot_s + 1.0:.1f} s: is it powered, at "
+                raise DutUnreachable(f"no ESC answered GET_ESC_ID for {self.profile.boot_s + 1.0:.1f} s: is it powered, at "
                                f"{self.lane.bitrate} bit/s, and not at node id 0x7D (which answers nothing)? "
                                "Give --node-id to skip discovery.")
 
@@ -482,6 +482,11 @@ class Dut:
 
 class DutError(RuntimeError):
     """The harness could not do what a test needed (not a verdict on the DUT)."""
+
+
+class DutUnreachable(DutError):
+    """No ESC answers at all (discovery heard nothing): the bench, not one test, is the problem; the
+    plugin aborts the run on it."""
 
 
 _THROTTLE_FRAMES = frozenset({"raw_command_14b", "raw_command_12b", "raw_command_10b"})

@@ -24,11 +24,13 @@ from typing import Any
 
 from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
+from .verdict import incomplete_banner
 
 #: how a requirement's result is drawn from its tests' verdicts: the first that occurs
 _WORST_FIRST = ("FAIL", "ERROR", "INCONCLUSIVE", "PASS", "OBSERVED", "SKIPPED")
 _COLOURS = {"PASS": "#1a7f37", "FAIL": "#cf222e", "ERROR": "#8250df", "INCONCLUSIVE": "#bf8700", "OBSERVED": "#0969da",
-            "SKIPPED": "#6e7781", "NOT CHECKED": "#6e7781"}
+            "SKIPPED": "#6e7781", "NOT CHECKED": "#6e7781",
+            "ABORTED": "#cf222e", "INTERRUPTED": "#bf8700", "SUBSET": "#6e7781", "INCOMPLETE": "#bf8700"}
 
 
 def build(out: Path) -> Path:
@@ -67,11 +69,15 @@ def render(doc: dict[str, Any], *, run: str = "") -> str:
     info: dict[str, Any] = doc.get("info", {})
     results: list[dict[str, Any]] = doc.get("results", [])
     counts = Counter(r["outcome"] for r in results)
-    overall = "FAIL" if counts["FAIL"] or counts["ERROR"] else "PASS"
+    banner = incomplete_banner(info)
+    # never a green PASS for less than the whole suite: ABORTED / INTERRUPTED / SUBSET / INCOMPLETE
+    overall = "FAIL" if counts["FAIL"] or counts["ERROR"] else (banner.split(" ")[0] if banner else "PASS")
     parts = [
         f"<header><h1>CKESC conformance report</h1><p class=run>run {_e(run)} &middot; "
         f"{_badge(overall)} {len(results)} tests: "
-        + ", ".join(f"{counts[v]} {v}" for v in VERDICTS if counts[v]) + "</p></header>",
+        + ", ".join(f"{counts[v]} {v}" for v in VERDICTS if counts[v])
+        + (f", {info.get('not_run', 0)} not run" if info.get("not_run") else "") + "</p>"
+        + (f'<p class=banner role=alert>{_e(banner)}</p>' if banner else "") + "</header>",
         _identity(info),
         _matrix(results),
         _failures(results),
@@ -347,7 +353,7 @@ def _last_command(commands: list[float]) -> float | None:
 _CSS = """
 body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:1.5rem auto;max-width:72rem;padding:0 1rem;color:#1f2328}
 h1{font-size:1.6rem;margin:0}h2{font-size:1.25rem;border-bottom:1px solid #d0d7de;padding-bottom:.2rem;margin-top:2rem}
-h3{font-size:1rem;margin:.2rem 0}.run{color:#57606a}
+h3{font-size:1rem;margin:.2rem 0}.run{color:#57606a}.banner{background:#fff8c5;border:1px solid #bf8700;padding:.5rem .8rem;font-weight:600}
 table{border-collapse:collapse;margin:.4rem 0}th,td{border:1px solid #d0d7de;padding:.2rem .45rem;vertical-align:top;text-align:left}
 th{background:#f6f8fa}.kv th{width:12rem}
 .matrix td.n{text-align:right;font-variant-numeric:tabular-nums}.matrix td.zero{color:#afb8c1}

@@ -14,9 +14,11 @@ import itertools
 import math
 import os
 import shlex
+import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from abc import ABC, abstractmethod
 from collections import deque
@@ -206,17 +208,27 @@ def enlarge_receive_buffer(sock: socket.socket, size: int = SOCKETCAN_RCVBUF) ->
     return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
 
 
+class BenchGone(RuntimeError):
+    """The bench itself went away mid-run (the emulator's process exited, the adapter vanished): no
+    further test can reach the DUT, so the plugin aborts the run with this message."""
+
+
 class _SendTap:
     """A python-can bus whose send() tells the lane when the host sent a frame (everything else is the
     bus's own; periodic tasks send on the bus itself and are not noted)."""
 
-    def __init__(self, bus: can.BusABC, on_send) -> None:
+    def __init__(self, bus: can.BusABC, on_send, on_error) -> None:
         self._bus = bus
         self._on_send = on_send
+        self._on_error = on_error
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         t = time.time()  # the kernel stamps the frame (and its echo) after this
-        self._bus.send(msg, timeout)
+        try:
+            self._bus.send(msg, timeout)
+        except (OSError, can.CanError) as exc:
+            self._on_error(exc)
+            raise
         self._on_send(t)
 
     def __getattr__(self, name: str) -> Any:
@@ -250,10 +262,13 @@ class BusLane(Lane):
         sock = getattr(bus, "socket", None)  # python-can's SocketcanBus
         if isinstance(sock, socket.socket) and sock.family == getattr(socket, "AF_CAN", None):
             self.rcvbuf = enlarge_receive_buffer(sock)
-        return _SendTap(bus, self._sent)
+        return _SendTap(bus, self._sent, self._io_failed)
 
     def _sent(self, t: float) -> None:
         self._hold = t
+
+    def _io_failed(self, exc: BaseException) -> None:
+        """A send or receive raised: a lane that can tell the bench is gone raises :class:`BenchGone`."""
 
     @property
     def can_change_bitrate(self) -> bool:
@@ -288,7 +303,11 @@ class BusLane(Lane):
         return min(wall, max(hold, stamp)) if stamp else wall
 
     def recv(self, timeout: float) -> can.Message | None:
-        msg = self._pending.popleft() if self._pending else self.bus.recv(timeout=max(timeout, 0.0))
+        try:
+            msg = self._pending.popleft() if self._pending else self.bus.recv(timeout=max(timeout, 0.0))
+        except (OSError, can.CanError) as exc:
+            self._io_failed(exc)
+            raise
         self._hold = -math.inf if msg is not None else None
         return self.heard(msg)
 
@@ -325,21 +344,53 @@ class RealtimeEmulatorLane(BusLane):
     name = "realtime"
 
     def __init__(self, *, nodes=(1,), faults=None, flash_path: str | None = None, seed: int = 0,
-                 timing_error: float = 0.002) -> None:
+                 timing_error: float = 0.002, temp_flash: bool = False) -> None:
         cmd = [sys.executable, "-m", "ckesc", "emulate", "--nodes", ",".join(map(str, nodes)), "--socketcand", "0",
                "--control", "0", "--seed", str(seed)]
         if faults:
             cmd += ["--faults", ",".join(faults)]
+        # temp_flash: the emulated ESCs keep their flash across power cycles in a file that lives as long as
+        # the lane and is removed with it (close(), on every exit path)
+        self._flash_dir = tempfile.TemporaryDirectory(prefix="ckesc-flash-") if temp_flash else None
+        if self._flash_dir is not None:
+            flash_path = os.path.join(self._flash_dir.name, "flash.json")
         if flash_path:
             cmd += ["--flash-path", flash_path]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        ports = self._read_ports()
+        # its own session: a Ctrl-C at the terminal (SIGINT to the foreground process group) reaches the
+        # suite, which stops the run with zero throttle and then ends the emulator itself (close())
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     start_new_session=True, preexec_fn=_die_with_parent)
+        try:
+            ports = self._read_ports()
+        except BaseException:
+            self._end_process()
+            raise
         host, port = ports["socketcand"]
         self.control = ports["control"]
         control_cmd = f"{shlex.quote(sys.executable)} -m ckesc control --port {self.control[1]} power"
         power = CommandPower(control_cmd + " off", control_cmd + " on")
         super().__init__({"interface": "socketcand", "host": host, "port": port, "channel": "can0",
                           "ignore_config": True}, power, timing_error=timing_error)
+
+    def _io_failed(self, exc: BaseException | None = None) -> None:
+        code = self.proc.poll()
+        if code is None:
+            return
+        err = ""
+        if self.proc.stderr is not None:
+            try:
+                err = " ".join(self.proc.stderr.read().strip().splitlines()[-2:])
+            except (OSError, ValueError):
+                pass
+        how = f"was killed by signal {-code}" if code < 0 else f"exited with status {code}"
+        raise BenchGone(f"the emulator process (ckesc emulate, pid {self.proc.pid}) {how} mid-run"
+                        + (f": {err}" if err else "")) from exc
+
+    def recv(self, timeout: float) -> can.Message | None:
+        msg = super().recv(timeout)
+        if msg is None:
+            self._io_failed()
+        return msg
 
     def _read_ports(self) -> dict[str, tuple[str, int]]:
         ports: dict[str, tuple[str, int]] = {}
@@ -363,8 +414,32 @@ class RealtimeEmulatorLane(BusLane):
         try:
             super().close()
         finally:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
+            self._end_process()
+
+    def _end_process(self) -> None:
+        try:
+            if self.proc.poll() is None:
+                self.proc.terminate()
+                try:
+                    self.proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    self.proc.kill()
+                    self.proc.wait(timeout=10)
+            for pipe in (self.proc.stdout, self.proc.stderr):
+                if pipe is not None:
+                    pipe.close()
+        finally:
+            if self._flash_dir is not None:
+                self._flash_dir.cleanup()
+
+
+def _die_with_parent() -> None:
+    """In the emulator's child process: SIGTERM when the suite's process dies, however it dies (Linux
+    prctl PR_SET_PDEATHSIG; elsewhere nothing), so no emulator outlives a killed run."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass

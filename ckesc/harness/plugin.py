@@ -7,9 +7,9 @@ options exist, but nothing is opened and no report is written.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import signal
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,14 +19,22 @@ import pytest
 
 from ..evidence.live import LaneRules, failure_text
 from ..protocol.requirements import REQUIREMENTS, requirement, strongest
+from . import preflight
 from . import report as _report
-from .dut import Dut
-from .lanes import BusLane, CommandPower, Lane, ManualPower, NoPower, RealtimeEmulatorLane, SimLane
+from .dut import Dut, DutUnreachable
+from .lanes import BenchGone, BusLane, CommandPower, Lane, ManualPower, NoPower, RealtimeEmulatorLane, SimLane
 from .profile import DutProfile
 from .traces import TRACE_FORMATS, TestTraces
 from .verdict import Inconclusive
 
 CONFORMANCE_PACKAGE = "conformance"
+
+#: exit status of a run aborted because the DUT did not answer or the bench went away (pytest's own
+#: statuses are 0-5; ``ckesc run`` passes this one on)
+EXIT_ABORTED = 3
+#: a DUT that did not send one frame in this many tests in a row, each of which ERRORed, has stopped
+#: answering: the run is aborted rather than every remaining test ERRORing the same way
+SILENT_TESTS_TO_ABORT = 3
 
 
 # ----------------------------------------------------------------------------------------- options
@@ -49,7 +57,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                      "`ckesc control --port P bitrate {bitrate}` for the emulator on vcan0")
     g.addoption("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
     g.addoption("--nodes", help="emulator: node ids of the emulated bench (default 1); the DUT is the first")
-    g.addoption("--profile", help="DUT profile name in fixtures/duts or a path (default: emulator / ckesc-generic)")
+    g.addoption("--profile", help="DUT profile: a shipped one by name (emulator, ckesc-generic, vcan-vm), a name in ./fixtures/duts, or a path (default: emulator / ckesc-generic)")
     g.addoption("--power", choices=("emulator", "command", "manual", "none"),
                 help="power control (default: emulator for --dut emulator, none for --dut bus)")
     g.addoption("--power-off-cmd", help="--power command: shell command that switches the DUT off")
@@ -116,6 +124,14 @@ class _State:
     report_dir: Path | None = None  # reports/<run>/, made at the first test that writes into it
     traces: TestTraces | None = None  # the per-test trace writer, on every lane the plugin opens
     bus_rules: list[LaneRules] = field(default_factory=list)  # the bus rules on every lane the plugin opens
+    preflight_done: bool = False
+    #: the run's tests as collected (after -k / -m deselection), and what deselection left out
+    selected: list[pytest.Item] = field(default_factory=list)
+    deselected: list[str] = field(default_factory=list)
+    #: why the run stopped early: "aborted: ..." (the DUT did not answer, the bench went away) or
+    #: "interrupted" (Ctrl-C, SIGTERM); None while it runs or when it ran to its end
+    stopped: str | None = None
+    silent_errors: int = 0  # tests in a row that ERRORed without a frame from the DUT
 
 
 _STATE = pytest.StashKey[_State]()
@@ -136,6 +152,57 @@ def item_requirements(item: pytest.Item) -> list[str]:
     for m in item.iter_markers("requirement"):
         ids.extend(m.args)
     return list(dict.fromkeys(ids))
+
+
+def _conformance_dir() -> Path | None:
+    spec = importlib.util.find_spec(CONFORMANCE_PACKAGE)
+    locations = list(spec.submodule_search_locations or []) if spec else []
+    return Path(locations[0]).resolve() if locations else None
+
+
+def targets_conformance(config: pytest.Config) -> bool:
+    """Whether the command line names the conformance suites (``--pyargs conformance[.module]``, or a
+    path inside the package), so that set-up mistakes are found before pytest even collects."""
+    where = _conformance_dir()
+    for arg in config.args:
+        head = arg.split("::")[0]
+        if config.option.pyargs and head.split(".")[0] == CONFORMANCE_PACKAGE:
+            return True
+        path = Path(head).resolve()
+        if where is not None and (path == where or where in path.parents):
+            return True
+    return False
+
+
+def _preflight(config: pytest.Config) -> None:
+    st = state(config)
+    if st.preflight_done:
+        return
+    st.preflight_done = True
+    try:
+        preflight.run(config.getoption, bus_kwargs=lambda: _bus_kwargs(config))
+    except preflight.PreflightError as exc:
+        raise pytest.UsageError(f"preflight: {exc}") from None
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Set-up mistakes end the run here, before pytest's header, collection or any report."""
+    if targets_conformance(session.config):
+        _preflight(session.config)
+
+
+def pytest_deselected(items: list[pytest.Item]) -> None:
+    if items:
+        st = state(items[0].config)
+        st.deselected += [it.nodeid for it in items if _is_conformance(it)]
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    st = state(session.config)
+    st.selected = [it for it in session.items if _is_conformance(it)]
+    if st.selected:
+        _preflight(session.config)  # collected from a path the command line did not name as the suites
 
 
 def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -171,11 +238,15 @@ def _bus_kwargs(config: pytest.Config) -> dict[str, Any]:
     for kv in config.getoption("can_config"):
         key, sep, value = kv.partition("=")
         if not sep:
-            raise pytest.UsageError(f"--can-config takes KEY=VALUE, got {kv!r}")
+            raise preflight.PreflightError(f"--can-config takes KEY=VALUE, got {kv!r}")
         kwargs[key] = can.util.cast_from_string(value)
-    resolved = can.util.load_config(config=kwargs)  # explicit options, then CAN_* and can.conf
+    try:
+        resolved = can.util.load_config(config=kwargs)  # explicit options, then CAN_* and can.conf
+    except (can.CanInterfaceNotImplementedError, ValueError, TypeError) as exc:
+        raise preflight.PreflightError(f"the CAN bus configuration {kwargs}: {exc} (known interfaces: "
+                                       f"{', '.join(sorted(can.interfaces.VALID_INTERFACES))})") from None
     if not resolved.get("interface"):
-        raise pytest.UsageError("--dut bus needs --can-interface (or CAN_INTERFACE / can.conf)")
+        raise preflight.PreflightError("--dut bus needs --can-interface (or CAN_INTERFACE / can.conf)")
     return dict(resolved)
 
 
@@ -202,8 +273,7 @@ def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
     nodes = [int(n, 0) for n in (config.getoption("nodes") or "1").split(",")]
     if dut_kind == "emulator":
         if config.getoption("lane") == "realtime":
-            flash = Path(tempfile.mkdtemp(prefix="ckesc-flash-")) / "flash.json"  # survives the emulator's process
-            return RealtimeEmulatorLane(nodes=nodes, faults=faults, flash_path=str(flash),
+            return RealtimeEmulatorLane(nodes=nodes, faults=faults, temp_flash=True,
                                         seed=config.getoption("emulator_seed"), timing_error=max(profile.error_s, 0.002))
         # in one process the emulated ESCs keep their flash contents across power cycles: no file needed
         return SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"), esc_config={"boot_time": 0.25})
@@ -261,7 +331,10 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     if request.node.get_closest_marker("power_cycle") and not ckesc_lane.power.available:
         pytest.skip("needs a power cycle; no power control (--power none)")
     node = config.getoption("node_id") or st.node_id
-    d = Dut(ckesc_lane, profile, node_id=node, allow_motor_spin=_allow_spin(config))
+    try:
+        d = Dut(ckesc_lane, profile, node_id=node, allow_motor_spin=_allow_spin(config))
+    except DutUnreachable as exc:
+        _abort(config, f"the DUT did not answer: {exc}")
     st.node_id = d.node_id
     st.info.setdefault("node_id", d.node_id)
     if "esc_information" not in st.info:
@@ -332,11 +405,20 @@ def record(dut: Dut):
     return dut.record
 
 
+def _abort(config: pytest.Config, why: str) -> None:
+    """Stop the run now: no further test can reach the DUT. The reports say ABORTED with ``why`` and
+    list every test not run; the exit status is :data:`EXIT_ABORTED`."""
+    state(config).stopped = f"aborted: {why}"
+    pytest.exit(f"ABORTED: {why}", returncode=EXIT_ABORTED)
+
+
 def _install_signal_guard(config: pytest.Config) -> None:
-    """Ctrl-C / SIGTERM: stop throttle before anything else happens."""
+    """Ctrl-C / SIGTERM: stop throttle before anything else happens, then stop the run (pytest
+    tears the fixtures down, zero throttle again, and the reports say INTERRUPTED)."""
 
     def handler(signum, frame):  # noqa: ARG001
         st = state(config)
+        st.stopped = st.stopped or f"interrupted ({signal.Signals(signum).name})"
         if st.lane is not None and st.profile is not None and st.node_id is not None:
             try:
                 Dut(st.lane, st.profile, node_id=st.node_id).zero_throttle()
@@ -344,10 +426,11 @@ def _install_signal_guard(config: pytest.Config) -> None:
                 pass
         raise KeyboardInterrupt
 
-    try:
-        signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread
-        pass
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            signal.signal(sig, handler)
+        except ValueError:  # not the main thread
+            pass
 
 
 # ----------------------------------------------------------------------------------------- traces
@@ -432,6 +515,9 @@ def _bus_rules_verdict(item: pytest.Item, rep: pytest.TestReport) -> None:
 
 
 # ----------------------------------------------------------------------------------------- verdicts
+_DECISIVE = pytest.StashKey[pytest.TestReport]()  # the phase report that decided a test's verdict
+
+
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     rep: pytest.TestReport = yield
@@ -453,15 +539,79 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
             rep.outcome = "skipped"
             rep.longrepr = (str(item.path), item.location[1] or 0, "INCONCLUSIVE: " + "; ".join(d.record.inconclusive))
     _bus_rules_verdict(item, rep)
+    if not rep.passed and _DECISIVE not in item.stash:
+        item.stash[_DECISIVE] = rep
     _collect(item, rep, ids, strength, d)
+    if call.excinfo is not None and isinstance(call.excinfo.value, BenchGone):
+        _stop(item, f"aborted: {call.excinfo.value}")
+    if rep.when == "teardown":
+        _watch_silence(item, d)
+        _final_report(item, rep)
     return rep
+
+
+def _stop(item: pytest.Item, why: str) -> None:
+    """End the run after this test (its teardown still zeroes the throttle)."""
+    st = state(item.config)
+    st.stopped = st.stopped or why
+    item.session.shouldstop = why
+
+
+def _watch_silence(item: pytest.Item, d: Dut | None) -> None:
+    """Abort when the DUT has stopped answering: several tests in a row ERRORed without one frame from it."""
+    st = state(item.config)
+    res = st.results.get(item.nodeid)
+    if res is None:
+        return
+    heard = d is not None and (any(f.source == d.node_id for f in d.trace)
+                               or any(g.msg.arbitration_id & 0x7F == d.node_id for g in d.garbled))
+    st.silent_errors = st.silent_errors + 1 if res.outcome == "ERROR" and not heard else 0
+    if st.silent_errors >= SILENT_TESTS_TO_ABORT:
+        _stop(item, f"aborted: the DUT stopped answering: {st.silent_errors} tests in a row ERRORed and heard no frame "
+                    f"from node {st.node_id} (the last: {res.message.splitlines()[0][:200] if res.message else '?'})")
+
+
+def _final_report(item: pytest.Item, rep: pytest.TestReport) -> None:
+    """The teardown report carries the test's one verdict (pytest_report_teststatus): a failure found
+    in any phase, the bus rules' at teardown included, is the test's FAIL, counted once."""
+    res = state(item.config).results.get(item.nodeid)
+    decisive = item.stash.get(_DECISIVE, None)
+    if res is None or decisive is None or decisive is rep:
+        return
+    if res.outcome in ("FAIL", "ERROR") and not rep.failed:
+        rep.outcome, rep.longrepr = "failed", decisive.longrepr
+        rep.sections = decisive.sections + rep.sections
+    elif res.outcome in ("SKIPPED", "INCONCLUSIVE") and rep.passed:
+        rep.outcome, rep.longrepr = "skipped", decisive.longrepr
+
+
+#: how the console counts and prints each verdict (category, letter, word): the same verdicts as
+#: summary.txt, JUnit and report.html
+_CONSOLE = {"PASS": ("passed", ".", "PASSED"), "FAIL": ("failed", "F", "FAILED"), "ERROR": ("error", "E", "ERROR"),
+            "OBSERVED": ("observed", "o", ("OBSERVED", {"blue": True})),
+            "INCONCLUSIVE": ("inconclusive", "i", ("INCONCLUSIVE", {"yellow": True})),
+            "SKIPPED": ("skipped", "s", "SKIPPED")}
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_report_teststatus(report: pytest.TestReport, config: pytest.Config):
+    """A conformance test is counted once, at its teardown, by its verdict (setup and call are not
+    counted on their own): pytest's closing line and progress words say what summary.txt says."""
+    if getattr(report, "when", None) is None:
+        return None
+    res = state(config).results.get(report.nodeid)
+    if res is None:
+        return None
+    if report.when != "teardown":
+        return "", "", ""
+    return _CONSOLE.get(res.outcome)
 
 
 def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength: str, d: Dut | None) -> None:
     st = state(item.config)
     res = st.results.get(item.nodeid)
     if res is None:
-        section = getattr(item.module, "SECTION", None) or requirement(ids[0]).section
+        section = _section_of(item)
         res = st.results[item.nodeid] = Result(item.nodeid, item.name, section, ids, strength)
     res.duration += rep.duration
     if rep.when == "call" or (rep.when == "setup" and not rep.passed) or (rep.when == "teardown" and rep.failed):
@@ -508,21 +658,73 @@ def _longrepr_text(rep: pytest.TestReport) -> str:
 
 
 # ----------------------------------------------------------------------------------------- reports
+def _module_name(nodeid_or_item) -> str:
+    mod = getattr(nodeid_or_item, "module", None)
+    if mod is not None:
+        return mod.__name__.rsplit(".", 1)[-1]
+    return Path(str(nodeid_or_item).split("::")[0]).stem
+
+
+def _completeness(session: pytest.Session, exitstatus: int) -> tuple[str | None, list[dict[str, Any]]]:
+    """Why this run is less than the whole suite ("aborted: ...", "interrupted", "stopped: ...",
+    "subset: ..."; None: it is the whole suite, run to its end), and the tests it did not run."""
+    st = state(session.config)
+    reason = st.stopped
+    if reason is None and exitstatus == pytest.ExitCode.INTERRUPTED:
+        reason = f"stopped: {session.shouldstop}" if isinstance(session.shouldstop, str) else "interrupted"
+    if reason is None and session.shouldfail:
+        reason = f"stopped: {session.shouldfail} (-x / --maxfail)"
+    why_not = {"aborted": "not run: the run was aborted", "interrupted": "not run: the run was interrupted",
+               "stopped": "not run: the run stopped early"}.get((reason or "").split(":")[0].split(" ")[0], "not run")
+    not_run = [{"nodeid": it.nodeid, "name": it.name, "section": _section_of(it), "requirements": item_requirements(it),
+                "reason": why_not} for it in st.selected if it.nodeid not in st.results]
+    not_run += [{"nodeid": n, "name": n.split("::")[-1], "section": "", "requirements": [], "reason": "not run: deselected"}
+                for n in st.deselected]
+    where = _conformance_dir()
+    suite = {p.stem for p in where.glob("test_*.py")} if where else set()
+    ran = {_module_name(it) for it in st.selected} | {_module_name(n) for n in st.deselected}
+    left_out = sorted(suite - ran)
+    if reason is None and (st.deselected or left_out or any("::" in a for a in session.config.args)):
+        parts = []
+        if left_out:
+            parts.append(f"{len(suite) - len(left_out)} of {len(suite)} section modules selected")
+        if st.deselected:
+            parts.append(f"{len(st.deselected)} tests deselected")
+        reason = "subset: " + ("; ".join(parts) or "single tests selected")
+    return reason, not_run
+
+
+def _section_of(item: pytest.Item) -> str:
+    ids = item_requirements(item)
+    return getattr(getattr(item, "module", None), "SECTION", None) or (requirement(ids[0]).section if ids else "")
+
+
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     st = state(session.config)
     if st.traces is not None:
         st.traces.end()
-    if not st.conformance or not st.results:
+    if not st.conformance or not st.selected:
         return
+    reason, not_run = _completeness(session, exitstatus)
+    st.info["complete"] = reason is None
+    st.info["incomplete"] = reason or ""
+    st.info["not_run"] = len(not_run)
+    if reason is not None and reason.startswith("aborted"):
+        session.exitstatus = EXIT_ABORTED
     out = report_dir(session.config)
     if out is not None:
-        _report.write_reports(out, list(st.results.values()), st.info, html=not session.config.getoption("ckesc_no_html"))
+        _report.write_reports(out, list(st.results.values()), st.info, not_run=not_run,
+                               html=not session.config.getoption("ckesc_no_html"))
         st.info["report_dir"] = str(out)
+    if session.exitstatus == EXIT_ABORTED:  # pytest prints no terminal summary for this status: ours, then
+        tr = session.config.pluginmanager.get_plugin("terminalreporter")
+        if tr is not None:
+            pytest_terminal_summary(tr, EXIT_ABORTED, session.config)
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:
     st = state(config)
-    if not st.conformance or not st.results or not config.getoption("ckesc_summary"):
+    if not st.conformance or not st.selected or not config.getoption("ckesc_summary"):
         return
     terminalreporter.write_sep("=", "CKESC conformance summary")
     terminalreporter.write_line(_report.summary_text(list(st.results.values()), st.info))

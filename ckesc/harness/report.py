@@ -23,6 +23,7 @@ from ..protocol import catalogue as cat
 from ..protocol.ids import Kind
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
 from . import html_report
+from .verdict import incomplete_banner
 
 
 def _properties(r) -> dict[str, str]:
@@ -36,12 +37,22 @@ def _properties(r) -> dict[str, str]:
     return props
 
 
-def junit_xml(results: list, info: dict[str, Any], out: Path | None = None) -> str:
+def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_run: list[dict[str, Any]] = ()) -> str:
     """The JUnit document; with ``out`` (the run's directory) each of a test's traces is also an
-    ``[[ATTACHMENT|/absolute/path]]`` line (Jenkins' JUnit attachments plugin wants it absolute)."""
+    ``[[ATTACHMENT|/absolute/path]]`` line (Jenkins' JUnit attachments plugin wants it absolute).
+    Every testsuite carries the run's info (``complete``, ``incomplete``: why not); the tests the run
+    did not get to (``not_run``) are skipped testcases saying why."""
     by_section: dict[str, list] = defaultdict(list)
     for r in results:
         by_section[r.section].append(r)
+    skipped_cases: dict[str, list[TestCase]] = defaultdict(list)
+    for n in not_run:
+        section = n.get("section") or "unselected"
+        tc = TestCase(f"{n['name']} [{' '.join(n.get('requirements', []))}]".replace(" []", ""),
+                      classname=f"ckesc.{section} {SECTION_TITLES.get(section, '')}".strip(), status="NOT RUN")
+        tc.add_skipped_info(message=n.get("reason") or "not run")
+        skipped_cases[section].append(tc)
+        by_section.setdefault(section, [])
     suites = []
     cases_props: list[dict[str, str]] = []
     for section in sorted(by_section, key=section_key):
@@ -61,6 +72,8 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None) -> s
                 tc.add_skipped_info(message=r.message[:500] or r.outcome)
             cases.append(tc)
             cases_props.append(props)
+        cases += skipped_cases.get(section, [])
+        cases_props += [{"verdict": "NOT RUN"}] * len(skipped_cases.get(section, []))
         suites.append(TestSuite(f"{section} {SECTION_TITLES.get(section, '')}".strip(), cases,
                                 properties={k: str(v) for k, v in info.items() if not isinstance(v, dict)}))
     text = to_xml_report_string(suites, prettyprint=False)
@@ -110,6 +123,9 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
     lines.append(f"DUT: {dut}")
     if info.get("clock"):  # the lane's stated error: timing margins inside it are INCONCLUSIVE
         lines.append(f"timing: {info['clock']} clock, stated error +-{(info.get('timing_error_s') or 0.0) * 1000:g} ms")
+    if banner := incomplete_banner(info):
+        lines.insert(0, banner)
+        lines.append(banner)
     fails = [r for r in results if r.outcome in ("FAIL", "ERROR")]
     for r in fails[:20]:
         lines.append(f"  {r.outcome}: {r.nodeid}: {r.message.splitlines()[0][:160] if r.message else ''}")
@@ -201,13 +217,15 @@ def evidence(frames: list, *, host: int, node: int | None, comm_loss: bool = Fal
     return out
 
 
-def write_reports(out: Path, results: list, info: dict[str, Any], *, html: bool = True) -> Path:
+def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: list[dict[str, Any]] = (),
+                  html: bool = True) -> Path:
     """Write the run's reports into ``out`` (from :func:`run_dir`), ``report.html`` last (built from
     ``results.json``; ``html=False``: not at all), and point ``latest`` at it."""
     base = out.parent
-    (out / "junit.xml").write_text(junit_xml(results, info, out), encoding="utf-8")
+    (out / "junit.xml").write_text(junit_xml(results, info, out, not_run), encoding="utf-8")
     (out / "results.json").write_text(json.dumps({"info": info, "coverage": coverage(results),
-                                                  "results": [r.__dict__ for r in results]}, indent=1, default=str),
+                                                  "results": [r.__dict__ for r in results], "not_run": list(not_run)},
+                                                 indent=1, default=str),
                                       encoding="utf-8")
     (out / "summary.txt").write_text(summary_text(results, info) + "\n", encoding="utf-8")
     latest = base / "latest"

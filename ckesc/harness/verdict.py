@@ -105,3 +105,13 @@ class Record:
                 raise AssertionError(f"{tag}{m}")
             self.observe(name, str(m))
         return m
+
+
+def incomplete_banner(info: dict[str, Any]) -> str:
+    """One line saying why a run is less than the whole suite ("" for a complete one)."""
+    why = info.get("incomplete") or ""
+    if not why:
+        return ""
+    kind = why.split(":")[0].split(" ")[0].upper()
+    kind = {"STOPPED": "INCOMPLETE"}.get(kind, kind)
+    return f"{kind} - not a conformance result for the whole suite: {why}; {info.get('not_run', 0)} tests not run"

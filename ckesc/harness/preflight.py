@@ -1,0 +1,168 @@
+"""Preflight: everything about a run's set-up that can be wrong before the first test, checked in
+about a second, so that a mistake is one clear line (exit status 2) and never hundreds of ERRORs,
+a new report directory or a moved ``reports/latest``.
+
+Checked: node ids (1..125 everywhere), emulator fault names, option combinations, the DUT profile
+(schema: see :mod:`.profile`), the reports directory (writable), the power commands (found and
+executable), the bit-rate command, and the bus itself (opened once and closed again, with the way
+out named for a kernel without SocketCAN).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shlex
+import shutil
+import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from ..emulator.faults import FAULTS
+from ..protocol.ids import ESC_NODE_IDS
+from .profile import DutProfile, ProfileError
+
+
+class PreflightError(Exception):
+    """A set-up mistake: the message is one line naming what is wrong and, where there is one, the way out."""
+
+
+Option = Callable[[str], Any]  # the run's options by dest name (pytest's config.getoption)
+
+
+def node_id(text: str | int, what: str = "node id") -> int:
+    """A node id an ESC can have (F7: 1..0x7D), from ``5`` or ``0x05``."""
+    try:
+        value = text if isinstance(text, int) else int(str(text).strip(), 0)
+    except ValueError:
+        raise PreflightError(f"{what} {text!r} is not a number") from None
+    if value not in ESC_NODE_IDS:
+        raise PreflightError(f"{what} {value} is out of range: an ESC's node id is {ESC_NODE_IDS.start}.."
+                             f"{ESC_NODE_IDS.stop - 1} (0 is the host's; 126 and 127 are reserved, F7)")
+    return value
+
+
+def node_list(text: str) -> list[int]:
+    ids = [node_id(part, "--nodes: node id") for part in text.split(",") if part.strip()]
+    if not ids:
+        raise PreflightError(f"--nodes {text!r} names no node id")
+    dupes = sorted({n for n in ids if ids.count(n) > 1})
+    if dupes:
+        raise PreflightError(f"--nodes names node id {dupes[0]} twice: two ESCs with one node id cannot be told apart")
+    return ids
+
+
+def fault_names(text: str) -> list[str]:
+    names = [f.strip() for f in text.split(",") if f.strip()]
+    unknown = [f for f in names if f not in FAULTS]
+    if unknown:
+        import difflib
+
+        close = difflib.get_close_matches(unknown[0], list(FAULTS), n=3)
+        raise PreflightError(f"--emulator-faults: unknown fault {unknown[0]!r}"
+                             + (f" (did you mean {', '.join(close)}?)" if close else "")
+                             + "; `ckesc control faults` or ckesc/emulator/faults.py lists them")
+    return names
+
+
+def reports_writable(base: str | os.PathLike) -> None:
+    """``base`` is a directory this user can write into (made if missing; a file is written to it and
+    removed again, since permission bits alone do not tell about a read-only or special file system)."""
+    path = Path(base)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path, prefix=".ckesc-preflight-"):
+            pass
+    except OSError as exc:
+        raise PreflightError(f"reports directory {str(base)!r} is not writable: {exc.strerror or exc} "
+                             "(give another with --reports)") from None
+
+
+def command(cmd: str | None, option: str) -> None:
+    """A command line given to the suite: not empty, splits like a shell line, its program exists."""
+    if not cmd:
+        raise PreflightError(f"{option} is empty")
+    try:
+        argv = shlex.split(cmd)
+    except ValueError as exc:
+        raise PreflightError(f"{option} {cmd!r}: {exc}") from None
+    if not argv:
+        raise PreflightError(f"{option} is empty")
+    program = argv[0]
+    if os.sep in program:
+        if not (os.path.isfile(program) and os.access(program, os.X_OK)):
+            raise PreflightError(f"{option}: {program!r} is not an executable file")
+    elif shutil.which(program) is None:
+        raise PreflightError(f"{option}: program {program!r} not found on PATH (the command is run without a shell: "
+                             "wrap pipes and redirections in sh -c '...')")
+
+
+def profile(get: Option) -> DutProfile:
+    name = get("profile") or ("emulator" if get("dut") == "emulator" else "ckesc-generic")
+    try:
+        return DutProfile.load(name)
+    except ProfileError as exc:
+        raise PreflightError(str(exc)) from None
+
+
+def open_bus(kwargs: dict[str, Any]) -> None:
+    """Open the bus once and close it: a dead adapter is named here, not by every test."""
+    import can
+
+    where = ", ".join(f"{k}={kwargs[k]}" for k in ("interface", "channel", "bitrate") if kwargs.get(k) is not None)
+    try:
+        bus = can.Bus(**kwargs)
+    except Exception as exc:  # noqa: BLE001 - python-can's backends raise anything; all mean "cannot use it"
+        cause = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        hint = ""
+        if getattr(exc, "errno", None) == errno.EAFNOSUPPORT or "Address family not supported" in str(exc) or (
+                kwargs.get("interface") == "socketcan" and not hasattr(__import__("socket"), "AF_CAN")):
+            hint = (" - this kernel has no SocketCAN (AF_CAN): run the suite on a Linux host with can0/vcan0, or in "
+                    "the VM lane (tools/vm-lane)")
+        elif isinstance(exc, can.CanInterfaceNotImplementedError) or "Unknown interface" in str(exc):
+            hint = f" - known interfaces: {', '.join(sorted(can.interfaces.VALID_INTERFACES))}"
+        raise PreflightError(f"cannot open the CAN bus ({where}): {cause}{hint}") from None
+    try:
+        bus.shutdown()
+    except Exception:  # noqa: BLE001 - it opened; closing is best effort
+        pass
+
+
+def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None) -> DutProfile:
+    """Every check, in the order a person fixes them; the first failure raises :class:`PreflightError`.
+    Returns the loaded profile. ``bus_kwargs`` resolves the python-can arguments (``--dut bus``)."""
+    dut = get("dut")
+    if get("node_id") is not None:
+        node_id(get("node_id"), "--node-id")
+    if get("nodes"):
+        if dut != "emulator":
+            raise PreflightError("--nodes builds an emulated bench: it needs --dut emulator (give --node-id for a real ESC)")
+        node_list(get("nodes"))
+    if get("emulator_faults"):
+        if dut != "emulator":
+            raise PreflightError("--emulator-faults switches faults of the emulator: it needs --dut emulator")
+        fault_names(get("emulator_faults"))
+    prof = profile(get)
+    if get("ckesc_reports"):
+        reports_writable(get("ckesc_reports"))
+    power = get("power")
+    if dut == "emulator" and power not in (None, "emulator"):
+        raise PreflightError(f"--power {power} is for --dut bus; the emulator's power is switched by the suite")
+    if dut == "bus":
+        if power == "emulator":
+            raise PreflightError("--power emulator works only with --dut emulator (for a real ESC: command, manual or none)")
+        if power == "command":
+            if not get("power_off_cmd") or not get("power_on_cmd"):
+                raise PreflightError("--power command needs both --power-off-cmd and --power-on-cmd")
+            command(get("power_off_cmd"), "--power-off-cmd")
+            command(get("power_on_cmd"), "--power-on-cmd")
+        elif power == "manual" and not sys.stdin.isatty():
+            raise PreflightError("--power manual prompts an operator, but standard input is not a terminal "
+                                 "(use --power command, or --power none to skip the persistence tests)")
+        if get("can_bitrate_cmd"):
+            command(get("can_bitrate_cmd").replace("{bitrate}", "500000"), "--can-bitrate-cmd")
+        if bus_kwargs is not None:
+            open_bus(bus_kwargs())
+    return prof
