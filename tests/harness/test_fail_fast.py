@@ -1,0 +1,329 @@
+"""Fail fast and never mislead (issue #10), tried the way a user meets it: a real ``ckesc run``
+process, real signals to its process group, a real emulator process that dies or loses power.
+
+* a set-up mistake is one line on stderr, exit 2, no report directory, ``reports/latest`` untouched;
+* a bench with no ESC aborts in seconds (exit 3), a DUT that stops answering aborts the rest;
+* an interrupted, aborted or subset run says so in summary.txt, results.json, JUnit and report.html;
+* pytest's closing line counts the verdicts summary.txt counts;
+* nothing is left in the temp directory.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+CKESC = [sys.executable, "-m", "ckesc"]
+
+
+def _env(tmp: Path) -> dict[str, str]:
+    (tmp / "tmp").mkdir(exist_ok=True)
+    env = dict(os.environ, TMPDIR=str(tmp / "tmp"), PYTHONUNBUFFERED="1")
+    for key in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        env.pop(key, None)
+    return env
+
+
+def ckesc(tmp: Path, *args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([*CKESC, *args], cwd=tmp, env=_env(tmp), capture_output=True, text=True, timeout=timeout)
+
+
+def _litter(tmp: Path) -> list[str]:
+    return sorted(p.name for p in (tmp / "tmp").iterdir())
+
+
+def _run_dirs(reports: Path) -> list[Path]:
+    return sorted(p for p in reports.iterdir() if p.is_dir() and not p.is_symlink()) if reports.is_dir() else []
+
+
+def _latest(reports: Path) -> Path:
+    return reports / "latest"
+
+
+# ----------------------------------------------------------------------------------------- preflight
+BAD_PROFILES = {
+    "typo.toml": ("[timing]\neror_s = 0.002\n", "unknown key 'eror_s'", "did you mean 'error_s'"),
+    "section.toml": ("[timng]\nerror_s = 0.002\n", "unknown section 'timng'", "did you mean 'timing'"),
+    "syntax.toml": ("[timing\n", "not valid TOML", "line 1"),
+    "type.toml": ("[capabilities]\nled = \"yes\"\n", "capabilities.led", "boolean"),
+    "negative.toml": ("[timing]\nerror_s = -0.5\n", "timing.error_s", "greater than or equal to 0"),
+}
+
+SETUP_MISTAKES = [
+    pytest.param(["--node-id", "200"], ["--node-id 200", "1..125"], id="node-id-200"),
+    pytest.param(["--nodes", "0"], ["node id 0", "1..125"], id="nodes-0"),
+    pytest.param(["--nodes", "1,1"], ["twice"], id="nodes-duplicate"),
+    pytest.param(["--emulator-faults", "report_interval_wrng"], ["unknown fault", "report_interval_wrong"], id="fault-name"),
+    pytest.param(["--profile", "no-such-profile"], ["no DUT profile 'no-such-profile'", "ckesc-generic"], id="profile-missing"),
+    *[pytest.param(["--profile", name], list(expect), id=f"profile-{name}") for name, (_, *expect) in BAD_PROFILES.items()],
+    pytest.param(["--dut", "bus", "--can-interface", "no-such-adapter"], ["Unknown interface", "socketcan"], id="interface"),
+    pytest.param(["--dut", "bus", "--can-interface", "socketcan", "--can-channel", "vcan0"],
+                 ["cannot open the CAN bus", "interface=socketcan", "channel=vcan0"], id="socketcan"),
+    pytest.param(["--dut", "bus", "--can-interface", "virtual", "--power", "command", "--power-off-cmd", "no-such-psu off",
+                  "--power-on-cmd", "true"], ["--power-off-cmd", "'no-such-psu' not found"], id="power-command"),
+    pytest.param(["--dut", "bus", "--can-interface", "virtual", "--power", "emulator"], ["--power emulator"], id="power-emulator-on-bus"),
+    pytest.param(["--reports", "blocked/reports"], ["reports directory", "not writable"], id="reports-unwritable"),
+]
+
+
+@pytest.mark.parametrize("args, expect", SETUP_MISTAKES)
+def test_a_setup_mistake_is_one_line_exit_2_and_no_report(tmp_path, args, expect):
+    for name, (text, *_) in BAD_PROFILES.items():
+        (tmp_path / name).write_text(text)
+    (tmp_path / "blocked").write_text("a file where a directory should be\n")
+    reports = tmp_path / "reports"
+    reports.mkdir()
+    (reports / "20200101T000000Z").mkdir()
+    (reports / "latest").symlink_to("20200101T000000Z")
+    if "--reports" not in args:
+        args = [*args, "--reports", str(reports)]
+    if "socketcan" in args and hasattr(__import__("socket"), "AF_CAN"):
+        try:
+            import can
+
+            can.Bus(interface="socketcan", channel="vcan0").shutdown()
+            pytest.skip("this host has a working vcan0: the socketcan mistake is not one here")
+        except Exception:  # noqa: BLE001
+            pass
+    done = ckesc(tmp_path, "run", "-q", *args, timeout=60)
+    assert done.returncode == 2, done.stdout + done.stderr
+    lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, done.stderr
+    for phrase in expect:
+        assert phrase in lines[0], lines[0]
+    assert "Traceback" not in done.stdout + done.stderr
+    assert "PASSED" not in done.stdout and "collected" not in done.stdout, "a test started"
+    assert [p.name for p in _run_dirs(reports)] == ["20200101T000000Z"], "a report directory was made"
+    assert os.readlink(reports / "latest") == "20200101T000000Z"
+    assert _litter(tmp_path) == []
+
+
+def test_a_good_profile_of_ones_own_is_found_by_path_and_by_name_in_fixtures_duts(tmp_path):
+    from ckesc.harness.profile import DutProfile
+
+    own = tmp_path / "fixtures" / "duts"
+    own.mkdir(parents=True)
+    (own / "bench-esc.toml").write_text('[dut]\nname = "bench ESC"\n[timing]\nerror_s = 1\nboot_s = 2.5\n'
+                                        '[capabilities]\nled = true\n')
+    by_path = DutProfile.load(str(own / "bench-esc.toml"))
+    assert (by_path.name, by_path.error_s, by_path.boot_s, by_path.has("led"), by_path.has("motor")) == \
+        ("bench ESC", 1.0, 2.5, True, False)
+    cwd = os.getcwd()
+    try:
+        os.chdir(tmp_path)
+        assert DutProfile.load("bench-esc").name == "bench ESC"
+        assert DutProfile.load("ckesc-generic").error_s == 0.002  # shipped, from any directory
+    finally:
+        os.chdir(cwd)
+
+
+# ----------------------------------------------------------------------------------------- a dead bench
+def _read_run(reports: Path) -> tuple[dict, ET.Element, str, str]:
+    run = _latest(reports)
+    doc = json.loads((run / "results.json").read_text())
+    junit = ET.parse(run / "junit.xml").getroot()
+    return doc, junit, (run / "summary.txt").read_text(), (run / "report.html").read_text()
+
+
+def _header(page: str) -> str:
+    return page.split("<body>", 1)[1].split("</header>", 1)[0]
+
+
+def _suite_props(junit: ET.Element) -> list[dict[str, str]]:
+    return [{p.get("name"): p.get("value") for p in s.find("properties")} for s in junit.iter("testsuite")]
+
+
+def test_a_bus_with_no_esc_aborts_at_once_with_exit_3_and_says_so_everywhere(tmp_path):
+    (tmp_path / "quick.toml").write_text("[timing]\nboot_s = 0.2\n")
+    reports = tmp_path / "reports"
+    done = ckesc(tmp_path, "run", "-q", "--dut", "bus", "--can-interface", "virtual", "--can-channel", f"nobody-{os.getpid()}",
+                 "--profile", "quick.toml", "--reports", str(reports), timeout=120)
+    assert done.returncode == 3, done.stdout + done.stderr
+    assert "ABORTED" in done.stdout and "GET_ESC_ID" in done.stdout
+    assert done.stdout.count("Traceback") == 0
+    doc, junit, summary, page = _read_run(reports)
+    assert doc["info"]["complete"] is False and doc["info"]["incomplete"].startswith("aborted: the DUT did not answer")
+    assert doc["results"] == [] and len(doc["not_run"]) == doc["info"]["not_run"] > 300
+    assert {n["reason"] for n in doc["not_run"]} == {"not run: the run was aborted"}
+    assert summary.startswith("ABORTED")
+    assert all(p["complete"] == "False" for p in _suite_props(junit))
+    skipped = [c for c in junit.iter("testcase") if c.find("skipped") is not None]
+    assert len(skipped) == len(doc["not_run"])
+    header = _header(page)
+    assert 'class="v v-ABORTED"' in header and 'class="v v-PASS"' not in header and "role=alert" in header
+
+
+def _emulator(tmp: Path) -> tuple[subprocess.Popen, int, int]:
+    proc = subprocess.Popen([*CKESC, "emulate", "--nodes", "1", "--socketcand", "0", "--control", "0"], cwd=tmp,
+                            env=_env(tmp), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    ports: dict[str, int] = {}
+    assert proc.stdout is not None
+    while len(ports) < 2:
+        line = proc.stdout.readline()
+        assert line, proc.stderr.read() if proc.stderr else "emulator died"
+        kind, _, addr = line.strip().partition(" ")
+        if kind in ("socketcand", "control"):
+            ports[kind] = int(addr.rsplit(":", 1)[1])
+    return proc, ports["socketcand"], ports["control"]
+
+
+def test_a_dut_that_loses_power_mid_run_aborts_the_rest(tmp_path):
+    """A bench whose ESC goes dark: ``ckesc emulate`` behind socketcand as a third-party DUT, its power
+    switched off while the suite runs; the run aborts after a few silent tests, not 300 ERRORs."""
+    emu, can_port, control = _emulator(tmp_path)
+    reports = tmp_path / "reports"
+    try:
+        run = subprocess.Popen([*CKESC, "run", "--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0",
+                                "--can-config", "host=127.0.0.1", "--can-config", f"port={can_port}", "--node-id", "1",
+                                "--profile", "emulator", "--reports", str(reports), "--", "-k", "set_freq or msg_control"],
+                               cwd=tmp_path, env=_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        out = []
+        assert run.stdout is not None
+        for line in run.stdout:
+            out.append(line)
+            if len(out) > 3 and "PASSED" in line:
+                break
+        subprocess.run([*CKESC, "control", "--port", str(control), "power", "off"], check=True, capture_output=True,
+                       timeout=30, env=_env(tmp_path))
+        rest, _ = run.communicate(timeout=300)
+        out.append(rest)
+    finally:
+        emu.terminate()
+        emu.wait(timeout=30)
+    text = "".join(out)
+    assert run.returncode == 3, text
+    doc, junit, summary, _ = _read_run(reports)
+    assert doc["info"]["incomplete"].startswith("aborted: the DUT stopped answering"), doc["info"]["incomplete"]
+    errors = [r for r in doc["results"] if r["outcome"] == "ERROR"]
+    assert 1 <= len(errors) <= 3, [r["nodeid"] for r in errors]
+    assert doc["not_run"], "the rest of the run was not listed as not run"
+    assert "ABORTED" in summary
+
+
+# ----------------------------------------------------------------------------------------- interruptions
+def _start_run(tmp: Path, *args: str) -> subprocess.Popen:
+    return subprocess.Popen([*CKESC, "run", "--reports", str(tmp / "reports"), *args], cwd=tmp, env=_env(tmp),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+
+
+def _wait_progress(proc: subprocess.Popen, passed: int) -> list[str]:
+    seen, out = 0, []
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        out.append(line)
+        seen += "PASSED" in line
+        if seen >= passed:
+            return out
+    pytest.fail("the run ended before the signal:\n" + "".join(out[-20:]))
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+@pytest.mark.parametrize("lane, sig, to_group", [
+    ("simulated", signal.SIGINT, True),
+    ("simulated", signal.SIGTERM, False),
+    ("realtime", signal.SIGINT, True),  # Ctrl-C at a terminal: SIGINT to the whole foreground process group
+])
+def test_an_interrupted_run_stops_and_is_never_a_pass(tmp_path, lane, sig, to_group):
+    proc = _start_run(tmp_path, "--lane", lane)
+    out = _wait_progress(proc, 3)
+    kids = _children(proc.pid)
+    if to_group:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
+    rest, _ = proc.communicate(timeout=120)
+    text = "".join(out) + rest
+    assert proc.returncode == 130, text[-3000:]
+    assert "BrokenPipeError" not in text
+    doc, junit, summary, page = _read_run(tmp_path / "reports")
+    assert doc["info"]["complete"] is False and doc["info"]["incomplete"].startswith("interrupted"), doc["info"]
+    assert doc["not_run"] and summary.startswith("INTERRUPTED") and "INTERRUPTED" in text
+    assert not [r for r in doc["results"] if r["outcome"] == "ERROR"], "the interruption showed as ERRORs"
+    assert all(p["complete"] == "False" for p in _suite_props(junit))
+    assert 'class="v v-INTERRUPTED"' in _header(page)
+    for kid in kids:  # the real-time emulator went with the run
+        deadline = time.monotonic() + 15
+        while Path(f"/proc/{kid}").exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not Path(f"/proc/{kid}").exists() or "zombie" in Path(f"/proc/{kid}/status").read_text().lower()
+    assert _litter(tmp_path) == []
+
+
+def test_an_emulator_that_dies_mid_run_aborts_with_one_clear_line(tmp_path):
+    proc = _start_run(tmp_path, "--lane", "realtime")
+    out = _wait_progress(proc, 2)
+    kids = _children(proc.pid)
+    assert kids, "no emulator process"
+    for kid in kids:
+        os.kill(kid, signal.SIGKILL)
+    rest, _ = proc.communicate(timeout=120)
+    text = "".join(out) + rest
+    assert proc.returncode == 3, text[-3000:]
+    assert re.search(r"the emulator process \(ckesc emulate, pid \d+\) was killed by signal 9", text)
+    doc, _, summary, _ = _read_run(tmp_path / "reports")
+    assert doc["info"]["incomplete"].startswith("aborted: the emulator process")
+    assert len([r for r in doc["results"] if r["outcome"] == "ERROR"]) <= 1
+    assert summary.startswith("ABORTED")
+    assert _litter(tmp_path) == []
+
+
+def test_a_selected_subset_says_subset_and_lists_what_it_left_out(tmp_path):
+    done = ckesc(tmp_path, "run", "-q", "--reports", str(tmp_path / "reports"), "--", "-k", "set_freq")
+    assert done.returncode == 0, done.stdout + done.stderr
+    doc, junit, summary, page = _read_run(tmp_path / "reports")
+    assert doc["info"]["complete"] is False and doc["info"]["incomplete"].startswith("subset")
+    header = _header(page)
+    assert summary.startswith("SUBSET") and 'class="v v-SUBSET"' in header and 'class="v v-PASS"' not in header
+    assert {n["reason"] for n in doc["not_run"]} == {"not run: deselected"}
+    assert all(p["complete"] == "False" for p in _suite_props(junit))
+
+
+def test_the_whole_suite_is_complete(tmp_path):
+    done = ckesc(tmp_path, "run", "-q", "--reports", str(tmp_path / "reports"))
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr
+    doc, junit, summary, page = _read_run(tmp_path / "reports")
+    assert doc["info"]["complete"] is True and doc["not_run"] == []
+    assert not summary.startswith(("SUBSET", "ABORTED", "INTERRUPTED")) and 'class="v v-PASS"' in _header(page)
+    assert all(p["complete"] == "True" for p in _suite_props(junit))
+    # one story: pytest's closing line counts what summary.txt counts
+    closing = done.stdout.strip().splitlines()[-1]
+    counts = {m.group(2): int(m.group(1)) for m in re.finditer(r"(\d+) (\w+)", closing)}
+    by_verdict = {}
+    for r in doc["results"]:
+        by_verdict[r["outcome"]] = by_verdict.get(r["outcome"], 0) + 1
+    assert counts.get("passed", 0) == by_verdict.get("PASS", 0)
+    assert counts.get("observed", 0) == by_verdict.get("OBSERVED", 0)
+    assert _litter(tmp_path) == []
+
+
+def test_a_live_bus_rule_failure_is_the_tests_fail_not_an_extra_error(tmp_path):
+    """One story: with a fault that breaks R9 in the background, pytest's closing line, summary.txt
+    and results.json count the same FAILs and no ERROR."""
+    done = ckesc(tmp_path, "run", "-q", "--reports", str(tmp_path / "reports"), "--emulator-faults", "report_interval_wrong",
+                 "--", "-k", "set_freq or esc_information")
+    assert done.returncode == 1, done.stdout[-3000:]
+    doc, *_ = _read_run(tmp_path / "reports")
+    by_verdict: dict[str, int] = {}
+    for r in doc["results"]:
+        by_verdict[r["outcome"]] = by_verdict.get(r["outcome"], 0) + 1
+    closing = done.stdout.strip().splitlines()[-1]
+    counts = {m.group(2): int(m.group(1)) for m in re.finditer(r"(\d+) (\w+)", closing)}
+    assert by_verdict.get("FAIL", 0) > 0
+    assert counts.get("failed", 0) == by_verdict.get("FAIL", 0), (closing, by_verdict)
+    assert counts.get("error", counts.get("errors", 0)) == by_verdict.get("ERROR", 0), (closing, by_verdict)
+    assert counts.get("passed", 0) == by_verdict.get("PASS", 0), (closing, by_verdict)
