@@ -28,8 +28,9 @@ from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_me
 
 from ckesc.cli import main
 from ckesc.emulator.bench import Bench
+from ckesc.emulator.control import control_request
 from ckesc.emulator.flash import FlashStore
-from ckesc.emulator.realtime import Histogram, RealtimeEmulator, _fmt_frame, _parse_send, control_request
+from ckesc.emulator.realtime import Histogram, RealtimeEmulator, _fmt_frame, _parse_send
 from ckesc.protocol import Decoder, Frame, Kind, WireFrame, decode, encode
 
 MSG1_PERIOD = 0.020  # default MSG1 interval: 10 x 2 ms (R9)
