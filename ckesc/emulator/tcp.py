@@ -1,4 +1,4 @@
-"""The TCP side the real-time emulator's two servers share: the socketcand hub (:mod:`.realtime`) and
+"""The TCP side the real-time emulator's two servers share: the socketcand hub (:mod:`.socketcand`) and
 the control channel (:mod:`.control`). A :class:`TcpServer` is a non-blocking listening socket on
 127.0.0.1 and the connections it accepted, each with an input buffer and an output backlog; it does no
 waiting of its own. The scheduler (:mod:`.realtime`) puts the server (readable: a connection to accept)
