@@ -711,7 +711,7 @@ def _control_request(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _run_control(args: argparse.Namespace) -> int:
-    from .emulator.realtime import ControlError, control_request
+    from .emulator.control import ControlError, control_request
 
     if args.action == "power" and args.state == "cycle" and args.off_time is None:
         args.off_time = 1.0

@@ -24,55 +24,27 @@ Buses
     ``bus``: any python-can bus. Frames the ESCs send go out with ``bus.send``; frames read from it
     go to the ESCs. A bus with ``fileno()`` (socketcan) is waited on directly; any other (virtual,
     a socketcand client, ...) is read by one helper thread that only queues frames.
-    ``socketcand_port``: serve the socketcand ASCII protocol on 127.0.0.1, as a hub: python-can's
-    stock ``can.Bus(interface="socketcand", host="127.0.0.1", port=P, channel="can0")`` connects.
-    Handshake ``< hi >``, ``< open NAME >`` (any name) -> ``< ok >``, ``< rawmode >`` -> ``< ok >``;
-    then frames go out as ``< frame ID SEC.USEC DATA >`` (ID 8 hex digits for 29-bit ids, 3 for
-    11-bit; DATA hex, no spaces) and come in as ``< send ID LEN B0 B1 ... >``. A client gets no
-    frames during the first 50 ms after its rawmode ``< ok >`` (python-can reads each handshake
-    reply with a single ``recv()``), unless it sends a frame first. Every frame a client sends is
-    echoed to every client, the sender included, stamped with its arrival time, so that a client
-    can measure answer delays from bus timestamps at both ends (set ``echo_own=False`` for
-    SocketCAN's default, where the sender does not see its own frames). ``< echo >`` is answered;
-    other commands are ignored. Classic CAN only. Both may be given: the emulator then also
-    bridges the two.
+    ``socketcand_port``: serve the socketcand ASCII protocol on 127.0.0.1, as a hub that python-can's
+    stock socketcand client connects to (:mod:`.socketcand`, which describes the protocol as served).
+    Both may be given: the emulator then also bridges the two.
     The emulated bus has one bit rate (``bitrate``): an ESC at another bit rate (after Set Baud and
     a power cycle) neither hears nor is heard. Arbitration and frame durations are not modelled
     here: frames leave in due order as soon as they are due.
 
 Control channel (``control_port``), for harness power switching and fault injection
-    Line-based JSON on 127.0.0.1: one request object per line, one answer object per line, on a
-    connection that may stay open. Every answer has ``"ok": true`` or ``"ok": false`` with
-    ``"error"``. Requests:
-
-    ``{"cmd": "status"}``
-        power state, bit rate, uptime, clients, frame counts, lateness summary, and per ESC: slot,
-        node id, powered, ready, bitrate, reporting state, faults, counters, power-up count.
-    ``{"cmd": "power", "action": "off" | "on" | "cycle", "off_time": 1.0}``
-        ``cycle`` answers once power is back on (after ``off_time`` seconds). Power-off writes the
-        flash file.
-    ``{"cmd": "fault", "name": "answer_late", "on": true, "node": 3}``
-        ``node`` optional (default: every ESC). An unknown name is an error listing the known ones.
-    ``{"cmd": "faults"}``: the known faults with their rules and descriptions.
-    ``{"cmd": "bitrate", "bitrate": 250000}``: the emulated bus's bit rate from now on.
-    ``{"cmd": "stats", "reset": false}``: the lateness summary (and start a new one).
-    ``{"cmd": "save"}``: write the flash file now.
-    ``{"cmd": "stop"}``: stop the emulator (power off, flash saved), as SIGTERM does.
-
-    :func:`control_request` is the client; ``ckesc control`` wraps it.
+    Line-based JSON on 127.0.0.1, served by :mod:`.control`, which lists the requests; their
+    handlers are this emulator's ``_cmd_*`` methods. :func:`.control.control_request` is the
+    client; ``ckesc control`` wraps it.
 """
 
 from __future__ import annotations
 
 import bisect
 import ctypes
-import errno
 import itertools
-import json
 import math
 import os
 import select
-import socket
 import sys
 import threading
 import time
@@ -87,22 +59,20 @@ from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame
 from . import faults as _faults
 from .bench import Bench
+from .control import ControlServer, Handler, Reply, dispatch
+from .control import control_request as control_request  # re-exported: conformance/test_s4_4_19_set_baud.py imports it from here
 from .model import EscModel
+from .socketcand import SocketcandServer, fmt_frame
+from .tcp import Conn
 
-LOCALHOST = "127.0.0.1"
-RAWMODE_QUIET_S = 0.050  # no frames to a client for this long after its rawmode "< ok >"
 TIMER_SLACK_NS = 1
 SWITCH_INTERVAL_S = 5e-4
-MAX_CLIENT_BACKLOG = 4 << 20  # bytes queued for a client that does not read: it is dropped
-MAX_LINE = 1 << 16  # longest control line / socketcand command accepted
 READER_POLL_S = 0.1  # how often the bus reader thread looks at the stop flag
 PLAUSIBLE_RX_STAMP_S = 1.0  # a bus receive stamp further back than this is not trusted
 MAX_POLL_ROUNDS = 100  # polls of the due ESCs at one instant (frames they hear from one another can make more due)
 
 _PR_SET_TIMERSLACK = 29
 _PR_GET_TIMERSLACK = 30
-
-Reply = Callable[[dict], None]
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -200,50 +170,6 @@ class Histogram:
         return out
 
 
-def _fmt_frame(wire: Any, stamp: float) -> bytes:
-    """``< frame ID SEC.USEC DATA >`` as socketcand writes it."""
-    sec, usec = divmod(round(stamp * 1e6), 1_000_000)
-    can_id = f"{wire.arbitration_id & 0x1FFFFFFF:08X}" if wire.is_extended_id else f"{wire.arbitration_id & 0x7FF:03X}"
-    return f"< frame {can_id} {sec}.{usec:06d} {bytes(wire.data).hex().upper()} >".encode("ascii")
-
-
-def _parse_send(words: list[str]) -> WireFrame | None:
-    """``send ID LEN B0 B1 ...`` (python-can writes bytes without zero padding) -> a frame, None if malformed."""
-    try:
-        id_text = words[1]
-        can_id = int(id_text, 16)
-        length = int(words[2], 16)
-        data = bytes(int(b, 16) for b in words[3:])
-    except (IndexError, ValueError):
-        return None
-    extended = len(id_text) > 3 or can_id > 0x7FF
-    if length != len(data) or length > 8 or can_id > 0x1FFFFFFF:
-        return None
-    return WireFrame(can_id, data, 0.0, is_extended_id=extended)
-
-
-class _Conn:
-    """A TCP connection served by the loop: input buffer, output backlog."""
-
-    __slots__ = ("sock", "peer", "inbuf", "out", "state", "quiet_until", "rx", "tx", "dropped")
-
-    def __init__(self, sock: socket.socket) -> None:
-        self.sock = sock
-        try:
-            host, port = sock.getpeername()[:2]
-            self.peer = f"{host}:{port}"
-        except OSError:
-            self.peer = "?"
-        self.inbuf = bytearray()
-        self.out = bytearray()
-        self.state = "hi"  # socketcand: hi -> open -> raw
-        self.quiet_until = 0.0
-        self.rx = self.tx = self.dropped = 0
-
-    def fileno(self) -> int:
-        return self.sock.fileno()
-
-
 class _Input:
     __slots__ = ("t", "msg", "wire", "origin")
 
@@ -311,20 +237,29 @@ class RealtimeEmulator:
         self._power_waiters: list[Reply] = []
         self._stop_at: float | None = None
         self._t_start = time.monotonic()
-        self._clients: list[_Conn] = []
-        self._controls: list[_Conn] = []
         self._reader: threading.Thread | None = None
         self._bus_fd: int | None = None
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
-        self._sc_listener: socket.socket | None = None
-        self._ctl_listener: socket.socket | None = None
+        self._commands: dict[str, Handler] = {
+            "status": self._cmd_status,
+            "power": self._cmd_power,
+            "fault": self._cmd_fault,
+            "faults": self._cmd_faults,
+            "bitrate": self._cmd_bitrate,
+            "stats": self._cmd_stats,
+            "save": self._cmd_save,
+            "stop": self._cmd_stop,
+        }
+        self._socketcand: SocketcandServer | None = None
+        self._control: ControlServer | None = None
         try:
             if socketcand_port is not None:
-                self._sc_listener = self._listen(socketcand_port)
+                self._socketcand = SocketcandServer(socketcand_port, on_frame=self._host_input, counters=self.counters,
+                                                    log=self._log)
             if control_port is not None:
-                self._ctl_listener = self._listen(control_port)
+                self._control = ControlServer(control_port, submit=self._submit, log=self._log)
         except OSError:
             self._close_sockets()
             raise
@@ -337,25 +272,13 @@ class RealtimeEmulator:
 
     # ------------------------------------------------------------------ addresses
 
-    @staticmethod
-    def _listen(port: int) -> socket.socket:
-        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        try:
-            s.bind((LOCALHOST, port))
-            s.listen(16)
-            s.setblocking(False)
-        except OSError:
-            s.close()
-            raise
-        return s
-
     @property
     def socketcand_address(self) -> tuple[str, int] | None:
-        return None if self._sc_listener is None else self._sc_listener.getsockname()[:2]
+        return None if self._socketcand is None else self._socketcand.address
 
     @property
     def control_address(self) -> tuple[str, int] | None:
-        return None if self._ctl_listener is None else self._ctl_listener.getsockname()[:2]
+        return None if self._control is None else self._control.address
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -454,7 +377,7 @@ class RealtimeEmulator:
             if not fut.done():
                 fut.set_result(answer)
 
-        self._posted.append((self._dispatch, (req, reply)))
+        self._submit(req, reply)
         self._wake()
         if timeout is None:
             timeout = 10.0 + float(req.get("off_time") or 0.0)
@@ -509,23 +432,20 @@ class RealtimeEmulator:
 
     def _loop(self) -> None:
         mono = time.monotonic
+        servers = [s for s in (self._socketcand, self._control) if s is not None]
         while not self._stopping:
             deadline = self._next_wake()
-            rlist: list[Any] = [self._wake_r, *self._clients, *self._controls]
-            if self._sc_listener is not None:
-                rlist.append(self._sc_listener)
-            if self._ctl_listener is not None:
-                rlist.append(self._ctl_listener)
+            rlist: list[Any] = [self._wake_r, *(c for s in servers for c in s.conns), *servers]
             if self._bus_fd is not None:
                 rlist.append(self._bus_fd)
-            wlist = [c for c in itertools.chain(self._clients, self._controls) if c.out]
+            wlist = [c for s in servers for c in s.conns if c.out]
             timeout = None if deadline is None else max(0.0, deadline - mono())
             readable, writable, _ = select.select(rlist, wlist, [], timeout)
             now = mono()
             if not readable and not writable and deadline is not None:
                 self.wakeup.add(now - deadline)
             for c in writable:
-                self._flush(c)
+                c.server.flush(c)
             for r in readable:
                 self._on_readable(r, now)
             self._process()
@@ -540,16 +460,16 @@ class RealtimeEmulator:
             while self._rx_queue:
                 msg, t = self._rx_queue.popleft()
                 self._bus_input(msg, t)
-        elif r is self._sc_listener or r is self._ctl_listener:
-            self._accept(r)
+        elif r is self._socketcand or r is self._control:
+            r.accept()
         elif r == self._bus_fd:
             while True:
                 msg = self.bus.recv(0)  # type: ignore[union-attr]
                 if msg is None:
                     break
                 self._bus_input(msg, now)
-        elif isinstance(r, _Conn):
-            self._read_conn(r, now)
+        elif isinstance(r, Conn):
+            r.server.read(r, now)
 
     def _process(self) -> None:
         """Feed the frames heard in arrival order (emitting what fell due before each), then the
@@ -606,9 +526,10 @@ class RealtimeEmulator:
             return
         t_send = time.monotonic()
         due_stamps = self.stamp == "due"
-        if self._clients:
-            data = b"".join(_fmt_frame(w, (w.timestamp if due_stamps else t_send) + self.offset) for w in frames)
-            self._to_clients(data, None, t_send)
+        sc = self._socketcand
+        if sc is not None and sc.conns:
+            data = b"".join(fmt_frame(w, (w.timestamp if due_stamps else t_send) + self.offset) for w in frames)
+            sc.to_clients(data, None, t_send)
         for w in frames:
             if self.bus is not None:
                 t_send = time.monotonic()
@@ -639,7 +560,11 @@ class RealtimeEmulator:
             if t_read - PLAUSIBLE_RX_STAMP_S <= t_bus <= t_read:
                 t = t_bus
         wire = WireFrame(msg.arbitration_id, bytes(msg.data), 0.0, is_extended_id=msg.is_extended_id)
-        self._inputs.append(_Input(t, msg, wire, self.bus))
+        self._host_input(t, msg, wire, self.bus)
+
+    def _host_input(self, t: float, msg: can.Message, wire: WireFrame, origin: Any) -> None:
+        """A frame from the host (the bus or a socketcand client) heard at ``t``: fed to the ESCs in :meth:`_process`."""
+        self._inputs.append(_Input(t, msg, wire, origin))
 
     def _host_frame(self, item: _Input, t: float) -> None:
         self.counters["rx"] += 1
@@ -647,9 +572,10 @@ class RealtimeEmulator:
         self._deadlines_stale = True
         if item.origin is not self.bus and self.bus is not None:  # bridge: a socketcand client's frame
             self._bus_send(item.wire, t + self.offset)
-        if self._clients and not getattr(item.msg, "is_remote_frame", False):
-            skip = None if self.echo_own or not isinstance(item.origin, _Conn) else item.origin
-            self._to_clients(_fmt_frame(item.wire, t + self.offset), skip, time.monotonic())
+        sc = self._socketcand
+        if sc is not None and sc.conns and not getattr(item.msg, "is_remote_frame", False):
+            skip = None if self.echo_own or not isinstance(item.origin, Conn) else item.origin
+            sc.to_clients(fmt_frame(item.wire, t + self.offset), skip, time.monotonic())
 
     def _read_bus(self) -> None:
         """Helper thread for buses without a file descriptor: only reads and queues."""
@@ -667,159 +593,15 @@ class RealtimeEmulator:
                 self._rx_queue.append((msg, time.monotonic()))
                 self._wake()
 
-    # ------------------------------------------------------------------ sockets
-
-    def _accept(self, listener: socket.socket) -> None:
-        try:
-            sock, _ = listener.accept()
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError as exc:
-            self._log(f"accept failed: {exc}")
-            return
-        sock.setblocking(False)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        conn = _Conn(sock)
-        if listener is self._sc_listener:
-            self._clients.append(conn)
-            self.counters["clients"] += 1
-            self._write(conn, b"< hi >")
-        else:
-            self._controls.append(conn)
-
-    def _read_conn(self, conn: _Conn, now: float) -> None:
-        try:
-            data = conn.sock.recv(65536)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError:
-            data = b""
-        if not data:
-            self._drop(conn)
-            return
-        conn.inbuf += data
-        if conn in self._clients:
-            self._socketcand_commands(conn, now)
-        else:
-            self._control_lines(conn)
-        if len(conn.inbuf) > MAX_LINE:
-            self._log(f"{conn.peer}: more than {MAX_LINE} bytes without a complete command; dropped")
-            self._drop(conn)
-
-    def _socketcand_commands(self, conn: _Conn, now: float) -> None:
-        buf = conn.inbuf
-        while True:
-            start = buf.find(b"<")
-            if start < 0:
-                buf.clear()
-                return
-            end = buf.find(b">", start)
-            if end < 0:
-                del buf[:start]
-                return
-            words = buf[start + 1 : end].decode("ascii", "replace").split()
-            del buf[: end + 1]
-            if not words:
-                continue
-            cmd = words[0]
-            if cmd == "send" and conn.state in ("open", "raw"):
-                wire = _parse_send(words)
-                if wire is None:
-                    self.counters["rx_malformed"] += 1
-                    continue
-                conn.rx += 1
-                conn.quiet_until = 0.0  # it has read our "< ok >": frames may flow
-                msg = can.Message(arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id, data=wire.data)
-                self._inputs.append(_Input(now, msg, wire, conn))
-            elif cmd == "open" and conn.state == "hi" and len(words) == 2:
-                conn.state = "open"
-                self._write(conn, b"< ok >")
-            elif cmd == "rawmode" and conn.state in ("open", "raw"):
-                conn.state = "raw"
-                conn.quiet_until = time.monotonic() + RAWMODE_QUIET_S
-                self._write(conn, b"< ok >")
-            elif cmd == "echo":
-                self._write(conn, b"< echo >")
-            # anything else (bcmmode commands, filters, ...) is ignored: python-can never sends it,
-            # and an "< error >" line would be read by its client as a CAN error frame
-
-    def _to_clients(self, data: bytes, skip: _Conn | None, now: float) -> None:
-        for c in list(self._clients):
-            if c is skip or c.state != "raw":
-                continue
-            if now < c.quiet_until:
-                c.dropped += 1
-                continue
-            c.tx += 1
-            self._write(c, data)
-
-    def _write(self, conn: _Conn, data: bytes) -> None:
-        conn.out += data
-        self._flush(conn)
-
-    def _flush(self, conn: _Conn) -> None:
-        if not conn.out:
-            return
-        try:
-            n = conn.sock.send(conn.out)
-        except (BlockingIOError, InterruptedError):
-            n = 0
-        except OSError:
-            self._drop(conn)
-            return
-        del conn.out[:n]
-        if len(conn.out) > MAX_CLIENT_BACKLOG:
-            self._log(f"{conn.peer}: does not read its frames ({len(conn.out)} bytes queued); dropped")
-            self._drop(conn)
-
-    def _drop(self, conn: _Conn) -> None:
-        for group in (self._clients, self._controls):
-            if conn in group:
-                group.remove(conn)
-        try:
-            conn.sock.close()
-        except OSError:
-            pass
-
     # ------------------------------------------------------------------ control
 
-    def _control_lines(self, conn: _Conn) -> None:
-        while True:
-            nl = conn.inbuf.find(b"\n")
-            if nl < 0:
-                return
-            line = bytes(conn.inbuf[:nl]).strip()
-            del conn.inbuf[: nl + 1]
-            if not line:
-                continue
-
-            def reply(answer: dict, conn: _Conn = conn) -> None:
-                if conn in self._controls:
-                    self._write(conn, json.dumps(answer).encode() + b"\n")
-
-            try:
-                req = json.loads(line)
-            except ValueError as exc:
-                reply({"ok": False, "error": f"not a JSON object: {exc}"})
-                continue
-            self._posted.append((self._dispatch, (req, reply)))
+    def _submit(self, req: Any, reply: Reply) -> None:
+        """A control request, from the control channel or :meth:`request`: answered in :meth:`_process`."""
+        self._posted.append((self._dispatch, (req, reply)))
 
     def _dispatch(self, req: Any, reply: Reply) -> None:
         """One control request, in the loop thread. ``reply`` is called once (maybe later: power cycle)."""
-        try:
-            if not isinstance(req, dict):
-                raise ValueError("a request is a JSON object such as {\"cmd\": \"status\"}")
-            cmd = req.get("cmd")
-            handler = _COMMANDS.get(cmd)  # type: ignore[arg-type]
-            if handler is None:
-                raise ValueError(f"unknown command {cmd!r}; known: {', '.join(_COMMANDS)}")
-            answer = handler(self, req, reply)
-        except (ValueError, TypeError, KeyError) as exc:
-            text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
-            reply({"ok": False, "error": str(text)})
-            return
-        if answer is not None:
-            reply({"ok": True, **answer})
+        dispatch(self._commands, req, reply)
 
     def _cmd_status(self, req: dict, reply: Reply) -> dict:
         now = time.monotonic()
@@ -851,7 +633,7 @@ class RealtimeEmulator:
             "scheduling": self.scheduling,
             "flash": None if self.bench.flash is None else str(self.bench.flash.path),
             "socketcand": _addr(self.socketcand_address),
-            "clients": len(self._clients),
+            "clients": 0 if self._socketcand is None else len(self._socketcand.conns),
             "counters": dict(self.counters),
             "lateness": self.lateness.summary(),
             "wakeup": self.wakeup.summary(),
@@ -956,13 +738,8 @@ class RealtimeEmulator:
             else:
                 self.bench.persist()
         finally:
-            for conn in self._controls:  # answers already queued (e.g. to "stop") still go out
-                try:
-                    conn.sock.setblocking(True)
-                    conn.sock.settimeout(0.5)
-                    conn.sock.sendall(conn.out)
-                except OSError:
-                    pass
+            if self._control is not None:  # answers already queued (e.g. to "stop") still go out
+                self._control.send_pending()
             self._stopping = True
             if self._reader is not None:
                 self._reader.join(READER_POLL_S * 5)
@@ -971,11 +748,9 @@ class RealtimeEmulator:
                 self.bus.shutdown()
 
     def _close_sockets(self) -> None:
-        for conn in [*self._clients, *self._controls]:
-            self._drop(conn)
-        for s in (self._sc_listener, self._ctl_listener):
-            if s is not None:
-                s.close()
+        for server in (self._socketcand, self._control):
+            if server is not None:
+                server.close()
         for fd in (self._wake_r, self._wake_w):
             try:
                 os.close(fd)
@@ -984,71 +759,6 @@ class RealtimeEmulator:
         self._wake_r = self._wake_w = -1
 
 
-_COMMANDS: dict[str, Callable[[RealtimeEmulator, dict, Reply], dict | None]] = {
-    "status": RealtimeEmulator._cmd_status,
-    "power": RealtimeEmulator._cmd_power,
-    "fault": RealtimeEmulator._cmd_fault,
-    "faults": RealtimeEmulator._cmd_faults,
-    "bitrate": RealtimeEmulator._cmd_bitrate,
-    "stats": RealtimeEmulator._cmd_stats,
-    "save": RealtimeEmulator._cmd_save,
-    "stop": RealtimeEmulator._cmd_stop,
-}
-
 
 def _addr(address: tuple[str, int] | None) -> str | None:
     return None if address is None else f"{address[0]}:{address[1]}"
-
-
-# ---------------------------------------------------------------------------------------------------
-# the control client
-
-
-class ControlError(RuntimeError):
-    """The emulator is not reachable, or it answered ``ok: false``; the message says which."""
-
-    def __init__(self, message: str, *, unreachable: bool = False) -> None:
-        super().__init__(message)
-        self.unreachable = unreachable
-
-
-def control_request(port: int, req: dict, *, host: str = LOCALHOST, timeout: float | None = None) -> dict:
-    """Send one request to a running emulator's control port and return its answer (``ok`` true).
-    Raises :class:`ControlError` when nothing listens there, the connection fails, or the answer is an error."""
-    if timeout is None:
-        timeout = 10.0 + float(req.get("off_time") or 0.0)
-    where = f"{host}:{port}"
-    try:
-        sock = socket.create_connection((host, port), timeout=timeout)
-    except ConnectionRefusedError:
-        raise ControlError(f"no emulator is running with its control channel on {where} (connection refused); "
-                           f"start one with 'ckesc emulate --control {port} ...'", unreachable=True) from None
-    except OSError as exc:
-        raise ControlError(f"cannot reach the emulator's control channel on {where}: {exc.strerror or exc}",
-                           unreachable=True) from None
-    with sock:
-        try:
-            sock.sendall(json.dumps(req).encode() + b"\n")
-            data = bytearray()
-            while b"\n" not in data:
-                chunk = sock.recv(65536)
-                if not chunk:
-                    break
-                data += chunk
-        except TimeoutError:
-            raise ControlError(f"no answer from the emulator on {where} within {timeout} s", unreachable=True) from None
-        except OSError as exc:
-            if exc.errno in (errno.ECONNRESET, errno.EPIPE):
-                raise ControlError(f"the emulator on {where} closed the connection", unreachable=True) from None
-            raise ControlError(f"control connection to {where} failed: {exc}", unreachable=True) from None
-    line = bytes(data).split(b"\n", 1)[0]
-    if not line:
-        raise ControlError(f"the emulator on {where} closed the connection without answering", unreachable=True)
-    try:
-        answer = json.loads(line)
-    except ValueError:
-        raise ControlError(f"{where} answered something that is not JSON: {line[:200]!r}") from None
-    if not isinstance(answer, dict) or not answer.get("ok"):
-        error = answer.get("error") if isinstance(answer, dict) else answer
-        raise ControlError(str(error))
-    return answer

@@ -28,8 +28,10 @@ from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_me
 
 from ckesc.cli import main
 from ckesc.emulator.bench import Bench
+from ckesc.emulator.control import control_request
 from ckesc.emulator.flash import FlashStore
-from ckesc.emulator.realtime import Histogram, RealtimeEmulator, _fmt_frame, _parse_send, control_request
+from ckesc.emulator.realtime import Histogram, RealtimeEmulator
+from ckesc.emulator.socketcand import _parse_send, fmt_frame
 from ckesc.protocol import Decoder, Frame, Kind, WireFrame, decode, encode
 
 MSG1_PERIOD = 0.020  # default MSG1 interval: 10 x 2 ms (R9)
@@ -418,11 +420,11 @@ def test_socketcand_hub_echoes_to_every_client(virtual):
 
 def test_socketcand_text_matches_python_can_client():
     wire = encode("msg1", {"speed": 1234, "pwm": 1000, "status": 0x0100}, source=5)
-    text = _fmt_frame(wire, 1700000000.25).decode()
+    text = fmt_frame(wire, 1700000000.25).decode()
     msg = convert_ascii_message_to_can_message(text)
     assert text == "< frame 1F4E5205 1700000000.250000 D204E8030001C0 >"
     assert (msg.arbitration_id, bytes(msg.data), msg.is_extended_id) == (wire.arbitration_id, wire.data, True)
-    assert convert_ascii_message_to_can_message(_fmt_frame(WireFrame(0x123, b"", 0.0, False), 1.5).decode()).dlc == 0
+    assert convert_ascii_message_to_can_message(fmt_frame(WireFrame(0x123, b"", 0.0, False), 1.5).decode()).dlc == 0
 
     sent = convert_can_message_to_ascii_message(msg_of(wire))  # "< send 1F4E5205 7 d2 4 e8 3 0 1 c0 >"
     assert _parse_send(sent[1:-1].split()) == WireFrame(wire.arbitration_id, wire.data, 0.0, True)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from ckesc.emulator.realtime import control_request
+from ckesc.emulator.control import control_request
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -1,0 +1,121 @@
+"""The real-time emulator's socketcand hub (``ckesc emulate --socketcand PORT``, :mod:`.realtime`).
+
+The socketcand ASCII protocol on 127.0.0.1, as a hub: python-can's stock
+``can.Bus(interface="socketcand", host="127.0.0.1", port=P, channel="can0")`` connects.
+Handshake ``< hi >``, ``< open NAME >`` (any name) -> ``< ok >``, ``< rawmode >`` -> ``< ok >``;
+then frames go out as ``< frame ID SEC.USEC DATA >`` (ID 8 hex digits for 29-bit ids, 3 for
+11-bit; DATA hex, no spaces) and come in as ``< send ID LEN B0 B1 ... >``. A client gets no
+frames during the first 50 ms after its rawmode ``< ok >`` (python-can reads each handshake
+reply with a single ``recv()``), unless it sends a frame first. Every frame a client sends is
+echoed to every client, the sender included, stamped with its arrival time, so that a client
+can measure answer delays from bus timestamps at both ends (set ``echo_own=False`` for
+SocketCAN's default, where the sender does not see its own frames). ``< echo >`` is answered;
+other commands are ignored. Classic CAN only.
+
+:class:`SocketcandServer` speaks the protocol; the scheduler owns it: it hands each frame a client
+sends to the ESCs (``on_frame``) and decides which frames go out to the clients, and with which stamp
+(:meth:`SocketcandServer.to_clients` with :func:`fmt_frame`).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable
+
+import can
+
+from ..protocol.frame import WireFrame
+from .tcp import Conn, TcpServer
+
+RAWMODE_QUIET_S = 0.050  # no frames to a client for this long after its rawmode "< ok >"
+
+
+def fmt_frame(wire: Any, stamp: float) -> bytes:
+    """``< frame ID SEC.USEC DATA >`` as socketcand writes it."""
+    sec, usec = divmod(round(stamp * 1e6), 1_000_000)
+    can_id = f"{wire.arbitration_id & 0x1FFFFFFF:08X}" if wire.is_extended_id else f"{wire.arbitration_id & 0x7FF:03X}"
+    return f"< frame {can_id} {sec}.{usec:06d} {bytes(wire.data).hex().upper()} >".encode("ascii")
+
+
+def _parse_send(words: list[str]) -> WireFrame | None:
+    """``send ID LEN B0 B1 ...`` (python-can writes bytes without zero padding) -> a frame, None if malformed."""
+    try:
+        id_text = words[1]
+        can_id = int(id_text, 16)
+        length = int(words[2], 16)
+        data = bytes(int(b, 16) for b in words[3:])
+    except (IndexError, ValueError):
+        return None
+    extended = len(id_text) > 3 or can_id > 0x7FF
+    if length != len(data) or length > 8 or can_id > 0x1FFFFFFF:
+        return None
+    return WireFrame(can_id, data, 0.0, is_extended_id=extended)
+
+
+class SocketcandServer(TcpServer):
+    """The socketcand clients. A frame a client sends goes to ``on_frame(t, msg, wire, conn)`` (``t``: the
+    read time); ``counters`` (the scheduler's) counts ``clients`` accepted and ``rx_malformed`` frames."""
+
+    def __init__(
+        self,
+        port: int,
+        *,
+        on_frame: Callable[[float, can.Message, WireFrame, Conn], None],
+        counters: dict[str, int],
+        log: Callable[[str], None],
+    ) -> None:
+        super().__init__(port, log)
+        self._on_frame = on_frame
+        self._counters = counters
+
+    def accepted(self, conn: Conn) -> None:
+        self._counters["clients"] += 1
+        self.write(conn, b"< hi >")
+
+    def received(self, conn: Conn, now: float) -> None:
+        buf = conn.inbuf
+        while True:
+            start = buf.find(b"<")
+            if start < 0:
+                buf.clear()
+                return
+            end = buf.find(b">", start)
+            if end < 0:
+                del buf[:start]
+                return
+            words = buf[start + 1 : end].decode("ascii", "replace").split()
+            del buf[: end + 1]
+            if not words:
+                continue
+            cmd = words[0]
+            if cmd == "send" and conn.state in ("open", "raw"):
+                wire = _parse_send(words)
+                if wire is None:
+                    self._counters["rx_malformed"] += 1
+                    continue
+                conn.rx += 1
+                conn.quiet_until = 0.0  # it has read our "< ok >": frames may flow
+                msg = can.Message(arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id, data=wire.data)
+                self._on_frame(now, msg, wire, conn)
+            elif cmd == "open" and conn.state == "hi" and len(words) == 2:
+                conn.state = "open"
+                self.write(conn, b"< ok >")
+            elif cmd == "rawmode" and conn.state in ("open", "raw"):
+                conn.state = "raw"
+                conn.quiet_until = time.monotonic() + RAWMODE_QUIET_S
+                self.write(conn, b"< ok >")
+            elif cmd == "echo":
+                self.write(conn, b"< echo >")
+            # anything else (bcmmode commands, filters, ...) is ignored: python-can never sends it,
+            # and an "< error >" line would be read by its client as a CAN error frame
+
+    def to_clients(self, data: bytes, skip: Conn | None, now: float) -> None:
+        """``data`` (formatted frames) to every client in raw mode but ``skip``, unless it is still quiet."""
+        for c in list(self.conns):
+            if c is skip or c.state != "raw":
+                continue
+            if now < c.quiet_until:
+                c.dropped += 1
+                continue
+            c.tx += 1
+            self.write(c, data)
