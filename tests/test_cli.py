@@ -13,7 +13,8 @@ from pathlib import Path
 import can
 import pytest
 
-from ckesc.cli import decode_lines, main, parse_candump
+from ckesc.cli import main
+from ckesc.evidence.candump import decode_lines, parse_candump
 from ckesc.protocol import BY_NAME, CATALOGUE
 
 MSG1_LINE = "(1700000000.123456) can0 1F4E5205#3412E8030181C0"  # MSG1 from node 5, LOWEST, tid 0
