@@ -18,7 +18,6 @@ import argparse
 import io
 import json
 import os
-import re
 import sys
 from typing import IO, Any, Callable, Sequence
 
@@ -29,11 +28,10 @@ from .evidence.candump import decode_lines
 from .evidence.checklog import add_check_log_command
 from .harness.html_report import add_report_command
 from .protocol import catalogue as cat
-from .protocol.catalogue import Field, FrameSpec, Layout
+from .protocol.assignments import AssignmentError, chosen_layout, encode_warnings, parse_assignments, parse_int
 from .protocol.errors import EncodeError
-from .protocol.frame import FALLBACK_PRIORITY, Decoder, encode, pick_response_layout
-from .protocol.ids import RESERVED_NODE_IDS, Kind, Priority
-from .protocol.legality import illegal_fields
+from .protocol.frame import FALLBACK_PRIORITY, Decoder, encode
+from .protocol.ids import Kind, Priority
 from .run import add_run_command
 from .selftest import add_selftest_command
 
@@ -63,25 +61,16 @@ class UsageError(Exception):
 Handler = Callable[[argparse.Namespace], int]
 
 
-def _int(text: str) -> int:
-    """Decimal or 0x-hex (also 0b/0o); leading zeros are read as decimal ("08" is 8)."""
-    text = text.strip()
-    try:
-        return int(text, 0)
-    except ValueError:
-        return int(text, 10)  # "08", "010": decimal; raises ValueError for anything else
-
-
 def _int_arg(text: str) -> int:
     try:
-        return _int(text)
+        return parse_int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not an integer: {text!r} (decimal or 0x-hex)") from None
 
 
 def _priority_arg(text: str) -> int:
     try:
-        return _int(text)
+        return parse_int(text)
     except ValueError:
         pass
     try:
@@ -148,105 +137,16 @@ def add_decode_command(sub: argparse._SubParsersAction) -> None:
 # ---------------------------------------------------------------------------------------------------
 # ckesc encode
 
-_LIST_FIELDS = ("channels", "payload")  # always lists, even with one value
-#: Throttle ranges of the document (4.4.15-4.4.17); larger values are encodable, what a device does is OBSERVE (R6).
-_THROTTLE_MAX = {"throttle14": cat.THROTTLE_MAX, "throttle12": cat.THROTTLE_MAX, "throttle10": cat.THROTTLE_10B_MAX}
-
-
-def _candidate_fields(spec: FrameSpec, name: str) -> list[Field]:
-    return [f for lay in spec.all_layouts for f in lay.fields if f.name == name]
-
-
-def _named_value(spec: FrameSpec, key: str, text: str) -> int | None:
-    """A code or flag name for a field value: ``option=write``, ``command=suspend``, ``color=red+green``."""
-    want = text.strip().lower().replace("_", " ")
-    for f in _candidate_fields(spec, key):
-        if f.codes is not None:
-            for code, label in f.codes.items():
-                if label.lower().replace("_", " ") == want:
-                    return code
-        if f.flags is not None:
-            total = 0
-            for part in re.split(r"[+|]", text):
-                member = f.flags.__members__.get(part.strip().upper())
-                if member is None:
-                    break
-                total |= int(member)
-            else:
-                return total
-    return None
-
-
-def parse_assignments(spec: FrameSpec, items: Sequence[str]) -> dict[str, Any]:
-    """``key=value`` words into field values: decimal or 0x-hex, comma lists, code names."""
-    values: dict[str, Any] = {}
-    for item in items:
-        key, eq, text = item.partition("=")
-        key = key.strip()
-        if not eq or not key:
-            raise UsageError(f"{item!r} is not key=value")
-        if key in values:
-            raise UsageError(f"field {key} is given twice")
-        try:
-            if "," in text or key in _LIST_FIELDS:
-                values[key] = [_int(part) for part in text.split(",") if part.strip()]
-            else:
-                values[key] = _int(text)
-        except ValueError:
-            named = None if "," in text else _named_value(spec, key, text)
-            if named is None:
-                raise UsageError(f"{key}={text!r}: not an integer (decimal or 0x-hex) nor a code name of {spec.name}.{key}") from None
-            values[key] = named
-    return values
-
-
-def _legal_text(f: Field) -> str:
-    if f.codes is not None:
-        return "one of " + ", ".join(f"{code} ({label})" for code, label in f.codes.items())
-    lo, hi = f.legal if f.legal is not None else (0, f.mask)
-    return f"{lo}..{hi}"
-
-
-def _chosen_layout(spec: FrameSpec, kind: Kind, data: bytes, values: dict[str, Any], layout: str | None) -> Layout | None:
-    """The layout :func:`encode` used (for the legality warnings)."""
-    if kind is Kind.MESSAGE:
-        size = len(data) - spec.has_tail
-        return spec.message_layout(size)
-    if kind is Kind.REQUEST:
-        return spec.request
-    if layout is not None:
-        return next((lay for lay in spec.responses if lay.name == layout), None)
-    return pick_response_layout(spec, values)  # encode's own choice, so the warnings name the same fields
-
-
-def encode_warnings(spec: FrameSpec, layout: Layout | None, values: dict[str, Any], source: int, destination: int | None) -> list[str]:
-    """Values the wire format carries but the document does not allow (the suite sends them on purpose)."""
-    out = []
-    if layout is not None:
-        for f, value in illegal_fields(layout, values):
-            rule = f"; ignored by rule {f.rejected_by}" if f.rejected_by else ""
-            out.append(f"{spec.name}.{f.name}={value} is outside the document's legal range {_legal_text(f)}{rule}")
-        top = _THROTTLE_MAX.get(layout.codec)
-        if top is not None:
-            for i, v in enumerate(values.get("channels") or ()):
-                if isinstance(v, int) and v > top:
-                    out.append(f"{spec.name}.channels[{i}]={v} is outside the document's throttle range 0..{top} (R6: OBSERVE)")
-            group = values.get("group")
-            groups = cat.THROTTLE_GROUPS
-            if layout.codec == "throttle12" and isinstance(group, int) and group not in groups:
-                out.append(f"{spec.name}.group={group} is outside the document's legal range {groups.start}..{groups.stop - 1}")
-    for label, node in (("source", source), ("destination", destination)):
-        if node in RESERVED_NODE_IDS:
-            out.append(f"{label} node id {node} is reserved (F7)")
-    return out
-
 
 def _run_encode(args: argparse.Namespace) -> int:
     try:
         spec = cat.spec(args.name)
     except KeyError:
         raise UsageError(f"no frame {args.name!r}; see 'ckesc frames' (names: {', '.join(cat.BY_NAME)})") from None
-    values = parse_assignments(spec, args.fields)
+    try:
+        values = parse_assignments(spec, args.fields)
+    except AssignmentError as exc:
+        raise UsageError(str(exc)) from None
     kind = Kind.RESPONSE if args.response else (Kind.REQUEST if spec.service else Kind.MESSAGE)
     if spec.service and args.destination is None:
         raise UsageError(f"{spec.name} is a service ({spec.type_id}): give --destination N (the node id it goes to)")
@@ -269,7 +169,7 @@ def _run_encode(args: argparse.Namespace) -> int:
         raise UsageError(text if text.startswith(spec.name) else f"{spec.name} {text}") from None
     except (TypeError, ValueError) as exc:  # defensive: never a traceback for bad input
         raise UsageError(f"{spec.name}: cannot encode {values}: {exc}") from None
-    layout = _chosen_layout(spec, kind, wire.data, values, args.layout)
+    layout = chosen_layout(spec, kind, wire.data, values, args.layout)
     for warning in encode_warnings(spec, layout, values, args.source, args.destination):
         print(f"ckesc encode: warning: {warning}", file=sys.stderr)
     print(wire)
@@ -361,7 +261,7 @@ def _node_ids(text: str) -> list[int]:
             continue
         lo, dash, hi = part.partition("-")
         try:
-            first, last = (_int(lo), _int(hi)) if dash else (_int(part), _int(part))
+            first, last = (parse_int(lo), parse_int(hi)) if dash else (parse_int(part), parse_int(part))
         except ValueError:
             raise argparse.ArgumentTypeError(f"not a node id list: {text!r} (e.g. 1,2,3 or 1-20)") from None
         nodes.extend(range(first, last + 1))
@@ -389,7 +289,7 @@ def _fault_spec(text: str | None, nodes: list[int]) -> list[str] | dict[int, lis
             everywhere.append(name)
             continue
         try:
-            node = _int(node_text)
+            node = parse_int(node_text)
         except ValueError:
             raise UsageError(f"--faults {item!r}: {node_text!r} is not a node id") from None
         if node not in nodes:
@@ -536,7 +436,7 @@ def _control_port(args: argparse.Namespace) -> int:
     env = os.environ.get("CKESC_CONTROL_PORT")
     if env:
         try:
-            return _int(env)
+            return parse_int(env)
         except ValueError:
             raise UsageError(f"CKESC_CONTROL_PORT={env!r} is not a port number") from None
     raise UsageError("give --port P (the emulator's --control port) or set CKESC_CONTROL_PORT")
