@@ -23,17 +23,17 @@ from typing import IO, Any, Callable, Sequence
 
 import can
 
-from . import __version__
-from .evidence.candump import decode_lines
-from .evidence.checklog import add_check_log_command
-from .harness.html_report import add_report_command
-from .protocol import catalogue as cat
-from .protocol.assignments import AssignmentError, chosen_layout, encode_warnings, parse_assignments, parse_int
-from .protocol.errors import EncodeError
-from .protocol.frame import FALLBACK_PRIORITY, Decoder, encode
-from .protocol.ids import Kind, Priority
-from .run import add_run_command
-from .selftest import add_selftest_command
+from .. import __version__
+from ..evidence.candump import decode_lines
+from ..evidence.checklog import add_check_log_command
+from ..harness.html_report import add_report_command
+from ..protocol import catalogue as cat
+from ..protocol.assignments import AssignmentError, chosen_layout, encode_warnings, parse_assignments, parse_int
+from ..protocol.errors import EncodeError
+from ..protocol.frame import FALLBACK_PRIORITY, Decoder, encode
+from ..protocol.ids import Kind, Priority
+from ..run import add_run_command
+from ..selftest import add_selftest_command
 
 EXIT_OK = 0
 EXIT_FRAMES_FAILED = 1
@@ -320,9 +320,9 @@ def _run_emulate(args: argparse.Namespace) -> int:
     import threading
     import time
 
-    from .emulator.bench import Bench
-    from .emulator.flash import FlashError
-    from .emulator.realtime import RealtimeEmulator, stagger_boot
+    from ..emulator.bench import Bench
+    from ..emulator.flash import FlashError
+    from ..emulator.realtime import RealtimeEmulator, stagger_boot
 
     if args.socketcand is None and args.interface is None:
         raise UsageError("give --socketcand PORT (a hub for python-can's socketcand client) or --interface/--channel (a python-can bus)")
@@ -385,7 +385,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
 
 
 def add_emulate_command(sub: argparse._SubParsersAction) -> None:
-    from .protocol.catalogue import DEFAULT_BITRATE
+    from ..protocol.catalogue import DEFAULT_BITRATE
 
     p = sub.add_parser(
         "emulate",
@@ -461,7 +461,7 @@ def _control_request(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _run_control(args: argparse.Namespace) -> int:
-    from .emulator.realtime import ControlError, control_request
+    from ..emulator.realtime import ControlError, control_request
 
     if args.action == "power" and args.state == "cycle" and args.off_time is None:
         args.off_time = 1.0
@@ -567,6 +567,3 @@ def _silence_stdout() -> None:
     except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
         pass
 
-
-if __name__ == "__main__":
-    sys.exit(main())
