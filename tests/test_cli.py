@@ -379,7 +379,8 @@ def test_installed_script_survives_a_closed_pipe(tmp_path):
 def test_run_passes_the_trace_format_to_the_plugin():
     import argparse
 
-    from ckesc.run import add_run_command, pytest_argv
+    from ckesc.cli.run import add_run_command
+    from ckesc.run import pytest_argv
 
     parser = argparse.ArgumentParser()
     add_run_command(parser.add_subparsers())

@@ -1,6 +1,6 @@
 """The ``ckesc`` command line.
 
-Each subcommand is one module of this package (``decode``, ``encode``, ...) with one
+Each subcommand is one module of this package (``run``, ``decode``, ``check_log``, ...) with one
 ``add_<name>_command(subparsers)`` function that declares its arguments and sets ``handler`` (a function
 ``(args) -> exit code``): it parses the arguments, calls the library and maps its errors to exit codes.
 :data:`COMMANDS` lists them and :func:`main` builds the parser from that list. Adding a command is one
@@ -23,16 +23,16 @@ import sys
 from typing import Callable, Sequence
 
 from .. import __version__
-from ..evidence.checklog import add_check_log_command
-from ..harness.html_report import add_report_command
-from ..run import add_run_command
-from ..selftest import add_selftest_command
+from .check_log import add_check_log_command
 from .common import EXIT_BROKEN_PIPE, EXIT_INTERRUPTED, EXIT_USAGE, Handler, UsageError, _Parser
 from .control import add_control_command
 from .decode import add_decode_command
 from .emulate import add_emulate_command
 from .encode import add_encode_command
 from .frames import add_frames_command
+from .report import add_report_command
+from .run import add_run_command
+from .selftest import add_selftest_command
 
 #: The subcommands, in help order. Each adds its parser and sets ``handler``.
 COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [

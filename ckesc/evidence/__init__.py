@@ -2,7 +2,8 @@
 
 ``rules`` is the sans-IO engine (:class:`BusRules`: one frame in, violations out, per-node statistics
 in bounded memory); ``candump`` parses candump lines; ``logs`` reads captures (candump, and whatever
-python-can's ``LogReader`` reads); ``checklog`` is ``ckesc check-log``.
+python-can's ``LogReader`` reads); ``checklog`` checks a capture against
+them (the library of ``ckesc check-log``).
 """
 
 from .rules import BusRules, Violation
