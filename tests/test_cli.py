@@ -13,7 +13,8 @@ from pathlib import Path
 import can
 import pytest
 
-from ckesc.cli import decode_lines, main, parse_candump
+from ckesc.cli import main
+from ckesc.evidence.candump import decode_lines, parse_candump
 from ckesc.protocol import BY_NAME, CATALOGUE
 
 MSG1_LINE = "(1700000000.123456) can0 1F4E5205#3412E8030181C0"  # MSG1 from node 5, LOWEST, tid 0
@@ -378,7 +379,8 @@ def test_installed_script_survives_a_closed_pipe(tmp_path):
 def test_run_passes_the_trace_format_to_the_plugin():
     import argparse
 
-    from ckesc.run import add_run_command, pytest_argv
+    from ckesc.cli.run import add_run_command
+    from ckesc.run import pytest_argv
 
     parser = argparse.ArgumentParser()
     add_run_command(parser.add_subparsers())

@@ -1,8 +1,9 @@
 """Evidence from the bus itself: the rules that hold at all times, judged over a stream of frames.
 
 ``rules`` is the sans-IO engine (:class:`BusRules`: one frame in, violations out, per-node statistics
-in bounded memory); ``logs`` reads captures (candump, and whatever python-can's ``LogReader`` reads);
-``checklog`` is ``ckesc check-log``.
+in bounded memory); ``candump`` parses candump lines; ``logs`` reads captures (candump, and whatever
+python-can's ``LogReader`` reads); ``checklog`` checks a capture against
+them (the library of ``ckesc check-log``).
 """
 
 from .rules import BusRules, Violation

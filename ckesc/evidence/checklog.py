@@ -10,19 +10,13 @@ and do not change the exit code (the summary says how many there were).
 
 from __future__ import annotations
 
-import argparse
 import html
-import json
-import sys
-from pathlib import Path
 from typing import Any
 
 from ..protocol import catalogue as cat
-from ..protocol.catalogue import BAUD_RATES
 from .logs import capture_format, read_capture
 from .rules import BusRules
 
-EXIT_OK, EXIT_VIOLATIONS, EXIT_USAGE = 0, 1, 2
 _BAD_KEPT = 100  # damaged records listed; the rest counted
 DEFAULT_TOLERANCE_S = 0.002  # a USB adapter's timestamps: about 1 ms of jitter, plus an ESC's 1 ms scheduling tick
 
@@ -189,52 +183,3 @@ def summary_html(s: dict[str, Any]) -> str:
         out.append("</table>")
     out.append("</body></html>")
     return "\n".join(out)
-
-
-# ------------------------------------------------------------------------------------------ command
-def _bitrate_arg(text: str) -> int:
-    try:
-        value = int(text.lower().replace("k", "000").replace("m", "000000"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a bit rate: {text!r}") from None
-    if value not in BAUD_RATES.values():
-        raise argparse.ArgumentTypeError(f"{value} is not a CKESC bit rate ({', '.join(map(str, sorted(BAUD_RATES.values())))})")
-    return value
-
-
-def _run(args: argparse.Namespace) -> int:
-    path = args.file
-    if not Path(path).is_file():
-        print(f"ckesc check-log: error: no such file: {path}", file=sys.stderr)
-        return EXIT_USAGE
-    summary = check_capture(path, bitrate=args.bitrate, tolerance=args.tolerance / 1000, complete=args.complete)
-    if summary["frames"] == 0 and summary["damaged"]["count"]:
-        first = summary["damaged"]["first"][0]
-        print(f"ckesc check-log: error: no frame could be read from {path}: {first['reason']}", file=sys.stderr)
-        return EXIT_USAGE
-    try:
-        if args.json:
-            Path(args.json).write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
-        if args.html:
-            Path(args.html).write_text(summary_html(summary), encoding="utf-8")
-    except OSError as exc:
-        print(f"ckesc check-log: error: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
-        return EXIT_USAGE
-    print(summary_text(summary))
-    return EXIT_VIOLATIONS if summary["violations"]["count"] else EXIT_OK
-
-
-def add_check_log_command(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("check-log", help="check a capture (candump .log, .asc, .blf, ...) against the bus rules",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("file", metavar="FILE", help="the capture: candump -L .log, or any format python-can's LogReader reads")
-    p.add_argument("--json", metavar="OUT", help="write the summary as JSON")
-    p.add_argument("--html", metavar="OUT", help="write the summary as a self-contained HTML page")
-    p.add_argument("--bitrate", type=_bitrate_arg, default=cat.DEFAULT_BITRATE,
-                   help=f"the bus's bit rate, for frame durations (default {cat.DEFAULT_BITRATE}, the factory rate; a lower "
-                        "value than the real one only makes the timing checks more lenient)")
-    p.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE_S * 1000, metavar="MS",
-                   help=f"timing error of the capture's timestamps in ms (default {DEFAULT_TOLERANCE_S * 1000:g})")
-    p.add_argument("--complete", action="store_true",
-                   help="the capture holds every frame on the bus (no drops): a missing frame is then the sender's fault")
-    p.set_defaults(handler=_run)

@@ -15,7 +15,7 @@ which with the rules' ~2.1 us leaves ``ckesc check-log`` at its 160k frames/s ta
 at well under half of it in wall time on a loaded machine); it also stops at the first bad line, without
 its number. Splitting the common line form ``(ts) iface 1F4E5205#DATA`` ourselves costs 1.7 us (580k
 frames/s): check-log reaches 255k-272k frames/s of CPU time. Every other form (display form, remote and
-error frames, CAN FD, bare ``ID#DATA``, damage) goes through :func:`ckesc.cli.parse_candump`, which
+error frames, CAN FD, bare ``ID#DATA``, damage) goes through :func:`ckesc.evidence.candump.parse_candump`, which
 follows candump's conventions and names what is wrong with a line.
 """
 
@@ -25,6 +25,8 @@ import os
 from typing import Callable, Iterator
 
 import can
+
+from .candump import CandumpError, parse_candump
 
 FrameTuple = tuple  # (can_id, data, timestamp, extended, remote, error, own)
 OnBad = Callable[[int | None, str, str], None]
@@ -49,8 +51,6 @@ def read_capture(path: str, on_bad: OnBad) -> Iterator[FrameTuple]:
 
 def read_candump(path: str, on_bad: OnBad) -> Iterator[FrameTuple]:
     """A candump log, line by line (see the module docstring for why not python-can's reader)."""
-    from ..cli import CandumpError, parse_candump  # the CLI module registers check-log: import when used
-
     fromhex = bytes.fromhex
     with open(path, encoding="utf-8", errors="replace") as stream:  # undecodable bytes fail their line only
         for number, line in enumerate(stream, 1):

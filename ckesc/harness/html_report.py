@@ -17,7 +17,6 @@ from __future__ import annotations
 import html
 import io
 import json
-import sys
 from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
@@ -40,28 +39,6 @@ def build(out: Path) -> Path:
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")
     return path
-
-
-def add_report_command(sub) -> None:
-    p = sub.add_parser("report", help="(re)build report.html of a run from its results.json",
-                       description="Build REPORT_DIR/report.html from REPORT_DIR/results.json (what `ckesc run` wrote), "
-                                   "e.g. after an upgrade, or for a run copied from another machine.")
-    p.add_argument("report_dir", metavar="REPORT_DIR", help="a run's directory, e.g. reports/latest")
-    p.set_defaults(handler=_report_command)
-
-
-def _report_command(args) -> int:
-    out = Path(args.report_dir)
-    if not (out / "results.json").is_file():
-        print(f"ckesc report: no results.json in {out} (give a run's directory, e.g. reports/latest)", file=sys.stderr)
-        return 2
-    try:
-        path = build(out)
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:  # JSONDecodeError is a ValueError
-        print(f"ckesc report: {out / 'results.json'} is not a results record this version reads: {exc!r}", file=sys.stderr)
-        return 2
-    print(path)
-    return 0
 
 
 # ----------------------------------------------------------------------------------------- page

@@ -1,0 +1,89 @@
+"""The ``ckesc`` command line.
+
+Each subcommand is one module of this package (``run``, ``decode``, ``check_log``, ...) with one
+``add_<name>_command(subparsers)`` function that declares its arguments and sets ``handler`` (a function
+``(args) -> exit code``): it parses the arguments, calls the library and maps its errors to exit codes.
+:data:`COMMANDS` lists them and :func:`main` builds the parser from that list. Adding a command is one
+module and one entry in :data:`COMMANDS`; nothing else here needs to change. ``common`` holds what the
+commands share (exit codes, the parser class, :class:`UsageError`, argument types).
+
+Exit codes: 0 success; 1 the input had frames that do not decode (``decode``), the emulator
+answered a control request with an error (``control``) or could not write its flash file at the end
+(``emulate``); 2 usage or input the wire format cannot carry (``encode``), or the emulator cannot start
+(``emulate``: port in use, unreadable flash file, bus that does not open); 3 no emulator answers on
+the control port (``control``); 130 interrupted; 141 stdout closed early (``| head``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import os
+import sys
+from typing import Callable, Sequence
+
+from .. import __version__
+from .check_log import add_check_log_command
+from .common import EXIT_BROKEN_PIPE, EXIT_INTERRUPTED, EXIT_USAGE, Handler, UsageError, _Parser
+from .control import add_control_command
+from .decode import add_decode_command
+from .emulate import add_emulate_command
+from .encode import add_encode_command
+from .frames import add_frames_command
+from .report import add_report_command
+from .run import add_run_command
+from .selftest import add_selftest_command
+
+#: The subcommands, in help order. Each adds its parser and sets ``handler``.
+COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
+    add_run_command,
+    add_selftest_command,
+    add_report_command,
+    add_decode_command,
+    add_check_log_command,
+    add_encode_command,
+    add_frames_command,
+    add_emulate_command,
+    add_control_command,
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="ckesc", description="Tools for the CKESC UAVCAN Protocol 2.1 conformance suite.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for add in COMMANDS:
+        add(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, usage errors: a return code, as for every other outcome
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    handler: Handler | None = getattr(args, "handler", None)
+    if handler is None:
+        parser.print_help(sys.stderr)
+        return EXIT_USAGE
+    try:
+        return handler(args)
+    except UsageError as exc:
+        print(f"ckesc {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
+
+
+def _silence_stdout() -> None:
+    """After the reader of our stdout went away (``| head``), point stdout at /dev/null so that the
+    interpreter's final flush does not print a second BrokenPipeError (Python docs, 'Note on SIGPIPE')."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        pass

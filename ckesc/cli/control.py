@@ -1,0 +1,92 @@
+"""``ckesc control``: one request to the control channel of a running ``ckesc emulate``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from typing import Any
+
+from ..protocol.assignments import parse_int
+from .common import EXIT_FRAMES_FAILED, EXIT_OK, EXIT_UNREACHABLE, UsageError, _int_arg, _Parser
+
+
+def _control_port(args: argparse.Namespace) -> int:
+    if args.port is not None:
+        return args.port
+    env = os.environ.get("CKESC_CONTROL_PORT")
+    if env:
+        try:
+            return parse_int(env)
+        except ValueError:
+            raise UsageError(f"CKESC_CONTROL_PORT={env!r} is not a port number") from None
+    raise UsageError("give --port P (the emulator's --control port) or set CKESC_CONTROL_PORT")
+
+
+def _control_request(args: argparse.Namespace) -> dict[str, Any]:
+    action = args.action
+    if action == "power":
+        req: dict[str, Any] = {"cmd": "power", "action": args.state}
+        if args.state == "cycle":
+            req["off_time"] = args.off_time
+        elif args.off_time is not None:
+            raise UsageError("--off-time applies to 'power cycle' only")
+        return req
+    if action == "fault":
+        return {"cmd": "fault", "name": args.name, "on": args.state == "on", "node": args.node}
+    if action == "bitrate":
+        return {"cmd": "bitrate", "bitrate": args.bitrate}
+    if action == "stats":
+        return {"cmd": "stats", "reset": args.reset}
+    return {"cmd": action}
+
+
+def _run_control(args: argparse.Namespace) -> int:
+    from ..emulator.control import ControlError, control_request
+
+    if args.action == "power" and args.state == "cycle" and args.off_time is None:
+        args.off_time = 1.0
+    req = _control_request(args)
+    port = _control_port(args)
+    try:
+        answer = control_request(port, req, timeout=args.timeout)
+    except ControlError as exc:
+        print(f"ckesc control: error: {exc}", file=sys.stderr)
+        return EXIT_UNREACHABLE if exc.unreachable else EXIT_FRAMES_FAILED
+    print(json.dumps(answer, indent=1 if args.action in ("status", "faults") else None))
+    return EXIT_OK
+
+
+def add_control_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "control",
+        help="switch the power, faults and bit rate of a running 'ckesc emulate'",
+        description="Send one request to a running 'ckesc emulate --control PORT' and print its JSON answer. Usable as a "
+        "harness's power commands: 'ckesc control --port P power off' / 'power on' / 'power cycle --off-time 1.0' (which "
+        "returns once the power is back on). Exit 0 done, 1 the emulator refused (the message says why), 3 no emulator "
+        "answers on that port.",
+        epilog="examples: ckesc control --port 29536 status\n"
+        "          ckesc control --port 29536 fault answer_late on --node 3\n"
+        "          CKESC_CONTROL_PORT=29536 ckesc control power cycle --off-time 0.5",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--port", type=_int_arg, metavar="P", help="the emulator's control port (default: $CKESC_CONTROL_PORT)")
+    p.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for the answer (default 10, plus the off time)")
+    actions = p.add_subparsers(dest="action", metavar="ACTION", parser_class=_Parser, required=True)
+    actions.add_parser("status", help="power state, bit rate, per-ESC node ids, faults and counters, timing")
+    power = actions.add_parser("power", help="power off / on / cycle")
+    power.add_argument("state", choices=("off", "on", "cycle"))
+    power.add_argument("--off-time", type=float, metavar="S", help="cycle: seconds without power (default 1.0)")
+    fault = actions.add_parser("fault", help="switch a fault on or off")
+    fault.add_argument("name", metavar="NAME", help="fault name (ckesc control faults lists them)")
+    fault.add_argument("state", choices=("on", "off"))
+    fault.add_argument("--node", type=_int_arg, metavar="N", help="only the ESC with this node id (default: every ESC)")
+    actions.add_parser("faults", help="list the known faults")
+    bitrate = actions.add_parser("bitrate", help="set the emulated bus's bit rate")
+    bitrate.add_argument("bitrate", type=_int_arg, metavar="BIT/S")
+    stats = actions.add_parser("stats", help="frame lateness (send - due) and wake-up lateness")
+    stats.add_argument("--reset", action="store_true", help="start counting afresh")
+    actions.add_parser("save", help="write the flash file now")
+    actions.add_parser("stop", help="stop the emulator (power off, flash saved)")
+    p.set_defaults(handler=_run_control)

@@ -1,0 +1,63 @@
+"""``ckesc decode``: candump lines (FILE or stdin) to JSON, one object per frame line."""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import sys
+from typing import IO, Callable
+
+from ..evidence.candump import decode_lines
+from ..protocol.frame import Decoder
+from .common import EXIT_FRAMES_FAILED, EXIT_OK, UsageError
+
+
+def _open_input(path: str | None) -> tuple[IO[str], Callable[[], None]]:
+    """The text stream to read and how to let go of it (stdin is detached, not closed)."""
+    if path is None or path == "-":
+        buffer = getattr(sys.stdin, "buffer", None)
+        if buffer is None:  # already a text stream (tests, embedding)
+            return sys.stdin, lambda: None
+        # undecodable bytes become U+FFFD and that line fails to parse, instead of a UnicodeDecodeError
+        wrapper = io.TextIOWrapper(buffer, encoding="utf-8", errors="replace")
+        return wrapper, wrapper.detach
+    try:
+        stream = open(path, encoding="utf-8", errors="replace")  # universal newlines: CRLF logs are fine
+    except OSError as exc:
+        raise UsageError(f"cannot read {path}: {exc.strerror or exc}") from None
+    return stream, stream.close
+
+
+def _run_decode(args: argparse.Namespace) -> int:
+    stream, release = _open_input(args.file)
+    decoder = Decoder(nibble_order=args.nibble_order)
+    failed = 0
+    write = sys.stdout.write
+    dumps = json.JSONEncoder().encode
+    try:
+        for record in decode_lines(stream, decoder):  # streamed: one line in memory at a time
+            if "error" in record:
+                failed += 1
+            write(dumps(record) + "\n")
+    finally:
+        release()
+    return EXIT_FRAMES_FAILED if failed else EXIT_OK
+
+
+def add_decode_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "decode",
+        help="decode candump lines into JSON, one object per line",
+        description="Read candump lines (candump -L log, candump display form, or bare ID#DATA) from FILE or stdin "
+        "and print one JSON object per frame line. A line that does not decode prints "
+        '{"error": ..., "line": N, ...}. Exit 0 when every line decoded, 1 otherwise.',
+    )
+    p.add_argument("file", nargs="?", metavar="FILE", help="candump log; '-' or nothing: stdin")
+    p.add_argument(
+        "--nibble-order",
+        choices=("lsb", "swapped"),
+        default="lsb",
+        help="RawCommand_12b nibble order (R4; 'swapped' is the one alternative a DUT profile may select)",
+    )
+    p.set_defaults(handler=_run_decode)

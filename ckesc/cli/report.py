@@ -1,0 +1,30 @@
+"""``ckesc report``: its argument and exit code; :mod:`ckesc.harness.html_report` builds the page."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from ..harness.html_report import build
+
+
+def add_report_command(sub) -> None:
+    p = sub.add_parser("report", help="(re)build report.html of a run from its results.json",
+                       description="Build REPORT_DIR/report.html from REPORT_DIR/results.json (what `ckesc run` wrote), "
+                                   "e.g. after an upgrade, or for a run copied from another machine.")
+    p.add_argument("report_dir", metavar="REPORT_DIR", help="a run's directory, e.g. reports/latest")
+    p.set_defaults(handler=_report_command)
+
+
+def _report_command(args) -> int:
+    out = Path(args.report_dir)
+    if not (out / "results.json").is_file():
+        print(f"ckesc report: no results.json in {out} (give a run's directory, e.g. reports/latest)", file=sys.stderr)
+        return 2
+    try:
+        path = build(out)
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:  # JSONDecodeError is a ValueError
+        print(f"ckesc report: {out / 'results.json'} is not a results record this version reads: {exc!r}", file=sys.stderr)
+        return 2
+    print(path)
+    return 0

@@ -1,0 +1,44 @@
+"""``ckesc run``: its arguments; :mod:`ckesc.run` runs the suite with them."""
+
+from __future__ import annotations
+
+import argparse
+
+from .. import run as run_lib
+from ..harness.traces import TRACE_FORMATS
+
+
+def add_run_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run the conformance suite against a DUT and write reports",
+        description=run_lib.__doc__.split("\n\n")[1] if run_lib.__doc__ else None,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="Any other pytest option can follow `--`, e.g. `ckesc run -- -k set_freq -x`.",
+    )
+    g = p.add_argument_group("device under test")
+    g.add_argument("--dut", choices=("emulator", "bus"), default="emulator", help="default: emulator")
+    g.add_argument("--lane", choices=("simulated", "realtime"), default="simulated",
+                   help="for --dut emulator: simulated time (default) or a separate real-time process")
+    g.add_argument("--can-interface", help="python-can interface for --dut bus (else can.conf / CAN_INTERFACE)")
+    g.add_argument("--can-channel", help="python-can channel, e.g. can0")
+    g.add_argument("--can-bitrate", type=int, help="bit rate of the host's bus")
+    g.add_argument("--can-config", action="append", default=[], metavar="KEY=VALUE", help="extra bus argument (repeatable)")
+    g.add_argument("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
+    g.add_argument("--nodes", help="emulator: node ids of the emulated bench (default 1)")
+    g.add_argument("--profile", help="DUT profile name (fixtures/duts) or path")
+    g.add_argument("--power", choices=("emulator", "command", "manual", "none"), help="power control")
+    g.add_argument("--power-off-cmd", help="--power command: switches the DUT off")
+    g.add_argument("--power-on-cmd", help="--power command: switches the DUT on")
+    g.add_argument("--allow-motor-spin", action="store_true", default=None,
+                   help="allow non-zero throttle on a real ESC (propellers off!)")
+    g.add_argument("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")
+    g.add_argument("--emulator-seed", type=int, default=0)
+    o = p.add_argument_group("output")
+    o.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
+    o.add_argument("--strict", action="store_true", help="INCONCLUSIVE results fail the run too")
+    o.add_argument("--trace-format", choices=TRACE_FORMATS, default="blf",
+                   help="each test's CAN traffic under <run>/traces/: blf (default), asc, log (candump), none")
+    o.add_argument("-q", "--quiet", action="store_true", help="no per-test progress lines")
+    p.add_argument("pytest_args", nargs=argparse.REMAINDER, help="after --: passed to pytest")
+    p.set_defaults(handler=run_lib.run_command)
