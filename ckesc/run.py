@@ -13,13 +13,24 @@ with ``reports/latest`` pointing at it, and exits 0 only when no test FAILed or 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
+from pathlib import Path
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ABORTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
+def _suite_root() -> str:
+    """The directory holding the ``conformance`` package (a checkout, or site-packages of a wheel install):
+    pytest's rootdir, so that test ids read ``conformance/test_s4_4_22_set_freq.py::...`` however the
+    suite was installed and wherever it is run from."""
+    spec = importlib.util.find_spec("conformance")
+    locations = list(spec.submodule_search_locations or []) if spec else []
+    return str(Path(locations[0]).resolve().parent) if locations else "."
+
+
 def pytest_argv(args: argparse.Namespace) -> list[str]:
-    argv = ["--pyargs", "conformance", "-p", "no:cacheprovider", "--ckesc-summary", "--ckesc-reports", args.reports,
+    argv = ["--pyargs", "conformance", "-p", "no:cacheprovider", "--rootdir", _suite_root(), "--ckesc-summary", "--ckesc-reports", args.reports,
             "--dut", args.dut, "--lane", args.lane, "--ckesc-trace-format", args.trace_format,
             "-o", "console_output_style=count",
             # ckesc itself is the plugin and is imported before pytest starts: nothing of it needs rewriting

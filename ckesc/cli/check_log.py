@@ -32,9 +32,9 @@ def _run_check_log(args: argparse.Namespace) -> int:
         print(f"ckesc check-log: error: no such file: {path}", file=sys.stderr)
         return EXIT_USAGE
     summary = check_capture(path, bitrate=args.bitrate, tolerance=args.tolerance / 1000, complete=args.complete)
-    if summary["frames"] == 0 and summary["damaged"]["count"]:
-        first = summary["damaged"]["first"][0]
-        print(f"ckesc check-log: error: no frame could be read from {path}: {first['reason']}", file=sys.stderr)
+    if summary["frames"] == 0:
+        why = summary["damaged"]["first"][0]["reason"] if summary["damaged"]["count"] else "it holds no frame"
+        print(f"ckesc check-log: error: nothing readable in {path}: {why}", file=sys.stderr)
         return EXIT_USAGE
     try:
         if args.json:
@@ -45,6 +45,13 @@ def _run_check_log(args: argparse.Namespace) -> int:
         print(f"ckesc check-log: error: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
         return EXIT_USAGE
     print(summary_text(summary))
+    if summary["truncated"]:
+        cut = summary["truncated"]
+        if not args.allow_truncated:
+            print(f"ckesc check-log: error: {path} is truncated: {cut['detail']} (--allow-truncated judges what is there)",
+                  file=sys.stderr)
+            return EXIT_USAGE
+        print(f"ckesc check-log: warning: {path} is truncated: {cut['detail']}", file=sys.stderr)
     return EXIT_VIOLATIONS if summary["violations"]["count"] else EXIT_OK
 
 
@@ -61,4 +68,7 @@ def add_check_log_command(sub: argparse._SubParsersAction) -> None:
                    help=f"timing error of the capture's timestamps in ms (default {DEFAULT_TOLERANCE_S * 1000:g})")
     p.add_argument("--complete", action="store_true",
                    help="the capture holds every frame on the bus (no drops): a missing frame is then the sender's fault")
+    p.add_argument("--allow-truncated", action="store_true",
+                   help="a capture shorter than its header declares (BLF) is judged on what it holds, with a warning, "
+                        "instead of exit 2")
     p.set_defaults(handler=_run_check_log)

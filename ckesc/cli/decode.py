@@ -23,10 +23,34 @@ def _open_input(path: str | None) -> tuple[IO[str], Callable[[], None]]:
         wrapper = io.TextIOWrapper(buffer, encoding="utf-8", errors="replace")
         return wrapper, wrapper.detach
     try:
+        with open(path, "rb") as probe:
+            head = probe.read(4096)
         stream = open(path, encoding="utf-8", errors="replace")  # universal newlines: CRLF logs are fine
     except OSError as exc:
         raise UsageError(f"cannot read {path}: {exc.strerror or exc}") from None
+    kind = _binary_kind(head)
+    if kind:
+        stream.close()
+        raise UsageError(f"{path} is not candump text ({kind}): `ckesc check-log {path}` reads BLF, ASC and the other "
+                         "capture formats python-can reads")
     return stream, stream.close
+
+
+#: the first bytes of capture formats that are not text
+_MAGIC = ((b"LOGG", "a BLF file"), (b"\x1f\x8b", "gzip-compressed"), (b"MDF ", "an MF4 file"),
+          (b"SQLite format 3\0", "an SQLite database"))
+
+
+def _binary_kind(head: bytes) -> str | None:
+    """What a file that is not candump text is, from its first bytes (None: text, perhaps with a damaged
+    line, which decode reports as that line's error)."""
+    for magic, kind in _MAGIC:
+        if head.startswith(magic):
+            return kind
+    text = sum(32 <= b < 127 or b in (9, 10, 13) for b in head)
+    if head and (len(head) - text) * 10 > 3 * len(head):  # candump lines are printable ASCII; damage is a few bytes
+        return "a binary file"
+    return None
 
 
 def _run_decode(args: argparse.Namespace) -> int:

@@ -71,7 +71,7 @@ def _open_bus(args: argparse.Namespace) -> can.BusABC:
         kwargs.setdefault("preserve_timestamps", True)  # the due-time stamps reach the other buses
     try:
         return can.Bus(interface=args.interface, channel=args.channel, bitrate=args.bitrate, ignore_config=True, **kwargs)
-    except (can.CanError, ValueError, TypeError, OSError, ImportError) as exc:
+    except (can.CanError, ValueError, TypeError, OSError, ImportError, NotImplementedError) as exc:  # unknown interface: NotImplementedError
         raise UsageError(f"cannot open the {args.interface} bus on channel {args.channel!r}: {exc}") from None
 
 

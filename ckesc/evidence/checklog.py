@@ -4,7 +4,8 @@ Reads a candump log, ``.asc``, ``.blf`` or anything python-can's ``LogReader`` r
 :class:`~ckesc.evidence.rules.BusRules` over every frame, prints a summary per node (frames by type,
 report interval statistics, comm-loss events, violations with timestamps) and writes the same as JSON
 (``--json``) and a self-contained HTML page (``--html``). Exit 0: no rule broken; 1: a rule broken;
-2: the file cannot be read at all or bad arguments. Damaged records are listed with their line numbers
+2: nothing readable (an empty file, no frame, a header only), a capture cut short (a BLF file shorter than
+its header declares: the counts are printed; ``--allow-truncated`` judges what is there), or bad arguments. Damaged records are listed with their line numbers
 and do not change the exit code (the summary says how many there were).
 """
 
@@ -34,11 +35,17 @@ def check_capture(path: str, *, bitrate: int = cat.DEFAULT_BITRATE, tolerance: f
         if len(bad) < _BAD_KEPT:
             bad.append({"line": line, "reason": reason, "text": text[:200]})
 
+    truncated: dict[str, Any] = {}
+
+    def on_truncated(read: int, declared: int, detail: str) -> None:
+        truncated.update(read=read, declared=declared, detail=detail)
+
     feed = rules.feed
-    for can_id, data, ts, extended, remote, error, own in read_capture(path, on_bad):
+    for can_id, data, ts, extended, remote, error, own in read_capture(path, on_bad, on_truncated):
         feed(can_id, data, ts, extended, remote, error, own)
     summary = rules.summary()
     summary["capture"] = {"path": str(path), "format": capture_format(path) or "?"}
+    summary["truncated"] = truncated or None
     summary["damaged"] = {"count": bad_count, "first": bad}
     return summary
 

@@ -30,6 +30,8 @@ from .candump import CandumpError, parse_candump
 
 FrameTuple = tuple  # (can_id, data, timestamp, extended, remote, error, own)
 OnBad = Callable[[int | None, str, str], None]
+#: ``on_truncated(read, declared, detail)``: the file is shorter than its own header says
+OnTruncated = Callable[[int, int, str], None]
 
 _CAN_EXT_MAX = 0x1FFFFFFF
 
@@ -42,11 +44,13 @@ def capture_format(path: str) -> str:
     return name.rsplit(".", 1)[-1] if "." in name else ""
 
 
-def read_capture(path: str, on_bad: OnBad) -> Iterator[FrameTuple]:
-    """Every frame of the capture at ``path`` in file order."""
+def read_capture(path: str, on_bad: OnBad, on_truncated: OnTruncated | None = None) -> Iterator[FrameTuple]:
+    """Every frame of the capture at ``path`` in file order. A format whose header states its own size
+    (BLF) is checked against it: ``on_truncated`` hears a file cut short (a copy that stopped, a logger
+    that lost power), with how many frames were read of the objects the header declares."""
     if capture_format(path) == "log" and not path.lower().endswith(".gz"):
         return read_candump(path, on_bad)
-    return read_python_can(path, on_bad)
+    return read_python_can(path, on_bad, on_truncated)
 
 
 def read_candump(path: str, on_bad: OnBad) -> Iterator[FrameTuple]:
@@ -87,15 +91,17 @@ def read_candump(path: str, on_bad: OnBad) -> Iterator[FrameTuple]:
                    msg.is_error_frame, not msg.is_rx)
 
 
-def read_python_can(path: str, on_bad: OnBad) -> Iterator[FrameTuple]:
+def read_python_can(path: str, on_bad: OnBad, on_truncated: OnTruncated | None = None) -> Iterator[FrameTuple]:
     """Any format python-can reads. A reader that fails mid-file cannot go on: the failure is reported
     (after how many frames) and the frames before it are kept."""
+    declared: tuple[int, int] | None = None
     count = 0
     try:
         reader = can.LogReader(path)
     except Exception as exc:  # noqa: BLE001 - an unknown suffix, an unreadable file: reported, not raised
         on_bad(None, path, f"python-can cannot read it: {exc}")
         return
+    declared = _blf_declared(reader)
     try:
         with reader:
             for msg in reader:
@@ -107,3 +113,16 @@ def read_python_can(path: str, on_bad: OnBad) -> Iterator[FrameTuple]:
                        msg.is_error_frame, not msg.is_rx)
     except Exception as exc:  # noqa: BLE001 - damage in a binary file: keep what was read, say where it stopped
         on_bad(None, "", f"reading stopped after frame {count}: {type(exc).__name__}: {exc}")
+    if declared is not None and on_truncated is not None:
+        objects, size = declared
+        actual = os.path.getsize(path)
+        if size and actual < size:  # a count alone proves nothing: a BLF may hold objects other than frames
+            on_truncated(count, objects, f"{count} frames read of the {objects} objects its BLF header declares; the "
+                                         f"file has {actual} of the {size} bytes the header declares")
+
+
+def _blf_declared(reader: can.LogReader) -> tuple[int, int] | None:
+    """(object count, file size) a BLF file's header declares (0: not filled in by its writer)."""
+    if isinstance(reader, can.BLFReader):
+        return int(getattr(reader, "object_count", 0) or 0), int(getattr(reader, "file_size", 0) or 0)
+    return None

@@ -101,8 +101,55 @@ def test_exit_codes_for_unreadable_input(tmp_path, capsys):
     junk = tmp_path / "junk.log"
     junk.write_text("not a capture\n")
     assert main(["check-log", str(junk)]) == 2
-    assert "no frame could be read" in capsys.readouterr().err
+    assert "nothing readable" in capsys.readouterr().err
     broken = tmp_path / "broken.blf"
     broken.write_bytes(b"LOGG" + bytes(200))
     assert main(["check-log", str(broken)]) == 2
     assert main(["check-log", str(junk), "--bitrate", "123"]) == 2
+
+
+@pytest.mark.parametrize("name, content", [("empty.log", b""), ("comments.log", b"# a header, no frame\n\n"),
+                                           ("empty.blf", b""), ("empty.asc", b"")])
+def test_nothing_readable_is_exit_2(tmp_path, capsys, name, content):
+    (tmp_path / name).write_bytes(content)
+    assert main(["check-log", str(tmp_path / name)]) == 2
+    err = capsys.readouterr().err
+    assert "nothing readable" in err and "no rule broken" not in err
+
+
+def test_a_header_only_blf_is_exit_2(tmp_path, capsys):
+    header_only = write(tmp_path / "none.blf", [])
+    assert main(["check-log", str(header_only)]) == 2
+    assert "nothing readable" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("keep", [0.5, 0.9])
+def test_a_blf_cut_short_is_truncated_with_its_counts(tmp_path, traffic, capsys, keep):
+    full = write(tmp_path / "full.blf", traffic["good"])
+    data = full.read_bytes()
+    cut = tmp_path / "cut.blf"
+    cut.write_bytes(data[: int(len(data) * keep)])
+    assert main(["check-log", str(full), "--complete"]) == 0
+    capsys.readouterr()
+    assert main(["check-log", str(cut)]) == 2
+    err = capsys.readouterr().err
+    declared = len(traffic["good"])
+    assert "truncated" in err and f"of the {declared} objects its BLF header declares" in err
+    assert f"of the {len(data)} bytes" in err
+    assert main(["check-log", str(cut), "--allow-truncated"]) == 0
+    captured = capsys.readouterr()
+    assert "warning" in captured.err and "truncated" in captured.err and "verdict: no rule broken" in captured.out
+
+
+def test_decode_says_a_binary_file_is_not_candump_text(tmp_path, traffic, capsys):
+    blf = write(tmp_path / "capture.blf", traffic["good"])
+    assert main(["decode", str(blf)]) == 2
+    err = capsys.readouterr().err
+    assert "not candump text" in err and "check-log" in err
+    gz = write(tmp_path / "capture.log.gz", traffic["good"])
+    assert main(["decode", str(gz)]) == 2
+    assert "gzip" in capsys.readouterr().err
+    noise = tmp_path / "noise.bin"
+    noise.write_bytes(bytes(range(256)) * 8)
+    assert main(["decode", str(noise)]) == 2
+    assert "a binary file" in capsys.readouterr().err
