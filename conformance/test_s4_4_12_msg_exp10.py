@@ -6,7 +6,8 @@ import pytest
 
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import exp_reports, reference
+from .answers import reference
+from .reports import exp_reports
 from .test_s4_4_4_msg1 import run_motor
 from .test_s4_4_11_msg_exp9 import RUN_S, SECOND
 

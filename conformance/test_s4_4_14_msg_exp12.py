@@ -6,7 +6,8 @@ import pytest
 
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import describe_garbled, garbled, reference
+from .answers import reference
+from .reports import describe_garbled, garbled
 from .test_s4_4_6_msg3 import MAX_PLAUSIBLE_C
 
 SECTION = "4.4.14"

@@ -7,19 +7,8 @@ import pytest
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import (
-    EXP_FRAMES,
-    REACT_S,
-    REPORTS,
-    check_suspended,
-    longest_interval_s,
-    ms,
-    msg_control,
-    reported,
-    resume,
-    several_escs,
-    with_emulator_faults,
-)
+from .multi_esc import several_escs, with_emulator_faults
+from .reports import EXP_FRAMES, REACT_S, REPORTS, check_suspended, longest_interval_s, ms, msg_control, reported, resume
 
 SECTION = "4.4.1"
 

@@ -4,16 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from .test_s4_4_2_msg_control import (
-    answer_window_s,
-    check_answer_slot,
-    describe_garbled,
-    garbled,
-    ms,
-    settle,
-    several_escs,
-    with_emulator_faults,
-)
+from .answers import answer_window_s, check_answer_slot, settle
+from .multi_esc import several_escs, with_emulator_faults
+from .reports import describe_garbled, garbled, ms
 
 SECTION = "4.4.3"
 #: between queries: not a multiple of any report interval, so each query meets the reports at another phase

@@ -8,7 +8,7 @@ from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import Status
 
-from .test_s4_4_2_msg_control import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
+from .reports import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
 
 SECTION = "4.4.4"
 

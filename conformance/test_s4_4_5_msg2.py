@@ -7,7 +7,7 @@ import pytest
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import INTERVALS, describe_garbled, garbled, interval_s, ms, need_decoded, report_starts
+from .reports import INTERVALS, describe_garbled, garbled, interval_s, ms, need_decoded, report_starts
 
 SECTION = "4.4.5"
 

@@ -6,7 +6,7 @@ import pytest
 
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import REACT_S, describe_garbled, garbled, interval_s, ms, need_decoded
+from .reports import REACT_S, describe_garbled, garbled, interval_s, ms, need_decoded
 from .test_s4_4_5_msg2 import check_interval_follows_set_freq
 
 SECTION = "4.4.6"
