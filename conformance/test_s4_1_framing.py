@@ -33,7 +33,7 @@ from ckesc.protocol.frame import FALLBACK_PRIORITY, Frame, WireFrame, classify, 
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, Kind, parse_can_id, service_id
 from ckesc.protocol.transfer import TRANSFER_ID_MODULO, TransferIdCounter, parse_tail, tail_byte
 
-from .test_s4_4_4_msg1 import command_for
+from .throttle import command_for
 
 SECTION = "4.1"
 

@@ -11,7 +11,7 @@ from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
 from .test_s4_1_framing import code
-from .test_s4_4_4_msg1 import STREAM_PERIOD_S, command_for
+from .throttle import STREAM_PERIOD_S, command_for
 
 SECTION = "4.2"
 

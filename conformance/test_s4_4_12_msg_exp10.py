@@ -7,9 +7,8 @@ import pytest
 from ckesc.protocol import catalogue as cat
 
 from .answers import reference
+from .motor import RUN_S, SECOND, run_motor
 from .reports import exp_reports
-from .test_s4_4_4_msg1 import run_motor
-from .test_s4_4_11_msg_exp9 import RUN_S, SECOND
 
 SECTION = "4.4.12"
 
