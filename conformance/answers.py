@@ -12,6 +12,8 @@ from .reports import frame_start, ms
 
 #: R2: the answer slots, (node_id % SLOTS) x ANSWER_SLOT_S, the last one ending at ANSWER_DELAY_MAX_S
 SLOTS = round(cat.ANSWER_DELAY_MAX_S / cat.ANSWER_SLOT_S)
+#: Every ESC answers a broadcast within 64 ms (R2); the harness's discovery reads twice that
+BROADCAST_WINDOW_S = 2 * cat.ANSWER_DELAY_MAX_S
 
 
 def answer_window_s(dut) -> float:

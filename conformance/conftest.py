@@ -5,7 +5,8 @@ import pytest
 # The helper modules beside the suites hold what several section modules share (README.md): their
 # asserts fail tests as the test modules' do, with pytest's explanation in the message. Registered
 # here, before any test module imports them.
-pytest.register_assert_rewrite("conformance.reports", "conformance.answers", "conformance.multi_esc", "conformance.motor")
+pytest.register_assert_rewrite("conformance.reports", "conformance.answers", "conformance.multi_esc", "conformance.motor",
+                              "conformance.codes", "conformance.wire")
 
 
 # every conformance test gets a timeout: a silent DUT must fail fast, never hang the run

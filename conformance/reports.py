@@ -19,6 +19,8 @@ from ckesc.protocol.errors import TailError
 from ckesc.protocol.frame import classify, frame_bits
 from ckesc.protocol.ids import Kind
 
+from .codes import code
+
 INTERVALS = ("msg1_interval", "msg2_interval", "msg3_interval")
 REPORTS = ("msg1", "msg2", "msg3")
 EXP_FRAMES = tuple(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp"))
@@ -50,6 +52,11 @@ def node_settings(dut, node: int) -> dict:
     """Report intervals of any node on the bus (Set/Get Freq read)."""
     return dut.ask("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0},
                    destination=node)
+
+
+def read_request(frame: str) -> dict[str, int]:
+    """Set/Get Freq's read (option "read"): the intervals sent are ignored (4.4.22-2)."""
+    return {"option": code(frame, "option", "read"), **dict.fromkeys(INTERVALS, 0)}
 
 
 def longest_interval_s(dut, node: int | None = None) -> float:

@@ -10,7 +10,7 @@ import pytest
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_1_framing import code
+from .codes import code
 from .throttle import STREAM_PERIOD_S, command_for
 
 SECTION = "4.2"

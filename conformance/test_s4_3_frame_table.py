@@ -4,7 +4,7 @@ frame type in the data frame type table (4.3.2, F5).
 Judged, like section 4.1's framing, on every frame the DUT sends: the traffic provoked here (every
 kind of frame a DUT sends, plus the one request a DroneCAN flight controller sends every node it
 sees: GetNodeInfo, outside the vendor range) and, in the tests marked ``last``, the whole run's.
-The wire helpers are section 4.1's (:mod:`.test_s4_1_framing`).
+The wire helpers it shares with section 4.1 are in ``conformance/wire.py``.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import pytest
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.ids import MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind, Priority, priority_name
 
-from .test_s4_1_framing import SCOPES, Heard, Traffic, check_each, describe, in_scope, provoked_traffic
+from .wire import SCOPES, Heard, Traffic, check_each, describe, in_scope, provoked_traffic
 
 SECTION = "4.3"
 

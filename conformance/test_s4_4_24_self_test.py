@@ -13,8 +13,8 @@ import pytest
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
+from .codes import code
 from .reports import exp_capture
-from .test_s4_1_framing import code
 
 SECTION = "4.4.24"
 

@@ -9,7 +9,7 @@ from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import Kind
 from ckesc.protocol.legality import illegal_fields
 
-from .test_s4_1_framing import code
+from .codes import code
 
 SECTION = "4.4.26"
 

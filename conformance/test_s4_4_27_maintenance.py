@@ -14,7 +14,7 @@ from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
 from .motor import run_motor
-from .test_s4_1_framing import INTERVALS
+from .reports import INTERVALS
 from .test_s4_4_26_esc_information import undecoded
 
 SECTION = "4.4.27"

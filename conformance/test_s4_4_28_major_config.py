@@ -8,7 +8,9 @@ import pytest
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import field_cases
 
-from .test_s4_1_framing import BROADCAST_WINDOW_S, INTERVALS, code, read_request
+from .answers import BROADCAST_WINDOW_S
+from .codes import code
+from .reports import INTERVALS, read_request
 from .test_s4_4_26_esc_information import undecoded
 
 SECTION = "4.4.28"
