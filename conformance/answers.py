@@ -1,12 +1,15 @@
 """Answers to the host's commands, as the sections that send them read them (not a section: no
 tests here): the answer slots of R2 (:func:`check_answer_slot`), how long to read for an answer to a
-broadcast, and an answer a test compares with (:func:`reference`).
+broadcast, an answer a test compares with (:func:`reference`), and what came instead of an answer
+that did not decode (:func:`heard_instead`).
 """
 
 from __future__ import annotations
 
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
+from ckesc.protocol.frame import classify
+from ckesc.protocol.ids import Kind
 
 from .reports import frame_start, ms
 
@@ -50,3 +53,9 @@ def check_answer_slot(dut, answer, sent, node: int, what: str, max_requirement: 
                 unit="ms", clock=dut.clock, error=err, requirement="R2", strength="READING")
     rec.measure(f"{what} node {node}: answer delay", ms(end), limit=ms(cat.ANSWER_DELAY_MAX_S), unit="ms",
                 clock=dut.clock, error=err, requirement=max_requirement)
+
+
+def heard_instead(dut, spec: cat.FrameSpec) -> str:
+    """What the DUT sent instead, when its answer did not decode (for the failure message)."""
+    bad = [g for g in dut.garbled if (c := classify(g.msg.arbitration_id))[4] is spec and c[0] is Kind.RESPONSE and c[2] == dut.node_id]
+    return "".join(f"; heard instead: {len(g.msg.data)} data bytes ({g.error})" for g in bad[:2])

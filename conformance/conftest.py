@@ -6,7 +6,7 @@ import pytest
 # asserts fail tests as the test modules' do, with pytest's explanation in the message. Registered
 # here, before any test module imports them.
 pytest.register_assert_rewrite("conformance.reports", "conformance.answers", "conformance.multi_esc", "conformance.motor",
-                              "conformance.codes", "conformance.wire")
+                              "conformance.codes", "conformance.wire", "conformance.physics")
 
 
 # every conformance test gets a timeout: a silent DUT must fail fast, never hang the run

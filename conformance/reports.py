@@ -183,3 +183,21 @@ def exp_reports(dut, name: str, seconds: float | None = None, during=None) -> tu
     if not got:
         raise Inconclusive(f"the DUT sent no {title} in {window:.3f} s of MSG_EXP mode (which MSG_EXP frames come is OBSERVE, R9-exp)")
     return got, seen
+
+
+def check_interval_follows_set_freq(dut, report: str, interval: int) -> None:
+    """After Set Freq sets ``report``'s interval (the others as they are), ``report`` comes every
+    ``interval`` x 2 ms: measured over four intervals once the old schedule has run out (R9)."""
+    s = dut.settings()
+    fields = {k: s[k] for k in INTERVALS} | {f"{report}_interval": interval}
+    dut.ask("set_freq", {"option": 1, **fields})
+    target = interval * cat.INTERVAL_UNIT_S
+    dut.wait(max(interval_s(s, report), target))  # the old schedule runs out
+    t = dut.now()
+    dut.wait(4 * target + target / 2)
+    stamps = report_starts(dut, report, t)
+    what = report.upper()
+    assert len(stamps) >= 3, f"only {len(stamps)} {what} in {ms(4.5 * target)} ms at {what}_SET {interval}"
+    worst = max(abs((b - a) - target) for a, b in zip(stamps, stamps[1:]))
+    dut.record.measure(f"{what} interval error", ms(worst), limit=dut.interval_tolerance_ms, unit="ms", clock=dut.clock,
+                       error=dut.lane.timing_error * 1000, requirement="R9")

@@ -7,8 +7,8 @@ import pytest
 from ckesc.protocol import catalogue as cat
 
 from .answers import reference
+from .physics import MAX_PLAUSIBLE_C
 from .reports import describe_garbled, garbled
-from .test_s4_4_6_msg3 import MAX_PLAUSIBLE_C
 
 SECTION = "4.4.14"
 
