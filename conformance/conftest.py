@@ -6,7 +6,8 @@ import pytest
 # asserts fail tests as the test modules' do, with pytest's explanation in the message. Registered
 # here, before any test module imports them.
 pytest.register_assert_rewrite("conformance.reports", "conformance.answers", "conformance.multi_esc", "conformance.motor",
-                              "conformance.codes", "conformance.wire", "conformance.physics")
+                              "conformance.codes", "conformance.wire", "conformance.physics",
+                              "conformance.raw_command_12b")
 
 
 # every conformance test gets a timeout: a silent DUT must fail fast, never hang the run
