@@ -19,7 +19,7 @@ The wire helpers it shares with section 4.3's module (:class:`Heard`, :func:`pro
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -32,13 +32,15 @@ from ckesc.protocol.frame import Frame, classify, encode
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, Kind
 from ckesc.protocol.transfer import TRANSFER_ID_MODULO, TransferIdCounter, parse_tail
 
+from . import wire
 from .answers import BROADCAST_WINDOW_S
 from .codes import code
 from .reports import read_request
 from .throttle import command_for
-from .wire import QUERIES, SCOPES, Heard, Traffic, check_each, describe, in_scope, provoked_traffic, run_heard
+from .wire import QUERIES, SCOPES, Heard, check_each, describe, in_scope, run_heard
 
 SECTION = "4.1"
+traffic = wire.traffic  # fixture: the provoked traffic, once per module
 
 INTERVALS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
 #: The reports whose interval Set/Get Freq sets (R9): MSG1, MSG2, MSG3
@@ -46,12 +48,6 @@ REPORTS = tuple(k.removesuffix("_interval") for k in INTERVALS)
 SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
 #: ArduPilot's default node id, from which it sends GET_ESC_ID and RawCommand (INTERPRETATIONS, F6)
 ARDUPILOT_NODE = 10
-
-
-# ------------------------------------------------------------------------------------------ provoked traffic
-@pytest.fixture(scope="module")
-def traffic(request: pytest.FixtureRequest, ckesc_lane) -> Iterator[Traffic]:
-    yield from provoked_traffic(request, ckesc_lane)
 
 
 # ------------------------------------------------------------------------------------------ the rules, per frame

@@ -255,6 +255,12 @@ def provoked_traffic(request: pytest.FixtureRequest, lane) -> Iterator[Traffic]:
         state(request.config).dut_segments.append([f for f in d.trace if f.source == d.node_id])
 
 
+@pytest.fixture(scope="module")
+def traffic(request: pytest.FixtureRequest, ckesc_lane) -> Iterator[Traffic]:
+    """The provoked traffic, once per module that uses it (``traffic = wire.traffic``)."""
+    yield from provoked_traffic(request, ckesc_lane)
+
+
 # ------------------------------------------------------------------------------------------ scopes
 def run_heard(config: pytest.Config) -> list[Heard]:
     """Every frame the DUT sent in the run so far, as the plugin collected them.
