@@ -11,7 +11,7 @@ import pytest
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import exp_capture
+from .reports import exp_capture
 
 SECTION = "attachment"
 

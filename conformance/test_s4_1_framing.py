@@ -13,305 +13,41 @@ Framing is judged on every frame the DUT sends, in two scopes (the ``scope`` par
   plugin's ``dut_segments``) plus a fresh provoked capture. The run-wide record holds decoded frames
   only (see :func:`run_heard`).
 
-Also home of the wire helpers that section 4.3's module shares: :class:`Heard`, :func:`provoke`,
-:func:`provoked_traffic`, :func:`in_scope`.
+The wire helpers it shares with section 4.3's module (:class:`Heard`, :func:`provoke`,
+:func:`provoked_traffic`, :func:`in_scope`) are in ``conformance/wire.py``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 
-from ckesc.harness.dut import Dut, DutError
+from ckesc.harness.dut import DutError
 from ckesc.harness.plugin import state
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.frame import FALLBACK_PRIORITY, Frame, WireFrame, classify, encode
-from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, Kind, parse_can_id, service_id
-from ckesc.protocol.transfer import TRANSFER_ID_MODULO, TransferIdCounter, parse_tail, tail_byte
+from ckesc.protocol.frame import Frame, classify, encode
+from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, Kind
+from ckesc.protocol.transfer import TRANSFER_ID_MODULO, TransferIdCounter, parse_tail
 
-from .test_s4_4_4_msg1 import command_for
+from . import wire
+from .answers import BROADCAST_WINDOW_S
+from .codes import code
+from .reports import read_request
+from .throttle import command_for
+from .wire import QUERIES, SCOPES, Heard, check_each, describe, in_scope, run_heard
 
 SECTION = "4.1"
+traffic = wire.traffic  # fixture: the provoked traffic, once per module
 
 INTERVALS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
 #: The reports whose interval Set/Get Freq sets (R9): MSG1, MSG2, MSG3
 REPORTS = tuple(k.removesuffix("_interval") for k in INTERVALS)
-#: The longest report interval the document allows (250 x 2 ms): any report comes within it
-LONGEST_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
 SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
-#: Every ESC answers a broadcast within 64 ms (R2); the harness's discovery reads twice that
-BROADCAST_WINDOW_S = 2 * cat.ANSWER_DELAY_MAX_S
 #: ArduPilot's default node id, from which it sends GET_ESC_ID and RawCommand (INTERPRETATIONS, F6)
 ARDUPILOT_NODE = 10
-#: DroneCAN's uavcan.protocol.GetNodeInfo: what a DroneCAN flight controller asks the nodes it sees.
-#: Not a CKESC id - the probe that shows whether the DUT answers outside its vendor range (4.3.1).
-DRONECAN_GET_NODE_INFO = 1
-
-
-def code(frame: str, field_name: str, label: str, *, layout: str = "request") -> int:
-    """The catalogue's code for ``label`` of one field (e.g. Set Rotation's "query")."""
-    spec = cat.spec(frame)
-    lay = spec.request if layout == "request" else next(x for x in spec.all_layouts if x.name == layout)
-    assert lay is not None
-    codes = lay.field(field_name).codes or {}
-    return next(k for k, v in codes.items() if v == label)
-
-
-def read_request(frame: str) -> dict[str, int]:
-    """Set/Get Freq's read (option "read"): the intervals sent are ignored (4.4.22-2)."""
-    return {"option": code(frame, "option", "read"), **dict.fromkeys(INTERVALS, 0)}
-
-
-#: Every request that only reads: (label, frame, fields). They change nothing on the DUT.
-QUERIES: tuple[tuple[str, str, dict[str, int]], ...] = (
-    ("self_test", "self_test", {}),
-    ("set_rotation-query", "set_rotation", {"rotation": code("set_rotation", "rotation", "query")}),
-    ("set_freq-read", "set_freq", read_request("set_freq")),
-    ("esc_information", "esc_information", {"option": code("esc_information", "option", "query")}),
-    *((f"maintenance_information-{o}", "maintenance_information", {"option": o})
-      for o in cat.spec("maintenance_information").request.field("option").codes or {}),  # type: ignore[union-attr]
-    ("get_major_configuration", "get_major_configuration", {"option": code("get_major_configuration", "option", "query")}),
-)
-
-
-# ------------------------------------------------------------------------------------------ frames as heard
-@dataclass(frozen=True)
-class Heard:
-    """One frame as it came off the wire, decoded or not: framing is judged on the raw id and data."""
-
-    can_id: int
-    data: bytes
-    timestamp: float
-    extended: bool = True
-    remote: bool = False
-    rx: bool = True  # False: the host's own frame, echoed back (when the adapter says)
-    frame: Frame | None = None  # None: it did not decode
-    error: str | None = None  # why it did not decode
-    segment: int = 0  # run-wide record: which test's capture it is from (frames between tests are in none)
-
-    @classmethod
-    def of_frame(cls, f: Frame) -> Heard:
-        return cls(f.can_id, bytes(f.data), f.timestamp or 0.0, frame=f)
-
-    @classmethod
-    def of_garbled(cls, g: Any) -> Heard:
-        m = g.msg
-        return cls(m.arbitration_id, bytes(m.data), m.timestamp or 0.0, bool(getattr(m, "is_extended_id", True)),
-                   bool(getattr(m, "is_remote_frame", False)), bool(getattr(m, "is_rx", True)), error=str(g.error))
-
-    @property
-    def cid(self):  # CanId: kind, priority, type_id, source, destination, anonymous
-        return parse_can_id(self.can_id)
-
-    @property
-    def spec(self) -> cat.FrameSpec | None:
-        return classify(self.can_id)[4]
-
-    @property
-    def has_tail(self) -> bool:
-        spec = self.spec
-        return spec is None or spec.has_tail
-
-    @property
-    def transfer_id(self) -> int | None:
-        return parse_tail(self.data[-1]).transfer_id if self.data and self.has_tail else None
-
-    def __str__(self) -> str:
-        cid = self.cid
-        spec = self.spec
-        what = f"{spec.title if spec else '?'} {cid.kind.label} {cid.type_id} from {cid.source}"
-        if cid.destination is not None:
-            what += f" to {cid.destination}"
-        raw = f"{self.can_id:08X}#{self.data.hex().upper()}" if self.extended else f"{self.can_id:03X}#{self.data.hex().upper()}"
-        return f"{what} [{raw}]" + (f" ({self.error})" if self.error else "")
-
-
-def describe(problems: list[tuple[Heard, str]], limit: int = 5) -> str:
-    """The first few problems, one per frame type, and how many in all."""
-    seen: dict[tuple[str, int], tuple[Heard, str]] = {}
-    for h, why in problems:
-        seen.setdefault((why, h.cid.type_id), (h, why))
-    lines = [f"{why}: {h}" for h, why in list(seen.values())[:limit]]
-    return f"{len(problems)} frame(s): " + "; ".join(lines)
-
-
-# ------------------------------------------------------------------------------------------ provoking traffic
-class Recorder(Dut):
-    """A Dut that remembers every frame it puts on the bus, to tell its own echoes from the DUT's frames."""
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        self.sent_wires: set[tuple[int, bytes]] = set()
-        super().__init__(*args, **kwargs)
-
-    def send_wire(self, wire: WireFrame):
-        self.sent_wires.add((wire.arbitration_id, bytes(wire.data)))
-        return super().send_wire(wire)
-
-    def heard(self) -> list[Heard]:
-        """Everything heard that the host side did not send (the DUT's frames), decoded or not, in order.
-        Error frames are the adapter's news of bus errors, nobody's frame: left out."""
-        raw = [Heard.of_garbled(g) for g in self.garbled if not getattr(g.msg, "is_error_frame", False)]
-        # one frame on the wire is one (id, end of frame time): a frame the harness also decoded after
-        # repairing it (a wrong tail byte) is judged as it came, once
-        seen = {(h.can_id, h.timestamp) for h in raw}
-        out = [h for h in map(Heard.of_frame, self.trace) if (h.can_id, h.timestamp) not in seen] + raw
-        others = set(self.nodes) - {self.node_id}  # other ESCs found by discovery (a real bus)
-        out = [h for h in out if not self.ours(h) and not (h.frame and h.cid.source in others)]
-        return sorted(out, key=lambda h: h.timestamp)
-
-    def ours(self, h: Heard) -> bool:
-        """The host side's frame: one this host sent, or the echo of another host object's on the same
-        bus (a request, or a host's message from the host's node id), never an ESC's."""
-        if (h.can_id, h.data) in self.sent_wires:
-            return True
-        if not h.extended or h.cid.source != self.host_node:
-            return False
-        if h.frame is None:
-            return not h.rx
-        layout = h.frame.layout
-        return h.frame.kind is Kind.REQUEST or (layout is not None and layout.sender != "esc")
-
-
-@dataclass
-class Asked:
-    """One request of the provoked traffic and the DUT's service frames with its service id."""
-
-    label: str
-    name: str
-    transfer_id: int
-    sent_at: float
-    until: float
-    answers: list[Heard] = field(default_factory=list)
-
-
-@dataclass
-class Traffic:
-    node: int
-    host: int
-    heard: list[Heard]  # the DUT's frames in the order they came, one unbroken stretch
-    asked: dict[str, Asked]  # the read-only requests, by label
-    broadcasts: dict[str, list[Heard]]  # the DUT's messages after each broadcast command, by label
-
-
-def find_node(d: Recorder) -> int:
-    """The DUT's node id when GET_ESC_ID discovery failed (its answers did not decode): the source
-    of the frames heard that this host did not send."""
-    d.broadcast("get_esc_id", {"option": 0}, layout="query")
-    d.wait(LONGEST_S + BROADCAST_WINDOW_S)
-    sources = [h.cid.source for h in d.heard() if h.extended]
-    if not sources:
-        raise DutError("no frame at all from any ESC: is it powered, at the bus's bit rate, and not at node id 0x7D?")
-    return max(set(sources), key=sources.count)
-
-
-def bare_dut(config: pytest.Config, lane) -> Recorder:
-    """A host on the lane that needs no decodable answer to start. The plugin's ``dut`` fixture reads
-    the settings through decoded answers: with a DUT whose framing is broken it cannot even start,
-    yet that is exactly the DUT this module must fail, not error on."""
-    st = state(config)
-    node = config.getoption("node_id") or st.node_id
-    if node:
-        return Recorder(lane, st.profile, node_id=node)
-    try:
-        d = Recorder(lane, st.profile)  # GET_ESC_ID discovery (R1)
-    except DutError:
-        d = Recorder(lane, st.profile, node_id=0)  # a placeholder until the raw search below
-        d.node_id = find_node(d)
-        d.nodes = [d.node_id]
-    st.node_id = st.node_id or d.node_id
-    return d
-
-
-def _window(d: Recorder, seconds: float) -> tuple[float, float]:
-    start = d.now()
-    d.wait(seconds)
-    return start, d.now()
-
-
-def provoke(d: Recorder) -> Traffic:
-    """Make the DUT send every kind of frame it has, and keep all it sent meanwhile."""
-    asked: dict[str, Asked] = {}
-    for label, name, fields in QUERIES:
-        ex = d.request(name, fields)
-        asked[label] = Asked(label, name, ex.pending.transfer_id, ex.sent.time, d.now())
-    windows: dict[str, tuple[float, float]] = {}
-    answer_window = BROADCAST_WINDOW_S + d.lane.timing_error  # an answer late by the lane's error is still one
-    d.broadcast("get_esc_id", {"option": 0}, layout="query")
-    windows["get_esc_id"] = _window(d, answer_window)
-    d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
-    windows["msg_control"] = _window(d, answer_window)
-    try:  # MSG_EXP mode: the MSG_EXP frames (which ones come is OBSERVE, R9-exp)
-        d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME_EXP})
-        d.wait(LONGEST_S + BROADCAST_WINDOW_S)
-    finally:
-        d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
-        d.wait(BROADCAST_WINDOW_S)
-    try:  # CAN Test mode: the CAN Test frames (R16)
-        d.broadcast("can_test", {"option": cat.CAN_TEST_ON, "count": 0})
-        d.wait(BROADCAST_WINDOW_S)
-    finally:
-        d.broadcast("can_test", {"option": cat.CAN_TEST_OFF, "count": 0})
-        d.wait(BROADCAST_WINDOW_S)
-    d.request("get_rec", {"payload": []})  # the temperature records, MSG_EXP12 (R15)
-    d.wait(BROADCAST_WINDOW_S)
-    probe_id = service_id(FALLBACK_PRIORITY, DRONECAN_GET_NODE_INFO, True, d.node_id, d.host_node)
-    d.send_wire(WireFrame(probe_id, bytes((tail_byte(0),))))  # GetNodeInfo has no payload: the tail byte only
-    d.wait(BROADCAST_WINDOW_S + 2 * LONGEST_S)  # then normal reporting: every report at least once, MSG1 over 32 times
-    heard = d.heard()
-    for a in asked.values():
-        sid = cat.spec(a.name).type_id
-        a.answers = [h for h in heard if h.cid.kind is not Kind.MESSAGE and h.cid.type_id == sid and a.sent_at <= h.timestamp <= a.until]
-
-    def during(label: str) -> list[Heard]:
-        start, end = windows[label]
-        return [h for h in heard if start <= h.timestamp <= end]
-
-    broadcasts = {name: [h for h in during(name) if h.cid.kind is Kind.MESSAGE and h.spec is not None and h.spec.name == name]
-                  for name in ("get_esc_id", "msg_control")}
-    return Traffic(d.node_id, d.host_node, heard, asked, broadcasts)
-
-
-def provoked_traffic(request: pytest.FixtureRequest, lane) -> Iterator[Traffic]:
-    """Body of the module-scoped ``traffic`` fixtures: provoke, yield, and put the DUT's decoded frames
-    into the run-wide record as the plugin does for every test."""
-    d = bare_dut(request.config, lane)
-    try:
-        yield provoke(d)
-    finally:
-        d.zero_throttle()
-        d.wait(cat.ANSWER_DELAY_MAX_S)  # read the echoes: the next test's host must not hear them as new
-        state(request.config).dut_segments.append([f for f in d.trace if f.source == d.node_id])
-
-
-@pytest.fixture(scope="module")
-def traffic(request: pytest.FixtureRequest, ckesc_lane) -> Iterator[Traffic]:
-    yield from provoked_traffic(request, ckesc_lane)
-
-
-def run_heard(config: pytest.Config) -> list[Heard]:
-    """Every frame the DUT sent in the run so far, as the plugin collected them.
-
-    Harness gap: ``dut_segments`` keeps decoded frames only (a frame that did not decode - the very
-    frames framing faults produce - is in no record after its test), it keeps no frame heard while
-    a test's settings are restored, and the frames of ``multi_dut``'s private bench come with that
-    bench's own clock. The run-wide checks therefore add a fresh provoked capture, and the transfer
-    id check looks only at pairs of frames that provably had nothing between them."""
-    return [replace(Heard.of_frame(f), segment=i) for i, seg in enumerate(state(config).dut_segments) for f in seg]
-
-
-SCOPES = (pytest.param("provoked", id="provoked"), pytest.param("run", id="run", marks=pytest.mark.last))
-
-
-def in_scope(scope: str, traffic: Traffic, config: pytest.Config) -> list[Heard]:
-    return traffic.heard if scope == "provoked" else run_heard(config) + traffic.heard
-
-
-def check_each(frames: list[Heard], rule: Callable[[Heard], list[str]]) -> list[tuple[Heard, str]]:
-    return [(h, why) for h in frames for why in rule(h)]
 
 
 # ------------------------------------------------------------------------------------------ the rules, per frame

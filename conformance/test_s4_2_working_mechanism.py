@@ -10,8 +10,8 @@ import pytest
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_1_framing import code
-from .test_s4_4_4_msg1 import STREAM_PERIOD_S, command_for
+from .codes import code
+from .throttle import STREAM_PERIOD_S, command_for
 
 SECTION = "4.2"
 

@@ -4,29 +4,24 @@ frame type in the data frame type table (4.3.2, F5).
 Judged, like section 4.1's framing, on every frame the DUT sends: the traffic provoked here (every
 kind of frame a DUT sends, plus the one request a DroneCAN flight controller sends every node it
 sees: GetNodeInfo, outside the vendor range) and, in the tests marked ``last``, the whole run's.
-The wire helpers are section 4.1's (:mod:`.test_s4_1_framing`).
+The wire helpers it shares with section 4.1 are in ``conformance/wire.py``.
 """
 
 from __future__ import annotations
-
-from collections.abc import Iterator
 
 import pytest
 
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.ids import MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind, Priority, priority_name
 
-from .test_s4_1_framing import SCOPES, Heard, Traffic, check_each, describe, in_scope, provoked_traffic
+from . import wire
+from .wire import SCOPES, Heard, check_each, describe, in_scope
 
 SECTION = "4.3"
+traffic = wire.traffic  # fixture: the provoked traffic, once per module
 
 #: The answers the table gives no priority (240, 241, 242: F5-unlisted)
 UNLISTED = tuple(s for s in cat.CATALOGUE if s.service and s.responses and s.priority is None)
-
-
-@pytest.fixture(scope="module")
-def traffic(request: pytest.FixtureRequest, ckesc_lane) -> Iterator[Traffic]:
-    yield from provoked_traffic(request, ckesc_lane)
 
 
 def _range_text(r: range) -> str:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from .test_s4_4_2_msg_control import exp_reports, reference
+from .answers import reference
+from .reports import exp_reports
 
 SECTION = "4.4.10"
 

@@ -6,14 +6,11 @@ import pytest
 
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import exp_reports, reference
-from .test_s4_4_4_msg1 import run_motor
+from .answers import reference
+from .motor import RUN_S, SECOND, run_motor
+from .reports import exp_reports
 
 SECTION = "4.4.11"
-
-#: Two readings of a whole-seconds counter taken apart differ by the truncation: one second
-SECOND = 1
-RUN_S = 2.0
 
 
 @pytest.mark.requirement("4.4.11-T")

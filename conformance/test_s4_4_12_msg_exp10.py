@@ -6,9 +6,9 @@ import pytest
 
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import exp_reports, reference
-from .test_s4_4_4_msg1 import run_motor
-from .test_s4_4_11_msg_exp9 import RUN_S, SECOND
+from .answers import reference
+from .motor import RUN_S, SECOND, run_motor
+from .reports import exp_reports
 
 SECTION = "4.4.12"
 

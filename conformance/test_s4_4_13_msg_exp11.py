@@ -6,8 +6,8 @@ import pytest
 
 from ckesc.harness.verdict import Inconclusive
 
-from .test_s4_4_2_msg_control import REACT_S, exp_reports, interval_s
-from .test_s4_4_6_msg3 import SAME_SENSOR_C
+from .physics import SAME_SENSOR_C
+from .reports import REACT_S, exp_reports, interval_s
 
 SECTION = "4.4.13"
 

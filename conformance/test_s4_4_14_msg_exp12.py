@@ -6,8 +6,9 @@ import pytest
 
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import describe_garbled, garbled, reference
-from .test_s4_4_6_msg3 import MAX_PLAUSIBLE_C
+from .answers import reference
+from .physics import MAX_PLAUSIBLE_C
+from .reports import describe_garbled, garbled
 
 SECTION = "4.4.14"
 

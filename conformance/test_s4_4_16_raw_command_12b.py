@@ -11,21 +11,12 @@ What the three RawCommand sections check alike is written once, in ``conformance
 import pytest
 
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.codecs import codec_for
 
 from . import throttle
-from .throttle import RawCommand, check
+from .raw_command_12b import FORMAT, GROUPS, NAME, PER_GROUP, RAW_MAX, VALUES
+from .throttle import check
 
 SECTION = "4.4.16"
-NAME = "raw_command_12b"
-_CODEC = codec_for(cat.spec(NAME).layouts[0])
-_SIZE = cat.spec(NAME).layouts[0].size
-PER_GROUP = len(_CODEC.decode(bytes(_SIZE))["channels"])  # 4.4.16-3: four channels per group
-RAW_MAX = max(_CODEC.decode(b"\xff" * _SIZE)["channels"])  # 4.4.16-2: 12 bits, 0..4095
-GROUPS = cat.THROTTLE_GROUPS  # 4.4.16-3: group ids 1..5
-FORMAT = RawCommand(NAME, per_frame=PER_GROUP, groups=tuple(GROUPS), requirement="4.4.16-3")
-#: one distinct value per channel 1..20, inside 0..2000, whose nibbles differ across p1/p4 (R4)
-VALUES = {c: 198 + 64 * c for c in cat.THROTTLE_CHANNELS}
 bench = throttle.bench  # fixture: multi_dut with each ESC's channel and MSG1 interval
 motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
 

@@ -16,8 +16,8 @@ from ckesc.protocol.host import HostProtocol
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, HOST_NODE_ID, RESERVED_NODE_IDS, Kind
 from ckesc.protocol.legality import field_cases, illegal_cases
 
-from .test_s4_4_16_raw_command_12b import FORMAT as RAW_12B
-from .test_s4_4_16_raw_command_12b import VALUES as RAW_12B_VALUES
+from .raw_command_12b import FORMAT as RAW_12B
+from .raw_command_12b import VALUES as RAW_12B_VALUES
 
 SECTION = "4.4.18"
 SPEC = cat.spec("set_id")

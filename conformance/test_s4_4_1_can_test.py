@@ -7,33 +7,18 @@ import pytest
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import (
-    EXP_FRAMES,
-    REACT_S,
-    REPORTS,
-    check_suspended,
-    longest_interval_s,
-    ms,
-    msg_control,
-    reported,
-    resume,
-    several_escs,
-    with_emulator_faults,
-)
+from . import multi_esc
+from .multi_esc import several_escs
+from .reports import EXP_FRAMES, REACT_S, REPORTS, check_suspended, longest_interval_s, ms, msg_control, reported, resume
 
 SECTION = "4.4.1"
+bench = multi_esc.bench  # fixture: several ESCs on one bus, with the run's emulator faults
 
 COUNT_MODULO = cat.spec("can_test").layouts[0].field("count").mask + 1  # "accumulated cyclically" (4.4.1-2)
 
 
 def can_test(dut, option: int, count: int = 0):
     return dut.broadcast("can_test", {"option": option, "count": count})
-
-
-@pytest.fixture
-def bench(multi_dut, request):
-    """Several ESCs on one bus (``multi_dut``), with the run's emulator faults."""
-    return with_emulator_faults(multi_dut, request.config)
 
 
 def _window(dut, node: int | None = None) -> float:

@@ -13,8 +13,8 @@ import pytest
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_1_framing import code
-from .test_s4_4_2_msg_control import exp_capture
+from .codes import code
+from .reports import exp_capture
 
 SECTION = "4.4.24"
 

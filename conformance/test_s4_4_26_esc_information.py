@@ -5,21 +5,14 @@ from __future__ import annotations
 import pytest
 
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.frame import classify
-from ckesc.protocol.ids import Kind
 from ckesc.protocol.legality import illegal_fields
 
-from .test_s4_1_framing import code
+from .answers import heard_instead
+from .codes import code
 
 SECTION = "4.4.26"
 
 SPEC = cat.spec("esc_information")
-
-
-def undecoded(dut, spec: cat.FrameSpec) -> str:
-    """What the DUT sent instead, when its answer did not decode (for the failure message)."""
-    bad = [g for g in dut.garbled if (c := classify(g.msg.arbitration_id))[4] is spec and c[0] is Kind.RESPONSE and c[2] == dut.node_id]
-    return "".join(f"; heard instead: {len(g.msg.data)} data bytes ({g.error})" for g in bad[:2])
 QUERY = {"option": code("esc_information", "option", "query")}  # "payload[0]=0"
 
 
@@ -29,7 +22,7 @@ def test_answer_is_seven_plausible_bytes(dut):
     hardware version, protocol version, firmware year, month (1..12) and day (1..31). The identity is
     recorded; asked twice, the ESC answers the same."""
     first, second = dut.request("esc_information", QUERY), dut.request("esc_information", QUERY)
-    assert first.response is not None, f"no 7-byte answer to ESC Information from node {dut.node_id}" + undecoded(dut, SPEC)
+    assert first.response is not None, f"no 7-byte answer to ESC Information from node {dut.node_id}" + heard_instead(dut, SPEC)
     layout = SPEC.response
     assert layout is not None and len(first.response.data) == layout.size + 1, f"{len(first.response.data)} data bytes"
     info = first.response.fields

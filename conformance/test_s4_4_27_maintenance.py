@@ -13,9 +13,9 @@ import pytest
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_1_framing import INTERVALS
-from .test_s4_4_4_msg1 import run_motor
-from .test_s4_4_26_esc_information import undecoded
+from .answers import heard_instead
+from .motor import run_motor
+from .reports import INTERVALS
 
 SECTION = "4.4.27"
 
@@ -28,7 +28,7 @@ RUN_S = 1.0
 
 def ask(dut, option: int) -> dict:
     ex = dut.request("maintenance_information", {"option": option})
-    assert ex.response is not None, f"no 7-byte answer to 241 option {option} from node {dut.node_id}" + undecoded(dut, SPEC)
+    assert ex.response is not None, f"no 7-byte answer to 241 option {option} from node {dut.node_id}" + heard_instead(dut, SPEC)
     return ex.response.fields
 
 
@@ -40,7 +40,7 @@ def test_answer_has_the_option_s_layout(dut, option):
     of runs; option 2 the power-ups, stops, power-on self-test fault code, and Info_7 = the option.
     This run's time is part of the accumulated time: never more."""
     ex = dut.request("maintenance_information", {"option": option})
-    assert ex.response is not None, f"no 7-byte answer to 241 option {option} from node {dut.node_id}" + undecoded(dut, SPEC)
+    assert ex.response is not None, f"no 7-byte answer to 241 option {option} from node {dut.node_id}" + heard_instead(dut, SPEC)
     layout = ex.response.layout
     assert layout is not None and layout.when == {"option": option}, f"answer decoded with {layout.name if layout else None}"
     fields = ex.response.fields

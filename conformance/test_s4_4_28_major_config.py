@@ -8,8 +8,9 @@ import pytest
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import field_cases
 
-from .test_s4_1_framing import BROADCAST_WINDOW_S, INTERVALS, code, read_request
-from .test_s4_4_26_esc_information import undecoded
+from .answers import BROADCAST_WINDOW_S, heard_instead
+from .codes import code
+from .reports import INTERVALS, read_request
 
 SECTION = "4.4.28"
 
@@ -61,7 +62,7 @@ def test_answer_shows_what_was_set(dut, combo):
     if reply is not None:
         want["throttle_channel"] = {reply["throttle_channel"]}
     ex = dut.request("get_major_configuration", QUERY)
-    assert ex.response is not None, f"no 7-byte answer to 242 from node {dut.node_id}" + undecoded(dut, SPEC)
+    assert ex.response is not None, f"no 7-byte answer to 242 from node {dut.node_id}" + heard_instead(dut, SPEC)
     got = ex.response.fields
     dut.record.observe(f"242 after setting {combo}", {**ex.response.physical(), "payload": ex.response.data[:-1].hex(" ")})
     wrong = {k: (got[k], sorted(v)) for k, v in want.items() if got[k] not in v}

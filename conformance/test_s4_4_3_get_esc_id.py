@@ -4,26 +4,15 @@ from __future__ import annotations
 
 import pytest
 
-from .test_s4_4_2_msg_control import (
-    answer_window_s,
-    check_answer_slot,
-    describe_garbled,
-    garbled,
-    ms,
-    settle,
-    several_escs,
-    with_emulator_faults,
-)
+from . import multi_esc
+from .answers import answer_window_s, check_answer_slot, settle
+from .multi_esc import several_escs
+from .reports import describe_garbled, garbled, ms
 
 SECTION = "4.4.3"
+bench = multi_esc.bench  # fixture: several ESCs on one bus, with the run's emulator faults
 #: between queries: not a multiple of any report interval, so each query meets the reports at another phase
 PHASE_STEP_S = 0.007
-
-
-@pytest.fixture
-def bench(multi_dut, request):
-    """Several ESCs on one bus (``multi_dut``), with the run's emulator faults."""
-    return with_emulator_faults(multi_dut, request.config)
 
 
 def _query(dut):

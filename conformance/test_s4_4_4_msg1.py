@@ -8,41 +8,14 @@ from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import Status
 
-from .test_s4_4_2_msg_control import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
+from .reports import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
+from .throttle import FORMAT_CHANNELS, STREAM_PERIOD_S, can_throttle, command_for
 
 SECTION = "4.4.4"
 
-#: One throttle frame per period, as a flight controller sends it (400 Hz)
-STREAM_PERIOD_S = 0.0025
-#: Throttle formats by the channels they carry: 4.4.15-4 (1-4), 4.4.17-4 (1-6); 12-bit: the DUT's group
-#: (4.4.16-3). The catalogue names no channel count per format, so it is written here once.
-FORMAT_CHANNELS = {"raw_command_14b": 4, "raw_command_12b": 4, "raw_command_10b": 6}
 #: Test allowance for the motor and the ESC's throttle ramp to settle before MSG1 is compared
 SPIN_SETTLE_S = 0.5
 PAYLOAD = cat.spec("msg1").layouts[0].size
-
-
-def _group(channel: int) -> int:
-    """4.4.16-3: group g carries channels 4g-3..4g."""
-    per = FORMAT_CHANNELS["raw_command_12b"]
-    return (channel - 1) // per + 1
-
-
-def command_for(name: str, channel: int, value: int = 0) -> dict | None:
-    """Fields of a throttle frame that commands ``value`` on ``channel`` (0 elsewhere); None when the
-    format cannot address that channel."""
-    n = FORMAT_CHANNELS[name]
-    if name == "raw_command_12b":
-        if _group(channel) not in cat.THROTTLE_GROUPS:
-            return None
-        channels = [0] * n
-        channels[(channel - 1) % n] = value
-        return {"channels": channels, "group": _group(channel)}
-    if not 1 <= channel <= n:
-        return None
-    channels = [0] * n
-    channels[channel - 1] = value
-    return {"channels": channels}
 
 
 def _msg1_after(dut, t: float) -> list:
@@ -174,20 +147,12 @@ def test_throttle_source_bit(dut, source):
 
 
 # ------------------------------------------------------------------------------------------ 4.4.4-3, R8
-def _can_throttle(dut) -> dict:
-    s = dut.settings()
-    if s["throttle_source"] != 0:
-        dut.ask("throttle_select", {"source": 0})  # "under CAN throttle condition"; the fixture restores it
-        s = dut.settings()
-    return s
-
-
 @pytest.mark.requirement("4.4.4-3", "R8")
 @pytest.mark.parametrize("name", list(FORMAT_CHANNELS), ids=lambda n: n.rsplit("_", 1)[1])
 def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
     """Under a zero-throttle stream bit 13 is clear; from the last command it is set no earlier than
     200 ms and no later than 200 ms + one MSG1 interval; the next command clears it."""
-    s = _can_throttle(dut)
+    s = can_throttle(dut)
     fields = command_for(name, s["throttle_channel"])
     if fields is None:
         pytest.skip(f"{name} cannot address the DUT's throttle channel {s['throttle_channel']}")
@@ -264,7 +229,7 @@ def test_pwm_field_follows_the_throttle(dut, throttle):
     Commanded in RawCommand_12b; should PWM differ, the other formats are tried: a DUT that shows the
     value from one of them reads the first format wrongly (that format's own tests judge it), and
     this test is INCONCLUSIVE; from none of them, it fails."""
-    s = _can_throttle(dut)
+    s = can_throttle(dut)
     interval = interval_s(s, "msg1")
     channel = s["throttle_channel"]
     motor = dut.profile.has("motor")
@@ -294,32 +259,3 @@ def test_pwm_field_follows_the_throttle(dut, throttle):
         assert all(f.fields["speed"] > 0 for f in spinning), f"speed {[f.fields['speed'] for f in spinning]} rpm at throttle {throttle}"
         status = [f.fields["status"] for f in spinning]
         assert all(st & Status.RUNNING for st in status), f"bit8 (running) clear while the motor runs: {[hex(x) for x in status]} (R7)"
-
-
-# ------------------------------------------------------------------------------------------ shared
-#: Throttle for run_motor: a gentle spin, enough to count running time
-RUN_THROTTLE = 500
-#: Test allowance for a motor to coast to a stop
-COAST_S = 5.0
-
-
-def run_motor(dut, seconds: float) -> bool:
-    """Spin the motor for ``seconds`` and wait until it has stopped (MSG1 speed 0), so that the
-    running-time counters move (MSG_EXP9/10, 241). Only with --allow-motor-spin and a motor; returns
-    whether it ran."""
-    if not (dut.allow_motor_spin and dut.profile.has("motor")):
-        dut.record.observe("motor", "not run (needs --allow-motor-spin and capability motor)")
-        return False
-    s = _can_throttle(dut)
-    dut.throttle_stream("raw_command_12b", command_for("raw_command_12b", s["throttle_channel"], RUN_THROTTLE), STREAM_PERIOD_S)
-    dut.wait(seconds)
-    dut.stop_throttle()
-    dut.throttle_stream("raw_command_12b", command_for("raw_command_12b", s["throttle_channel"], 0), STREAM_PERIOD_S)
-    t = dut.now()
-    stopped = dut.wait_for("msg1", COAST_S, where=lambda f: f.fields["speed"] == 0)
-    dut.stop_throttle()
-    if stopped is None:
-        need_decoded(dut, "msg1", [], t, "the motor speed")
-        raise Inconclusive(f"the motor did not stop within {COAST_S} s of zero throttle")
-    dut.record.observe("motor", f"run {seconds} s at throttle {RUN_THROTTLE}, stopped")
-    return True

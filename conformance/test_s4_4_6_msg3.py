@@ -6,17 +6,13 @@ import pytest
 
 from ckesc.protocol import catalogue as cat
 
-from .test_s4_4_2_msg_control import REACT_S, describe_garbled, garbled, interval_s, ms, need_decoded
-from .test_s4_4_5_msg2 import check_interval_follows_set_freq
+from .physics import MAX_PLAUSIBLE_C, SAME_SENSOR_C
+from .reports import REACT_S, check_interval_follows_set_freq, describe_garbled, garbled, interval_s, ms, need_decoded
 
 SECTION = "4.4.6"
 
 LAYOUT = cat.spec("msg3").layouts[0]
 PAYLOAD = LAYOUT.size
-#: Physics, not protocol: an ESC above 150 degC is destroyed, not reporting; two readings of one
-#: sensor a few report intervals apart agree within a few degrees.
-MAX_PLAUSIBLE_C = 150
-SAME_SENSOR_C = 3
 TEMPERATURES = ("mos_t", "cap_t", "mcu_t")  # motor_t needs a motor sensor (capability motor_temperature)
 
 

@@ -6,8 +6,8 @@ import pytest
 
 from ckesc.harness.verdict import Inconclusive
 
-from .test_s4_4_2_msg_control import exp_reports, interval_s
-from .test_s4_4_5_msg2 import CELL_FULL_V, MIN_SUPPLY_V, check_voltage_current, esc_limits
+from .physics import CELL_FULL_V, MIN_SUPPLY_V, check_voltage_current, esc_limits
+from .reports import exp_reports, interval_s
 
 SECTION = "4.4.7"
 

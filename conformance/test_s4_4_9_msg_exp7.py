@@ -8,7 +8,7 @@ from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import LedColor
 
-from .test_s4_4_2_msg_control import exp_reports
+from .reports import exp_reports
 
 SECTION = "4.4.9"
 

@@ -6,6 +6,8 @@
 - :func:`motor_stopped`: an autouse fixture for the modules that import it - the motor stopped before
   each test (settings need it, R12) and after it.
 - :data:`RUN_VALUE` / :func:`start_motor`: a modest run throttle on the DUT's own channel.
+- :func:`command_for`: the fields of a throttle frame that commands one channel, in any format;
+  :data:`STREAM_PERIOD_S`, the period of a throttle stream; :func:`can_throttle`, CAN throttle selected.
 """
 
 from __future__ import annotations
@@ -22,8 +24,6 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import Kind
 
-from .test_s4_4_4_msg1 import command_for
-
 #: a modest throttle whose 12-bit packing is the same in both nibble orders (bits 11..8 and 3..0 zero),
 #: so that running the motor does not depend on R4
 RUN_VALUE = 0xF0
@@ -32,6 +32,44 @@ REPORTS = frozenset(s.name for s in cat.CATALOGUE if any(lay.name == "report" fo
 #: an answer may come late into the window): not an answer to a RawCommand
 NOT_ANSWERS = REPORTS | {"can_test", "msg_control", "get_esc_id"}
 NOT_ANSWER_IDS = frozenset(cat.spec(name).type_id for name in NOT_ANSWERS)
+#: One throttle frame per period, as a flight controller sends it (400 Hz)
+STREAM_PERIOD_S = 0.0025
+#: Throttle formats by the channels they carry: 4.4.15-4 (1-4), 4.4.17-4 (1-6); 12-bit: the DUT's group
+#: (4.4.16-3). The catalogue names no channel count per format, so it is written here once.
+FORMAT_CHANNELS = {"raw_command_14b": 4, "raw_command_12b": 4, "raw_command_10b": 6}
+
+
+# ------------------------------------------------------------------------------------------ throttle frames
+def _group(channel: int) -> int:
+    """4.4.16-3: group g carries channels 4g-3..4g."""
+    per = FORMAT_CHANNELS["raw_command_12b"]
+    return (channel - 1) // per + 1
+
+
+def command_for(name: str, channel: int, value: int = 0) -> dict | None:
+    """Fields of a throttle frame that commands ``value`` on ``channel`` (0 elsewhere); None when the
+    format cannot address that channel."""
+    n = FORMAT_CHANNELS[name]
+    if name == "raw_command_12b":
+        if _group(channel) not in cat.THROTTLE_GROUPS:
+            return None
+        channels = [0] * n
+        channels[(channel - 1) % n] = value
+        return {"channels": channels, "group": _group(channel)}
+    if not 1 <= channel <= n:
+        return None
+    channels = [0] * n
+    channels[channel - 1] = value
+    return {"channels": channels}
+
+
+def can_throttle(dut) -> dict:
+    """The DUT's settings, with CAN throttle selected first if it was not."""
+    s = dut.settings()
+    if s["throttle_source"] != 0:
+        dut.ask("throttle_select", {"source": 0})  # "under CAN throttle condition"; the fixture restores it
+        s = dut.settings()
+    return s
 
 
 # ------------------------------------------------------------------------------------------ the motor

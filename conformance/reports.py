@@ -1,0 +1,203 @@
+"""What a DUT reports on its own, as the report sections (4.4.1 - 4.4.14) read it (not a section: no
+tests here).
+
+- timing: :func:`ms`, :func:`frame_start`, :data:`REACT_S` / :func:`react_s`, :func:`interval_s`;
+- which reports came, decodable or not: :func:`reported`, :func:`report_starts`, and the ones that
+  did not decode: :func:`garbled`, :func:`describe_garbled`, :func:`need_decoded`;
+- MSG Control (4.4.2): :func:`msg_control`, :func:`resume`, :func:`check_suspended`, and capturing
+  what a DUT sends in MSG_EXP mode: :func:`exp_capture`, :func:`exp_reports`;
+- Set Freq (4.4.22) as the reports follow it: :func:`check_interval_follows_set_freq`.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+from ckesc.harness.verdict import Inconclusive
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.errors import TailError
+from ckesc.protocol.frame import classify, frame_bits
+from ckesc.protocol.ids import Kind
+
+from .codes import code
+
+INTERVALS = ("msg1_interval", "msg2_interval", "msg3_interval")
+REPORTS = ("msg1", "msg2", "msg3")
+EXP_FRAMES = tuple(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp"))
+#: A test allowance, not a protocol fact: a frame that starts within this time of a command may
+#: have been queued before the DUT could act on the command, and is not held against it. On a lane
+#: with a stated timing error a frame may also leave that much late: see :func:`react_s`.
+REACT_S = 0.005
+#: The longest a reporting DUT can be silent: one MSG1 interval at its largest legal setting
+REPORT_SILENCE_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S + REACT_S
+
+
+def ms(seconds: float) -> float:
+    """Seconds to milliseconds, rounded to the nanosecond (float noise must not decide a verdict)."""
+    return round(seconds * 1000, 6)
+
+
+def frame_start(dut, frame) -> float:
+    """When a frame started on the bus: its timestamp is its end (SocketCAN, and the simulated lane,
+    where an extended frame of n data bytes takes frame_bits(n) bit times; on a real bus stuff bits
+    make it up to ~20 % longer, inside the lane's stated error)."""
+    return frame.timestamp - frame_bits(len(frame.data)) / dut.lane.bitrate
+
+
+def interval_s(settings: dict, which: str) -> float:
+    return settings[f"{which}_interval"] * cat.INTERVAL_UNIT_S
+
+
+def node_settings(dut, node: int) -> dict:
+    """Report intervals of any node on the bus (Set/Get Freq read)."""
+    return dut.ask("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0},
+                   destination=node)
+
+
+def read_request(frame: str) -> dict[str, int]:
+    """Set/Get Freq's read (option "read"): the intervals sent are ignored (4.4.22-2)."""
+    return {"option": code(frame, "option", "read"), **dict.fromkeys(INTERVALS, 0)}
+
+
+def longest_interval_s(dut, node: int | None = None) -> float:
+    s = node_settings(dut, dut.node_id if node is None else node)
+    return max(s[k] for k in INTERVALS) * cat.INTERVAL_UNIT_S
+
+
+def msg_control(dut, command: int):
+    return dut.broadcast("msg_control", {"option": 0, "command": command})
+
+
+def resume(dut) -> None:
+    """Normal reporting again (0xAAAAAAAA), and the DUT left reporting: if no report comes back within
+    the longest interval there can be, the DUT is power-cycled where the lane can (suspension does not
+    survive it, R13), so that one broken resume does not fail every later test for the wrong reason."""
+    sent = msg_control(dut, cat.MSG_CONTROL_RESUME)
+    dut.wait(cat.ANSWER_DELAY_MAX_S)
+    if dut.wait_for("msg1", REPORT_SILENCE_S) is not None or reported(dut, sent.time, source=dut.node_id, names=REPORTS):
+        return
+    dut.record.observe("after 0xAAAAAAAA", f"no report in {ms(REPORT_SILENCE_S)} ms")
+    if dut.lane.power.available:
+        try:
+            dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+            dut.record.observe("recovery", "power cycle to leave the DUT reporting")
+        except Inconclusive as exc:
+            dut.record.observe("recovery failed", str(exc))
+
+
+def undecoded(dut) -> list:
+    """The frames heard that did not decode, but for those whose only fault is the tail byte's
+    start/end/toggle bits (F2): the harness reads those as the single frames they must be (they are in
+    ``dut.trace`` too), and the framing tests (4.1) judge the tail."""
+    return [g for g in dut.garbled if not isinstance(g.error, TailError)]
+
+
+def garbled(dut, name: str, *, source: int, since: float | None = None) -> list:
+    """Frames of message ``name`` from ``source`` that did not decode (wrong length, ...; see undecoded)."""
+    return [g for g in dut.undecoded(name, source=source, since=since, kind=Kind.MESSAGE) if not isinstance(g.error, TailError)]
+
+
+def describe_garbled(gs: list) -> str:
+    return "; ".join(f"{len(g.msg.data)} data bytes: {g.error}" for g in gs[:3])
+
+
+def reported(dut, since: float, *, source: int, names=REPORTS + EXP_FRAMES) -> list[tuple[str, float]]:
+    """(name, start) of every report frame from ``source`` that started REACT_S or more after
+    ``since``, decodable or not (a malformed report is still a report), in time order."""
+    out = [(f.name, frame_start(dut, f)) for f in dut.frames(since=since, source=source) if f.name in names]
+    for g in undecoded(dut):
+        kind, _, src, _, spec = classify(g.msg.arbitration_id)
+        if kind is Kind.MESSAGE and spec is not None and spec.name in names and src == source:
+            out.append((spec.name, (g.msg.timestamp or 0.0) - frame_bits(len(g.msg.data)) / dut.lane.bitrate))
+    return sorted((x for x in out if x[1] >= since + REACT_S), key=lambda x: x[1])
+
+
+def need_decoded(dut, name: str, frames: list, since: float, what: str) -> list:
+    """``frames`` (of ``name`` since ``since``), or INCONCLUSIVE when there are none because the DUT's
+    ones do not decode (their own test fails that): ``what`` cannot be read from them."""
+    if not frames:
+        bad = garbled(dut, name, source=dut.node_id, since=since)
+        if bad:
+            raise Inconclusive(f"{cat.spec(name).title} frames do not decode ({describe_garbled(bad)}): {what} cannot be read")
+    return frames
+
+
+def report_starts(dut, name: str, since: float) -> list[float]:
+    """Start times of the DUT's ``name`` reports since ``since``, decodable or not (timing is the question)."""
+    return [t for n, t in reported(dut, since - REACT_S, source=dut.node_id, names=(name,))]
+
+
+def react_s(dut) -> float:
+    """REACT_S plus the lane's stated timing error: how long after a command a frame may still be one
+    the DUT had due before it (on a lane that cannot time better, a frame may leave that much late)."""
+    return REACT_S + dut.lane.timing_error
+
+
+def check_suspended(dut, since: float, settings: dict) -> None:
+    """Precondition: MSG1 has stopped after 0x55555555 (else nothing about suspension can be shown)."""
+    dut.wait(max(0.0, since + 2 * interval_s(settings, "msg1") + react_s(dut) - dut.now()))
+    if reported(dut, since + dut.lane.timing_error, source=dut.node_id, names=("msg1",)):  # not held against it: react_s()
+        raise Inconclusive("MSG1 continues after 0x55555555: the DUT is not suspended, nothing can be shown in that state")
+
+
+@contextmanager
+def exp_mode(dut):
+    """MSG_EXP reporting (MSG Control 0xEEEEEEEE) for the ``with`` block; normal reporting after it, always."""
+    try:
+        yield msg_control(dut, cat.MSG_CONTROL_RESUME_EXP)
+    finally:
+        resume(dut)
+
+
+def exp_capture(dut, seconds: float | None = None) -> tuple[list, list, float, float]:
+    """Everything the DUT sends in ``seconds`` of MSG_EXP mode (default: twice the longest report
+    interval): (decoded frames, garbled ones, window start, window length). Used by other modules too:
+    keep its signature."""
+    return exp_capture_during(dut, seconds)[:4]
+
+
+def exp_capture_during(dut, seconds: float | None = None, during=None) -> tuple[list, list, float, float, object]:
+    """:func:`exp_capture`, and what ``during(dut)`` returned: called at the end of the window, still in
+    MSG_EXP mode, to read what the frames are compared with (before the resume, which may power-cycle)."""
+    window = 2 * longest_interval_s(dut) + 2 * REACT_S if seconds is None else seconds
+    with exp_mode(dut) as sent:
+        dut.wait(window + dut.lane.timing_error)
+        end = dut.now()
+        seen = during(dut) if during is not None else None
+    start = sent.time + react_s(dut)  # a frame that starts sooner may have been due before the command
+    frames = [f for f in dut.frames(since=start, until=end, source=dut.node_id) if frame_start(dut, f) >= start]
+    bad = [g for g in undecoded(dut) if start <= (g.msg.timestamp or 0.0) <= end and classify(g.msg.arbitration_id)[2] == dut.node_id]
+    return frames, bad, start, window, seen
+
+
+def exp_reports(dut, name: str, seconds: float | None = None, during=None) -> tuple[list, object]:
+    """The ``name`` frames of an MSG_EXP mode capture, and what ``during`` returned (see exp_capture).
+    Any frame that does not decode with its table layout fails the test; none at all makes it
+    INCONCLUSIVE (which MSG_EXP frames come is OBSERVE, R9-exp)."""
+    frames, bad, _, window, seen = exp_capture_during(dut, seconds, during)
+    wrong = [g for g in bad if (s := classify(g.msg.arbitration_id)[4]) is not None and s.name == name]
+    title = cat.spec(name).title
+    assert not wrong, f"{len(wrong)} {title} frames do not decode with the table's layout: {describe_garbled(wrong)}"
+    got = [f for f in frames if f.name == name]
+    dut.record.observe(f"{title} frames in {window:.3f} s of MSG_EXP mode", len(got))
+    if not got:
+        raise Inconclusive(f"the DUT sent no {title} in {window:.3f} s of MSG_EXP mode (which MSG_EXP frames come is OBSERVE, R9-exp)")
+    return got, seen
+
+
+def check_interval_follows_set_freq(dut, report: str, interval: int) -> None:
+    """After Set Freq sets ``report``'s interval (the others as they are), ``report`` comes every
+    ``interval`` x 2 ms: measured over four intervals once the old schedule has run out (R9)."""
+    s = dut.settings()
+    fields = {k: s[k] for k in INTERVALS} | {f"{report}_interval": interval}
+    dut.ask("set_freq", {"option": 1, **fields})
+    target = interval * cat.INTERVAL_UNIT_S
+    dut.wait(max(interval_s(s, report), target))  # the old schedule runs out
+    t = dut.now()
+    dut.wait(4 * target + target / 2)
+    stamps = report_starts(dut, report, t)
+    what = report.upper()
+    assert len(stamps) >= 3, f"only {len(stamps)} {what} in {ms(4.5 * target)} ms at {what}_SET {interval}"
+    worst = max(abs((b - a) - target) for a, b in zip(stamps, stamps[1:]))
+    dut.record.measure(f"{what} interval error", ms(worst), limit=dut.interval_tolerance_ms, unit="ms", clock=dut.clock,
+                       error=dut.lane.timing_error * 1000, requirement="R9")
