@@ -30,7 +30,7 @@ def _reopen(dut, rate):
     dut.lane.reopen(rate)
     control = getattr(dut.lane, "control", None)  # RealtimeEmulatorLane: (host, port) of `ckesc emulate --control`
     if control is not None:
-        from ckesc.emulator.realtime import control_request
+        from ckesc.emulator.control import control_request
 
         control_request(control[1], {"cmd": "bitrate", "bitrate": rate}, host=control[0])
 

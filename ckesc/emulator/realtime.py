@@ -60,7 +60,6 @@ from ..protocol.frame import WireFrame
 from . import faults as _faults
 from .bench import Bench
 from .control import ControlServer, Handler, Reply, dispatch
-from .control import control_request as control_request  # re-exported: conformance/test_s4_4_19_set_baud.py imports it from here
 from .model import EscModel
 from .socketcand import SocketcandServer, fmt_frame
 from .tcp import Conn
