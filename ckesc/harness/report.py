@@ -4,13 +4,18 @@ under ``reports/<timestamp>/`` with ``reports/latest`` pointing at the newest ru
 The JUnit file is built with the ``junit-xml`` package. That package has no per-testcase
 properties, so each testcase's requirement ids, strength, verdict and measurements are added as
 ``<properties>`` afterwards (Jenkins shows them) and repeated as ``[[PROPERTY|name=value]]`` lines
-in its system-out (GitLab and other readers that drop properties still show them).
+in its system-out (GitLab and other readers that drop properties still show them). Every testsuite
+carries the run's identity as properties (:func:`suite_properties`), and classnames are one dot deep
+(:func:`classname`), so that Jenkins, which splits a classname at its last dot into package and class,
+shows one package ``ckesc`` with a class per section.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
+import subprocess
 import xml.etree.ElementTree as ET
 from collections import Counter, defaultdict
 from datetime import UTC, datetime
@@ -19,6 +24,7 @@ from typing import Any
 
 from junit_xml import TestCase, TestSuite, to_xml_report_string
 
+from .. import __version__
 from ..protocol import catalogue as cat
 from ..protocol.ids import Kind
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
@@ -37,6 +43,55 @@ def _properties(r) -> dict[str, str]:
     return props
 
 
+def classname(section: str) -> str:
+    """The JUnit classname of a section's tests: ``ckesc.s4_4_22_set_get_freq`` for 4.4.22 Set/Get Freq.
+
+    Letters, digits and ``_`` after a single dot: Jenkins splits a classname at its last dot into package
+    and class (``ckesc.4.4.22 Set/Get Freq`` would be class ``22 Set/Get Freq`` of a package ``ckesc.4.4``,
+    with a slash in its URL), and GitLab keys test cases by classname and name."""
+    slug = re.sub(r"[^a-z0-9]+", "_", f"{section or 'unselected'} {SECTION_TITLES.get(section, '')}".lower()).strip("_")
+    return f"ckesc.{'s' + slug if slug[:1].isdigit() else slug}"
+
+
+def git_revision(source: Path | None = None) -> str | None:
+    """The commit of the checkout the suite runs from (``<sha>-dirty`` with uncommitted changes), or None
+    when it is installed from a wheel, git is missing or anything else goes wrong (never an error)."""
+    source = source or Path(__file__).resolve().parents[2]
+    if not (source / ".git").exists():  # the package directory is not at the top of a checkout
+        return None
+    try:
+        head = subprocess.run(["git", "-C", str(source), "rev-parse", "--verify", "HEAD"], capture_output=True,
+                              text=True, timeout=20)
+        if head.returncode != 0 or not re.fullmatch(r"[0-9a-f]{40,64}", head.stdout.strip()):
+            return None
+        dirty = subprocess.run(["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=20)
+    except (OSError, subprocess.SubprocessError, ValueError):
+        return None
+    return head.stdout.strip() + ("-dirty" if dirty.returncode == 0 and dirty.stdout.strip() else "")
+
+
+def suite_properties(info: dict[str, Any]) -> dict[str, str]:
+    """The run's info as JUnit testsuite properties: every plain value as it is (``complete``, ``lane``,
+    ``node_id``, ``timing_error_s``, ...), ESC Information 240 as ``esc_information.<field>`` and
+    ``firmware_date`` (``esc_information`` = ``no answer`` when the DUT gave none), and ``none`` for an
+    unknown value (``git_revision`` outside a checkout)."""
+    props: dict[str, str] = {}
+    for key, value in info.items():
+        if isinstance(value, dict):
+            props.update({f"{key}.{k}": "none" if v is None else str(v) for k, v in value.items()})
+        else:
+            props[key] = "none" if value is None else str(value)
+    esc = info.get("esc_information")
+    if isinstance(esc, dict):
+        y, m, d = esc.get("firmware_year"), esc.get("firmware_month"), esc.get("firmware_day")
+        if None not in (y, m, d):
+            props["firmware_date"] = f"20{int(y):02d}-{int(m):02d}-{int(d):02d}"
+    elif "esc_information" in info:
+        props["esc_information"] = "no answer"
+    return props
+
+
 def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_run: list[dict[str, Any]] = ()) -> str:
     """The JUnit document; with ``out`` (the run's directory) each of a test's traces is also an
     ``[[ATTACHMENT|/absolute/path]]`` line (Jenkins' JUnit attachments plugin wants it absolute).
@@ -49,11 +104,12 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
     for n in not_run:
         section = n.get("section") or "unselected"
         tc = TestCase(f"{n['name']} [{' '.join(n.get('requirements', []))}]".replace(" []", ""),
-                      classname=f"ckesc.{section} {SECTION_TITLES.get(section, '')}".strip(), status="NOT RUN")
+                      classname=classname(section), status="NOT RUN")
         tc.add_skipped_info(message=n.get("reason") or "not run")
         skipped_cases[section].append(tc)
         by_section.setdefault(section, [])
     suites = []
+    suite_props = suite_properties(info)
     cases_props: list[dict[str, str]] = []
     for section in sorted(by_section, key=section_key):
         cases = []
@@ -62,7 +118,7 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
             lines = "\n".join(f"[[PROPERTY|{k}={v}]]" for k, v in props.items())
             if out is not None:
                 lines += "".join(f"\n[[ATTACHMENT|{(out / path).resolve()}]]" for path in r.traces.values())
-            tc = TestCase(f"{r.name} [{' '.join(r.requirements)}]", classname=f"ckesc.{section} {SECTION_TITLES.get(section, '')}".strip(),
+            tc = TestCase(f"{r.name} [{' '.join(r.requirements)}]", classname=classname(section),
                           elapsed_sec=round(r.duration, 6), stdout=lines, status=r.outcome)
             if r.outcome == "FAIL":
                 tc.add_failure_info(message=r.message[:500], output=r.message, failure_type=r.strength)
@@ -74,8 +130,7 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
             cases_props.append(props)
         cases += skipped_cases.get(section, [])
         cases_props += [{"verdict": "NOT RUN"}] * len(skipped_cases.get(section, []))
-        suites.append(TestSuite(f"{section} {SECTION_TITLES.get(section, '')}".strip(), cases,
-                                properties={k: str(v) for k, v in info.items() if not isinstance(v, dict)}))
+        suites.append(TestSuite(f"{section} {SECTION_TITLES.get(section, '')}".strip(), cases, properties=suite_props))
     text = to_xml_report_string(suites, prettyprint=False)
     root = ET.fromstring(text)
     for case, props in zip(root.iter("testcase"), cases_props):
@@ -220,8 +275,12 @@ def evidence(frames: list, *, host: int, node: int | None, comm_loss: bool = Fal
 def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: list[dict[str, Any]] = (),
                   html: bool = True) -> Path:
     """Write the run's reports into ``out`` (from :func:`run_dir`), ``report.html`` last (built from
-    ``results.json``; ``html=False``: not at all), and point ``latest`` at it."""
+    ``results.json``; ``html=False``: not at all), and point ``latest`` at it. ``info`` gains the run's
+    id (the directory's name), the suite's version and its git revision (None outside a checkout)."""
     base = out.parent
+    info.setdefault("run_id", out.name)
+    info.setdefault("suite_version", __version__)
+    info.setdefault("git_revision", git_revision())
     (out / "junit.xml").write_text(junit_xml(results, info, out, not_run), encoding="utf-8")
     (out / "results.json").write_text(json.dumps({"info": info, "coverage": coverage(results),
                                                   "results": [r.__dict__ for r in results], "not_run": list(not_run)},
