@@ -9,7 +9,7 @@ commands share (exit codes, the parser class, :class:`UsageError`, argument type
 
 Exit codes: 0 success; 1 the input had frames that do not decode (``decode``), the emulator
 answered a control request with an error (``control``) or could not write its flash file at the end
-(``emulate``); 2 usage or input the wire format cannot carry (``encode``), or the emulator cannot start
+(``emulate``), or a run regressed (``compare``); 2 usage or input the wire format cannot carry (``encode``), or the emulator cannot start
 (``emulate``: port in use, unreadable flash file, bus that does not open); 3 no emulator answers on
 the control port (``control``); 130 interrupted; 141 stdout closed early (``| head``).
 """
@@ -25,6 +25,7 @@ from typing import Callable, Sequence
 from .. import __version__
 from .check_log import add_check_log_command
 from .common import EXIT_BROKEN_PIPE, EXIT_INTERRUPTED, EXIT_USAGE, Handler, UsageError, _Parser
+from .compare import add_compare_command
 from .control import add_control_command
 from .decode import add_decode_command
 from .emulate import add_emulate_command
@@ -39,6 +40,7 @@ COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
     add_run_command,
     add_selftest_command,
     add_report_command,
+    add_compare_command,
     add_decode_command,
     add_check_log_command,
     add_encode_command,

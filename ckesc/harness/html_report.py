@@ -81,9 +81,7 @@ def _identity(info: dict[str, Any]) -> str:
             ("emulator faults", info.get("faults") or None)]
     esc = info.get("esc_information")
     if isinstance(esc, dict):
-        y, m, d = esc.get("firmware_year"), esc.get("firmware_month"), esc.get("firmware_day")
-        if None not in (y, m, d):
-            rows.append(("firmware date", f"20{int(y):02d}-{int(m):02d}-{int(d):02d}"))
+        rows.append(("firmware date", cat.firmware_date(esc)))
         rows += [(k.replace("_", " "), v) for k, v in esc.items() if not k.startswith("firmware_")]
     elif "esc_information" in info:
         rows.append(("ESC information (240)", "no answer"))

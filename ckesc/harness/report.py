@@ -84,9 +84,8 @@ def suite_properties(info: dict[str, Any]) -> dict[str, str]:
             props[key] = "none" if value is None else str(value)
     esc = info.get("esc_information")
     if isinstance(esc, dict):
-        y, m, d = esc.get("firmware_year"), esc.get("firmware_month"), esc.get("firmware_day")
-        if None not in (y, m, d):
-            props["firmware_date"] = f"20{int(y):02d}-{int(m):02d}-{int(d):02d}"
+        if date := cat.firmware_date(esc):
+            props["firmware_date"] = date
     elif "esc_information" in info:
         props["esc_information"] = "no answer"
     return props

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntFlag
 from types import MappingProxyType
-from typing import Mapping
+from typing import Any, Mapping
 
 from .ids import MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Priority
 
@@ -795,6 +795,15 @@ def spec(name: str) -> FrameSpec:
         if s.title.lower() == str(name).lower() or str(s.type_id) == str(name):
             return s
     raise KeyError(f"no frame named {name!r}; known: {', '.join(BY_NAME)}")
+
+
+def firmware_date(fields: Mapping[str, Any] | None) -> str | None:
+    """ESC Information 240's firmware date as ``YYYY-MM-DD`` (its year byte counts from 2000), None when the
+    answer or a field is missing."""
+    if not isinstance(fields, Mapping):
+        return None
+    y, m, d = fields.get("firmware_year"), fields.get("firmware_month"), fields.get("firmware_day")
+    return None if None in (y, m, d) else f"20{int(y):02d}-{int(m):02d}-{int(d):02d}"
 
 
 def _self_check() -> None:

@@ -1,0 +1,65 @@
+"""``ckesc compare``: its arguments, output files and exit code; :mod:`ckesc.harness.compare` compares the runs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from ..harness import compare
+from .common import EXIT_OK, EXIT_USAGE
+
+EXIT_REGRESSED = 1
+
+
+def _percent(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a percentage: {text!r}") from None
+    if not 0 <= value <= 100:
+        raise argparse.ArgumentTypeError(f"{text} is not between 0 and 100")
+    return value / 100
+
+
+def _run_compare(args: argparse.Namespace) -> int:
+    try:
+        runs = [compare.read_run(path) for path in args.runs]
+    except compare.RunError as exc:
+        print(f"ckesc compare: error: cannot read run {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    doc = compare.compare(runs, threshold=args.margin_threshold)
+    try:
+        if args.json:
+            Path(args.json).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+        if args.html:
+            Path(args.html).write_text(compare.page(doc), encoding="utf-8")
+    except OSError as exc:
+        print(f"ckesc compare: error: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
+        return EXIT_USAGE
+    print(compare.text(doc))
+    return EXIT_REGRESSED if doc["regressed"] else EXIT_OK
+
+
+def add_compare_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("compare", help="what changed between runs: regressions, fixes, tests added/removed, shrinking margins",
+                       description=compare.__doc__.split("\n\n:func:")[0] + "\n\nExit 0: nothing regressed; 1: something regressed; 2: a run cannot "
+                                                     "be read, or bad arguments.",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("runs", nargs="+", metavar="RUN",
+                   help="a run's report directory (reports/<timestamp>, reports/latest) or its results.json; two or more, "
+                        "oldest first")
+    p.add_argument("--html", metavar="OUT", help="write the comparison as a self-contained HTML page")
+    p.add_argument("--json", metavar="OUT", help="write the comparison as JSON")
+    p.add_argument("--margin-threshold", type=_percent, default=compare.DEFAULT_THRESHOLD, metavar="PCT",
+                   help=f"a timing margin counts as shrunk when it fell by more than PCT %% of its earlier value (and by more "
+                        f"than the runs' stated timing error); default {compare.DEFAULT_THRESHOLD * 100:g}")
+    p.set_defaults(handler=_check_count)
+
+
+def _check_count(args: argparse.Namespace) -> int:
+    if len(args.runs) < 2:
+        print("ckesc compare: error: give two runs or more (see ckesc compare --help)", file=sys.stderr)
+        return EXIT_USAGE
+    return _run_compare(args)

@@ -1,0 +1,210 @@
+"""``ckesc compare``: runs made by the emulator with and without faults, compared as the command does
+(subprocesses, exit statuses, --json, --html rendered in headless Chromium), and the library's rules on
+records derived from those runs (issue #12, items 5 and 6)."""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+# the report's DOM reader and headless Chromium, as tests/harness/test_html_report.py uses them
+from test_html_report import _chromium, _render
+
+from ckesc.harness import compare
+
+SELECTION = "test_s4_4_2_msg_control or test_s4_4_26"  # answer-delay margins (R2, 4.4.2-4) and ESC Information
+FAULT = "answer_late"  # MSG Control answered after 80 ms: R2 and 4.4.2-4 FAIL
+
+
+def ckesc(*args: str | Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ckesc", *map(str, args)], capture_output=True, text=True, timeout=600)
+
+
+def _run(reports: Path, *args: str) -> Path:
+    ckesc("run", "-q", "--reports", reports, *args, "--", "-k", SELECTION)
+    assert (reports / "latest" / "results.json").is_file(), f"no run in {reports}"
+    return reports / "latest"
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, Path]:
+    base = tmp_path_factory.mktemp("compare")
+    return {"clean": _run(base / "clean"), "late": _run(base / "late", "--emulator-faults", FAULT),
+            "generic": _run(base / "generic", "--profile", "ckesc-generic")}
+
+
+def _doc(run: Path) -> dict:
+    return json.loads((run / "results.json").read_text())
+
+
+def _compare(tmp_path: Path, *runs: Path | str, extra: tuple[str, ...] = ()) -> tuple[subprocess.CompletedProcess, dict]:
+    out = tmp_path / "compare.json"
+    done = ckesc("compare", *runs, "--json", out, *extra)
+    return done, (json.loads(out.read_text()) if out.exists() else {})
+
+
+def _failed(run: Path) -> set[str]:
+    return {r["nodeid"] for r in _doc(run)["results"] if r["outcome"] == "FAIL"}
+
+
+# ------------------------------------------------------------------------------------------ two runs
+def test_a_run_with_a_fault_after_a_clean_one_regressed(runs, tmp_path):
+    done, doc = _compare(tmp_path, runs["clean"], runs["late"])
+    assert done.returncode == 1, done.stdout + done.stderr
+    (pair,) = doc["pairs"]
+    assert pair["regressed"] and doc["regressed"]
+    failed = _failed(runs["late"])
+    assert failed and {r["test"] for r in pair["tests"]["regressed"]} == failed
+    assert all(r["before"] == "PASS" and r["after"] == "FAIL" and r["message"] for r in pair["tests"]["regressed"])
+    assert {"R2", "4.4.2-4"} <= {r["requirement"] for r in pair["requirements"]["regressed"]}
+    assert not pair["tests"]["fixed"] and not pair["tests"]["added"] and not pair["tests"]["removed"]
+    # the answer-delay margins that shrank, both values as each run recorded them
+    shrank = {m["measurement"]: m for m in pair["margins_shrank"]}
+    assert any("answer end after the request" in k for k in shrank)
+    for m in shrank.values():
+        for run, key in ((runs["clean"], "before_ms"), (runs["late"], "after_ms")):
+            r = next(r for r in _doc(run)["results"] if r["nodeid"] == m["test"])
+            recorded = [float(v.split()[0]) for k, v in r["properties"].items()
+                        if k.endswith(".margin") and r["properties"][k.replace(".margin", ".name")] == m["name"]]
+            assert m[key] in recorded, (m, key, recorded)
+        assert m["after_ms"] < 0 < m["before_ms"]
+    # the DUT side by side: the fault is what differs; the console says it
+    (a, b) = doc["runs"]
+    assert a["identity"]["firmware date"] == b["identity"]["firmware date"] == "2024-10-11"
+    assert b["identity"]["emulator faults"] == FAULT and "emulator faults" not in a["identity"]
+    assert re.search(r"^\* emulator faults\s+-\s+answer_late", done.stdout, re.M)
+    assert "REGRESSED" in done.stdout.splitlines()[-1]
+    assert any(f.startswith("A (") and "SUBSET" in f for f in doc["flags"]), "a subset run is flagged as incomplete"
+
+
+def test_the_fault_gone_is_fixed_and_exit_0(runs, tmp_path):
+    done, doc = _compare(tmp_path, runs["late"], runs["clean"])
+    assert done.returncode == 0, done.stdout + done.stderr
+    (pair,) = doc["pairs"]
+    assert {r["test"] for r in pair["tests"]["fixed"]} == _failed(runs["late"])
+    assert "R2" in {r["requirement"] for r in pair["requirements"]["fixed"]}
+    assert not pair["tests"]["regressed"] and done.stdout.splitlines()[-1] == "no regression"
+
+
+def test_runs_from_different_profiles_are_compared_and_flagged(runs, tmp_path):
+    done, doc = _compare(tmp_path, runs["clean"], runs["generic"])
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert any(f.startswith("different DUT profiles") for f in doc["flags"]), doc["flags"]
+    assert "! different DUT profiles" in done.stdout
+    changed = doc["pairs"][0]["tests"]["changed"]  # the generic profile has no LED: those tests are SKIPPED
+    assert changed and all((r["before"], r["after"]) == ("PASS", "SKIPPED") for r in changed)
+
+
+def test_tests_added_and_removed_and_not_run(runs):
+    old = _doc(runs["clean"])
+    new = copy.deepcopy(old)
+    gone = new["results"].pop(0)["nodeid"]  # a test the next suite version no longer has
+    moved = new["results"].pop(0)
+    new["not_run"].append({"nodeid": moved["nodeid"], "name": moved["name"], "section": moved["section"], "reason": "not run: deselected"})
+    extra = {**copy.deepcopy(old["results"][0]), "nodeid": "conformance/test_s4_4_2_msg_control.py::test_new_one"}
+    new["results"].append(extra)
+    pair = compare.diff(compare.parse_run(old, label="a"), compare.parse_run(new, label="b"))
+    assert [r["test"] for r in pair["tests"]["removed"]] == [gone]
+    assert [r["test"] for r in pair["tests"]["added"]] == [extra["nodeid"]]
+    assert [(r["test"], r["after"]) for r in pair["tests"]["not_run"]] == [(moved["nodeid"], "NOT RUN")]
+    assert not pair["regressed"], "a test not run is no regression"
+
+
+def test_a_margin_shrinking_past_the_threshold_and_the_timing_error(runs):
+    old = _doc(runs["clean"])
+    new = copy.deepcopy(old)
+    r, key = next((r, k) for r in new["results"] for k, v in r["properties"].items()
+                  if k.endswith(".margin") and v.endswith(" ms") and float(v.split()[0]) > 1)
+    before = float(r["properties"][key].split()[0])
+    r["properties"][key] = f"{before * 0.95:.6g} ms"  # 5 % less, still a PASS
+    a, b = compare.parse_run(old, label="a"), compare.parse_run(new, label="b")
+    assert not compare.diff(a, b)["margins_shrank"], "within the default 10 %"
+    (m,) = compare.diff(a, b, threshold=0.04)["margins_shrank"]
+    assert (m["before_ms"], m["after_ms"], m["test"]) == (before, float(f"{before * 0.95:.6g}"), r["nodeid"])
+    new["info"]["timing_error_s"] = before * 0.1 / 1000  # the drop is inside what this run's clock can tell
+    assert not compare.diff(a, compare.parse_run(new, label="b"), threshold=0.04)["margins_shrank"]
+
+
+# ------------------------------------------------------------------------------------------ three runs and the page
+@pytest.fixture(scope="module")
+def three(runs, tmp_path_factory) -> tuple[subprocess.CompletedProcess, dict, Path]:
+    out = tmp_path_factory.mktemp("three")
+    done = ckesc("compare", runs["clean"], runs["late"], runs["generic"] / "results.json", "--json", out / "c.json",
+                 "--html", out / "c.html")
+    return done, json.loads((out / "c.json").read_text()), out / "c.html"
+
+
+def test_three_runs_make_a_requirement_by_run_matrix(runs, three):
+    done, doc, _ = three
+    assert done.returncode == 1, "A -> B regressed"
+    assert [p["regressed"] for p in doc["pairs"]] == [True, False]
+    rows = {row["requirement"]: row["results"] for row in doc["matrix"]}
+    assert rows["R2"] == ["PASS", "FAIL", "PASS"]
+    want = [compare.requirement_results(compare.read_run(runs[k])) for k in ("clean", "late", "generic")]
+    assert rows == {rid: [w.get(rid, "NOT CHECKED") for w in want] for rid in rows}
+    assert re.search(r"^  R2\s+READING\s+PASS\s+FAIL\s+PASS", done.stdout, re.M), done.stdout
+    trend = {t["measurement"]: t for t in doc["trends"]}
+    late = next(t for k, t in trend.items() if "answer end after the request" in k)
+    assert len(late["margins_ms"]) == 3 and late["margins_ms"][1] < 0 < late["margins_ms"][0] and late["shrank_at"] == ["B"]
+
+
+def test_the_page_renders_in_chromium_with_matrix_and_margin_trends(three, tmp_path):
+    done, doc, page = three
+    text = page.read_text()
+    assert "<script" not in text and not re.findall(r'(?:href|src)="[^#"]|url\((?!#)|@import', text), "self-contained"
+    dom = _render(page, tmp_path)
+    assert "REGRESSED" in dom.find("header").text()
+    assert dom.find("section", id="pair-A-B").attrs["data-regressed"] == "true"
+    assert dom.find("section", id="pair-B-C").attrs["data-regressed"] == "false"
+    assert dom.find("section", id="matrix").find("tr", **{"data-requirement": "R2"}).attrs["data-results"] == "PASS FAIL PASS"
+    assert "different DUT profiles" in " ".join(p.text() for p in dom.iter("p", role="alert"))
+    assert "diff" in dom.find("tr", **{"data-field": "emulator faults"}).attrs.get("class", "")
+    trends = dom.find("section", id="trends")
+    rows = {tr.attrs["data-measurement"]: tr for tr in trends.iter("tr") if "data-measurement" in tr.attrs}
+    assert set(rows) == {t["measurement"] for t in doc["trends"]}
+    for t in doc["trends"]:  # each timing measurement: its margin in each run, and a line of them
+        assert rows[t["measurement"]].find("svg"), t["measurement"]
+        assert (rows[t["measurement"]].attrs.get("class") == "diff") == bool(t["shrank_at"])
+    shot = tmp_path / "compare.png"
+    done = _chromium([f"--screenshot={shot}", "--window-size=1200,2400", "--hide-scrollbars", page.resolve().as_uri()],
+                     tmp_path / "chromium")
+    assert done.returncode == 0 and shot.is_file(), done.stderr[-2000:]
+    import matplotlib.image
+
+    pixels = matplotlib.image.imread(shot)
+    colours = {tuple((p[:3] * 255).round().astype(int)) for p in pixels[::5, ::5].reshape(-1, pixels.shape[2])}
+    assert (0xCF, 0x22, 0x2E) in colours and len(colours) > 50, "the REGRESSED badge on a page, not a blank"
+
+
+# ------------------------------------------------------------------------------------------ runs that cannot be read
+def test_a_run_that_cannot_be_read_is_exit_2_with_one_line(runs, tmp_path):
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "bad.json").write_text("{not json")
+    (tmp_path / "other.json").write_text('{"frames": 3}')
+    reports = runs["clean"].parent
+    cases = {tmp_path / "nowhere": "no such run", tmp_path / "empty": "no results.json",
+             reports: "give one run, e.g. reports/latest", tmp_path / "bad.json": "is not JSON",
+             tmp_path / "other.json": "not a results record"}
+    for bad, why in cases.items():
+        done = ckesc("compare", runs["clean"], bad)
+        assert done.returncode == 2, (bad, done.stdout, done.stderr)
+        assert len(done.stderr.strip().splitlines()) == 1 and why in done.stderr and str(bad) in done.stderr, done.stderr
+        assert done.stdout == ""
+    one = ckesc("compare", runs["clean"])
+    assert one.returncode == 2 and "two runs or more" in one.stderr
+    assert ckesc("compare", runs["clean"], runs["late"], "--margin-threshold", "150").returncode == 2
+
+
+def test_the_same_run_twice_is_no_regression(runs, tmp_path):
+    copied = tmp_path / "copy"
+    shutil.copytree(runs["clean"], copied)
+    done, doc = _compare(tmp_path, runs["clean"], copied)
+    assert done.returncode == 0 and not doc["pairs"][0]["margins_shrank"]
+    assert not any(doc["pairs"][0]["tests"][k] for k in ("regressed", "fixed", "changed", "added", "removed", "not_run"))
