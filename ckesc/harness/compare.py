@@ -237,8 +237,8 @@ def flags(runs: list[Run]) -> list[str]:
     for key, what in (("profile", "DUT profiles"), ("lane", "lanes"), ("dut", "kinds of DUT"),
                       ("timing_error_s", "stated timing errors"), ("bitrate", "bit rates")):
         values = [r.info.get(key) for r in runs]
-        if len(set(map(str, values))) > 1:
-            out.append(f"different {what}: " + ", ".join(f"{_letter(i)} {v}" for i, v in enumerate(values)))
+        if len({str(v) for v in values if v is not None}) > 1:  # a run that does not say is not flagged for it
+            out.append(f"different {what}: " + ", ".join(f"{_letter(i)} {'?' if v is None else v}" for i, v in enumerate(values)))
     suites = [(r.info.get("suite_version"), r.info.get("git_revision")) for r in runs]
     if all(v for v, _ in suites) and len(set(suites)) > 1:  # runs older than these fields: nothing to tell
         out.append("different suite revisions (a verdict may have changed with the suite, not the DUT): "
@@ -340,7 +340,8 @@ def text(doc: dict[str, Any]) -> str:
             rows = p["tests"][key]
             if rows:
                 lines.append(f"  {title} ({len(rows)}):")
-                lines += [f"    {r['test']}: {r['before']} -> {r['after']}" for r in rows[:_LISTED]]
+                lines += [f"    {r['test']}: " + {"added": r["after"], "removed": f"(was {r['before']})"}.get(
+                    key, f"{r['before']} -> {r['after']}") for r in rows[:_LISTED]]
                 if len(rows) > _LISTED:
                     lines.append(f"    ... {len(rows) - _LISTED} more")
         if p["margins_shrank"]:

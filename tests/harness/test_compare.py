@@ -208,3 +208,19 @@ def test_the_same_run_twice_is_no_regression(runs, tmp_path):
     done, doc = _compare(tmp_path, runs["clean"], copied)
     assert done.returncode == 0 and not doc["pairs"][0]["margins_shrank"]
     assert not any(doc["pairs"][0]["tests"][k] for k in ("regressed", "fixed", "changed", "added", "removed", "not_run"))
+
+
+def test_flags_name_what_differs_and_only_that(runs):
+    doc = _doc(runs["clean"])
+    whole = copy.deepcopy(doc)
+    whole["info"].update(complete=True, incomplete="")
+    old = copy.deepcopy(whole)  # a record from before the suite wrote its version, with less in its info
+    for key in ("suite_version", "git_revision", "profile"):
+        old["info"].pop(key, None)
+    runs_ = [compare.parse_run(d, label=n) for n, d in (("old", old), ("whole", whole), ("subset", doc))]
+    flags = compare.flags(runs_)
+    assert flags == [f"C ({doc['info']['run_id']}) is incomplete: SUBSET - not a conformance result for the whole suite: {doc['info']['incomplete']}; "
+                     f"{doc['info']['not_run']} tests not run"], flags
+    generic = _doc(runs["generic"])
+    assert compare.flags([runs_[1], compare.parse_run({**generic, "info": {**generic["info"], "complete": True}})]) == [
+        f"different DUT profiles: A {doc['info']['profile']}, B {generic['info']['profile']}"]
