@@ -8,7 +8,7 @@ Runs are given oldest first; each is compared with the one before it. For each s
   requirement first checked, ...) are listed apart;
 * tests **added** or **removed** (in neither the results nor the not-run list of the other run), and tests
   one of the two runs did not run (a subset, an aborted run);
-* timing **margins that shrank**: per timing measurement (unit ms or s) of a test, both margins, when the
+* timing **margins that shrank**: per timing measurement (unit ms or s) of a test, both margins and values, when the
   margin fell by more than the threshold (a fraction of the earlier margin) and by more than the runs'
   stated timing error.
 
@@ -211,6 +211,7 @@ def diff(a: Run, b: Run, *, threshold: float = DEFAULT_THRESHOLD) -> dict[str, A
     error = max(_error_ms(a), _error_ms(b))
     margins = [{"measurement": key, "test": mb[key]["test"], "name": mb[key]["name"],
                 "before_ms": ma[key]["margin_ms"], "after_ms": mb[key]["margin_ms"],
+                "value_before_ms": ma[key]["value_ms"], "value_after_ms": mb[key]["value_ms"],
                 "limit_before": ma[key]["limit"], "limit_after": mb[key]["limit"], "verdict_after": mb[key]["verdict"]}
                for key in ma.keys() & mb.keys()
                if shrank(ma[key]["margin_ms"], mb[key]["margin_ms"], threshold=threshold, error_ms=error)]
@@ -346,7 +347,8 @@ def text(doc: dict[str, Any]) -> str:
                     lines.append(f"    ... {len(rows) - _LISTED} more")
         if p["margins_shrank"]:
             lines.append(f"  timing margins that shrank by more than {doc['threshold'] * 100:g} % ({len(p['margins_shrank'])}):")
-            lines += [f"    {m['measurement']}: {_ms(m['before_ms'])} -> {_ms(m['after_ms'])} (limit {m['limit_after']})"
+            lines += [f"    {m['measurement']}: margin {_ms(m['before_ms'])} -> {_ms(m['after_ms'])} (measured "
+                      f"{_ms(m['value_before_ms'])} -> {_ms(m['value_after_ms'])}, limit {m['limit_after']})"
                       for m in p["margins_shrank"][:_LISTED]]
     if len(runs) > 2:
         differing = [row for row in doc["matrix"] if len(set(row["results"])) > 1]
@@ -442,10 +444,11 @@ def _pair_section(doc: dict[str, Any], p: dict[str, Any]) -> str:
                        f"<th>section</th><th>verdict</th><th>message</th></tr>{_change_rows(tests, 'test')}</table></details>")
     if p["margins_shrank"]:
         rows = "".join(f'<tr data-measurement="{_e(m["measurement"])}">{_what(m)}<td class=lim>{_e(m["limit_after"])}</td>'
+                       f'<td class=num>{_ms(m["value_before_ms"])}</td><td class=num>{_ms(m["value_after_ms"])}</td>'
                        f'<td class=num>{_ms(m["before_ms"])}</td><td class=num>{_ms(m["after_ms"])}</td>'
                        f'<td>{_badge(m["verdict_after"])}</td></tr>' for m in p["margins_shrank"])
         out.append(f"<h3>Timing margins that shrank by more than {doc['threshold'] * 100:g} % ({len(p['margins_shrank'])})</h3>"
-                   "<table class=margins-shrank><tr><th>measurement and test</th><th>limit</th><th>margin before</th>"
+                   "<table class=margins-shrank><tr><th>measurement and test</th><th>limit</th><th>measured before</th><th>after</th><th>margin before</th>"
                    f"<th>margin after</th><th></th></tr>{rows}</table>")
     out.append("</section>")
     return "".join(out)
