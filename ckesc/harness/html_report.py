@@ -78,7 +78,8 @@ def _badge(verdict: str) -> str:
 def _identity(info: dict[str, Any]) -> str:
     rows = [("DUT", info.get("dut")), ("node id", info.get("node_id")), ("profile", info.get("profile")),
             ("lane", info.get("lane")), ("clock", info.get("clock")), ("bit rate", f"{info['bitrate']} bit/s" if info.get("bitrate") else None),
-            ("power control", info.get("power")), ("timing error", f"{info['timing_error_s'] * 1000:g} ms" if "timing_error_s" in info else None),
+            ("power control", info.get("power")), ("timing error (the bench's)", f"{info['timing_error_s'] * 1000:g} ms" if "timing_error_s" in info else None),
+            ("report-interval jitter allowance (the DUT's)", f"{info['jitter_s'] * 1000:g} ms" if "jitter_s" in info else None),
             ("conformance claim", claim_text(info).removeprefix("claim: ") if "not_claimed" in info else None),
             ("emulator faults", info.get("faults") or None)]
     esc = info.get("esc_information")

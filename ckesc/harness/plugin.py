@@ -302,7 +302,7 @@ def ckesc_lane(request: pytest.FixtureRequest):
     _watch_lane(config, lane)
     st.info.update(dut=config.getoption("dut"), lane=lane.name, clock=lane.clock, profile=profile.name,
                    bitrate=lane.bitrate, power=lane.power.name, timing_error_s=lane.timing_error,
-                   not_claimed=functions.not_claimed_text(profile.absent),
+                   jitter_s=profile.jitter_s, not_claimed=functions.not_claimed_text(profile.absent),
                    faults=config.getoption("emulator_faults") or "")
     _install_signal_guard(config)
     yield lane
@@ -491,7 +491,8 @@ _BUS_TEARDOWN = pytest.StashKey[bool]()  # the bus rules failed the test at tear
 
 def _watch_lane(config: pytest.Config, lane: Lane) -> None:
     """The bus rules that hold at all times (ckesc/evidence/rules.py) over every frame the lane reads."""
-    watcher = LaneRules(lane)
+    profile = state(config).profile
+    watcher = LaneRules(lane, jitter=profile.jitter_s if profile is not None else 0.0)
     lane.listeners.append(watcher)
     state(config).bus_rules.append(watcher)
 

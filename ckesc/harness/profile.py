@@ -5,7 +5,10 @@ your own is a path, or a name found in ``./fixtures/duts/``.
 
     [dut]          name, description
     [capabilities] led, motor, pwm_input, motor_temperature, multi_node   (true/false)
-    [timing]       error_s: measurement error of the real-time lane; margins below it are INCONCLUSIVE
+    [timing]       error_s: the bench's measurement error (host + adapter timestamps); margins below it
+                   are INCONCLUSIVE
+                   jitter_s: the DUT's report-interval jitter allowance (R9): widens what its report
+                   intervals may do, in the interval tests and the live bus rules alike
                    boot_s: power-on to first report; off_s: off time of a power cycle
     [readings]     R4 = "lsb" | "swapped"   (12-bit nibble order)
     [functions]    absent = ["get_rec", ...]: optional functions the ESC lacks (R9b; the names are
@@ -67,6 +70,7 @@ class _Capabilities(_Section):
 class _Timing(_Section):
     model_config = ConfigDict(extra="forbid", strict=False)  # an int (2) is a float here, a string is not
     error_s: float = Field(0.0, ge=0.0, le=10.0)
+    jitter_s: float = Field(0.0, ge=0.0, le=1.0)
     boot_s: float = Field(1.0, ge=0.0, le=600.0)
     off_s: float = Field(1.0, ge=0.0, le=600.0)
 
@@ -135,6 +139,7 @@ class DutProfile:
     description: str = ""
     capabilities: dict[str, bool] = field(default_factory=dict)
     error_s: float = 0.0
+    jitter_s: float = 0.0
     boot_s: float = 1.0
     off_s: float = 1.0
     readings: dict[str, str] = field(default_factory=dict)
@@ -178,7 +183,7 @@ class DutProfile:
         except ValidationError as exc:
             raise ProfileError("; ".join(_describe(path, e) for e in exc.errors())) from None
         return cls(name=doc.dut.name or path.name.removesuffix(".toml"), description=doc.dut.description,
-                   capabilities=doc.capabilities.model_dump(), error_s=doc.timing.error_s,
+                   capabilities=doc.capabilities.model_dump(), error_s=doc.timing.error_s, jitter_s=doc.timing.jitter_s,
                    boot_s=doc.timing.boot_s, off_s=doc.timing.off_s, readings=doc.readings.model_dump(), path=str(path),
                    absent=tuple(doc.functions.absent))
 

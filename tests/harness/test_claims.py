@@ -4,13 +4,16 @@
 * optional functions (R9b): a profile declaring functions absent turns their tests SKIPPED "not
   claimed" against an emulator that lacks them, every report says what the claim leaves out, and the
   same emulator FAILs when the functions are claimed; the core cannot be declared away;
-* selecting sections by number or test modules by path; a selection of nothing is exit 2.
+* selecting sections by number or test modules by path; a selection of nothing is exit 2;
+* the DUT's report-interval jitter allowance apart from the bench's error, in the interval tests and
+  the live bus rules; every bench option in ``ckesc run --help``.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -18,8 +21,10 @@ from pathlib import Path
 
 import pytest
 
+from ckesc.evidence import BusRules
 from ckesc.harness.profile import DutProfile, ProfileError
 from ckesc.protocol import catalogue as cat
+from ckesc.protocol.frame import encode
 from ckesc.protocol.functions import CORE, OPTIONAL
 from ckesc.protocol.requirements import REQUIREMENTS
 
@@ -45,7 +50,7 @@ def emulator_profile(tmp: Path, name: str, extra: str) -> Path:
     """The shipped emulator profile with ``extra`` TOML appended (a bench's own copy)."""
     text = (Path(__file__).resolve().parents[2] / "ckesc/harness/profiles/emulator.toml").read_text()
     path = tmp / name
-    path.write_text(text + extra)
+    path.write_text(text.replace("[timing]\n", "[timing]\n" + extra) if extra.startswith("jitter_s") else text + extra)
     return path
 
 
@@ -163,3 +168,60 @@ def test_a_selection_of_nothing_is_one_line_exit_2_never_the_whole_suite(tmp_pat
         assert w in lines[0]
     assert "passed" not in done.stdout
     assert not (reports / "latest").exists()
+
+
+# ----------------------------------------------------------------------------------------- jitter and error
+def test_the_dut_jitter_allowance_widens_the_interval_tests_and_the_live_rules(tmp_path):
+    reports = tmp_path / "reports"
+    strict = run(tmp_path, "4.4.5", "4.4.22", "--emulator-faults", "report_jitter", "--reports", str(reports))
+    assert strict.returncode == 1, strict.stdout[-3000:] + strict.stderr
+    doc, *_ = latest(reports)
+    fails = [r for r in doc["results"] if r["outcome"] == "FAIL"]
+    assert any(r["bus_rules"] == ["R9"] for r in fails) and any("interval" in r["message"] for r in fails)
+
+    profile = emulator_profile(tmp_path, "jittery.toml", "jitter_s = 0.2\n")
+    wide = run(tmp_path, "4.4.5", "4.4.22", "--profile", str(profile), "--emulator-faults", "report_jitter",
+               "--reports", str(reports))
+    assert wide.returncode == 0, wide.stdout[-3000:] + wide.stderr
+    doc, junit, summary, page = latest(reports)
+    assert {r["outcome"] for r in doc["results"]} <= {"PASS", "OBSERVED"}
+    assert doc["info"]["jitter_s"] == 0.2 and doc["info"]["timing_error_s"] == 0.0
+    assert re.search(r"stated error \+-0 ms \(the bench's\), report-interval jitter allowance 200 ms \(the DUT's\)", summary)
+    assert "jitter allowance (the DUT&#x27;s)" in page
+    limits = [v for r in doc["results"] for k, v in r["properties"].items() if k.endswith(".limit") and "interval" in
+              r["properties"].get(k.replace("limit", "name"), "")]
+    assert limits and all(float(v.split()[1]) > 200 for v in limits)
+
+
+def test_the_live_interval_rule_takes_the_jitter_allowance_on_top_of_the_error():
+    def late_msg1(rules: BusRules) -> list:
+        feed = rules.feed
+        read = {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}
+        w = encode("set_freq", read, source=0, destination=1, transfer_id=0)
+        feed(w.arbitration_id, w.data, 0.0)
+        w = encode("set_freq", {"option": 0, "msg1_interval": 10, "msg2_interval": 50, "msg3_interval": 250},
+                   kind="response", source=1, destination=0, transfer_id=0)
+        feed(w.arbitration_id, w.data, 0.001)
+        found = []
+        for i, t in enumerate([0.01, 0.03, 0.053, 0.073]):  # one gap 3 ms long
+            w = encode("msg1", {"speed": 0, "pwm": 0, "status": 0}, source=1, transfer_id=i)
+            found += [v.check for v in feed(w.arbitration_id, w.data, t)]
+        return found
+
+    assert "report-interval" in late_msg1(BusRules(tolerance=0.001, complete=True))
+    assert late_msg1(BusRules(tolerance=0.001, complete=True, jitter=0.003)) == []
+
+
+def test_every_bench_option_of_the_plugin_is_in_ckesc_run_help():
+    plugin = subprocess.run([sys.executable, "-m", "pytest", "--help", "-p", "no:cacheprovider"], capture_output=True,
+                            text=True, timeout=120).stdout
+    group = plugin.split("CKESC conformance", 1)[1].split("\n\n", 1)[0]
+    options = set(re.findall(r"^\s+(--[a-z][a-z-]+)", group, re.M))
+    assert "--can-bitrate-cmd" in options
+    ours = subprocess.run([sys.executable, "-m", "ckesc", "run", "--help"], capture_output=True, text=True, timeout=60).stdout
+    # the plugin's report options are ckesc run's --reports and --trace-format; --ckesc-summary and --ckesc-no-html
+    # are set by ckesc run / ckesc selftest themselves
+    renamed = {"--ckesc-reports": "--reports", "--ckesc-trace-format": "--trace-format"}
+    missing = [o for o in sorted(options) if o not in ("--ckesc-summary", "--ckesc-no-html")
+               and renamed.get(o, o) not in ours]
+    assert missing == []
