@@ -48,9 +48,10 @@ _FLAGS = frozenset({"-x", "--exitfirst", "-v", "-vv", "-vvv", "--verbose", "-q",
 def is_selector(token: str, previous: str | None = None) -> bool:
     """Whether ``token`` selects part of the suite: a section number, a test module's name or a path
     to one (``.py``, with or without ``::test``), and not the value of the option before it."""
-    if previous is not None and previous.startswith("-") and "=" not in previous and previous not in _FLAGS:
+    if token.startswith("-") or (previous is not None and previous.startswith("-") and "=" not in previous
+                                 and previous not in _FLAGS):
         return False
-    return bool(_SECTION.match(token)) or ".py" in token or ("/" in token and not token.startswith("-"))
+    return bool(_SECTION.match(token)) or ".py" in token or "/" in token
 
 
 def split_selection(tokens: list[str]) -> tuple[list[str], list[str]]:
@@ -91,7 +92,8 @@ def resolve_selection(selectors: list[str], cwd: Path | None = None) -> list[str
             path = where / f"{head}.py"
         elif _SECTION.match(head) and ".py" not in head:
             known = sorted(modules, key=lambda k: [int(x) if x.isdigit() else 1 << 30 for x in k.split(".")])
-            raise SelectionError(f"no conformance section {head!r} (sections: {', '.join(known)})")
+            what = "test module" if head.startswith("test_") else "section"
+            raise SelectionError(f"no conformance {what} {head!r} (sections: {', '.join(known)})")
         else:
             given = Path(head).expanduser()
             tries = [given] if given.is_absolute() else [cwd / given, root / given]

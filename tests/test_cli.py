@@ -396,7 +396,7 @@ def test_run_tells_sections_and_modules_from_pytest_options_and_their_values():
     from ckesc.run import split_selection
 
     tokens = ["4.4.22", "--", "-k", "4.4", "--maxfail", "3", "--timeout", "2.5", "-x", "4.4.3", "conformance/t.py::a",
-              "--deselect", "conformance/t.py::b", "--junitxml=out/j.xml"]
+              "--deselect", "conformance/t.py::b", "--junitxml=out/j.xml", "--ignore=conformance/u.py"]
     assert split_selection(tokens) == (["4.4.22", "4.4.3", "conformance/t.py::a"],
                                        ["-k", "4.4", "--maxfail", "3", "--timeout", "2.5", "-x", "--deselect",
-                                        "conformance/t.py::b", "--junitxml=out/j.xml"])
+                                        "conformance/t.py::b", "--junitxml=out/j.xml", "--ignore=conformance/u.py"])
