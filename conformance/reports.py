@@ -149,10 +149,15 @@ def exp_mode(dut):
         resume(dut)
 
 
-def exp_capture(dut, seconds: float | None = None) -> tuple[list, list, float, float]:
+def exp_capture(dut, seconds: float | None = None, *, if_claimed: bool = False) -> tuple[list, list, float, float]:
     """Everything the DUT sends in ``seconds`` of MSG_EXP mode (default: twice the longest report
     interval): (decoded frames, garbled ones, window start, window length). Used by other modules too:
-    keep its signature."""
+    keep its signature. A DUT whose profile declares MSG_EXP mode absent (R9b) ends the test as not
+    claimed; with ``if_claimed`` (a caller that only compares MSG_EXP frames with other reports, when
+    there are some) the capture is empty instead."""
+    if if_claimed and not dut.profile.claims("msg_exp_mode"):
+        dut.record.observe("MSG_EXP mode", "not claimed (R9b): the DUT profile declares it absent")
+        return [], [], dut.now(), 0.0
     return exp_capture_during(dut, seconds)[:4]
 
 

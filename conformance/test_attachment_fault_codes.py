@@ -28,7 +28,7 @@ def test_reported_fault_codes_are_the_attachment_s(dut):
     ex = dut.request("maintenance_information", {"option": 2})
     if ex.response is not None:
         reported["241 option 2"] = [ex.response.fields["fault_code"]]
-    frames, _, _, _ = exp_capture(dut)
+    frames, _, _, _ = exp_capture(dut, if_claimed=True)
     exp9 = sorted({f.fields["fault_code_1"] for f in frames if f.name == "msg_exp9"})
     if exp9:
         reported["MSG_EXP9 fault code 1"] = exp9

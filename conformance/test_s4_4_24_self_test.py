@@ -52,7 +52,7 @@ def test_self_test_agrees_with_the_reported_fault_codes(dut):
     fault = m.response.fields.get("fault_code") if m.response is not None else None
     msg1 = dut.reports("msg1", 3 * dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S)
     bits = sorted({f.fields["status"] & cat.SELFTEST_ERROR_MASK for f in msg1})
-    frames, _, _, _ = exp_capture(dut)
+    frames, _, _, _ = exp_capture(dut, if_claimed=True)
     exp9 = sorted({f.fields["fault_code_1"] for f in frames if f.name == "msg_exp9"})
     dut.record.observe("self-test reports", {
         "Self Test": _label(status), "241 fault code": "no answer" if fault is None else f"{fault:#06x}",

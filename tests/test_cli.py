@@ -390,3 +390,13 @@ def test_run_passes_the_trace_format_to_the_plugin():
     assert default[default.index("--ckesc-trace-format") + 1] == "blf"
     with pytest.raises(SystemExit):
         parser.parse_args(["run", "--trace-format", "pcap"])
+
+
+def test_run_tells_sections_and_modules_from_pytest_options_and_their_values():
+    from ckesc.run import split_selection
+
+    tokens = ["4.4.22", "--", "-k", "4.4", "--maxfail", "3", "--timeout", "2.5", "-x", "4.4.3", "conformance/t.py::a",
+              "--deselect", "conformance/t.py::b", "--junitxml=out/j.xml", "--ignore=conformance/u.py"]
+    assert split_selection(tokens) == (["4.4.22", "4.4.3", "conformance/t.py::a"],
+                                       ["-k", "4.4", "--maxfail", "3", "--timeout", "2.5", "-x", "--deselect",
+                                        "conformance/t.py::b", "--junitxml=out/j.xml", "--ignore=conformance/u.py"])

@@ -14,7 +14,9 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
         help="run the conformance suite against a DUT and write reports",
         description=run_lib.__doc__.split("\n\n")[1] if run_lib.__doc__ else None,
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="Any other pytest option can follow `--`, e.g. `ckesc run -- -k set_freq -x`.",
+        epilog="Select sections by number or test modules by path: `ckesc run 4.4.22 4.4.3`, `ckesc run "
+               "conformance/test_s4_4_22_set_freq.py`; a selection that matches nothing is an error (exit 2). Any "
+               "other pytest option can follow `--`, e.g. `ckesc run -- -k set_freq -x`.",
     )
     g = p.add_argument_group("device under test")
     g.add_argument("--dut", choices=("emulator", "bus"), default="emulator", help="default: emulator")
@@ -24,6 +26,9 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--can-channel", help="python-can channel, e.g. can0")
     g.add_argument("--can-bitrate", type=int, help="bit rate of the host's bus")
     g.add_argument("--can-config", action="append", default=[], metavar="KEY=VALUE", help="extra bus argument (repeatable)")
+    g.add_argument("--can-bitrate-cmd", metavar="CMD",
+                   help="--dut bus: command that moves the host's bus to {bitrate} when Set Baud's tests need it "
+                        "(python-can cannot set a SocketCAN bit rate; see README, Firmware qualification)")
     g.add_argument("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
     g.add_argument("--nodes", help="emulator: node ids of the emulated bench (default 1)")
     g.add_argument("--profile", help="DUT profile name (fixtures/duts) or path")
@@ -40,5 +45,23 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
     o.add_argument("--trace-format", choices=TRACE_FORMATS, default="blf",
                    help="each test's CAN traffic under <run>/traces/: blf (default), asc, log (candump), none")
     o.add_argument("-q", "--quiet", action="store_true", help="no per-test progress lines")
-    p.add_argument("pytest_args", nargs=argparse.REMAINDER, help="after --: passed to pytest")
-    p.set_defaults(handler=run_lib.run_command)
+    p.add_argument("pytest_args", nargs=argparse.REMAINDER, metavar="SECTION|MODULE ... [-- PYTEST_ARGS]",
+                   help="sections (4.4.22), test modules by name or path; after --: passed to pytest")
+
+    def handler(args: argparse.Namespace) -> int:
+        # argparse hands everything from the first free argument on to pytest_args: ckesc run's own options
+        # after a section (`ckesc run 4.4.22 --strict`) are taken back here; the rest goes to pytest
+        tokens = list(args.pytest_args)
+        cut = tokens.index("--") if "--" in tokens else len(tokens)
+        mine, rest, i = [], [], 0
+        while i < cut:
+            action = p._option_string_actions.get(tokens[i].split("=")[0])  # noqa: SLF001 - argparse has no public lookup
+            take = 1 if action is None or "=" in tokens[i] or action.nargs == 0 else 2
+            (mine if action is not None else rest).extend(tokens[i:i + take])
+            i += take
+        if mine:
+            p.parse_args(mine, namespace=args)
+        args.pytest_args = rest + tokens[cut:]
+        return run_lib.run_command(args)
+
+    p.set_defaults(handler=handler)

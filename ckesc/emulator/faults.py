@@ -103,6 +103,10 @@ _FAULTS = (
     Fault("expand_set_answered", ("R14",), "Expand Set Part is answered"),
     Fault("expand_set_big_endian", ("R14",), "Expand Set Part's Set_cmd is read big-endian"),
     Fault("get_rec_untagged", ("R15",), "MSG_EXP12 records carry tail 0xC0 instead of 0xC1..0xC5"),
+    # an ESC model without an optional function (R9b): FAILs, unless its profile declares the function absent
+    Fault("get_rec_absent", ("R15",), "no temperature records: Get Rec (223), Clear Rec (224) and Expand Set Part's "
+          "record read are ignored (an ESC model without Get Rec)"),
+    Fault("expand_set_part_absent", ("R14",), "Expand Set Part (222) is ignored (an ESC model without it)"),
     # Clear Rec's effect is no rule (R15 is Get Rec's; 224's payload and answer are OBSERVE): recorded, never failed
     Fault("clear_rec_ignored", ("R15-payload",), "Clear Rec leaves the temperature records"),
     Fault("can_test_count_skips", ("R16",), "CAN Test counts up by 2 per frame"),

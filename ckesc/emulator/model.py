@@ -797,7 +797,7 @@ class EscModel:
         self._respond(f, now, {"status": int(failed)})
 
     def _on_expand_set(self, f: Frame, now: float) -> None:
-        if not self._addressed(f):
+        if not self._addressed(f) or "expand_set_part_absent" in self.faults:
             return
         code, part = f.fields["set_cmd"], f.fields["part"]
         if "expand_set_big_endian" in self.faults:
@@ -840,6 +840,8 @@ class EscModel:
             self._set_nvm(baud=part)
 
     def _send_records(self, now: float) -> None:
+        if "get_rec_absent" in self.faults:
+            return
         due = now + self.config.service_delay
         for index, sensor in enumerate(_RECORD_SENSORS, start=1):
             rec = self.nvm["records"][sensor]
@@ -852,7 +854,7 @@ class EscModel:
             self._send_records(now)
 
     def _on_clear_rec(self, f: Frame, now: float) -> None:
-        if self._addressed(f) and "clear_rec_ignored" not in self.faults:
+        if self._addressed(f) and not {"clear_rec_ignored", "get_rec_absent"} & self.faults:
             self._set_nvm(records={s: {"t_max": 0, "times": 0, "time": 0} for s in _RECORD_SENSORS})
 
     def _on_esc_information(self, f: Frame, now: float) -> None:

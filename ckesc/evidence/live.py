@@ -26,10 +26,12 @@ def tolerance_for(lane) -> float:
 class LaneRules(can.Listener):
     """The bus rules over one lane's frames, violations kept per test."""
 
-    def __init__(self, lane) -> None:
+    def __init__(self, lane, *, jitter: float = 0.0) -> None:
+        """``jitter``: the DUT's report-interval jitter allowance (seconds; the profile's ``jitter_s``)."""
         self.lane = lane
         # the simulated lane hears every frame on its bus; a real bus or socketcand may drop some
-        self.rules = BusRules(tolerance=tolerance_for(lane), bitrate=lane.bitrate, complete=lane.clock == "simulated")
+        self.rules = BusRules(tolerance=tolerance_for(lane), bitrate=lane.bitrate, complete=lane.clock == "simulated",
+                              jitter=jitter)
         self.found: list[Violation] = []
         self.count = 0
         self.between = 0  # violations while no test ran (session fixtures)

@@ -318,11 +318,14 @@ class BusRules:
     bus's, for frame durations (a lower one than the real one only makes the engine more careful).
     ``complete``: the capture holds every frame on the bus (the simulated lane), so a missing frame is
     the sender's. ``host_nodes``: nodes known to be hosts from the start (node 0, 4.4.18 note 8).
+    ``jitter``: the DUT's report-interval jitter allowance (seconds; a DUT profile's ``jitter_s``),
+    added to ``tolerance`` in the R9 interval check only.
     """
 
     def __init__(self, *, tolerance: float = 0.0, bitrate: int = cat.DEFAULT_BITRATE, complete: bool = False,
-                 host_nodes=(HOST_NODE_ID,)) -> None:
+                 host_nodes=(HOST_NODE_ID,), jitter: float = 0.0) -> None:
         self.tolerance = max(float(tolerance), 1e-9)
+        self.jitter = max(float(jitter), 0.0)
         self.complete = complete
         self._host_nodes = frozenset(host_nodes)
         self.frames = 0
@@ -584,8 +587,9 @@ class BusRules:
 
     def _cadence(self, out, st: _Stream, info: _Id, node: _Node, data, ts: float, start: float, busy_from: float):
         """R9 between two reports of one stretch (no restart, no reset between them). Without a period the
-        node stated, only a report closer than the shortest legal interval is judged."""
-        tol = self.tolerance
+        node stated, only a report closer than the shortest legal interval is judged. The DUT's jitter
+        allowance widens the interval; the bench's error (``tolerance``) is on top of it."""
+        tol = self.tolerance + self.jitter
         # due times lie in [start of the busy stretch, start]: the due-to-due gap lies in [lo, hi]
         lo, hi = busy_from - st.start, start - st.busy_from
         period = node.periods[st.interval]  # type: ignore[index]

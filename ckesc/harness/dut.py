@@ -13,13 +13,14 @@ from typing import Any, Callable, Mapping
 import can
 
 from ..protocol import catalogue as cat
+from ..protocol import functions
 from ..protocol.errors import TailError
 from ..protocol.frame import Frame, WireFrame, classify, frame_bits
 from ..protocol.host import Garbled, HostProtocol, Pending, Response
 from ..protocol.ids import Kind
 from .lanes import Lane
 from .profile import DutProfile
-from .verdict import Inconclusive, Record
+from .verdict import Inconclusive, NotClaimed, Record
 
 
 @dataclass
@@ -87,10 +88,12 @@ class Dut:
         """How far one report interval may stray from its target. In the simulated lane: bus access
         only, two of the longest frames at the lane's bit rate (a report due while a frame is on the
         bus waits for it, and for one that wins arbitration); in real time: one report-scheduling tick
-        (1 ms) plus the lane's error."""
+        (1 ms) plus the lane's error. The profile's ``jitter_s`` (the DUT's own allowance) on top of
+        either; the lane's error (``timing_error``) decides INCONCLUSIVE around it."""
+        jitter = self.profile.jitter_s * 1000
         if self.clock == "simulated":
-            return 2 * frame_bits(8) / self.lane.bitrate * 1000
-        return 1.0 + self.lane.timing_error * 1000
+            return 2 * frame_bits(8) / self.lane.bitrate * 1000 + jitter
+        return 1.0 + self.lane.timing_error * 1000 + jitter
 
     def wait(self, seconds: float) -> None:
         """Let lane time pass, reading the bus (nothing is lost)."""
@@ -159,7 +162,13 @@ class Dut:
         self.lane.bus.send(msg)
         return sent
 
+    def _check_claimed(self, name: str, fields: Mapping[str, Any] | None) -> None:
+        """A request for a function the profile declares absent ends the test as SKIPPED, not claimed (R9b)."""
+        if self.profile.absent and (fn := functions.of_request(name, fields, self.profile.absent)) is not None:
+            raise NotClaimed(fn.name, self.profile.name)
+
     def broadcast(self, name: str, fields: Mapping[str, Any] | None = None, **kw: Any) -> Sent:
+        self._check_claimed(name, fields)
         if name in _THROTTLE_FRAMES:
             self._check_throttle(name, fields or {})
         return self.send_wire(self.proto.message(name, fields, **kw))
@@ -168,6 +177,7 @@ class Dut:
                 timeout: float | None = None, **kw: Any) -> Exchange:
         """Send a request and read until its answer or ``timeout`` (lane seconds; default 0.1 s plus the
         lane's stated timing error: an answer that late is not "no answer" on a lane that cannot tell)."""
+        self._check_claimed(name, fields)
         if timeout is None:
             timeout = 0.1 + self.lane.timing_error
         dest = self.node_id if destination is None else destination

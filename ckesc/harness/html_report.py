@@ -23,7 +23,7 @@ from typing import Any
 
 from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
-from .verdict import incomplete_banner
+from .verdict import claim_text, incomplete_banner
 
 #: how a requirement's result is drawn from its tests' verdicts: the first that occurs
 _WORST_FIRST = ("FAIL", "ERROR", "INCONCLUSIVE", "PASS", "OBSERVED", "SKIPPED")
@@ -54,7 +54,8 @@ def render(doc: dict[str, Any], *, run: str = "") -> str:
         f"{_badge(overall)} {len(results)} tests: "
         + ", ".join(f"{counts[v]} {v}" for v in VERDICTS if counts[v])
         + (f", {info.get('not_run', 0)} not run" if info.get("not_run") else "") + "</p>"
-        + (f'<p class=banner role=alert>{_e(banner)}</p>' if banner else "") + "</header>",
+        + (f'<p class=banner role=alert>{_e(banner)}</p>' if banner else "")
+        + (f"<p class=claim>{_e(claim_text(info))}</p>" if info.get("not_claimed") else "") + "</header>",
         _identity(info),
         _matrix(results),
         _failures(results),
@@ -77,7 +78,9 @@ def _badge(verdict: str) -> str:
 def _identity(info: dict[str, Any]) -> str:
     rows = [("DUT", info.get("dut")), ("node id", info.get("node_id")), ("profile", info.get("profile")),
             ("lane", info.get("lane")), ("clock", info.get("clock")), ("bit rate", f"{info['bitrate']} bit/s" if info.get("bitrate") else None),
-            ("power control", info.get("power")), ("timing error", f"{info['timing_error_s'] * 1000:g} ms" if "timing_error_s" in info else None),
+            ("power control", info.get("power")), ("timing error (the bench's)", f"{info['timing_error_s'] * 1000:g} ms" if "timing_error_s" in info else None),
+            ("report-interval jitter allowance (the DUT's)", f"{info['jitter_s'] * 1000:g} ms" if "jitter_s" in info else None),
+            ("conformance claim", claim_text(info).removeprefix("claim: ") if "not_claimed" in info else None),
             ("emulator faults", info.get("faults") or None)]
     esc = info.get("esc_information")
     if isinstance(esc, dict):

@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 
 from ..evidence.live import LaneRules, failure_text
+from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, requirement, strongest
 from . import preflight
 from . import report as _report
@@ -25,7 +26,7 @@ from .dut import Dut, DutUnreachable
 from .lanes import BenchGone, BusLane, CommandPower, Lane, ManualPower, NoPower, RealtimeEmulatorLane, SimLane
 from .profile import DutProfile
 from .traces import TRACE_FORMATS, TestTraces
-from .verdict import Inconclusive
+from .verdict import Inconclusive, NotClaimed
 
 CONFORMANCE_PACKAGE = "conformance"
 
@@ -296,11 +297,12 @@ def ckesc_lane(request: pytest.FixtureRequest):
     profile = DutProfile.load(config.getoption("profile") or ("emulator" if config.getoption("dut") == "emulator"
                                                               else "ckesc-generic"))
     lane = make_lane(config, profile)
+    st.lane, st.profile = lane, profile
     _trace_lane(config, lane, "")
     _watch_lane(config, lane)
-    st.lane, st.profile = lane, profile
     st.info.update(dut=config.getoption("dut"), lane=lane.name, clock=lane.clock, profile=profile.name,
                    bitrate=lane.bitrate, power=lane.power.name, timing_error_s=lane.timing_error,
+                   jitter_s=profile.jitter_s, not_claimed=functions.not_claimed_text(profile.absent),
                    faults=config.getoption("emulator_faults") or "")
     _install_signal_guard(config)
     yield lane
@@ -324,6 +326,7 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     st = state(config)
     profile = st.profile
     assert profile is not None
+    _check_claims(request.node, profile)
     for rid in item_requirements(request.node):
         cap = requirement(rid).capability
         if cap and not profile.has(cap):
@@ -359,6 +362,13 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
 
 _DUT = pytest.StashKey[Dut]()
 
+
+def _check_claims(item: pytest.Item, profile: DutProfile) -> None:
+    """A test of a function the profile declares absent is SKIPPED before it starts: not claimed (R9b)."""
+    absent = functions.of_requirements(item_requirements(item), profile.absent)
+    if absent:
+        raise NotClaimed(absent[0].name, profile.name)
+
 #: The private bench of :func:`multi_dut` in the emulator lanes: node ids chosen so that
 #: node_id % 32 covers 1, 2 and wraps (33 -> slot 1).
 MULTI_NODES = (1, 2, 33)
@@ -374,6 +384,7 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     st = state(config)
     profile = st.profile
     assert profile is not None
+    _check_claims(request.node, profile)
     if config.getoption("dut") == "emulator":
         if config.getoption("lane") == "realtime":
             lane: Lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=ckesc_lane.timing_error)
@@ -480,7 +491,8 @@ _BUS_TEARDOWN = pytest.StashKey[bool]()  # the bus rules failed the test at tear
 
 def _watch_lane(config: pytest.Config, lane: Lane) -> None:
     """The bus rules that hold at all times (ckesc/evidence/rules.py) over every frame the lane reads."""
-    watcher = LaneRules(lane)
+    profile = state(config).profile
+    watcher = LaneRules(lane, jitter=profile.jitter_s if profile is not None else 0.0)
     lane.listeners.append(watcher)
     state(config).bus_rules.append(watcher)
 
@@ -641,7 +653,7 @@ def _outcome(rep: pytest.TestReport, strength: str, d: Dut | None) -> tuple[str,
             return "OBSERVED", ""
         return "PASS", ""
     if rep.skipped:
-        return ("INCONCLUSIVE" if "INCONCLUSIVE" in text else "SKIPPED"), text
+        return ("INCONCLUSIVE" if "INCONCLUSIVE" in text else "SKIPPED"), text.removeprefix(f"{NotClaimed.__module__}.NotClaimed: ")
     if rep.when == "setup":
         return "ERROR", text
     return "FAIL", text

@@ -5,9 +5,14 @@ your own is a path, or a name found in ``./fixtures/duts/``.
 
     [dut]          name, description
     [capabilities] led, motor, pwm_input, motor_temperature, multi_node   (true/false)
-    [timing]       error_s: measurement error of the real-time lane; margins below it are INCONCLUSIVE
+    [timing]       error_s: the bench's measurement error (host + adapter timestamps); margins below it
+                   are INCONCLUSIVE
+                   jitter_s: the DUT's report-interval jitter allowance (R9): widens what its report
+                   intervals may do, in the interval tests and the live bus rules alike
                    boot_s: power-on to first report; off_s: off time of a power cycle
     [readings]     R4 = "lsb" | "swapped"   (12-bit nibble order)
+    [functions]    absent = ["get_rec", ...]: optional functions the ESC lacks (R9b; the names are
+                   ckesc.protocol.functions.OPTIONAL): their tests are SKIPPED as "not claimed"
 
 A profile is checked against this schema (pydantic) when it is loaded: an unknown section or key, a
 wrong type or a value out of range is a :class:`ProfileError` naming the file, the key and, for an
@@ -23,7 +28,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from ..protocol.functions import CORE, OPTIONAL
 
 CAPABILITIES = ("led", "motor", "pwm_input", "motor_temperature", "multi_node")
 
@@ -63,6 +70,7 @@ class _Capabilities(_Section):
 class _Timing(_Section):
     model_config = ConfigDict(extra="forbid", strict=False)  # an int (2) is a float here, a string is not
     error_s: float = Field(0.0, ge=0.0, le=10.0)
+    jitter_s: float = Field(0.0, ge=0.0, le=1.0)
     boot_s: float = Field(1.0, ge=0.0, le=600.0)
     off_s: float = Field(1.0, ge=0.0, le=600.0)
 
@@ -71,11 +79,30 @@ class _Readings(_Section):
     R4: Literal["lsb", "swapped"] = "lsb"
 
 
+class _Functions(_Section):
+    absent: list[str] = []
+
+    @field_validator("absent")
+    @classmethod
+    def _optional_only(cls, names: list[str]) -> list[str]:
+        for name in names:
+            if name in CORE:
+                raise ValueError(f"{name!r} ({CORE[name]}) cannot be declared absent: R9b keeps 4.1, 4.3, GET_ESC_ID, "
+                                 "MSG Control, MSG1..3, RawCommand (all three formats), Set ID, Set Baud, Set/Get Freq "
+                                 "and ESC Information in every conformance claim")
+            if name not in OPTIONAL:
+                close = difflib.get_close_matches(name, list(OPTIONAL), n=1)
+                raise ValueError(f"unknown function {name!r} (optional functions: {', '.join(OPTIONAL)})"
+                                 + (f"; did you mean {close[0]!r}?" if close else ""))
+        return list(dict.fromkeys(names))
+
+
 class _ProfileDoc(_Section):
     dut: _Dut = _Dut()
     capabilities: _Capabilities = _Capabilities()
     timing: _Timing = _Timing()
     readings: _Readings = _Readings()
+    functions: _Functions = _Functions()
 
 
 def _model_at(loc: tuple) -> type[BaseModel] | None:
@@ -100,6 +127,8 @@ def _describe(path: Path, err: dict[str, Any]) -> str:
         prefix = f"[{'.'.join(map(str, loc[:-1]))}] " if len(loc) > 1 else ""
         return f"{path}: {prefix}unknown {what} {str(loc[-1])!r} (known: {', '.join(known)}){hint}"
     value = err.get("input")
+    if err["type"] == "value_error":  # our own validators' messages: as written
+        return f"{path}: {where} = {value!r}: {err['ctx']['error']}"
     return f"{path}: {where} = {value!r}: {err['msg'].lower()}"
 
 
@@ -110,10 +139,19 @@ class DutProfile:
     description: str = ""
     capabilities: dict[str, bool] = field(default_factory=dict)
     error_s: float = 0.0
+    jitter_s: float = 0.0
     boot_s: float = 1.0
     off_s: float = 1.0
     readings: dict[str, str] = field(default_factory=dict)
     path: str | None = None
+    #: optional functions the DUT lacks (R9b): not part of its conformance claim
+    absent: tuple[str, ...] = ()
+
+    def claims(self, function: str) -> bool:
+        """Whether the conformance claim includes ``function`` (a core function always)."""
+        if function not in OPTIONAL and function not in CORE:
+            raise KeyError(f"unknown function {function!r}; optional: {', '.join(OPTIONAL)}")
+        return function not in self.absent
 
     def has(self, capability: str) -> bool:
         if capability not in CAPABILITIES:
@@ -145,8 +183,9 @@ class DutProfile:
         except ValidationError as exc:
             raise ProfileError("; ".join(_describe(path, e) for e in exc.errors())) from None
         return cls(name=doc.dut.name or path.name.removesuffix(".toml"), description=doc.dut.description,
-                   capabilities=doc.capabilities.model_dump(), error_s=doc.timing.error_s, boot_s=doc.timing.boot_s,
-                   off_s=doc.timing.off_s, readings=doc.readings.model_dump(), path=str(path))
+                   capabilities=doc.capabilities.model_dump(), error_s=doc.timing.error_s, jitter_s=doc.timing.jitter_s,
+                   boot_s=doc.timing.boot_s, off_s=doc.timing.off_s, readings=doc.readings.model_dump(), path=str(path),
+                   absent=tuple(doc.functions.absent))
 
 
 def _find(name_or_path: str) -> Any:

@@ -29,7 +29,7 @@ from ..protocol import catalogue as cat
 from ..protocol.ids import Kind
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
 from . import html_report
-from .verdict import incomplete_banner
+from .verdict import claim_text, incomplete_banner
 
 
 def _properties(r) -> dict[str, str]:
@@ -175,8 +175,11 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
                  + (f" ({', '.join(cov['uncovered'][:12])}{' ...' if len(cov['uncovered']) > 12 else ''})" if cov["uncovered"] else ""))
     dut = ", ".join(f"{k}={info[k]}" for k in ("dut", "lane", "profile", "node_id", "bitrate", "power", "faults") if info.get(k) not in (None, ""))
     lines.append(f"DUT: {dut}")
-    if info.get("clock"):  # the lane's stated error: timing margins inside it are INCONCLUSIVE
-        lines.append(f"timing: {info['clock']} clock, stated error +-{(info.get('timing_error_s') or 0.0) * 1000:g} ms")
+    if info.get("clock"):  # the bench's stated error: timing margins inside it are INCONCLUSIVE
+        lines.append(f"timing: {info['clock']} clock, stated error +-{(info.get('timing_error_s') or 0.0) * 1000:g} ms "
+                     f"(the bench's), report-interval jitter allowance {(info.get('jitter_s') or 0.0) * 1000:g} ms (the DUT's)")
+    if "not_claimed" in info:
+        lines.append(claim_text(info))
     if banner := incomplete_banner(info):
         lines.insert(0, banner)
         lines.append(banner)

@@ -27,6 +27,15 @@ class Inconclusive(pytest.skip.Exception):  # type: ignore[misc, name-defined]
         super().__init__(msg=f"INCONCLUSIVE: {msg}", allow_module_level=False)
 
 
+class NotClaimed(pytest.skip.Exception):  # type: ignore[misc, name-defined]
+    """The test needs a function the DUT profile declares absent (R9b): SKIPPED, "not claimed", and
+    the reports say what the conformance claim leaves out."""
+
+    def __init__(self, function: str, profile: str) -> None:
+        super().__init__(msg=f"not claimed: {function} (R9b): the DUT profile {profile!r} declares it absent",
+                         allow_module_level=False)
+
+
 @dataclass
 class Measurement:
     name: str
@@ -115,3 +124,11 @@ def incomplete_banner(info: dict[str, Any]) -> str:
     kind = why.split(":")[0].split(" ")[0].upper()
     kind = {"STOPPED": "INCOMPLETE"}.get(kind, kind)
     return f"{kind} - not a conformance result for the whole suite: {why}; {info.get('not_run', 0)} tests not run"
+
+
+def claim_text(info: dict[str, Any]) -> str:
+    """What the conformance claim leaves out (R9b: functions the DUT profile declares absent)."""
+    left_out = info.get("not_claimed") or ""
+    if not left_out:
+        return "claim: every function of the document (the DUT profile declares none absent, R9b)"
+    return f"claim: leaves out (declared absent by the DUT profile, R9b; their tests SKIPPED): {left_out}"

@@ -560,6 +560,8 @@ def can_test_after_power_cycle(host) -> bool:
 case("expand_set_answered", expand_answers, 0, 1)
 case("expand_set_big_endian", expand_little_endian, 1, 0)
 case("get_rec_untagged", mcu_records_tail, [0xC1, 0xC2, 0xC3, 0xC4], [0xC0] * 4)
+case("get_rec_absent", mcu_records_tail, [0xC1, 0xC2, 0xC3, 0xC4], [])
+case("expand_set_part_absent", expand_little_endian, 1, 0)
 case("clear_rec_ignored", record_kept_after_clear, False, True)
 case("can_test_count_skips", can_test_counts, [0, 1, 2, 3], [0, 2, 4, 6])
 case("can_test_reports_continue", reports_in_can_test, 0, 10)

@@ -56,6 +56,8 @@ BAD_PROFILES = {
     "syntax.toml": ("[timing\n", "not valid TOML", "line 1"),
     "type.toml": ("[capabilities]\nled = \"yes\"\n", "capabilities.led", "boolean"),
     "negative.toml": ("[timing]\nerror_s = -0.5\n", "timing.error_s", "greater than or equal to 0"),
+    "core.toml": ('[functions]\nabsent = ["get_rec", "set_baud"]\n', "core.toml: functions.absent",
+                  "'set_baud' (4.4.19) cannot be declared absent", "R9b"),
 }
 
 SETUP_MISTAKES = [
