@@ -78,7 +78,11 @@ def _identity(info: dict[str, Any]) -> str:
     rows = [("DUT", info.get("dut")), ("node id", info.get("node_id")), ("profile", info.get("profile")),
             ("lane", info.get("lane")), ("clock", info.get("clock")), ("bit rate", f"{info['bitrate']} bit/s" if info.get("bitrate") else None),
             ("power control", info.get("power")), ("timing error", f"{info['timing_error_s'] * 1000:g} ms" if "timing_error_s" in info else None),
-            ("emulator faults", info.get("faults") or None)]
+            ("emulator faults", info.get("faults") or None),
+            ("echo of the host's frames", None if info.get("echo") is None else
+             f"{'yes' if info['echo'] else 'no'} ({info.get('echo_note', '')}); timed by: {info.get('own_frames_clock')}, "
+             f"error {(info.get('own_frames_error_s') or 0.0) * 1000:g} ms"),
+            ("bus failures recovered", "; ".join(info.get("bus_recoveries") or []) or None)]
     esc = info.get("esc_information")
     if isinstance(esc, dict):
         y, m, d = esc.get("firmware_year"), esc.get("firmware_month"), esc.get("firmware_day")

@@ -123,6 +123,12 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
     lines.append(f"DUT: {dut}")
     if info.get("clock"):  # the lane's stated error: timing margins inside it are INCONCLUSIVE
         lines.append(f"timing: {info['clock']} clock, stated error +-{(info.get('timing_error_s') or 0.0) * 1000:g} ms")
+    if info.get("echo") is not None:  # whether the bench echoes the host's own frames, and so what times them
+        own = f"{info.get('own_frames_clock')}, error +-{(info.get('own_frames_error_s') or 0.0) * 1000:g} ms"
+        lines.append(f"echo: {'yes' if info['echo'] else 'NO'} ({info.get('echo_note', '')}); the host's own frames "
+                     f"timed by: {own}")
+    if info.get("bus_recoveries"):
+        lines.append(f"bus failures recovered from (the lane reopened the bus): {'; '.join(info['bus_recoveries'])}")
     if banner := incomplete_banner(info):
         lines.insert(0, banner)
         lines.append(banner)
