@@ -275,9 +275,10 @@ BUS_ERRORS = (OSError, can.CanError)
 
 
 class _SendTap:
-    """A python-can bus whose send() tells the lane when the host sent a frame (everything else is the
-    bus's own). Without an echo, throttle streams (send_periodic) are python-can's thread-based tasks
-    sending through the tap, so that the lane sees, and hands out, every frame a stream sent."""
+    """A python-can bus whose send() tells the lane when the host sent a frame, or that the send failed
+    (everything else is the bus's own). Throttle streams (send_periodic) are python-can's thread-based
+    tasks sending through the tap (unless the interface has its own and echoes), so that a failed send
+    reaches the lane and, without an echo, the lane sees every frame a stream sent."""
 
     def __init__(self, bus: can.BusABC, lane: BusLane, *, stream: bool = False) -> None:
         self._bus = bus
@@ -289,20 +290,21 @@ class _SendTap:
         try:
             self._bus.send(msg, timeout)
         except BUS_ERRORS as exc:
-            if self._stream:
-                self._lane._stream_failed(exc)
-            else:
+            if not self._stream:  # a stream's task hands it to the lane itself (on_error)
                 self._lane._io_failed(exc)
             raise
         self._lane._sent(t, msg, stream=self._stream)
 
     def send_periodic(self, msgs, period: float, duration: float | None = None, store_task: bool = True,
                       autostart: bool = True, modifier_callback=None):
-        if self._lane.echo:  # the bus's own (native where the interface has it): its frames come back
+        native = type(self._bus)._send_periodic_internal is not can.BusABC._send_periodic_internal
+        if self._lane.echo and native:  # the interface's own (e.g. SocketCAN's kernel BCM): its frames come back
             return _stopped_means_stopped(self._bus.send_periodic(msgs, period, duration, store_task, autostart,
                                                                   modifier_callback))
+        # python-can's thread-based task, as the bus itself would run it, but sending through the tap: a
+        # failed send reaches the lane, and without an echo the lane sees every frame the stream sent
         task = can.broadcastmanager.ThreadBasedCyclicSendTask(
-            _SendTap(self._bus, self._lane, stream=True), threading.Lock(), msgs, period, duration,
+            _SendTap(self._bus, self._lane, stream=True), self._lane._stream_lock, msgs, period, duration,
             on_error=self._lane._stream_failed, autostart=autostart, modifier_callback=modifier_callback)
         self._lane._tasks.append(task)
         return _stopped_means_stopped(task)
@@ -323,7 +325,8 @@ class BusLane(Lane):
         self._pending: deque[can.Message] = deque()  # arrived, seen by now(), not yet handed out by recv()
         self._own: deque[OwnFrame] = deque()  # without an echo: the host's frames, not yet handed out
         self._last_ts = -math.inf  # the latest timestamp handed out (an OwnFrame is never stamped before it)
-        self._tasks: list[Any] = []  # without an echo: the throttle streams' tasks (stopped on close)
+        self._tasks: list[Any] = []  # the throttle streams' thread-based tasks (stopped on close)
+        self._stream_lock = threading.Lock()  # one send at a time from the streams' threads
         self._fault: BaseException | None = None  # a throttle stream's send failed (in its thread)
         self._hold: float | None = None  # see now(): after a read -inf, after a send its time, else None
         self.rcvbuf: int | None = None  # a SocketCAN socket's receive buffer, as the kernel granted it
