@@ -7,6 +7,7 @@ power-cycle with proof, change throttle safely, snapshot and restore settings.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
@@ -21,6 +22,9 @@ from ..protocol.transfer import TRANSFER_ID_MODULO
 from .lanes import Lane, OwnFrame
 from .profile import DutProfile
 from .verdict import Inconclusive, Record
+
+#: Frames that did not decode kept per test (the latest): about 0.5 kB each
+MAX_GARBLED = 20_000
 
 
 @dataclass
@@ -79,7 +83,10 @@ class Dut:
         self.proto = HostProtocol(host_node, nibble_order=profile.nibble_order)
         self.allow_motor_spin = allow_motor_spin
         self.trace: list[Frame] = []  # everything heard, decoded, in order
-        self.garbled: list[Garbled] = []
+        # the latest MAX_GARBLED frames heard that did not decode (a DUT flooding the bus with garbage must
+        # not grow memory without bound); how many older ones were let go
+        self.garbled: deque[Garbled] = deque(maxlen=MAX_GARBLED)
+        self.garbled_dropped = 0
         self._sent: list[Sent] = []
         self._tasks: list[Any] = []
         self.record = Record()
@@ -128,7 +135,7 @@ class Dut:
             self._match_echo(msg)
         for event in self.proto.receive(msg):
             if isinstance(event, Garbled):
-                self.garbled.append(event)  # the framing checks (4.1) report it
+                self._keep_garbled(event)  # the framing checks (4.1) report it
                 if not isinstance(event.error, TailError):
                     return None
                 # a frame whose tail says start/end/toggle wrongly (F2) still carries its payload:
@@ -144,6 +151,15 @@ class Dut:
                 event.pending.mismatch = event.mismatch
             return frame
         return None
+
+    def _keep_garbled(self, event: Garbled) -> None:
+        event.error.__traceback__ = None  # the message says why; the traceback would keep the decoder's frames alive
+        if len(self.garbled) == MAX_GARBLED:
+            if not self.garbled_dropped:
+                self.record.observe("frames that did not decode", f"more than {MAX_GARBLED} in this test: only the "
+                                    "latest are kept for the checks that look at them")
+            self.garbled_dropped += 1
+        self.garbled.append(event)
 
     def _take_decoded(self, msg: can.Message) -> Frame | None:
         for event in self.proto.receive(msg):

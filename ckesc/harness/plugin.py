@@ -378,7 +378,7 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     finally:
         d.lane_seconds = ckesc_lane.now() - started
         d.zero_throttle()
-        st.dut_segments.append([f for f in d.trace if f.source == d.node_id])
+        keep_segment(config, [f for f in d.trace if f.source == d.node_id])
         if d.node_id != st.node_id:
             st.node_id = d.node_id
         problems = d.restore(snapshot)
@@ -387,6 +387,21 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
 
 
 _DUT = pytest.StashKey[Dut]()
+
+#: Frames kept across the run for the run-wide checks (4.1): a whole suite in real time is ~70,000; a
+#: DUT that floods the bus must not grow memory without bound
+RUN_FRAMES_KEPT = 150_000
+
+
+def keep_segment(config: pytest.Config, frames: list) -> None:
+    """Keep one test's frames of the DUT for the run-wide checks (``dut_segments``), up to RUN_FRAMES_KEPT in
+    the run; what is not kept is counted in the run's info (``run_frames_not_kept``), which the reports show."""
+    st = state(config)
+    room = RUN_FRAMES_KEPT - sum(len(s) for s in st.dut_segments)
+    if len(frames) > room:
+        st.info["run_frames_not_kept"] = st.info.get("run_frames_not_kept", 0) + len(frames) - max(room, 0)
+        frames = frames[:max(room, 0)]
+    st.dut_segments.append(frames)
 
 #: The private bench of :func:`multi_dut` in the emulator lanes: node ids chosen so that
 #: node_id % 32 covers 1, 2 and wraps (33 -> slot 1).
@@ -423,7 +438,7 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
         yield d
     finally:
         d.zero_throttle()
-        st.dut_segments.append([f for f in d.trace if f.source != d.host_node])
+        keep_segment(config, [f for f in d.trace if f.source != d.host_node])
         if own:
             lane.close()
 
