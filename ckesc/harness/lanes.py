@@ -343,8 +343,7 @@ class BusLane(Lane):
         self.bitrate_cmd = bitrate_cmd
 
     def _open(self, kwargs: dict[str, Any]) -> Any:
-        self._pending.clear()
-        self._own.clear()
+        self._pending.clear()  # the old bus's backlog (the host's own frames not yet handed out are kept)
         self._hold = None
         bus = can.Bus(**kwargs)
         sock = getattr(bus, "socket", None)  # python-can's SocketcanBus
