@@ -117,7 +117,7 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
             # ckesc itself is the plugin and is imported before pytest starts: nothing of it needs rewriting
             "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning"]
     for opt in ("can_interface", "can_channel", "can_bitrate", "node_id", "nodes", "profile", "power", "power_off_cmd",
-                "power_on_cmd", "emulator_faults", "can_bitrate_cmd"):
+                "power_on_cmd", "emulator_faults", "can_bitrate_cmd", "host_send_error"):
         value = getattr(args, opt)
         if value not in (None, ""):
             argv += [f"--{opt.replace('_', '-')}", str(value)]

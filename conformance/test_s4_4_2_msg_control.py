@@ -110,7 +110,7 @@ def test_suspend_stops_and_resume_restarts_reporting(dut):
             first = next((t for n, t in back if n == which), None)
             assert first is not None, f"no {which.upper()} within {ms(longest + REACT_S + err)} ms of 0xAAAAAAAA"
             dut.record.measure(f"first {which.upper()} after resume", ms(first - on.time), limit=ms(interval_s(s, which)),
-                               unit="ms", clock=dut.clock, error=err * 1000, requirement="4.4.2-T")
+                               unit="ms", clock=on.clock, error=on.error * 1000, requirement="4.4.2-T")
     finally:
         resume(dut)
 

@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from ckesc.harness.dut import Dut, DutError
-from ckesc.harness.plugin import state
+from ckesc.harness.plugin import keep_segment, state
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import FALLBACK_PRIORITY, Frame, WireFrame, classify
 from ckesc.protocol.ids import Kind, parse_can_id, service_id
@@ -252,7 +252,7 @@ def provoked_traffic(request: pytest.FixtureRequest, lane) -> Iterator[Traffic]:
     finally:
         d.zero_throttle()
         d.wait(cat.ANSWER_DELAY_MAX_S)  # read the echoes: the next test's host must not hear them as new
-        state(request.config).dut_segments.append([f for f in d.trace if f.source == d.node_id])
+        keep_segment(request.config, [f for f in d.trace if f.source == d.node_id])
 
 
 @pytest.fixture(scope="module")

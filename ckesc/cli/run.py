@@ -29,6 +29,9 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--can-bitrate-cmd", metavar="CMD",
                    help="--dut bus: command that moves the host's bus to {bitrate} when Set Baud's tests need it "
                         "(python-can cannot set a SocketCAN bit rate; see README, Firmware qualification)")
+    g.add_argument("--host-send-error", type=float, metavar="MS",
+                   help="an adapter that does not echo the host's frames: how much later than the host clock at send "
+                        "a frame may reach the bus, ms (default 2): the error of times taken from the host's frames")
     g.add_argument("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
     g.add_argument("--nodes", help="emulator: node ids of the emulated bench (default 1)")
     g.add_argument("--profile", help="DUT profile name (fixtures/duts) or path")

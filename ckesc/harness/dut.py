@@ -7,6 +7,7 @@ power-cycle with proof, change throttle safely, snapshot and restore settings.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
@@ -18,9 +19,13 @@ from ..protocol.errors import TailError
 from ..protocol.frame import Frame, WireFrame, classify, frame_bits
 from ..protocol.host import Garbled, HostProtocol, Pending, Response
 from ..protocol.ids import Kind
-from .lanes import Lane
+from ..protocol.transfer import TRANSFER_ID_MODULO
+from .lanes import Lane, OwnFrame
 from .profile import DutProfile
 from .verdict import Inconclusive, NotClaimed, Record
+
+#: Frames that did not decode kept per test (the latest): about 0.5 kB each
+MAX_GARBLED = 20_000
 
 
 @dataclass
@@ -28,10 +33,23 @@ class Sent:
     wire: WireFrame
     host_time: float
     bus_time: float | None = None  # from the echo of our own frame (SocketCAN loopback / socketcand / sim)
+    #: (clock, error in s) of a bus time, and of the host's time (an adapter without echo, an echo not read yet)
+    bus_clock: tuple[str, float] = ("bus timestamp", 0.0)
+    host_clock: tuple[str, float] = ("host clock", 0.0)
 
     @property
     def time(self) -> float:
         return self.bus_time if self.bus_time is not None else self.host_time
+
+    @property
+    def clock(self) -> str:
+        """The clock :attr:`time` is on: the bus's (the frame's echo) or the host's (at send)."""
+        return (self.bus_clock if self.bus_time is not None else self.host_clock)[0]
+
+    @property
+    def error(self) -> float:
+        """The error (s) of :attr:`time`: a measurement from it states this error."""
+        return (self.bus_clock if self.bus_time is not None else self.host_clock)[1]
 
 
 @dataclass
@@ -66,7 +84,10 @@ class Dut:
         self.proto = HostProtocol(host_node, nibble_order=profile.nibble_order)
         self.allow_motor_spin = allow_motor_spin
         self.trace: list[Frame] = []  # everything heard, decoded, in order
-        self.garbled: list[Garbled] = []
+        # the latest MAX_GARBLED frames heard that did not decode (a DUT flooding the bus with garbage must
+        # not grow memory without bound); how many older ones were let go
+        self.garbled: deque[Garbled] = deque(maxlen=MAX_GARBLED)
+        self.garbled_dropped = 0
         self._sent: list[Sent] = []
         self._tasks: list[Any] = []
         self.record = Record()
@@ -117,7 +138,7 @@ class Dut:
             self._match_echo(msg)
         for event in self.proto.receive(msg):
             if isinstance(event, Garbled):
-                self.garbled.append(event)  # the framing checks (4.1) report it
+                self._keep_garbled(event)  # the framing checks (4.1) report it
                 if not isinstance(event.error, TailError):
                     return None
                 # a frame whose tail says start/end/toggle wrongly (F2) still carries its payload:
@@ -134,6 +155,15 @@ class Dut:
             return frame
         return None
 
+    def _keep_garbled(self, event: Garbled) -> None:
+        event.error.__traceback__ = None  # the message says why; the traceback would keep the decoder's frames alive
+        if len(self.garbled) == MAX_GARBLED:
+            if not self.garbled_dropped:
+                self.record.observe("frames that did not decode", f"more than {MAX_GARBLED} in this test: only the "
+                                    "latest are kept for the checks that look at them")
+            self.garbled_dropped += 1
+        self.garbled.append(event)
+
     def _take_decoded(self, msg: can.Message) -> Frame | None:
         for event in self.proto.receive(msg):
             if isinstance(event, Garbled):
@@ -146,6 +176,8 @@ class Dut:
         return None
 
     def _match_echo(self, msg: can.Message) -> None:
+        if isinstance(msg, OwnFrame):  # no echo: the lane's copy, stamped by the host clock at send
+            return
         data = bytes(msg.data)
         for s in self._sent:
             if s.bus_time is None and s.wire.arbitration_id == msg.arbitration_id and s.wire.data == data:
@@ -155,7 +187,7 @@ class Dut:
     # ------------------------------------------------------------------ sending
     def send_wire(self, wire: WireFrame) -> Sent:
         msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id)
-        sent = Sent(wire, self.now())
+        sent = Sent(wire, self.now(), bus_clock=(self.lane.clock, self.lane.timing_error), host_clock=self.lane.host_clock)
         self._sent.append(sent)
         if len(self._sent) > 256:
             del self._sent[:128]
@@ -488,6 +520,16 @@ class Dut:
             return self.read_output(nodes=nodes, intervals=known)
         finally:
             self.stop_throttle()
+
+
+def echo_probe(host_node: int = 0, *, nibble_order: str = "lsb") -> can.Message:
+    """The frame a lane sends to find out whether the host's own frames come back
+    (:meth:`BusLane.find_echo`): the GET_ESC_ID query the suite sends first anyway, harmless to every
+    ESC (R1), with the transfer id before the first one the :class:`Dut` uses, so that the DUT sees the
+    host's transfer ids count on."""
+    wire = HostProtocol(host_node, nibble_order=nibble_order).message("get_esc_id", {"option": 0}, layout="query",
+                                                                      transfer_id=TRANSFER_ID_MODULO - 1)
+    return can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id)
 
 
 class DutError(RuntimeError):

@@ -81,7 +81,11 @@ def _identity(info: dict[str, Any]) -> str:
             ("power control", info.get("power")), ("timing error (the bench's)", f"{info['timing_error_s'] * 1000:g} ms" if "timing_error_s" in info else None),
             ("report-interval jitter allowance (the DUT's)", f"{info['jitter_s'] * 1000:g} ms" if "jitter_s" in info else None),
             ("conformance claim", claim_text(info).removeprefix("claim: ") if "not_claimed" in info else None),
-            ("emulator faults", info.get("faults") or None)]
+            ("emulator faults", info.get("faults") or None),
+            ("echo of the host's frames", None if info.get("echo") is None else
+             f"{'yes' if info['echo'] else 'no'} ({info.get('echo_note', '')}); timed by: {info.get('own_frames_clock')}, "
+             f"error {(info.get('own_frames_error_s') or 0.0) * 1000:g} ms"),
+            ("bus failures recovered", "; ".join(info.get("bus_recoveries") or []) or None)]
     esc = info.get("esc_information")
     if isinstance(esc, dict):
         rows.append(("firmware date", cat.firmware_date(esc)))
@@ -212,8 +216,10 @@ def _plots(results: list[dict[str, Any]], info: dict[str, Any]) -> str:
         if "comm_loss" in ev:
             timelines.append((r, ev["comm_loss"]))
     parts.append(_figure("answer-delay", "Answer delay per node", _answer_plot(answers),
-                         f"Every service request the suite made and its answer, request on the bus to the answer's last bit "
-                         f"({_e(clock)} clock). Dashed: the {cat.ANSWER_DELAY_MAX_S * 1000:g} ms limit (4.4.2-4, 4.4.3-4).")
+                         "Every service request the suite made and its answer, request on the bus to the answer's last bit "
+                         + (f"({_e(clock)} clock). " if info.get("echo") is not False else
+                            f"(the request by the host clock at send: the adapter does not echo; the answer by the {_e(clock)} "
+                            "clock). ") + f"Dashed: the {cat.ANSWER_DELAY_MAX_S * 1000:g} ms limit (4.4.2-4, 4.4.3-4).")
                  if answers else "<p>No answered request was recorded.</p>")
     parts.append(_figure("report-intervals", "Report intervals against their targets", _interval_plot(intervals),
                          "Time between consecutive MSG1/MSG2/MSG3 of the DUT, grouped by the interval its latest Set/Get Freq "

@@ -2,8 +2,13 @@
 
 * :class:`SimLane` - the emulator in simulated time (``ckesc-sim``): exact timing, clock "simulated".
 * :class:`BusLane` - a real python-can bus (a real ESC on SocketCAN, or ``ckesc emulate`` behind
-  socketcand): the clock is the bus timestamps (the host's own frames come back through
-  ``receive_own_messages`` or the socketcand echo), with the DUT profile's stated measurement error.
+  socketcand): the clock is the bus timestamps, with the DUT profile's stated measurement error. The
+  lane finds out at the start (:meth:`BusLane.find_echo`) whether the host's own frames come back
+  (``receive_own_messages``, the socketcand echo). Where they do not (many USB adapters: python-can's
+  slcan, gs_usb, canalystii), it hands out a copy of each frame it sent (:class:`OwnFrame`, throttle
+  streams included) stamped by the host clock at send, so that everything reading the lane (the
+  tests, the live rules, the traces) still sees both directions; measurements that use such a time
+  say "host clock" and carry the larger error :data:`HOST_SEND_ERROR_S`.
 
 Tests never read the wall clock or sleep: they ask the lane (through the ``dut`` fixture).
 """
@@ -19,6 +24,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from abc import ABC, abstractmethod
 from collections import deque
@@ -30,6 +36,21 @@ from ..emulator import sim_bus
 from ..protocol.catalogue import DEFAULT_BITRATE
 
 _SIM_CHANNELS = itertools.count()
+
+#: How much later than the host clock read at ``send()`` a frame may be on the bus (driver and USB
+#: latency: a full-speed USB adapter polls every 1 ms each way; a TX queue; lost arbitration): the
+#: error of the time a lane without echo gives the host's own frames, on top of the bench's stated one.
+HOST_SEND_ERROR_S = 0.002
+#: How long the lane waits for the echo of its probe frame, and how often it tries while the bus is silent
+ECHO_PROBE_S = 0.25
+ECHO_PROBE_TRIES = 3
+
+
+class OwnFrame(can.Message):
+    """A frame the host sent, handed out by a lane whose adapter does not echo (``is_rx`` False, like an
+    echo), stamped by the host clock when it was sent."""
+
+    __slots__ = ()
 
 
 class PowerControl(ABC):
@@ -49,6 +70,13 @@ class Lane(ABC):
     name: str
     clock: str  # the verdict clock label: "simulated" or "bus timestamp"
     timing_error: float = 0.0  # seconds: margins smaller than this are INCONCLUSIVE
+    #: whether the host's own frames come back from the bus (their echo gives their bus time); False: the
+    #: lane hands out :class:`OwnFrame` copies stamped by the host clock at send
+    echo: bool = True
+    #: how the lane found out about the echo (for the reports)
+    echo_note: str = "the lane's own bus echoes every frame"
+    #: how much later than the host clock at send a frame may reach the bus (s; see HOST_SEND_ERROR_S)
+    host_send_error: float = HOST_SEND_ERROR_S
     can_change_bitrate: bool = True  # reopen() really moves the host to another bit rate (Set Baud's tests)
     bus: can.BusABC
     power: PowerControl
@@ -61,6 +89,23 @@ class Lane(ABC):
     @abstractmethod
     def wait_power(self, seconds: float) -> None:
         """Let ``seconds`` pass while the DUT is unpowered (no frames to read)."""
+
+    @property
+    def host_clock(self) -> tuple[str, float]:
+        """The clock that times what the host does when no echo says when it reached the bus (a send),
+        and that time's error (s): the bench's stated error plus :data:`HOST_SEND_ERROR_S`."""
+        return "host clock", self.timing_error + self.host_send_error
+
+    @property
+    def own_clock(self) -> str:
+        """The clock that times the host's own frames as the lane hands them out: the lane's (their
+        echo), or the host clock without an echo."""
+        return self.clock if self.echo else self.host_clock[0]
+
+    @property
+    def own_error(self) -> float:
+        """The error (s) of a time the lane gives one of the host's own frames (:attr:`own_clock`)."""
+        return self.timing_error if self.echo else self.host_clock[1]
 
     @property
     def listeners(self) -> list[can.Listener]:
@@ -121,6 +166,10 @@ class SimLane(Lane):
                                       flash_path=flash_path, seed=seed, bitrate=bitrate, esc_config=esc_config,
                                       receive_own_messages=True, ignore_config=True)
         self.power = EmulatorPower(self)
+
+    @property
+    def host_clock(self) -> tuple[str, float]:
+        return self.clock, 0.0  # the host acts in simulated time, exactly
 
     def now(self) -> float:
         return self.sim.now()
@@ -213,23 +262,52 @@ class BenchGone(RuntimeError):
     further test can reach the DUT, so the plugin aborts the run with this message."""
 
 
-class _SendTap:
-    """A python-can bus whose send() tells the lane when the host sent a frame (everything else is the
-    bus's own; periodic tasks send on the bus itself and are not noted)."""
+class BusFault(RuntimeError):
+    """The host's bus failed under a test (a send or a read raised: bus-off, a full TX queue, an adapter
+    unplugged) and the lane reopened it: that test ERRORs with this message, the run goes on."""
 
-    def __init__(self, bus: can.BusABC, on_send, on_error) -> None:
+
+#: How often, and how far apart, the lane tries to reopen a bus that failed before it gives up (BenchGone)
+REOPEN_TRIES = 3
+REOPEN_PAUSE_S = 0.5
+#: python-can exceptions (and the OSError of a vanished device) that mean the bus failed
+BUS_ERRORS = (OSError, can.CanError)
+
+
+class _SendTap:
+    """A python-can bus whose send() tells the lane when the host sent a frame, or that the send failed
+    (everything else is the bus's own). Throttle streams (send_periodic) are python-can's thread-based
+    tasks sending through the tap (unless the interface has its own and echoes), so that a failed send
+    reaches the lane and, without an echo, the lane sees every frame a stream sent."""
+
+    def __init__(self, bus: can.BusABC, lane: BusLane, *, stream: bool = False) -> None:
         self._bus = bus
-        self._on_send = on_send
-        self._on_error = on_error
+        self._lane = lane
+        self._stream = stream  # a periodic task's sends: noted, but they hold no reading of the lane clock
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         t = time.time()  # the kernel stamps the frame (and its echo) after this
         try:
             self._bus.send(msg, timeout)
-        except (OSError, can.CanError) as exc:
-            self._on_error(exc)
+        except BUS_ERRORS as exc:
+            if not self._stream:  # a stream's task hands it to the lane itself (on_error)
+                self._lane._io_failed(exc)
             raise
-        self._on_send(t)
+        self._lane._sent(t, msg, stream=self._stream)
+
+    def send_periodic(self, msgs, period: float, duration: float | None = None, store_task: bool = True,
+                      autostart: bool = True, modifier_callback=None):
+        native = type(self._bus)._send_periodic_internal is not can.BusABC._send_periodic_internal
+        if self._lane.echo and native:  # the interface's own (e.g. SocketCAN's kernel BCM): its frames come back
+            return _stopped_means_stopped(self._bus.send_periodic(msgs, period, duration, store_task, autostart,
+                                                                  modifier_callback))
+        # python-can's thread-based task, as the bus itself would run it, but sending through the tap: a
+        # failed send reaches the lane, and without an echo the lane sees every frame the stream sent
+        task = can.broadcastmanager.ThreadBasedCyclicSendTask(
+            _SendTap(self._bus, self._lane, stream=True), self._lane._stream_lock, msgs, period, duration,
+            on_error=self._lane._stream_failed, autostart=autostart, modifier_callback=modifier_callback)
+        self._lane._tasks.append(task)
+        return _stopped_means_stopped(task)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._bus, name)
@@ -240,12 +318,21 @@ class BusLane(Lane):
     clock = "bus timestamp"
 
     def __init__(self, bus_kwargs: dict[str, Any], power: PowerControl, *, timing_error: float,
-                 bitrate_cmd: str | None = None) -> None:
+                 bitrate_cmd: str | None = None, host_send_error: float = HOST_SEND_ERROR_S) -> None:
         self.bus_kwargs = dict(bus_kwargs)
+        self.host_send_error = host_send_error
         self.bus_kwargs.setdefault("receive_own_messages", True)
         self._pending: deque[can.Message] = deque()  # arrived, seen by now(), not yet handed out by recv()
+        self._own: deque[OwnFrame] = deque()  # without an echo: the host's frames, not yet handed out
+        self._last_ts = -math.inf  # the latest timestamp handed out (an OwnFrame is never stamped before it)
+        self._tasks: list[Any] = []  # the throttle streams' thread-based tasks (stopped on close)
+        self._stream_lock = threading.Lock()  # one send at a time from the streams' threads
+        self._fault: BaseException | None = None  # a throttle stream's send failed (in its thread)
         self._hold: float | None = None  # see now(): after a read -inf, after a send its time, else None
         self.rcvbuf: int | None = None  # a SocketCAN socket's receive buffer, as the kernel granted it
+        self.echo = True  # until find_echo() says otherwise: what python-can was asked for
+        self.echo_note = "not probed"
+        self.recoveries: list[str] = []  # each bus failure the lane recovered from (reopened)
         self.bus = self._open(self.bus_kwargs)
         self.bitrate = int(self.bus_kwargs.get("bitrate") or DEFAULT_BITRATE)
         self.power = power
@@ -256,19 +343,121 @@ class BusLane(Lane):
         self.bitrate_cmd = bitrate_cmd
 
     def _open(self, kwargs: dict[str, Any]) -> Any:
-        self._pending.clear()
+        self._pending.clear()  # the old bus's backlog (the host's own frames not yet handed out are kept)
         self._hold = None
         bus = can.Bus(**kwargs)
         sock = getattr(bus, "socket", None)  # python-can's SocketcanBus
         if isinstance(sock, socket.socket) and sock.family == getattr(socket, "AF_CAN", None):
             self.rcvbuf = enlarge_receive_buffer(sock)
-        return _SendTap(bus, self._sent, self._io_failed)
+        return _SendTap(bus, self)
 
-    def _sent(self, t: float) -> None:
-        self._hold = t
+    # ------------------------------------------------------------------ the echo
+    def find_echo(self, probe: can.Message) -> bool:
+        """Find out whether the host's own frames come back: send ``probe`` (a harmless frame, e.g. the
+        GET_ESC_ID query the suite sends anyway) and read for :data:`ECHO_PROBE_S`. Its echo: the lane
+        times the host's frames by it. Other frames but no echo (something on the bus took the frame):
+        no echo, the lane hands out :class:`OwnFrame` copies from now on. A silent bus is asked again,
+        and taken as having no echo if it stays silent (should an echo turn up later, the lane
+        switches back). Every frame read meanwhile goes to the listeners."""
+        heard = 0
+        for _ in range(ECHO_PROBE_TRIES):
+            self.echo = True  # the probe itself is not handed out as an OwnFrame
+            self.bus.send(probe)
+            end = time.monotonic() + ECHO_PROBE_S
+            while (left := end - time.monotonic()) > 0:
+                msg = self.recv(left)
+                if msg is None:
+                    continue
+                if _same_frame(msg, probe):
+                    self.echo, self.echo_note = True, "the probe frame came back from the bus"
+                    return True
+                heard += 1
+            if heard:
+                break
+        self.echo = False
+        self.echo_note = (f"the probe frame did not come back within {ECHO_PROBE_S * 1000:g} ms ({heard} other frame(s) heard)"
+                          if heard else f"the bus stayed silent through {ECHO_PROBE_TRIES} probes: taken as no echo")
+        return False
+
+    def _sent(self, t: float, msg: can.Message, *, stream: bool = False) -> None:
+        if not stream:
+            self._hold = t
+        if not self.echo:
+            self._own.append(OwnFrame(timestamp=t, arbitration_id=msg.arbitration_id, is_extended_id=msg.is_extended_id,
+                                      is_remote_frame=msg.is_remote_frame, data=bytes(msg.data), is_rx=False,
+                                      channel=msg.channel))
+
+    def _next(self, timeout: float) -> can.Message | None:
+        """The next frame in time order: the bus's (peeked by now() or read) and, without an echo, the
+        host's own (:class:`OwnFrame`, never stamped before a frame already handed out)."""
+        if self._own:
+            if not self._pending and (msg := self.bus.recv(timeout=0)) is not None:
+                self._pending.append(msg)
+        elif self._pending:
+            return self._pending.popleft()
+        else:
+            msg = self.bus.recv(timeout=max(timeout, 0.0))
+            if msg is None or not self._own:
+                return self._echo_seen(msg)
+            self._pending.append(msg)
+        if self._pending and (self._pending[0].timestamp or 0.0) < self._own[0].timestamp:
+            return self._echo_seen(self._pending.popleft())
+        own = self._own.popleft()
+        own.timestamp = max(own.timestamp, self._last_ts)
+        return own
+
+    def _echo_seen(self, msg: can.Message | None) -> can.Message | None:
+        """Without an echo (a silent probe): a frame equal to one the host just sent is its echo after all."""
+        if msg is not None and not self.echo and self.echo_note.startswith("the bus stayed silent"):
+            if any(_same_frame(msg, own) for own in self._own) or (msg.is_rx is False and msg.is_extended_id):
+                self.echo, self.echo_note = True, "the bus was silent at the probe; a later frame came back"
+                self._own.clear()
+        return msg
+
+    # ------------------------------------------------------------------ bus faults
+    def _stream_failed(self, exc: BaseException) -> bool:
+        """A throttle stream's send raised (in its thread): the stream stops; the next read reports it."""
+        self._fault = self._fault or exc
+        return False
 
     def _io_failed(self, exc: BaseException) -> None:
-        """A send or receive raised: a lane that can tell the bench is gone raises :class:`BenchGone`."""
+        """A send or a read raised: reopen the bus and raise :class:`BusFault` naming what happened, or
+        :class:`BenchGone` when the bus cannot be reopened."""
+        self._fault = None
+        what = f"{type(exc).__name__}: {exc}"
+        state = self._bus_state()
+        for task in self._tasks:
+            _stop_task(task)
+        self._tasks.clear()
+        errors = []
+        for attempt in range(REOPEN_TRIES):
+            if attempt:
+                time.sleep(REOPEN_PAUSE_S)  # the harness waits for an adapter, not a test for the DUT
+            try:
+                self.bus.shutdown()
+            except Exception:  # noqa: BLE001 - a failed bus may fail to close too; it is replaced
+                pass
+            try:
+                self.bus = self._open(self.bus_kwargs)
+                break
+            except Exception as again:  # noqa: BLE001 - whatever python-can raises, the bus is gone
+                errors.append(f"{type(again).__name__}: {again}")
+        else:
+            raise BenchGone(f"the CAN bus failed ({what}; bus state {state}) and could not be reopened "
+                            f"({REOPEN_TRIES} tries: {errors[-1]})") from exc
+        self.recoveries.append(f"{what} (bus state {state})")
+        raise BusFault(f"the CAN bus failed under this test ({what}; bus state {state}); the lane reopened it "
+                       "and the run goes on") from exc
+
+    def _bus_state(self) -> str:
+        try:
+            return self.bus.state.name
+        except Exception:  # noqa: BLE001 - not every interface can tell
+            return "unknown"
+
+    def _check_fault(self) -> None:
+        if self._fault is not None:
+            self._io_failed(self._fault)
 
     @property
     def can_change_bitrate(self) -> bool:
@@ -295,7 +484,10 @@ class BusLane(Lane):
         if hold is None:
             return wall
         if not self._pending:
-            msg = self.bus.recv(timeout=0)
+            try:
+                msg = self.bus.recv(timeout=0)
+            except BUS_ERRORS as exc:
+                self._io_failed(exc)
             if msg is None:
                 return wall
             self._pending.append(msg)
@@ -303,21 +495,29 @@ class BusLane(Lane):
         return min(wall, max(hold, stamp)) if stamp else wall
 
     def recv(self, timeout: float) -> can.Message | None:
+        self._check_fault()
         try:
-            msg = self._pending.popleft() if self._pending else self.bus.recv(timeout=max(timeout, 0.0))
-        except (OSError, can.CanError) as exc:
+            msg = self._next(timeout)
+        except BUS_ERRORS as exc:
             self._io_failed(exc)
-            raise
         self._hold = -math.inf if msg is not None else None
+        if msg is not None and msg.timestamp:
+            self._last_ts = max(self._last_ts, msg.timestamp)
         return self.heard(msg)
 
     def wait_power(self, seconds: float) -> None:
-        while self._pending:
-            self.heard(self._pending.popleft())
+        while self._pending or self._own:
+            self.heard(self._next(0))
         self._hold = None
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
             self.heard(self.bus.recv(timeout=left))  # drain whatever a powered-off bus still shows
+
+    def close(self) -> None:
+        for task in self._tasks:
+            _stop_task(task)
+        self._tasks.clear()
+        super().close()
 
     def reopen(self, bitrate: int) -> None:
         if not self.can_change_bitrate and bitrate != self.bitrate:
@@ -373,6 +573,18 @@ class RealtimeEmulatorLane(BusLane):
                           "ignore_config": True}, power, timing_error=timing_error)
 
     def _io_failed(self, exc: BaseException | None = None) -> None:
+        """A dead emulator process is :class:`BenchGone`; a failed socketcand connection to a live one is
+        reopened as on any bus (:meth:`BusLane._io_failed`)."""
+        self._emulator_gone(exc)
+        if exc is None:
+            return
+        try:
+            super()._io_failed(exc)
+        except BenchGone:
+            self._emulator_gone(exc)
+            raise
+
+    def _emulator_gone(self, exc: BaseException | None) -> None:
         code = self.proc.poll()
         if code is None:
             return
@@ -431,6 +643,36 @@ class RealtimeEmulatorLane(BusLane):
         finally:
             if self._flash_dir is not None:
                 self._flash_dir.cleanup()
+
+
+def _same_frame(msg: can.Message, other: can.Message) -> bool:
+    return (msg.arbitration_id == other.arbitration_id and msg.is_extended_id == other.is_extended_id
+            and bytes(msg.data) == bytes(other.data))
+
+
+def _stopped_means_stopped(task: Any) -> Any:
+    """A python-can thread-based periodic task whose stop() returns once its thread has ended: without
+    it a thread held up (a loaded host) sends one more frame after stop(), unseen by a test that took
+    the stream's last frame, and the DUT's comm-loss timer runs from that one (R8)."""
+    thread = getattr(task, "thread", None)
+    if not isinstance(thread, threading.Thread):
+        return task
+    stop = task.stop
+
+    def stop_and_join(*args: Any, **kwargs: Any) -> None:
+        stop(*args, **kwargs)
+        if thread is not threading.current_thread():
+            thread.join(timeout=1.0)
+
+    task.stop = stop_and_join
+    return task
+
+
+def _stop_task(task: Any) -> None:
+    try:
+        task.stop()
+    except Exception:  # noqa: BLE001 - on an exit path every stop is attempted
+        pass
 
 
 def _die_with_parent() -> None:

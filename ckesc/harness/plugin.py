@@ -22,8 +22,19 @@ from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, requirement, strongest
 from . import preflight
 from . import report as _report
-from .dut import Dut, DutUnreachable
-from .lanes import BenchGone, BusLane, CommandPower, Lane, ManualPower, NoPower, RealtimeEmulatorLane, SimLane
+from .dut import Dut, DutUnreachable, echo_probe
+from .lanes import (
+    HOST_SEND_ERROR_S,
+    BenchGone,
+    BusFault,
+    BusLane,
+    CommandPower,
+    Lane,
+    ManualPower,
+    NoPower,
+    RealtimeEmulatorLane,
+    SimLane,
+)
 from .profile import DutProfile
 from .traces import TRACE_FORMATS, TestTraces
 from .verdict import Inconclusive, NotClaimed
@@ -56,6 +67,10 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                      "{bitrate} is replaced. python-can cannot set a SocketCAN bit rate: e.g. a script running "
                      "`ip link set can0 down; ip link set can0 type can bitrate {bitrate}; ip link set can0 up`, or "
                      "`ckesc control --port P bitrate {bitrate}` for the emulator on vcan0")
+    g.addoption("--host-send-error", type=float, default=HOST_SEND_ERROR_S * 1000, metavar="MS",
+                help="--dut bus, an adapter that does not echo the host's frames: how much later than the host clock "
+                     "at send a frame may reach the bus (driver, USB, TX queue), in ms; the error of every time taken "
+                     f"from the host's own frames (default {HOST_SEND_ERROR_S * 1000:g})")
     g.addoption("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
     g.addoption("--nodes", help="emulator: node ids of the emulated bench (default 1); the DUT is the first")
     g.addoption("--profile", help="DUT profile: a shipped one by name (emulator, ckesc-generic, vcan-vm), a name in ./fixtures/duts, or a path (default: emulator / ckesc-generic)")
@@ -287,7 +302,8 @@ def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
         power = NoPower()
     else:
         raise pytest.UsageError("--power emulator works only with --dut emulator")
-    return BusLane(_bus_kwargs(config), power, timing_error=profile.error_s, bitrate_cmd=config.getoption("can_bitrate_cmd"))
+    return BusLane(_bus_kwargs(config), power, timing_error=profile.error_s, bitrate_cmd=config.getoption("can_bitrate_cmd"),
+                   host_send_error=config.getoption("host_send_error") / 1000)
 
 
 @pytest.fixture(scope="session")
@@ -300,17 +316,30 @@ def ckesc_lane(request: pytest.FixtureRequest):
     st.lane, st.profile = lane, profile
     _trace_lane(config, lane, "")
     _watch_lane(config, lane)
+    if isinstance(lane, BusLane):  # do the host's own frames come back? (the frames it reads go to the listeners)
+        lane.find_echo(echo_probe(nibble_order=profile.nibble_order))
     st.info.update(dut=config.getoption("dut"), lane=lane.name, clock=lane.clock, profile=profile.name,
                    bitrate=lane.bitrate, power=lane.power.name, timing_error_s=lane.timing_error,
                    jitter_s=profile.jitter_s, not_claimed=functions.not_claimed_text(profile.absent),
-                   faults=config.getoption("emulator_faults") or "")
+                   faults=config.getoption("emulator_faults") or "", **echo_info(lane))
     _install_signal_guard(config)
     yield lane
     try:
         if st.node_id is not None:
             Dut(lane, profile, node_id=st.node_id).zero_throttle()
+    except BenchGone:  # the run was aborted for it already (and says so): nothing reaches the DUT now
+        pass
     finally:
+        if isinstance(lane, BusLane):
+            st.info["bus_recoveries"] = list(lane.recoveries)
         lane.close()
+
+
+def echo_info(lane: Lane) -> dict[str, Any]:
+    """What the reports say about the host's own frames: whether the bench echoes them, and so which
+    clock times them (results.json and JUnit carry these keys; summary.txt and report.html say them)."""
+    return {"echo": lane.echo, "echo_note": lane.echo_note, "own_frames_clock": lane.own_clock,
+            "own_frames_error_s": round(lane.own_error, 9)}
 
 
 def _allow_spin(config: pytest.Config) -> bool:
@@ -352,7 +381,7 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     finally:
         d.lane_seconds = ckesc_lane.now() - started
         d.zero_throttle()
-        st.dut_segments.append([f for f in d.trace if f.source == d.node_id])
+        keep_segment(config, [f for f in d.trace if f.source == d.node_id])
         if d.node_id != st.node_id:
             st.node_id = d.node_id
         problems = d.restore(snapshot)
@@ -368,6 +397,22 @@ def _check_claims(item: pytest.Item, profile: DutProfile) -> None:
     absent = functions.of_requirements(item_requirements(item), profile.absent)
     if absent:
         raise NotClaimed(absent[0].name, profile.name)
+
+
+#: Frames kept across the run for the run-wide checks (4.1): a whole suite in real time is ~70,000; a
+#: DUT that floods the bus must not grow memory without bound
+RUN_FRAMES_KEPT = 150_000
+
+
+def keep_segment(config: pytest.Config, frames: list) -> None:
+    """Keep one test's frames of the DUT for the run-wide checks (``dut_segments``), up to RUN_FRAMES_KEPT in
+    the run; what is not kept is counted in the run's info (``run_frames_not_kept``), which the reports show."""
+    st = state(config)
+    room = RUN_FRAMES_KEPT - sum(len(s) for s in st.dut_segments)
+    if len(frames) > room:
+        st.info["run_frames_not_kept"] = st.info.get("run_frames_not_kept", 0) + len(frames) - max(room, 0)
+        frames = frames[:max(room, 0)]
+    st.dut_segments.append(frames)
 
 #: The private bench of :func:`multi_dut` in the emulator lanes: node ids chosen so that
 #: node_id % 32 covers 1, 2 and wraps (33 -> slot 1).
@@ -405,7 +450,7 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
         yield d
     finally:
         d.zero_throttle()
-        st.dut_segments.append([f for f in d.trace if f.source != d.host_node])
+        keep_segment(config, [f for f in d.trace if f.source != d.host_node])
         if own:
             lane.close()
 
@@ -538,7 +583,9 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     ids = item_requirements(item)
     strength = strongest(ids)
     d: Dut | None = item.stash.get(_DUT, None)
-    if rep.when == "call":
+    # the bus or the bench failed under the test, not the DUT: an ERROR whatever the requirement's strength
+    harness = call.excinfo is not None and isinstance(call.excinfo.value, (BusFault, BenchGone))
+    if rep.when == "call" and not harness:
         if rep.failed and strength == "OBSERVE":
             rep.outcome = "passed"
             msg = str(call.excinfo.value) if call.excinfo else ""
@@ -646,7 +693,8 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
 
 def _outcome(rep: pytest.TestReport, strength: str, d: Dut | None) -> tuple[str, str]:
     text = _longrepr_text(rep)
-    if rep.failed and "DutError" in text:  # the harness could not do what the test needed: no verdict on the DUT
+    if rep.failed and any(e in text for e in ("DutError", "BusFault", "BenchGone")):
+        # the harness could not do what the test needed, or the bus failed under it: no verdict on the DUT
         return "ERROR", text
     if rep.passed:
         if strength == "OBSERVE":

@@ -180,6 +180,15 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
                      f"(the bench's), report-interval jitter allowance {(info.get('jitter_s') or 0.0) * 1000:g} ms (the DUT's)")
     if "not_claimed" in info:
         lines.append(claim_text(info))
+    if info.get("echo") is not None:  # whether the bench echoes the host's own frames, and so what times them
+        own = f"{info.get('own_frames_clock')}, error +-{(info.get('own_frames_error_s') or 0.0) * 1000:g} ms"
+        lines.append(f"echo: {'yes' if info['echo'] else 'NO'} ({info.get('echo_note', '')}); the host's own frames "
+                     f"timed by: {own}")
+    if info.get("run_frames_not_kept"):
+        lines.append(f"run-wide checks (4.1): {info['run_frames_not_kept']} of the DUT's frames were not kept (more than "
+                     "the run keeps: a flooding DUT); those checks judged the frames kept")
+    if info.get("bus_recoveries"):
+        lines.append(f"bus failures recovered from (the lane reopened the bus): {'; '.join(info['bus_recoveries'])}")
     if banner := incomplete_banner(info):
         lines.insert(0, banner)
         lines.append(banner)

@@ -15,22 +15,13 @@ import os
 import re
 import signal
 import subprocess
-import sys
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-
-CKESC = [sys.executable, "-m", "ckesc"]
-
-
-def _env(tmp: Path) -> dict[str, str]:
-    (tmp / "tmp").mkdir(exist_ok=True)
-    env = dict(os.environ, TMPDIR=str(tmp / "tmp"), PYTHONUNBUFFERED="1")
-    for key in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        env.pop(key, None)
-    return env
+from procs import CKESC
+from procs import env as _env
 
 
 def ckesc(tmp: Path, *args: str, timeout: float = 300) -> subprocess.CompletedProcess:
