@@ -29,7 +29,9 @@ class LaneRules(can.Listener):
     def __init__(self, lane) -> None:
         self.lane = lane
         # the simulated lane hears every frame on its bus; a real bus or socketcand may drop some
-        self.rules = BusRules(tolerance=tolerance_for(lane), bitrate=lane.bitrate, complete=lane.clock == "simulated")
+        # the suite's power cycles go through Dut.switch_power, which tells the rules (power_switched)
+        self.rules = BusRules(tolerance=tolerance_for(lane), bitrate=lane.bitrate, complete=lane.clock == "simulated",
+                              power_known=True)
         self.found: list[Violation] = []
         self.count = 0
         self.between = 0  # violations while no test ran (session fixtures)
@@ -43,6 +45,10 @@ class LaneRules(can.Listener):
             room = _KEPT - len(self.found)
             if room > 0:
                 self.found.extend(found[:room])
+
+    def power_switched(self, when: float) -> None:
+        """The host switched the DUT's power at lane time ``when`` (see BusRules.power_switched)."""
+        self.rules.power_switched(when)
 
     def begin(self) -> None:
         """A test starts: what was found before it is nobody's test's."""

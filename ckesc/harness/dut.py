@@ -339,9 +339,19 @@ class Dut:
         verified afterwards."""
         self.stop_throttle()
         self.lane.power.off()
+        self._power_switched()
         self.lane.wait_power(self.profile.off_s if off_time is None else off_time)
         self.lane.power.on()
+        self._power_switched()
         self.wait(self.profile.boot_s if boot_wait is None else boot_wait)
+
+    def _power_switched(self) -> None:
+        """Tell the lane's listeners that care (the live bus rules: R9a) that the power was switched."""
+        now = self.now()
+        for listener in self.lane.listeners:
+            note = getattr(listener, "power_switched", None)
+            if note is not None:
+                note(now)
 
     # ------------------------------------------------------------------ throttle (safety)
     def _check_throttle(self, name: str, fields: Mapping[str, Any]) -> None:

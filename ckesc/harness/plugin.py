@@ -66,6 +66,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                 help="allow non-zero throttle (default: only for the emulator). PROPELLERS OFF.")
     g.addoption("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")
     g.addoption("--emulator-seed", type=int, default=0, help="emulator: random seed")
+    g.addoption("--emulator-option", action="append", default=[], metavar="KEY=VALUE",
+                help="emulator: a setting of every emulated ESC (repeatable): " + ", ".join(EMULATOR_OPTIONS))
     g.addoption("--ckesc-reports", default=None, metavar="DIR",
                 help="write JUnit, JSON and text reports under DIR/<timestamp>/ (ckesc run sets reports/)")
     g.addoption("--ckesc-summary", action="store_true", default=False,
@@ -267,16 +269,48 @@ class _null:
         return False
 
 
+#: What --emulator-option sets in every emulated ESC (ckesc.emulator.model.EscConfig), and how it is read
+EMULATOR_OPTIONS = {"boot_time": "S (power-on to the first answer)", "report_delay": "S (boot to the first report)",
+                    "report_timer": "restart|grid (R9a)"}
+
+
+def emulator_options(config: pytest.Config) -> dict[str, Any]:
+    """--emulator-option KEY=VALUE, checked: {EscConfig field: value}."""
+    out: dict[str, Any] = {}
+    for kv in config.getoption("emulator_option"):
+        key, sep, value = kv.partition("=")
+        if not sep or key not in EMULATOR_OPTIONS:
+            raise pytest.UsageError(f"--emulator-option takes KEY=VALUE with KEY one of {', '.join(EMULATOR_OPTIONS)}; "
+                                    f"got {kv!r}")
+        if key == "report_timer":
+            out[key] = value
+            continue
+        try:
+            out[key] = float(value)
+        except ValueError:
+            raise pytest.UsageError(f"--emulator-option {key}: seconds, got {value!r}") from None
+        if out[key] < 0:
+            raise pytest.UsageError(f"--emulator-option {key}: seconds, 0 or more, got {value!r}")
+    return out
+
+
 def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
     dut_kind = config.getoption("dut")
     faults = [f for f in config.getoption("emulator_faults").split(",") if f]
     nodes = [int(n, 0) for n in (config.getoption("nodes") or "1").split(",")]
+    options = emulator_options(config)
+    if options and dut_kind != "emulator":
+        raise pytest.UsageError("--emulator-option sets the emulator's ESCs: it needs --dut emulator")
     if dut_kind == "emulator":
         if config.getoption("lane") == "realtime":
-            return RealtimeEmulatorLane(nodes=nodes, faults=faults, temp_flash=True,
+            return RealtimeEmulatorLane(nodes=nodes, faults=faults, temp_flash=True, esc_options=options,
                                         seed=config.getoption("emulator_seed"), timing_error=max(profile.error_s, 0.002))
         # in one process the emulated ESCs keep their flash contents across power cycles: no file needed
-        return SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"), esc_config={"boot_time": 0.25})
+        try:
+            return SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"),
+                           esc_config={"boot_time": 0.25, **options})
+        except ValueError as exc:  # a report_timer the model does not know
+            raise pytest.UsageError(f"--emulator-option: {exc}") from None
     power_kind = config.getoption("power") or "none"
     if power_kind == "command":
         power = CommandPower(config.getoption("power_off_cmd"), config.getoption("power_on_cmd"))
@@ -376,11 +410,12 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     assert profile is not None
     if config.getoption("dut") == "emulator":
         if config.getoption("lane") == "realtime":
-            lane: Lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=ckesc_lane.timing_error)
+            lane: Lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=ckesc_lane.timing_error,
+                                              esc_options=emulator_options(config))
         else:
             faults = [f for f in config.getoption("emulator_faults").split(",") if f]
             lane = SimLane(nodes=MULTI_NODES, faults=faults, seed=config.getoption("emulator_seed"),
-                           esc_config={"boot_time": 0.25})
+                           esc_config={"boot_time": 0.25, **emulator_options(config)})
         _trace_lane(config, lane, "bench")
         _watch_lane(config, lane)
         own = True

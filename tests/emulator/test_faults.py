@@ -234,6 +234,27 @@ def reports_after_resume(host) -> int:
 case("resume_ignored", reports_after_resume, 10, 0)
 
 
+def msg1_dues_after_resume(host) -> list[float]:
+    """When the MSG1s after a resume were due, from the resume (R9a: the first within one interval)."""
+    suspend_answers(host)
+    host.send("msg_control", {"option": 0, "command": RESUME})
+    sent = host.now
+    frames = host.collect(sent + 0.1)
+    return [round(d - sent, 4) for d, f in zip(host.due_times(frames), frames) if f.name == "msg1"][:3]
+
+
+case("report_restart_late", msg1_dues_after_resume, lambda d: d[0] <= 0.0005, lambda d: 0.0295 <= d[0] <= 0.0305)
+
+
+def test_a_grid_keeping_report_timer_sends_at_once_then_on_its_old_grid(lane):
+    """EscConfig.report_timer "grid" (R9a leaves it open): one MSG1 at the resume, then the grid of before."""
+    restart = msg1_dues_after_resume(lane())
+    grid = msg1_dues_after_resume(lane(esc_config={"report_timer": "grid"}))
+    assert restart[0] <= 0.0005 and grid[0] <= 0.0005
+    assert abs(restart[1] - restart[0] - 0.02) < 1e-4  # the timer restarted
+    assert grid[1] - grid[0] < 0.0195 and abs(grid[2] - grid[1] - 0.02) < 1e-4  # the old grid: sooner, then 20 ms
+
+
 def exp_reports(host, name: str | tuple, seconds: float = 0.5) -> list:
     """The ``name`` frames heard after MSG Control 0xEEEEEEEE (MSG_EXP mode) at 300 ms: MSG_EXP1 every
     20 ms, MSG_EXP7..11 every 500 ms (MSG3's interval; the next due at 750 ms)."""
