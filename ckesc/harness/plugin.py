@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 
 from ..evidence.live import LaneRules, failure_text
+from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, requirement, strongest
 from . import preflight
 from . import report as _report
@@ -134,6 +135,7 @@ class _State:
     #: "interrupted" (Ctrl-C, SIGTERM); None while it runs or when it ran to its end
     stopped: str | None = None
     silent_errors: int = 0  # tests in a row that ERRORed without a frame from the DUT
+    ready: bool = False  # the DUT has been seen reporting (no test starts before: _await_ready)
 
 
 _STATE = pytest.StashKey[_State]()
@@ -365,10 +367,13 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     if request.node.get_closest_marker("power_cycle") and not ckesc_lane.power.available:
         pytest.skip("needs a power cycle; no power control (--power none)")
     node = config.getoption("node_id") or st.node_id
+    since = ckesc_lane.now()
     try:
         d = Dut(ckesc_lane, profile, node_id=node, allow_motor_spin=_allow_spin(config))
     except DutUnreachable as exc:
         _abort(config, f"the DUT did not answer: {exc}")
+    if not st.ready:
+        _await_ready(config, d, since)
     st.node_id = d.node_id
     st.info.setdefault("node_id", d.node_id)
     if "esc_information" not in st.info:
@@ -423,7 +428,9 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
         if not profile.has("multi_node"):
             pytest.skip(f"the DUT profile {profile.name!r} lacks capability 'multi_node' (several ESCs on the bus)")
         lane, own = ckesc_lane, False
+    since = lane.now()
     d = Dut(lane, profile, node_id=None, allow_motor_spin=_allow_spin(config))  # discovery lists every ESC
+    d.await_reports(since, since + d.ready_bound_s())  # no test starts before the (first) ESC reports
     request.node.stash[_DUT] = d
     try:
         yield d
@@ -438,6 +445,28 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
 def record(dut: Dut):
     """The current test's measurement record (same as ``dut.record``)."""
     return dut.record
+
+
+def _await_ready(config: pytest.Config, d: Dut, since: float) -> None:
+    """No test starts before the DUT reports: after discovery, wait for its first MSG1..MSG3 (at most
+    Dut.ready_bound_s from ``since``, the profile's boot time on top of one longest report interval). A
+    DUT that answers but does not report is sent MSG Control 0xAAAAAAAA once (an earlier run may have left
+    it suspended); if it still sends nothing the run is aborted: every report test would fail for it."""
+    st = state(config)
+    heard = d.await_reports(since, since + d.ready_bound_s())
+    if not heard:
+        d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+        t = d.now()
+        heard = d.await_reports(t, t + d.ready_bound_s(0.0))
+        st.info["readiness"] = ("reported only after MSG Control 0xAAAAAAAA (an earlier run left it suspended?)" if heard
+                                else "no report")
+    if not heard:
+        _abort(config, f"node {d.node_id} answers but sent no report (MSG1..MSG3, MSG_EXP, CAN Test) within "
+                       f"{d.ready_bound_s():.2f} s of discovery (the profile's boot_s {d.profile.boot_s} s and one longest "
+                       "report interval), nor after MSG Control 0xAAAAAAAA: is it in CAN Test mode or suspended? "
+                       "Power-cycle it, or raise [timing] boot_s in its profile")
+    st.ready = True
+    st.info["first_reports_s"] = {name: round(t - since, 4) for name, t in sorted(heard.items())}
 
 
 def _abort(config: pytest.Config, why: str) -> None:
