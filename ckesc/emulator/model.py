@@ -370,6 +370,8 @@ class EscModel:
             return 0.080
         if "answer_not_staggered" in self.faults:
             return 0.010
+        if "answer_at_once" in self.faults:
+            return 0.001
         return (self.node_id % 32) * ANSWER_SLOT_S  # R2
 
     # ------------------------------------------------------------------------------------------

@@ -309,10 +309,14 @@ def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
                                         seed=config.getoption("emulator_seed"), timing_error=max(profile.error_s, 0.002))
         # in one process the emulated ESCs keep their flash contents across power cycles: no file needed
         try:
-            return SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"),
+            lane = SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"),
                            esc_config={"boot_time": 0.25, **options})
         except ValueError as exc:  # a report_timer the model does not know
             raise pytest.UsageError(f"--emulator-option: {exc}") from None
+        # exact timestamps; a profile may still state a bench's error (0 for the emulator's own): margins below it
+        # are then INCONCLUSIVE as on that bench, e.g. to see what a 2 ms bench can tell
+        lane.timing_error = profile.error_s
+        return lane
     power_kind = config.getoption("power") or "none"
     if power_kind == "command":
         power = CommandPower(config.getoption("power_off_cmd"), config.getoption("power_on_cmd"))

@@ -201,6 +201,9 @@ case("answer_late", lambda h: answer_delays(h, "get_esc_id", {"option": 0}, 3), 
 # with the fault both answers are due at 10 ms: node 3's waits for node 1's (230 us at 500 kbit/s)
 case("answer_not_staggered", lambda h: answer_delays(h, "msg_control", {"option": 0, "command": RESUME}, 6),
      (0.002, 0.006), (0.010, 0.01023), nodes=(1, 3))
+# both due at 1 ms: node 3's reply (3 bytes) waits for node 1's (182 us)
+case("answer_at_once", lambda h: answer_delays(h, "get_esc_id", {"option": 0}, 3), (0.002, 0.006), (0.001, 0.001182),
+     nodes=(1, 3))
 
 
 def get_esc_id_reply(host):
