@@ -425,6 +425,7 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
             faults = [f for f in config.getoption("emulator_faults").split(",") if f]
             lane = SimLane(nodes=MULTI_NODES, faults=faults, seed=config.getoption("emulator_seed"),
                            esc_config={"boot_time": 0.25, **emulator_options(config)})
+            lane.timing_error = ckesc_lane.timing_error  # the profile's stated error, as on the DUT's lane
         _trace_lane(config, lane, "bench")
         _watch_lane(config, lane)
         own = True
