@@ -123,6 +123,8 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
             argv += [f"--{opt.replace('_', '-')}", str(value)]
     for kv in args.can_config:
         argv += ["--can-config", kv]
+    for kv in getattr(args, "emulator_option", []):
+        argv += ["--emulator-option", kv]
     if args.emulator_seed:
         argv += ["--emulator-seed", str(args.emulator_seed)]
     if args.allow_motor_spin:

@@ -1,15 +1,21 @@
 """Answers to the host's commands, as the sections that send them read them (not a section: no
-tests here): the answer slots of R2 (:func:`check_answer_slot`), how long to read for an answer to a
-broadcast, an answer a test compares with (:func:`reference`), and what came instead of an answer
-that did not decode (:func:`heard_instead`).
+tests here): the answer slots of R2 (:func:`check_answer_slot`, and :func:`slot_node`, which moves the
+DUT to a node id whose slot a coarse bench can tell), how long to read for an answer to a broadcast, an
+answer a test compares with (:func:`reference`), what came instead of an answer that did not decode
+(:func:`heard_instead`), and who answers GET_ESC_ID (:func:`esc_ids`, :func:`put_back`, used by Set ID's
+tests too).
 """
 
 from __future__ import annotations
 
+import math
+from contextlib import contextmanager
+
+from ckesc.harness.dut import DutError
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
-from ckesc.protocol.ids import Kind
+from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, Kind
 
 from .reports import frame_start, ms
 
@@ -40,21 +46,132 @@ def reference(dut, name: str, fields: dict | None = None, *, need: tuple[str, ..
     return ex.response.fields
 
 
+def slot_s(node: int) -> float:
+    """R2: when node ``node``'s answer slot starts after the request."""
+    return (node % SLOTS) * cat.ANSWER_SLOT_S
+
+
+def coarse(dut) -> bool:
+    """Whether the bench's stated error is not smaller than node 1's slot (2 ms): it cannot place an answer
+    inside a 2 ms slot, and at node 1 it cannot tell an answer that ignores the stagger (at once) from one
+    that waits for its slot."""
+    return dut.lane.timing_error >= cat.ANSWER_SLOT_S
+
+
+def wide_slot_s(error: float) -> float:
+    """On a coarse bench, a slot at least this late after the request: widened by the bench's error on each
+    side (the most such a bench can place an answer), it still starts more than one error after the
+    request, so that an answer sent at once, whatever the node id, falls before it."""
+    return 2 * error + cat.ANSWER_SLOT_S
+
+
+def wide_node(error: float) -> int | None:
+    """The lowest node id (2 or more) whose slot is wide enough for a bench with ``error`` (None: none is,
+    below 32)."""
+    n = max(2, math.ceil(round(wide_slot_s(error) / cat.ANSWER_SLOT_S, 9)))
+    return n if n < SLOTS and n != DEFAULT_ESC_NODE_ID else None
+
+
 def check_answer_slot(dut, answer, sent, node: int, what: str, max_requirement: str) -> None:
     """R2: an answer starts no earlier than (node_id % 32) x 2 ms after the request and ends within its
     2 ms slot; ``max_requirement`` (4.4.2-4 / 4.4.3-4): never later than 64 ms. Measured from the
     request's bus time (its echo), or where the bench does not echo from the host clock at send, with
-    that clock's larger error (``sent.clock``, ``sent.error``)."""
-    slot = (node % SLOTS) * cat.ANSWER_SLOT_S
-    err = sent.error * 1000
+    that clock's larger error (``sent.clock``, ``sent.error``). On a coarse bench (its stated error not
+    smaller than a slot) at a node whose slot is wide enough (:func:`slot_node` moves the DUT there), the
+    slot is judged widened by the error on each side, the most such a bench can place an answer: an answer
+    that ignores the stagger starts before it, one that waits for its slot is in it."""
+    slot = slot_s(node)
+    error = max(dut.lane.timing_error, sent.error)
+    err = error * 1000
     start, end = frame_start(dut, answer) - sent.time, answer.timestamp - sent.time
     rec = dut.record
-    rec.measure(f"{what} node {node}: answer start after the request", ms(start), limit=ms(slot), op=">=", unit="ms",
-                clock=sent.clock, error=err, requirement="R2", strength="READING")
-    rec.measure(f"{what} node {node}: answer end after the request", ms(end), limit=ms(slot + cat.ANSWER_SLOT_S),
-                unit="ms", clock=sent.clock, error=err, requirement="R2", strength="READING")
+    if coarse(dut) and slot >= wide_slot_s(error):
+        rec.observe(f"{what} node {node}: slot judged", f"{ms(slot - error)}..{ms(slot + cat.ANSWER_SLOT_S + error)} ms: the "
+                    f"2 ms slot widened by the bench's stated error +-{err:g} ms on each side")
+        rec.measure(f"{what} node {node}: answer start after the request (slot start - bench error)", ms(start),
+                    limit=ms(slot - error), op=">=", unit="ms", clock=sent.clock, requirement="R2", strength="READING")
+        rec.measure(f"{what} node {node}: answer end after the request (slot end + bench error)", ms(end),
+                    limit=ms(slot + cat.ANSWER_SLOT_S + error), unit="ms", clock=sent.clock, requirement="R2",
+                    strength="READING")
+    else:
+        ms_ = [rec.measure(f"{what} node {node}: answer start after the request", ms(start), limit=ms(slot), op=">=",
+                           unit="ms", clock=sent.clock, error=err, requirement="R2", strength="READING"),
+               rec.measure(f"{what} node {node}: answer end after the request", ms(end), limit=ms(slot + cat.ANSWER_SLOT_S),
+                           unit="ms", clock=sent.clock, error=err, requirement="R2", strength="READING")]
+        if coarse(dut) and any(m.verdict == "INCONCLUSIVE" for m in ms_):
+            rec.inconclusive.append(f"the bench's stated error +-{err:g} ms is not smaller than a 2 ms answer slot: at node "
+                                    f"{node} (slot {ms(slot):g} ms) it cannot tell an answer in its slot from one that "
+                                    "ignores the stagger (the DUT's own slot tests move it to a wider slot)")
     rec.measure(f"{what} node {node}: answer delay", ms(end), limit=ms(cat.ANSWER_DELAY_MAX_S), unit="ms",
                 clock=sent.clock, error=err, requirement=max_requirement)
+
+
+def esc_id_replies(dut) -> list[tuple[int, int]]:
+    """(node id, throttle channel) of each GET_ESC_ID reply (R1) to one broadcast query, by the reply's source."""
+    sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
+    dut.wait(BROADCAST_WINDOW_S)  # every ESC answers within 64 ms (R2)
+    return [(f.source, f.fields["throttle_channel"]) for f in dut.frames("get_esc_id", since=sent.time)
+            if f.layout is not None and f.layout.name == "reply"]
+
+
+def esc_ids(dut) -> list[tuple[int, int]]:
+    """The distinct (node id, throttle channel) pairs that answer GET_ESC_ID."""
+    return sorted(set(esc_id_replies(dut)))
+
+
+def put_back(dut, node: int, channel: int) -> None:
+    """Put the DUT back at ``node`` on ``channel`` (pseudo-broadcast Set ID in a fresh window, R11) and verify:
+    DutError when it is not."""
+    found = esc_ids(dut)
+    if found != [(node, channel)]:
+        dut.switch_power()  # a fresh 120 s window (R11)
+        found = esc_ids(dut)
+        for dest in dict.fromkeys([n for n, _ in found] + [node]):  # to each id it may listen at (R11 says any)
+            dut.request("set_id", {"node_id": node, "throttle_channel": channel}, destination=dest)
+        found = esc_ids(dut)
+    dut.node_id = node
+    if found != [(node, channel)]:
+        raise DutError(f"could not put the DUT back at node id {node}, channel {channel}: GET_ESC_ID answers {found}")
+
+
+@contextmanager
+def slot_node(dut):
+    """The node id at which the answer slots (R2) are checked, for the ``with`` block: the DUT's own, unless the
+    bench is coarse (its stated error not smaller than node 1's 2 ms slot) and the DUT's slot is narrower than
+    :func:`wide_slot_s`. Then the DUT is moved to :func:`wide_node` with Set ID inside the 120 s window of a
+    proven power cycle (R11), proven there by GET_ESC_ID, and moved back and proven afterwards on every way
+    out (DutError when it cannot be). INCONCLUSIVE, saying why, when no node id is wide enough, when there is
+    no power control to open the window, when other ESCs share the bus (Set ID moves every one), or when
+    Set ID does not move it (4.4.18's verdict)."""
+    error = dut.lane.timing_error
+    if not coarse(dut) or slot_s(dut.node_id) >= wide_slot_s(error):
+        yield dut.node_id
+        return
+    target = wide_node(error)
+    why = (f"the bench's stated error +-{ms(error):g} ms is not smaller than node {dut.node_id}'s answer slot "
+           f"({ms(slot_s(dut.node_id)):g} ms after the request): whether its answers wait for their slot (R2) shows only at a "
+           f"node id whose slot starts at least {ms(wide_slot_s(error)):g} ms after it")
+    if target is None:
+        raise Inconclusive(f"{why}, and none below 32 does")
+    if not dut.lane.power.available:
+        raise Inconclusive(f"{why} (node {target}), and moving it there needs Set ID's window after a power-up (R11): "
+                           "no power control (--power)")
+    found = esc_ids(dut)
+    if [n for n, _ in found] != [dut.node_id]:
+        raise Inconclusive(f"{why} (node {target}); GET_ESC_ID answers {found}: Set ID would move every ESC on the bus")
+    node, channel = found[0]
+    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)  # the Set ID window opens now (R11)
+    try:
+        dut.request("set_id", {"node_id": target, "throttle_channel": channel})
+        dut.node_id = target
+        moved = esc_ids(dut)
+        if moved != [(target, channel)]:
+            raise Inconclusive(f"{why}; Set ID did not move the DUT to node {target} (GET_ESC_ID answers {moved}, "
+                               "see 4.4.18)")
+        dut.record.observe("answer slots checked at", f"node {target} (moved from {node} with Set ID and back): {why}")
+        yield target
+    finally:
+        put_back(dut, node, channel)
 
 
 def heard_instead(dut, spec: cat.FrameSpec) -> str:

@@ -6,7 +6,9 @@ tests here).
   did not decode: :func:`garbled`, :func:`describe_garbled`, :func:`need_decoded`;
 - MSG Control (4.4.2): :func:`msg_control`, :func:`resume`, :func:`check_suspended`, and capturing
   what a DUT sends in MSG_EXP mode: :func:`exp_capture`, :func:`exp_reports`;
-- Set Freq (4.4.22) as the reports follow it: :func:`check_interval_follows_set_freq`.
+- Set Freq (4.4.22) as the reports follow it: :func:`check_interval_follows_set_freq`;
+- the reports after a restart (R9a: a resume, leaving MSG_EXP mode, CAN Test off, a Set Freq write):
+  :func:`check_restart`.
 """
 
 from __future__ import annotations
@@ -192,17 +194,57 @@ def exp_reports(dut, name: str, seconds: float | None = None, during=None) -> tu
 
 def check_interval_follows_set_freq(dut, report: str, interval: int) -> None:
     """After Set Freq sets ``report``'s interval (the others as they are), ``report`` comes every
-    ``interval`` x 2 ms: measured over four intervals once the old schedule has run out (R9)."""
+    ``interval`` x 2 ms (R9), its first frame within one new interval of the write (R9a)."""
     s = dut.settings()
     fields = {k: s[k] for k in INTERVALS} | {f"{report}_interval": interval}
-    dut.ask("set_freq", {"option": 1, **fields})
-    target = interval * cat.INTERVAL_UNIT_S
-    dut.wait(max(interval_s(s, report), target))  # the old schedule runs out
-    t = dut.now()
-    dut.wait(4 * target + target / 2)
-    stamps = report_starts(dut, report, t)
-    what = report.upper()
-    assert len(stamps) >= 3, f"only {len(stamps)} {what} in {ms(4.5 * target)} ms at {what}_SET {interval}"
-    worst = max(abs((b - a) - target) for a, b in zip(stamps, stamps[1:]))
-    dut.record.measure(f"{what} interval error", ms(worst), limit=dut.interval_tolerance_ms, unit="ms", clock=dut.clock,
-                       error=dut.lane.timing_error * 1000, requirement="R9")
+    ex = dut.request("set_freq", {"option": 1, **fields})
+    assert ex.response is not None, "no answer to Set/Get Freq write"
+    check_restart(dut, ex.sent.time, fields, "the Set Freq write", names=(report,), clock=ex.sent.clock,
+                  error_ms=ex.sent.error * 1000)
+
+
+#: R9a: the gaps up to and including this report after a restart are OBSERVE; from the next one on, R9
+R9A_UNJUDGED = 2
+
+
+def check_restart(dut, event: float, settings: dict, what: str, names=REPORTS, gaps: int = 2, *,
+                  silent_is: str | None = None, clock: str | None = None, error_ms: float | None = None) -> None:
+    """R9a after ``what`` at lane time ``event`` (a resume, leaving MSG_EXP mode, CAN Test off, a Set Freq
+    write), with the intervals of ``settings`` in force: each report of ``names`` starts within one interval
+    of the event (READING R9a; bus access on top, dut.interval_tolerance_ms); the gaps up to its second
+    frame are recorded, never judged (R9a-gaps: whether the ESC restarts its timer or keeps its grid is not
+    written); from the third frame on, ``gaps`` gaps are each one interval (R9). Reads until they can have come.
+    ``clock`` / ``error_ms``: what timed ``event`` when not the lane's bus clock (a bench without echo times
+    the host's command by the host clock at send, ``Sent.clock`` / ``Sent.error``).
+    When none of ``names`` comes back at all, whether reporting resumes is another clause's verdict: INCONCLUSIVE
+    naming ``silent_is``'s test (a description), or FAIL when ``silent_is`` is None."""
+    longest = max(interval_s(settings, w) for w in names)
+    dut.wait(max(0.0, event + (R9A_UNJUDGED + gaps) * longest + longest / 2 + react_s(dut) - dut.now()))
+    if silent_is is not None and not any(report_starts(dut, which, event) for which in names):
+        raise Inconclusive(f"no {'/'.join(n.upper() for n in names)} at all within {ms(dut.now() - event)} ms of {what} "
+                           f"({silent_is}): how they come back cannot be judged")
+    tol = dut.interval_tolerance_ms
+    err = dut.lane.timing_error * 1000
+    late = []
+    for which in names:
+        target = interval_s(settings, which)
+        stamps = report_starts(dut, which, event)
+        what_ = which.upper()
+        assert stamps, f"no {what_} within {ms(dut.now() - event)} ms of {what} (R9a: within one interval, {ms(target)} ms)"
+        try:
+            dut.record.measure(f"first {what_} after {what}", ms(stamps[0] - event), limit=ms(target) + tol, unit="ms",
+                               clock=clock or dut.clock, error=err if error_ms is None else max(err, error_ms),
+                               requirement="R9a", strength="READING")
+        except AssertionError as exc:
+            late.append(str(exc))
+            continue
+        if len(stamps) > 1:
+            dut.record.observe(f"{what_} gaps up to the second after {what} (R9a-gaps)",
+                               f"{ms(stamps[0] - event)} ms, {ms(stamps[1] - stamps[0])} ms")
+        judged = stamps[R9A_UNJUDGED - 1:]
+        assert len(judged) > 1, (f"only {len(stamps)} {what_} in {ms(dut.now() - event)} ms after {what} at "
+                                 f"{ms(target)} ms: its interval cannot be judged (R9)")
+        worst = max(abs((b - a) - target) for a, b in zip(judged, judged[1:]))
+        dut.record.measure(f"{what_} interval error from the third after {what}", ms(worst), limit=tol, unit="ms",
+                           clock=dut.clock, error=err, requirement="R9")
+    assert not late, "; ".join(late)

@@ -8,7 +8,6 @@ moved to an unexpected id is still found.
 
 import pytest
 
-from ckesc.harness.dut import DutError
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
@@ -16,6 +15,7 @@ from ckesc.protocol.host import HostProtocol
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, HOST_NODE_ID, RESERVED_NODE_IDS, Kind
 from ckesc.protocol.legality import field_cases, illegal_cases
 
+from .answers import esc_id_replies, esc_ids, put_back
 from .raw_command_12b import FORMAT as RAW_12B
 from .raw_command_12b import VALUES as RAW_12B_VALUES
 
@@ -37,19 +37,6 @@ REPORT_IDS = frozenset(cat.spec(name).type_id for name in REPORT_NAMES)
 
 
 # ------------------------------------------------------------------------------------------ helpers
-def _replies(dut):
-    """(node id, throttle channel) of each GET_ESC_ID reply (R1), by the reply's source."""
-    sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
-    dut.wait(2 * cat.ANSWER_DELAY_MAX_S)  # every ESC answers within 64 ms (R2)
-    return [(f.source, f.fields["throttle_channel"]) for f in dut.frames("get_esc_id", since=sent.time)
-            if f.layout is not None and f.layout.name == "reply"]
-
-
-def _ids(dut):
-    """The distinct (node id, throttle channel) pairs that answer GET_ESC_ID."""
-    return sorted(set(_replies(dut)))
-
-
 def _proven_cycle(dut):
     """A power cycle proven by the power-up counter (241 option 2) asked at whichever node id answers
     GET_ESC_ID afterwards: ``dut.power_cycle`` asks at ``dut.node_id``, which is what these tests
@@ -58,7 +45,7 @@ def _proven_cycle(dut):
         raise Inconclusive("this test needs a power cycle and no power control was given (--power)")
     before = dut.power_up_count()
     dut.switch_power()
-    found = _ids(dut)
+    found = esc_ids(dut)
     after = None
     if len(found) == 1:
         ex = dut.request("maintenance_information", {"option": 2}, destination=found[0][0])
@@ -72,20 +59,6 @@ def _proven_cycle(dut):
 def _open_window(dut):
     """A proven power cycle: the Set ID window (R11) starts now."""
     dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
-
-
-def _restore(dut, node, channel):
-    """Put the DUT back at ``node`` on ``channel`` (pseudo-broadcast Set ID in a fresh window) and verify."""
-    found = _ids(dut)
-    if found != [(node, channel)]:
-        dut.switch_power()  # a fresh 120 s window (R11)
-        found = _ids(dut)
-        for dest in dict.fromkeys([n for n, _ in found] + [node]):  # to each id it may listen at (R11 says any)
-            dut.request("set_id", {"node_id": node, "throttle_channel": channel}, destination=dest)
-        found = _ids(dut)
-    dut.node_id = node
-    if found != [(node, channel)]:
-        raise DutError(f"could not put the DUT back at node id {node}, channel {channel}: GET_ESC_ID answers {found}")
 
 
 def _report_sources(dut, since):
@@ -110,7 +83,7 @@ def _other_id(node):
 @pytest.fixture
 def original(dut):
     """(node id, channel) before the test; put back afterwards, whatever happened."""
-    found = _ids(dut)
+    found = esc_ids(dut)
     if found != [(dut.node_id, dut.settings()["throttle_channel"])]:
         raise Inconclusive(f"GET_ESC_ID answers {found}, not just the DUT (node {dut.node_id}): Set ID needs one ESC "
                            "on the bus, and its effects are read with GET_ESC_ID (see 4.4.3)")
@@ -118,7 +91,7 @@ def original(dut):
     try:
         yield node, channel
     finally:
-        _restore(dut, node, channel)
+        put_back(dut, node, channel)
 
 
 # ------------------------------------------------------------------------------------------ tests
@@ -136,7 +109,7 @@ def test_set_id_gives_the_dut_its_id_and_channel(dut, original, target):
     assert ex.response is not None, "no answer to Set ID"
     got = (ex.response.source, ex.response.fields["node_id"], ex.response.fields["throttle_channel"])
     assert got == (target, target, new_channel), f"Set ID answer (source, node id, channel) = {got}"
-    assert _ids(dut) == [(target, new_channel)], f"GET_ESC_ID after Set ID ({target}, {new_channel}): {_ids(dut)}"
+    assert esc_ids(dut) == [(target, new_channel)], f"GET_ESC_ID after Set ID ({target}, {new_channel}): {esc_ids(dut)}"
     assert dut.settings()["throttle_channel"] == new_channel, "242 from the new id shows another channel"
     start = dut.now()
     dut.wait(2 * dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S)
@@ -157,7 +130,7 @@ def test_destination_is_ignored(dut, original, destination):
     ex = dut.request("set_id", {"node_id": target, "throttle_channel": channel}, destination=dest)
     dut.node_id = target
     dut.record.observe(f"answer to Set ID sent to {dest}", ex.response.fields if ex.response else "none")
-    assert _ids(dut) == [(target, channel)], f"Set ID ({target}, {channel}) sent to node {dest} not obeyed: {_ids(dut)}"
+    assert esc_ids(dut) == [(target, channel)], f"Set ID ({target}, {channel}) sent to node {dest} not obeyed: {esc_ids(dut)}"
 
 
 @pytest.mark.requirement("4.4.18-2", "R11")
@@ -169,14 +142,14 @@ def test_several_escs_are_set_to_the_same_id(multi_dut, ckesc_lane):
     if len(multi_dut.nodes) < 2:
         pytest.skip(f"only {multi_dut.nodes} answered GET_ESC_ID")
     multi_dut.power_cycle(multi_dut.profile.off_s, multi_dut.profile.boot_s)
-    if sorted(n for n, _ in _replies(multi_dut)) != sorted(multi_dut.nodes):
+    if sorted(n for n, _ in esc_id_replies(multi_dut)) != sorted(multi_dut.nodes):
         raise Inconclusive(f"GET_ESC_ID does not list the ESCs {multi_dut.nodes} (see 4.4.3): the result cannot be read")
     target = max(multi_dut.nodes) + 1
     sent = multi_dut.request("set_id", {"node_id": target, "throttle_channel": 1}, destination=multi_dut.nodes[0])
     answers = [f for f in multi_dut.frames("set_id", since=sent.sent.time) if f.kind is Kind.RESPONSE]
     multi_dut.record.observe("Set ID answers (source)", [f.source for f in answers])
     multi_dut.node_id = target
-    sources = sorted(n for n, _ in _replies(multi_dut))
+    sources = sorted(n for n, _ in esc_id_replies(multi_dut))
     assert sources == [target] * len(multi_dut.nodes), (
         f"{len(multi_dut.nodes)} ESCs ({multi_dut.nodes}) after Set ID {target}: GET_ESC_ID answered from {sources}")
 
@@ -192,7 +165,7 @@ def test_at_0x7d_nothing_is_reported(dut, original):
     ex = dut.request("set_id", {"node_id": DEFAULT_ESC_NODE_ID, "throttle_channel": channel})
     dut.node_id = DEFAULT_ESC_NODE_ID
     if ex.response is None or ex.response.source != DEFAULT_ESC_NODE_ID:
-        found = _ids(dut)
+        found = esc_ids(dut)
         if found != [(DEFAULT_ESC_NODE_ID, channel)]:
             raise Inconclusive(f"Set ID to 0x7D did not take (GET_ESC_ID answers {found}): silence cannot be judged")
     try:
@@ -201,7 +174,7 @@ def test_at_0x7d_nothing_is_reported(dut, original):
         sources = _report_sources(dut, start)
         assert not sources, f"at node id 0x7D reports came from {sorted(sources)}"
     finally:
-        _restore(dut, node, channel)
+        put_back(dut, node, channel)
         # 'if it is not 0x7D, data will be reported automatically on power-up': make sure it reports again
         start = dut.now()
         dut.wait(2 * s["msg1_interval"] * cat.INTERVAL_UNIT_S)
@@ -220,7 +193,7 @@ def test_reserved_ids_change_nothing(dut, original, value):
     ex = dut.request("set_id", {"node_id": value, "throttle_channel": _other_channel(channel)})
     dut.record.observe("answer to the illegal Set ID (R10-answer)",
                        {"source": ex.response.source, **ex.response.fields} if ex.response else "none")
-    assert _ids(dut) == [(node, channel)], f"Set ID {value:#04x} changed the DUT: GET_ESC_ID answers {_ids(dut)}"
+    assert esc_ids(dut) == [(node, channel)], f"Set ID {value:#04x} changed the DUT: GET_ESC_ID answers {esc_ids(dut)}"
     found = _proven_cycle(dut)
     assert found == [(node, channel)], f"after Set ID {value:#04x} and a power cycle GET_ESC_ID answers {found}"
 
@@ -252,8 +225,8 @@ def test_id_and_channel_persist_across_power_cycle(dut, original):
     _open_window(dut)
     dut.request("set_id", {"node_id": target, "throttle_channel": new_channel})
     dut.node_id = target
-    if _ids(dut) != [(target, new_channel)]:
-        raise Inconclusive(f"Set ID ({target}, {new_channel}) did not take: GET_ESC_ID answers {_ids(dut)}")
+    if esc_ids(dut) != [(target, new_channel)]:
+        raise Inconclusive(f"Set ID ({target}, {new_channel}) did not take: GET_ESC_ID answers {esc_ids(dut)}")
     found = _proven_cycle(dut)
     assert found == [(target, new_channel)], f"after a power cycle GET_ESC_ID answers {found}, set was {(target, new_channel)}"
 
@@ -287,7 +260,7 @@ def test_observe_requests_from_a_non_zero_host(dut, original):
         dut.wait(0.1)
         answers = [f for f in dut.frames(name, since=sent.host_time) if f.kind is Kind.RESPONSE]
         dut.record.observe(f"{name} from node {host}: answered to", [f.destination for f in answers] or "none")
-    found = _ids(dut)
+    found = esc_ids(dut)
     dut.record.observe(f"Set ID from node {host} obeyed", found == [(node, _other_channel(channel))])
     assert found == [(node, _other_channel(channel))], f"Set ID from node {host} not obeyed: {found}"
 
@@ -306,7 +279,7 @@ def test_set_id_just_inside_the_window_is_obeyed(dut, original):
     ex = dut.request("set_id", {"node_id": target, "throttle_channel": channel})
     dut.node_id = target
     dut.record.observe("sent at (s after power-on, at most)", round(ex.sent.time - power_on_earliest, 3))
-    assert _ids(dut) == [(target, channel)], f"Set ID inside the window not obeyed: GET_ESC_ID answers {_ids(dut)}"
+    assert esc_ids(dut) == [(target, channel)], f"Set ID inside the window not obeyed: GET_ESC_ID answers {esc_ids(dut)}"
 
 
 @pytest.mark.requirement("R11", "R10-answer")
@@ -320,4 +293,4 @@ def test_set_id_after_the_window_is_ignored(dut, original):
     dut.read_until(ready + cat.CONFIG_WINDOW_S + MARGIN_S)
     ex = dut.request("set_id", {"node_id": _other_id(node), "throttle_channel": channel})
     dut.record.observe("answer to the late Set ID", {"source": ex.response.source, **ex.response.fields} if ex.response else "none")
-    assert _ids(dut) == [(node, channel)], f"Set ID {cat.CONFIG_WINDOW_S + MARGIN_S:.0f} s after power-up obeyed: {_ids(dut)}"
+    assert esc_ids(dut) == [(node, channel)], f"Set ID {cat.CONFIG_WINDOW_S + MARGIN_S:.0f} s after power-up obeyed: {esc_ids(dut)}"

@@ -9,7 +9,18 @@ from ckesc.protocol import catalogue as cat
 
 from . import multi_esc
 from .multi_esc import several_escs
-from .reports import EXP_FRAMES, REACT_S, REPORTS, check_suspended, longest_interval_s, ms, msg_control, reported, resume
+from .reports import (
+    EXP_FRAMES,
+    REACT_S,
+    REPORTS,
+    check_restart,
+    check_suspended,
+    longest_interval_s,
+    ms,
+    msg_control,
+    reported,
+    resume,
+)
 
 SECTION = "4.4.1"
 bench = multi_esc.bench  # fixture: several ESCs on one bus, with the run's emulator faults
@@ -117,6 +128,26 @@ def test_off_returns_to_the_state_before(dut, state):
         late = _test_frames(dut, off.time, dut.node_id)
         assert not late, f"{len(late)} CAN Test frames after 0x55, the last {ms(late[-1].timestamp - off.time)} ms after it"
         _check_state(dut, state, off.time, window, "after 0x55")
+    finally:
+        can_test(dut, cat.CAN_TEST_OFF)
+        resume(dut)
+
+
+@pytest.mark.requirement("R9a", "R9")
+def test_reports_after_test_mode_ends(dut):
+    """0x55 ends CAN Test mode: each of MSG1..MSG3 comes back within one of its intervals, and from its third
+    frame on at its interval (R9a: the timer restarted or its old grid kept, the gaps up to the second frame
+    are not judged)."""
+    s = dut.settings()
+    try:
+        on = can_test(dut, cat.CAN_TEST_ON)
+        dut.wait(_window(dut))
+        if not _test_frames(dut, on.time, dut.node_id):
+            raise Inconclusive("CAN Test mode did not start (0xAA): its end cannot be shown")
+        off = can_test(dut, cat.CAN_TEST_OFF)
+        check_restart(dut, off.time, s, "CAN Test 0x55",
+                      silent_is="whether 0x55 ends test mode is test_off_returns_to_the_state_before's verdict",
+                      clock=off.clock, error_ms=off.error * 1000)
     finally:
         can_test(dut, cat.CAN_TEST_OFF)
         resume(dut)

@@ -27,7 +27,7 @@ def test_msg2_is_five_bytes(dut):
     assert lengths == [PAYLOAD], f"MSG2 payload lengths {lengths}, expected {PAYLOAD}"
 
 
-@pytest.mark.requirement("4.4.5-2", "R9")
+@pytest.mark.requirement("4.4.5-2", "R9", "R9a")
 @pytest.mark.parametrize("interval", [10, 120])
 def test_msg2_interval_follows_set_freq(dut, interval):
     """After Set Freq, MSG2 comes every MSG2_SET x 2 ms."""

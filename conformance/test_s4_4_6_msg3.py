@@ -25,7 +25,7 @@ def test_msg3_is_reported_unasked(dut):
     dut.record.observe("MSG3", frames[-1].physical())
 
 
-@pytest.mark.requirement("4.4.6-2", "R9")
+@pytest.mark.requirement("4.4.6-2", "R9", "R9a")
 @pytest.mark.parametrize("interval", [10, 100])
 def test_msg3_interval_follows_set_freq(dut, interval):
     """After Set Freq, MSG3 comes every MSG3_SET x 2 ms."""

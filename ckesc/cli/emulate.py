@@ -88,13 +88,13 @@ def _run_emulate(args: argparse.Namespace) -> int:
         raise UsageError("give --socketcand PORT (a hub for python-can's socketcand client) or --interface/--channel (a python-can bus)")
     if args.interface is not None and args.channel is None:
         raise UsageError(f"--interface {args.interface} needs --channel")
-    if args.boot_spread < 0 or (args.duration is not None and args.duration < 0):
-        raise UsageError("--boot-spread and --duration are seconds, 0 or more")
+    if min(args.boot_spread, args.boot_time, args.report_delay) < 0 or (args.duration is not None and args.duration < 0):
+        raise UsageError("--boot-spread, --boot-time, --report-delay and --duration are seconds, 0 or more")
     if args.rt_priority is not None and not 1 <= args.rt_priority <= 99:
         raise UsageError(f"--rt-priority must be 1..99 (SCHED_FIFO), not {args.rt_priority}")
     faults = _fault_spec(args.faults, args.nodes)
     try:
-        bench = Bench(args.nodes, faults=faults, flash=args.flash_path, seed=args.seed)
+        bench = Bench(args.nodes, faults=faults, flash=args.flash_path, seed=args.seed, config=_model_options(args))
     except FlashError as exc:
         raise UsageError(str(exc)) from None
     except ValueError as exc:  # unknown fault names, listed with the known ones
@@ -144,7 +144,13 @@ def _run_emulate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _model_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The EscConfig fields the command line sets for every ESC."""
+    return {"boot_time": args.boot_time, "report_delay": args.report_delay, "report_timer": args.report_timer}
+
+
 def add_emulate_command(sub: argparse._SubParsersAction) -> None:
+    from ..emulator.model import REPORT_TIMERS, EscConfig
     from ..protocol.catalogue import DEFAULT_BITRATE
 
     p = sub.add_parser(
@@ -178,6 +184,14 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--boot-spread", type=float, default=0.02, metavar="S",
                    help="ESC k of n boots k/n x S later than the first, so that their reports are not in lockstep, as on a "
                    "real bench (default 0.02: one MSG1 interval; 0: all at once, as the simulated lane)")
+    p.add_argument("--boot-time", type=float, default=EscConfig.boot_time, metavar="S",
+                   help=f"power-on to the first answer: the ESC hears nothing before (default {EscConfig.boot_time})")
+    p.add_argument("--report-delay", type=float, default=0.0, metavar="S",
+                   help="boot to the first report: an ESC that answers before it reports (default 0)")
+    p.add_argument("--report-timer", choices=REPORT_TIMERS, default="restart",
+                   help="when reporting comes back (a resume, leaving CAN Test): restart (default: the first report at once, "
+                   "the next ones an interval apart) or grid (one report at once, then the old grid goes on); both are "
+                   "conformant (R9a)")
     p.add_argument("--rt-priority", type=_int_arg, metavar="N",
                    help="run the scheduler thread SCHED_FIFO at priority N (1..99; needs CAP_SYS_NICE, else a warning): "
                    "on a loaded machine this keeps other processes from delaying frames by milliseconds")

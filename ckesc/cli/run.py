@@ -42,6 +42,9 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
                    help="allow non-zero throttle on a real ESC (propellers off!)")
     g.add_argument("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")
     g.add_argument("--emulator-seed", type=int, default=0)
+    g.add_argument("--emulator-option", action="append", default=[], metavar="KEY=VALUE",
+                   help="emulator: a setting of every emulated ESC (repeatable): boot_time=S, report_delay=S, "
+                   "report_timer=restart|grid")
     o = p.add_argument_group("output")
     o.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
     o.add_argument("--strict", action="store_true", help="INCONCLUSIVE results fail the run too")

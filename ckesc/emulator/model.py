@@ -51,6 +51,9 @@ REPORTING = "normal"
 SUSPENDED = "suspended"
 EXP_MODE = "exp"
 
+#: How the report timer may behave when reporting comes back (EscConfig.report_timer; R9a allows both)
+REPORT_TIMERS = ("restart", "grid")
+
 #: Fault code 1 -> the MSG1 self-test error bit it lights (4.4.4 status bits 7..0).
 _FAULT_BITS = {
     code: int(bit)
@@ -90,7 +93,12 @@ class EscConfig:
     self_test_fault: int = 0  # fault code 1 found by the power-up self-test (0: passed)
     has_led: bool = True
     has_motor_sensor: bool = False
-    boot_time: float = 0.25  # power-on to first report; the ESC hears nothing before
+    boot_time: float = 0.25  # power-on to first answer; the ESC hears nothing before
+    report_delay: float = 0.0  # boot to first report: an ESC may answer services before it reports
+    #: what the report timer does when reporting comes back (resume, leaving CAN Test) - R9a leaves it open:
+    #: "restart" (the first report at once, the next ones one interval apart) or "grid" (one report at once,
+    #: "immediately", then the old grid goes on, as if the timer had never stopped)
+    report_timer: str = "restart"
     service_delay: float = 0.0005  # request to response for services
     max_rpm: int = 9000
     motor_tau: float = 0.15  # rpm first-order lag
@@ -100,6 +108,8 @@ class EscConfig:
 
     def __post_init__(self) -> None:
         self.faults = _faults.check(self.faults)
+        if self.report_timer not in REPORT_TIMERS:
+            raise ValueError(f"report_timer {self.report_timer!r}: one of {', '.join(REPORT_TIMERS)}")
 
 
 def factory_nvm(config: EscConfig) -> dict[str, Any]:
@@ -200,6 +210,7 @@ class EscModel:
         self._last_update = now
         self._last_thermal = now
         self._next_report: dict[str, float] = {}
+        self._regrid: dict[str, float] = {}  # report_timer "grid": the old grid's next point after a report sent at once
         self._reports_were_active = True
         self._next_can_test = 0.0
 
@@ -216,7 +227,7 @@ class EscModel:
         if "power_up_counter_stuck" not in self.faults:
             self.nvm["power_ups"] = (self.nvm["power_ups"] + 1) & 0xFFFF
         self.nvm_dirty = True
-        start = self.ready_at
+        start = self.ready_at + self.config.report_delay
         self._next_report = {"msg1": start, "msg2": start, "msg3": start}
         self._next_can_test = start
 
@@ -359,6 +370,8 @@ class EscModel:
             return 0.080
         if "answer_not_staggered" in self.faults:
             return 0.010
+        if "answer_at_once" in self.faults:
+            return 0.001
         return (self.node_id % 32) * ANSWER_SLOT_S  # R2
 
     # ------------------------------------------------------------------------------------------
@@ -460,6 +473,23 @@ class EscModel:
             period *= 1 + self._rng.uniform(-0.3, 0.3)
         return period
 
+    def _restart_reports(self, now: float) -> None:
+        """Reporting comes back (a resume, leaving CAN Test): the first report of each type at once (R9a: within
+        one interval), then every interval from it ("restart") or on the grid the timer kept ("grid"); with the
+        fault 'report_restart_late', one and a half intervals after the event."""
+        self._regrid = {}
+        for k, due in self._next_report.items():
+            if "report_restart_late" in self.faults:
+                self._next_report[k] = round(now + 1.5 * self._interval(k), 9)
+            elif self.config.report_timer == "grid" and (period := self._interval(k)) > 0:
+                if due < now:  # the old grid's next point at or after now
+                    due = round(due + math.ceil(round((now - due) / period, 9)) * period, 9)
+                self._next_report[k] = now
+                if due > now:
+                    self._regrid[k] = due
+            else:
+                self._next_report[k] = now
+
     def _next_report_times(self) -> list[float]:
         return list(self._next_report.values())
 
@@ -473,13 +503,13 @@ class EscModel:
             return
         if not self._reports_were_active:  # leaving 0x7D, suspension or CAN Test: start afresh, no catch-up burst
             self._reports_were_active = True
-            for k in self._next_report:
+            for k in self._next_report:  # (a resume or CAN Test off has set it already: _restart_reports)
                 self._next_report[k] = max(self._next_report[k], now)
         for which in ("msg1", "msg2", "msg3"):
             while self._next_report[which] <= now:
                 due = self._next_report[which]
                 self._emit_report(which, due)
-                self._next_report[which] = round(due + self._interval(which), 9)  # no float drift
+                self._next_report[which] = self._regrid.pop(which, None) or round(due + self._interval(which), 9)  # no float drift
 
     # ------------------------------------------------------------------------------------------
     # reports
@@ -589,8 +619,7 @@ class EscModel:
             self.can_test = False  # R16: back to the state before; reporting state was kept
             if "can_test_off_resumes_reporting" in self.faults:
                 self.reporting = REPORTING
-            for k in self._next_report:
-                self._next_report[k] = now
+            self._restart_reports(now)
 
     def _on_msg_control(self, f: Frame, now: float) -> None:
         if f.fields["option"] != 0:
@@ -609,8 +638,9 @@ class EscModel:
             self.counters["rx_ignored"] += 1
             return  # the answer packet (0) or an unknown command: nothing to do
         if was == SUSPENDED and self.reporting != SUSPENDED:
-            for k in self._next_report:
-                self._next_report[k] = now  # "immediate recovery"
+            self._restart_reports(now)  # "immediate recovery"
+        elif was == EXP_MODE and self.reporting == REPORTING and "report_restart_late" in self.faults:
+            self._restart_reports(now)  # leaving MSG_EXP mode (R9a); otherwise the reports go on on their grid
         if "msg_control_no_answer" in self.faults:
             return
         answer = command if "msg_control_answer_echo" in self.faults else cat.MSG_CONTROL_ANSWER
@@ -774,6 +804,8 @@ class EscModel:
                     if key in legal and legal[key] != old[key]:
                         last = self._next_report.get(which, now) - old[key] * INTERVAL_UNIT_S
                         self._next_report[which] = max(now, last + self._interval(which))
+                        if "report_restart_late" in self.faults:  # R9a: later than one new interval
+                            self._next_report[which] = round(now + 1.5 * self._interval(which), 9)
         current = {k: self.nvm[k] for k in names}
         if "set_freq_read_wrong" in self.faults and f.fields["option"] == 0:
             current = dict(cat.DEFAULT_REPORT_INTERVALS)

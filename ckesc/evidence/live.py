@@ -30,8 +30,9 @@ class LaneRules(can.Listener):
         """``jitter``: the DUT's report-interval jitter allowance (seconds; the profile's ``jitter_s``)."""
         self.lane = lane
         # the simulated lane hears every frame on its bus; a real bus or socketcand may drop some
+        # the suite's power cycles go through Dut.switch_power, which tells the rules (power_switched)
         self.rules = BusRules(tolerance=tolerance_for(lane), bitrate=lane.bitrate, complete=lane.clock == "simulated",
-                              jitter=jitter)
+                              jitter=jitter, power_known=True)
         self.found: list[Violation] = []
         self.count = 0
         self.between = 0  # violations while no test ran (session fixtures)
@@ -45,6 +46,10 @@ class LaneRules(can.Listener):
             room = _KEPT - len(self.found)
             if room > 0:
                 self.found.extend(found[:room])
+
+    def power_switched(self, when: float) -> None:
+        """The host switched the DUT's power at lane time ``when`` (see BusRules.power_switched)."""
+        self.rules.power_switched(when)
 
     def begin(self) -> None:
         """A test starts: what was found before it is nobody's test's."""

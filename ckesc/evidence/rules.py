@@ -32,6 +32,14 @@ judges only what it can tell:
   boots and self-tests first).
 * **Cadence.** MSG Control (suspend, resume, MSG_EXP), CAN Test on/off and Set/Get Freq writes restart
   the cadence they concern; Set ID (a pseudo-broadcast) makes every node's intervals unknown again.
+* **R9a restarts.** After a resume (MSG Control 0xAAAAAAAA, which also leaves MSG_EXP mode), CAN Test off or
+  a Set Freq write, the first report of each type must come within one (new) interval of the command
+  (R9a, READING: measured from the command's timestamp to the earliest the report can have been due);
+  the gaps up to and including the second report after such an event, or after a power cycle the host
+  reports (:meth:`BusRules.power_switched`), are not judged (R9a-gaps, OBSERVE): whether the ESC restarts its timer or keeps
+  its grid is not written. From the third report on R9 holds. A power cycle voids the pending event. (A
+  capture does not show power cycles: there, a first report more than two intervals late is only recorded,
+  and the gaps after a power-up are judged as after any silence.)
   A report's due time is known only up to bus queueing: a frame that started right when the previous
   one ended may have waited since the start of that busy stretch, so an interval is judged on the
   widest bounds the bus allows (frame lengths from the bit rate), with ``tolerance`` (the lane's stated
@@ -104,6 +112,8 @@ _REPORTING_SWITCHES = {
     _MSG_CONTROL.type_id: (_MSG_CONTROL_COMMAND, {cat.MSG_CONTROL_SUSPEND, cat.MSG_CONTROL_RESUME, cat.MSG_CONTROL_RESUME_EXP}),
     _CAN_TEST.type_id: (_CAN_TEST_OPTION, {cat.CAN_TEST_ON, cat.CAN_TEST_OFF}),
 }
+#: ... and the values among them after which MSG1..MSG3 come back (R9a: the first within one interval)
+_RESTARTS = {_MSG_CONTROL.type_id: cat.MSG_CONTROL_RESUME, _CAN_TEST.type_id: cat.CAN_TEST_OFF}
 
 # which side sends a frame
 _FOREIGN, _HOST, _ESC, _EITHER, _UNKNOWN = range(5)
@@ -227,7 +237,8 @@ class Intervals:
 
 class _Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
-                 "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted")
+                 "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
+                 "event_reset", "event_ts", "event_what", "grace_chain")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -237,6 +248,12 @@ class _Node:
         self.last_ts = -math.inf
         self.chain = 0  # +1 at every silence long enough for a power cycle
         self.reset = 0  # +1 whenever this node's report cadence may restart (suspend/resume, Set Freq, ...)
+        # R9a: the reset an event started after which the reports come back (a resume, CAN Test off, a Set Freq
+        # write), its time and name (None: the first report's delay cannot be judged, e.g. after a power cycle)
+        self.event_reset = -1
+        self.event_ts: float | None = None
+        self.event_what = ""
+        self.grace_chain = -1  # the stretch after a power cycle the host made (power_switched): R9a-gaps too
         self.periods: list[float | None] = [None] * len(_INTERVAL_FIELDS)  # seconds, as the node last said
         self.period_note = ""  # where the periods come from (for messages)
         self.from_read = False  # the periods come from a read answer (4.4.22-2 says it tells the settings)
@@ -258,7 +275,7 @@ class _Stream:
     """One (node, message type) of an ESC: transfer ids (F3) and intervals (R9)."""
 
     __slots__ = ("node", "type_id", "name", "interval", "periodic", "ts", "start", "busy_from", "tid", "data", "can_id",
-                 "chain", "reset", "min_gap", "stats")
+                 "chain", "reset", "min_gap", "stats", "nth", "grace", "event")
 
     def __init__(self, node: _Node, type_id: int, name: str, periodic: bool) -> None:
         self.node = node
@@ -274,6 +291,9 @@ class _Stream:
         self.chain = self.reset = -1
         self.min_gap = math.inf
         self.stats = Intervals()
+        self.nth = 0  # reports in this stretch (since the chain or the reset changed)
+        self.grace = False  # the stretch began at an R9a event: its first two gaps are not judged
+        self.event = -1  # the node's R9a event (event_reset) whose first report this stream has had
 
 
 class _Id:
@@ -317,16 +337,19 @@ class BusRules:
     ``tolerance``: the timing error of the timestamps (seconds; the lane's stated error). ``bitrate``: the
     bus's, for frame durations (a lower one than the real one only makes the engine more careful).
     ``complete``: the capture holds every frame on the bus (the simulated lane), so a missing frame is
-    the sender's. ``host_nodes``: nodes known to be hosts from the start (node 0, 4.4.18 note 8).
+    the sender's. ``power_known``: every power cycle is reported with :meth:`power_switched` (a suite's
+    lane); otherwise a first report more than two intervals after an R9a event may follow an unseen
+    power cycle and is only recorded. ``host_nodes``: nodes known to be hosts from the start (node 0, 4.4.18 note 8).
     ``jitter``: the DUT's report-interval jitter allowance (seconds; a DUT profile's ``jitter_s``),
     added to ``tolerance`` in the R9 interval check only.
     """
 
     def __init__(self, *, tolerance: float = 0.0, bitrate: int = cat.DEFAULT_BITRATE, complete: bool = False,
-                 host_nodes=(HOST_NODE_ID,), jitter: float = 0.0) -> None:
+                 host_nodes=(HOST_NODE_ID,), jitter: float = 0.0, power_known: bool = False) -> None:
         self.tolerance = max(float(tolerance), 1e-9)
         self.jitter = max(float(jitter), 0.0)
         self.complete = complete
+        self.power_known = power_known
         self._host_nodes = frozenset(host_nodes)
         self.frames = 0
         self.standard = 0
@@ -545,6 +568,7 @@ class BusRules:
 
     # ------------------------------------------------------------------------------------- F3 and R9
     def _stream(self, out, st: _Stream, info: _Id, node: _Node, data, ts: float, start: float, busy_from: float, tid: int):
+        fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
         if st.ts is not None and st.chain == node.chain and not node.shared:
             gap = start - st.start
             advance = (tid - st.tid) % TRANSFER_ID_MODULO
@@ -556,11 +580,21 @@ class BusRules:
             if advance != 1:
                 out = self._transfer_ids(out, st, info, node, data, ts, gap, advance, period)
             if st.reset == node.reset:
+                st.nth += 1
                 st.stats.add(gap)
-                if gap < st.min_gap and gap > 0:
-                    st.min_gap = gap
-                if st.interval is not None:
-                    out = self._cadence(out, st, info, node, data, ts, start, busy_from)
+                if st.nth > 2 or not st.grace:  # R9a-gaps: up to the second report after a restart, not judged
+                    if gap < st.min_gap and gap > 0:
+                        st.min_gap = gap
+                    if st.interval is not None:
+                        out = self._cadence(out, st, info, node, data, ts, start, busy_from)
+        if fresh:
+            st.nth = 1
+            first = node.reset == node.event_reset and st.event != node.event_reset  # the first since an R9a event
+            st.grace = first or (st.chain != node.chain and node.chain == node.grace_chain)
+            if first:
+                st.event = node.event_reset
+                if st.interval is not None and node.event_ts is not None:
+                    out = self._first_report(out, st, info, node, data, ts, start, busy_from)
         st.ts, st.start, st.busy_from, st.tid, st.data, st.can_id = ts, start, busy_from, tid, data, info.can_id
         st.chain, st.reset = node.chain, node.reset
         return out
@@ -618,6 +652,35 @@ class BusRules:
                                f"{st.name} {_ms(start - st.start)} after the previous one (bus queueing allows up to "
                                f"{_ms(hi)}), {expected}", self._pair(st, info, data, ts))
 
+    def _first_report(self, out, st: _Stream, info: _Id, node: _Node, data, ts: float, start: float, busy_from: float):
+        """R9a: the first report of a type after a resume / CAN Test off / Set Freq write comes within one
+        (new) interval of it; judged on the earliest it can have been due (bus queueing), tolerance on top."""
+        period = node.periods[st.interval]  # type: ignore[index]
+        if period is None or busy_from - node.event_ts <= period + self.tolerance:  # type: ignore[operator]
+            return out
+        if not self.power_known and busy_from - node.event_ts > 2 * period + RESTART_SILENCE_S + self.tolerance:  # type: ignore[operator]
+            self._observe(("R9a",), ts, node.id, "first-report-unjudged",
+                          f"the first {st.name} {_ms(start - node.event_ts)} after {node.event_what}: not judged, the node "  # type: ignore[operator]
+                          "may have been power cycled meanwhile (a capture does not show it)", (quote(info.can_id, data, ts),))
+            return out
+        return self._violation(out, ("R9a",), ts, node.id, "first-report",
+                               f"the first {st.name} {_ms(start - node.event_ts)} after {node.event_what} "  # type: ignore[operator]
+                               f"(bus queueing allows no less than {_ms(busy_from - node.event_ts)}), expected within one "  # type: ignore[operator]
+                               f"interval, {_ms(period)} +- {_ms(self.tolerance)} ({node.period_note})",
+                               (quote(info.can_id, data, ts, note=st.name),))
+
+    def _event(self, node: _Node, ts: float, what: str) -> None:
+        """An R9a event for ``node``: its reports (come back and) count from ``ts``."""
+        node.reset += 1
+        node.event_reset, node.event_ts, node.event_what = node.reset, ts, what
+
+    def power_switched(self, ts: float) -> None:
+        """The host switched the DUT's power (off or on) at ``ts``: a pending R9a event is void (the first
+        report after a power-up is the boot's, not the command's); the next stretch has R9a-gaps grace."""
+        for node in self._nodes.values():
+            node.event_ts = None
+            node.grace_chain = node.chain + 1  # the stretch after the silence it makes
+
     @staticmethod
     def _period_rules(node: _Node) -> tuple[str, ...]:
         """The other clause an interval mismatch may break: the read answer the period came from
@@ -656,7 +719,13 @@ class BusRules:
                 self._answered.clear()  # a query: every ESC answers once
             switch = _REPORTING_SWITCHES.get(type_id)
             if switch is not None and len(data) > switch[0].offset + switch[0].size and _field(data, switch[0]) in switch[1]:
-                self._reset_all()  # reporting stops, resumes or switches on every ESC: cadence restarts
+                value = _field(data, switch[0])
+                if _RESTARTS.get(type_id) == value:  # reporting comes back on every ESC (R9a)
+                    what = f"{info.label} {value:#x}"
+                    for node in self._nodes.values():
+                        self._event(node, ts, what)
+                else:
+                    self._reset_all()  # reporting stops or switches on every ESC: cadence restarts
             return
         if info.kind is not Kind.REQUEST or not data:
             return
@@ -672,7 +741,7 @@ class BusRules:
             key = (info.source, info.dest, type_id)
             if type_id == _SET_FREQ.type_id and _field(data, _SET_FREQ_OPTION) == _SET_FREQ_WRITE:
                 dest = self._node(info.dest)  # type: ignore[arg-type]
-                dest.reset += 1  # the new intervals count from the write (its answer tells them)
+                self._event(dest, ts, "a Set Freq write")  # the new intervals count from the write (its answer tells them)
         q = self._requests.get(key)
         if q is None:
             if len(self._requests) > 4096:
@@ -728,8 +797,8 @@ class BusRules:
             node.reset += 1
             return
         periods = [round(v * cat.INTERVAL_UNIT_S, 9) for v in values]
-        if periods != node.periods:
-            node.reset += 1
+        if periods != node.periods and not (node.event_reset == node.reset and node.event_what == "a Set Freq write"):
+            node.reset += 1  # (the answer to a write: the write restarted the cadence already, R9a counts from it)
         node.periods = periods
         node.floor = True
         option = "write" if _field(data, _SET_FREQ_OPTION) == _SET_FREQ_WRITE else "read"

@@ -364,26 +364,88 @@ class Dut:
 
     def power_cycle(self, off_time: float = 1.0, boot_wait: float = 1.0) -> None:
         """Power off, wait, on, and prove the cycle by the power-up counter (241 option 2);
-        raises Inconclusive when it cannot be proven."""
+        raises Inconclusive when it cannot be proven, DutError when the DUT sent nothing at all after
+        power-up (no report, no answer: it did not come back)."""
         if not self.lane.power.available:
             raise Inconclusive("this test needs a power cycle and no power control was given (--power)")
         self.stop_throttle()
         before = self.power_up_count()
-        self.switch_power(off_time, boot_wait)
+        on = self.switch_power(off_time, boot_wait)
         after = self.power_up_count()
         self.record.observe("power-up counter", f"{before} -> {after}")
+        if after is None and not self.heard_from(on):
+            raise DutError(f"node {self.node_id} sent nothing after power-up: no report within "
+                           f"{self.ready_bound_s(boot_wait):.2f} s, no answer to the power-up counter (241 option 2): "
+                           f"did it come back, at {self.lane.bitrate} bit/s?")
         if before is None or after is None or after != (before + 1) & 0xFFFF:
             raise Inconclusive(f"power cycle not proven: power-up counter {before} -> {after} (241 option 2)")
 
-    def switch_power(self, off_time: float | None = None, boot_wait: float | None = None) -> None:
-        """Power off, wait, on, and wait for the boot (default: the profile's off and boot times), without
-        proof: :meth:`power_cycle` proves it; this alone only puts things back, where the state is
-        verified afterwards."""
+    def switch_power(self, off_time: float | None = None, boot_wait: float | None = None) -> float:
+        """Power off, wait, on, and wait for the boot (default: the profile's off and boot times): until the
+        DUT reports again (:meth:`await_reports`), at most :meth:`ready_bound_s`, so that nothing is asked
+        of a DUT still booting. Without proof: :meth:`power_cycle` proves it; this alone only puts things
+        back, where the state is verified afterwards. Returns the lane time of power-on."""
         self.stop_throttle()
         self.lane.power.off()
+        self._power_switched()
         self.lane.wait_power(self.profile.off_s if off_time is None else off_time)
         self.lane.power.on()
-        self.wait(self.profile.boot_s if boot_wait is None else boot_wait)
+        on = self.now()
+        self._power_switched()
+        heard = self.await_reports(on, on + self.ready_bound_s(boot_wait))
+        first = min((t for t in heard.values()), default=None)
+        self.record.observe("after power-up", f"first report {(first - on) * 1000:.1f} ms after power-on" if first is not None
+                            else f"no report within {self.ready_bound_s(boot_wait):.2f} s of power-on")
+        return on
+
+    # ------------------------------------------------------------------ readiness
+    #: MSG1..MSG3: a reporting DUT has sent each once within the longest legal interval
+    READY_REPORTS = ("msg1", "msg2", "msg3")
+    #: ... or it reports in another mode (MSG_EXP mode, CAN Test): the first such frame will do
+    OTHER_MODE_REPORTS = frozenset({s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp")} | {"can_test"})
+
+    def ready_bound_s(self, boot: float | None = None) -> float:
+        """How long after power-on (or discovery) a DUT may take to report: its boot time (the profile's
+        boot_s, "power-on to first report", unless given), then one longest legal report interval (the
+        first MSG3 may come that late), and the lane's stated error."""
+        longest = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
+        return (self.profile.boot_s if boot is None else boot) + longest + self.lane.timing_error
+
+    def _reports_since(self, since: float) -> dict[str, float]:
+        """{report name: first start time} of the DUT's reports since ``since``, decoded or not (what its payload
+        is is another test's verdict: that it came is what counts here)."""
+        out: dict[str, float] = {}
+        names = set(self.READY_REPORTS) | self.OTHER_MODE_REPORTS
+        for f in self.frames(since=since, source=self.node_id, kind=Kind.MESSAGE):
+            if f.name in names:
+                out.setdefault(f.name, f.timestamp or since)
+        for g in self.undecoded(since=since, source=self.node_id, kind=Kind.MESSAGE):
+            spec = classify(g.msg.arbitration_id)[4]
+            if spec is not None and spec.name in names:
+                out.setdefault(spec.name, g.msg.timestamp or since)
+        return out
+
+    def await_reports(self, since: float, until: float) -> dict[str, float]:
+        """Read until the DUT has sent each of MSG1..MSG3 since ``since`` (or one frame of another reporting
+        mode), or until lane time ``until``: {report name: first time} of what came ({} when nothing did)."""
+        while True:
+            heard = self._reports_since(since)
+            if set(self.READY_REPORTS) <= heard.keys() or heard.keys() & self.OTHER_MODE_REPORTS or self.now() >= until:
+                return heard
+            self.read_until(min(until, self.now() + 0.01))
+
+    def heard_from(self, since: float) -> bool:
+        """Whether the DUT sent any frame since ``since`` (decoded or not)."""
+        return (any(f.source == self.node_id for f in self.frames(since=since))
+                or any(g.msg.arbitration_id & 0x7F == self.node_id for g in self.undecoded(since=since)))
+
+    def _power_switched(self) -> None:
+        """Tell the lane's listeners that care (the live bus rules: R9a) that the power was switched."""
+        now = self.now()
+        for listener in self.lane.listeners:
+            note = getattr(listener, "power_switched", None)
+            if note is not None:
+                note(now)
 
     # ------------------------------------------------------------------ throttle (safety)
     def _check_throttle(self, name: str, fields: Mapping[str, Any]) -> None:

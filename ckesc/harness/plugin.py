@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 
 from ..evidence.live import LaneRules, failure_text
+from ..protocol import catalogue as cat
 from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, requirement, strongest
 from . import preflight
@@ -82,6 +83,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                 help="allow non-zero throttle (default: only for the emulator). PROPELLERS OFF.")
     g.addoption("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")
     g.addoption("--emulator-seed", type=int, default=0, help="emulator: random seed")
+    g.addoption("--emulator-option", action="append", default=[], metavar="KEY=VALUE",
+                help="emulator: a setting of every emulated ESC (repeatable): " + ", ".join(EMULATOR_OPTIONS))
     g.addoption("--ckesc-reports", default=None, metavar="DIR",
                 help="write JUnit, JSON and text reports under DIR/<timestamp>/ (ckesc run sets reports/)")
     g.addoption("--ckesc-summary", action="store_true", default=False,
@@ -148,6 +151,7 @@ class _State:
     #: "interrupted" (Ctrl-C, SIGTERM); None while it runs or when it ran to its end
     stopped: str | None = None
     silent_errors: int = 0  # tests in a row that ERRORed without a frame from the DUT
+    ready: bool = False  # the DUT has been seen reporting (no test starts before: _await_ready)
 
 
 _STATE = pytest.StashKey[_State]()
@@ -283,16 +287,52 @@ class _null:
         return False
 
 
+#: What --emulator-option sets in every emulated ESC (ckesc.emulator.model.EscConfig), and how it is read
+EMULATOR_OPTIONS = {"boot_time": "S (power-on to the first answer)", "report_delay": "S (boot to the first report)",
+                    "report_timer": "restart|grid (R9a)"}
+
+
+def emulator_options(config: pytest.Config) -> dict[str, Any]:
+    """--emulator-option KEY=VALUE, checked: {EscConfig field: value}."""
+    out: dict[str, Any] = {}
+    for kv in config.getoption("emulator_option"):
+        key, sep, value = kv.partition("=")
+        if not sep or key not in EMULATOR_OPTIONS:
+            raise pytest.UsageError(f"--emulator-option takes KEY=VALUE with KEY one of {', '.join(EMULATOR_OPTIONS)}; "
+                                    f"got {kv!r}")
+        if key == "report_timer":
+            out[key] = value
+            continue
+        try:
+            out[key] = float(value)
+        except ValueError:
+            raise pytest.UsageError(f"--emulator-option {key}: seconds, got {value!r}") from None
+        if out[key] < 0:
+            raise pytest.UsageError(f"--emulator-option {key}: seconds, 0 or more, got {value!r}")
+    return out
+
+
 def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
     dut_kind = config.getoption("dut")
     faults = [f for f in config.getoption("emulator_faults").split(",") if f]
     nodes = [int(n, 0) for n in (config.getoption("nodes") or "1").split(",")]
+    options = emulator_options(config)
+    if options and dut_kind != "emulator":
+        raise pytest.UsageError("--emulator-option sets the emulator's ESCs: it needs --dut emulator")
     if dut_kind == "emulator":
         if config.getoption("lane") == "realtime":
-            return RealtimeEmulatorLane(nodes=nodes, faults=faults, temp_flash=True,
+            return RealtimeEmulatorLane(nodes=nodes, faults=faults, temp_flash=True, esc_options=options,
                                         seed=config.getoption("emulator_seed"), timing_error=max(profile.error_s, 0.002))
         # in one process the emulated ESCs keep their flash contents across power cycles: no file needed
-        return SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"), esc_config={"boot_time": 0.25})
+        try:
+            lane = SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"),
+                           esc_config={"boot_time": 0.25, **options})
+        except ValueError as exc:  # a report_timer the model does not know
+            raise pytest.UsageError(f"--emulator-option: {exc}") from None
+        # exact timestamps; a profile may still state a bench's error (0 for the emulator's own): margins below it
+        # are then INCONCLUSIVE as on that bench, e.g. to see what a 2 ms bench can tell
+        lane.timing_error = profile.error_s
+        return lane
     power_kind = config.getoption("power") or "none"
     if power_kind == "command":
         power = CommandPower(config.getoption("power_off_cmd"), config.getoption("power_on_cmd"))
@@ -363,10 +403,13 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     if request.node.get_closest_marker("power_cycle") and not ckesc_lane.power.available:
         pytest.skip("needs a power cycle; no power control (--power none)")
     node = config.getoption("node_id") or st.node_id
+    since = ckesc_lane.now()
     try:
         d = Dut(ckesc_lane, profile, node_id=node, allow_motor_spin=_allow_spin(config))
     except DutUnreachable as exc:
         _abort(config, f"the DUT did not answer: {exc}")
+    if not st.ready:
+        _await_ready(config, d, since)
     st.node_id = d.node_id
     st.info.setdefault("node_id", d.node_id)
     if "esc_information" not in st.info:
@@ -432,11 +475,13 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     _check_claims(request.node, profile)
     if config.getoption("dut") == "emulator":
         if config.getoption("lane") == "realtime":
-            lane: Lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=ckesc_lane.timing_error)
+            lane: Lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=ckesc_lane.timing_error,
+                                              esc_options=emulator_options(config))
         else:
             faults = [f for f in config.getoption("emulator_faults").split(",") if f]
             lane = SimLane(nodes=MULTI_NODES, faults=faults, seed=config.getoption("emulator_seed"),
-                           esc_config={"boot_time": 0.25})
+                           esc_config={"boot_time": 0.25, **emulator_options(config)})
+            lane.timing_error = ckesc_lane.timing_error  # the profile's stated error, as on the DUT's lane
         _trace_lane(config, lane, "bench")
         _watch_lane(config, lane)
         own = True
@@ -444,7 +489,9 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
         if not profile.has("multi_node"):
             pytest.skip(f"the DUT profile {profile.name!r} lacks capability 'multi_node' (several ESCs on the bus)")
         lane, own = ckesc_lane, False
+    since = lane.now()
     d = Dut(lane, profile, node_id=None, allow_motor_spin=_allow_spin(config))  # discovery lists every ESC
+    d.await_reports(since, since + d.ready_bound_s())  # no test starts before the (first) ESC reports
     request.node.stash[_DUT] = d
     try:
         yield d
@@ -459,6 +506,28 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
 def record(dut: Dut):
     """The current test's measurement record (same as ``dut.record``)."""
     return dut.record
+
+
+def _await_ready(config: pytest.Config, d: Dut, since: float) -> None:
+    """No test starts before the DUT reports: after discovery, wait for its first MSG1..MSG3 (at most
+    Dut.ready_bound_s from ``since``, the profile's boot time on top of one longest report interval). A
+    DUT that answers but does not report is sent MSG Control 0xAAAAAAAA once (an earlier run may have left
+    it suspended); if it still sends nothing the run is aborted: every report test would fail for it."""
+    st = state(config)
+    heard = d.await_reports(since, since + d.ready_bound_s())
+    if not heard:
+        d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+        t = d.now()
+        heard = d.await_reports(t, t + d.ready_bound_s(0.0))
+        st.info["readiness"] = ("reported only after MSG Control 0xAAAAAAAA (an earlier run left it suspended?)" if heard
+                                else "no report")
+    if not heard:
+        _abort(config, f"node {d.node_id} answers but sent no report (MSG1..MSG3, MSG_EXP, CAN Test) within "
+                       f"{d.ready_bound_s():.2f} s of discovery (the profile's boot_s {d.profile.boot_s} s and one longest "
+                       "report interval), nor after MSG Control 0xAAAAAAAA: is it in CAN Test mode or suspended? "
+                       "Power-cycle it, or raise [timing] boot_s in its profile")
+    st.ready = True
+    st.info["first_reports_s"] = {name: round(t - since, 4) for name, t in sorted(heard.items())}
 
 
 def _abort(config: pytest.Config, why: str) -> None:

@@ -201,6 +201,9 @@ case("answer_late", lambda h: answer_delays(h, "get_esc_id", {"option": 0}, 3), 
 # with the fault both answers are due at 10 ms: node 3's waits for node 1's (230 us at 500 kbit/s)
 case("answer_not_staggered", lambda h: answer_delays(h, "msg_control", {"option": 0, "command": RESUME}, 6),
      (0.002, 0.006), (0.010, 0.01023), nodes=(1, 3))
+# both due at 1 ms: node 3's reply (3 bytes) waits for node 1's (182 us)
+case("answer_at_once", lambda h: answer_delays(h, "get_esc_id", {"option": 0}, 3), (0.002, 0.006), (0.001, 0.001182),
+     nodes=(1, 3))
 
 
 def get_esc_id_reply(host):
@@ -232,6 +235,27 @@ def reports_after_resume(host) -> int:
 
 
 case("resume_ignored", reports_after_resume, 10, 0)
+
+
+def msg1_dues_after_resume(host) -> list[float]:
+    """When the MSG1s after a resume were due, from the resume (R9a: the first within one interval)."""
+    suspend_answers(host)
+    host.send("msg_control", {"option": 0, "command": RESUME})
+    sent = host.now
+    frames = host.collect(sent + 0.1)
+    return [round(d - sent, 4) for d, f in zip(host.due_times(frames), frames) if f.name == "msg1"][:3]
+
+
+case("report_restart_late", msg1_dues_after_resume, lambda d: d[0] <= 0.0005, lambda d: 0.0295 <= d[0] <= 0.0305)
+
+
+def test_a_grid_keeping_report_timer_sends_at_once_then_on_its_old_grid(lane):
+    """EscConfig.report_timer "grid" (R9a leaves it open): one MSG1 at the resume, then the grid of before."""
+    restart = msg1_dues_after_resume(lane())
+    grid = msg1_dues_after_resume(lane(esc_config={"report_timer": "grid"}))
+    assert restart[0] <= 0.0005 and grid[0] <= 0.0005
+    assert abs(restart[1] - restart[0] - 0.02) < 1e-4  # the timer restarted
+    assert grid[1] - grid[0] < 0.0195 and abs(grid[2] - grid[1] - 0.02) < 1e-4  # the old grid: sooner, then 20 ms
 
 
 def exp_reports(host, name: str | tuple, seconds: float = 0.5) -> list:

@@ -317,3 +317,67 @@ def test_two_escs_sharing_a_node_id_are_not_compared():
     assert stream(rules, 9, [0.01, 0.013, 0.03, 0.033], tids=[0, 5, 1, 6]) == []
     (o,) = [o for o in rules.summary()["observations"] if o["check"] == "shared-node-id"]
     assert o["node"] == 9
+
+
+# ------------------------------------------------------------------------------------------ R9a restarts
+def _resume(rules: BusRules, ts: float) -> None:
+    feed(rules, encode("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME}, source=0), ts)
+
+
+def test_r9a_an_esc_that_keeps_its_grid_is_not_judged_on_the_first_two_gaps():
+    """R9a: after a resume the ESC may report at once and then go on on its old grid (a 3 ms gap): the gaps
+    up to the second report are OBSERVE; from the third report on R9 holds."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0)
+    stream(rules, 1, [t, t + 0.02])
+    feed(rules, encode("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND}, source=0), t + 0.025)
+    _resume(rules, t + 0.057)
+    assert stream(rules, 1, [t + 0.0575, t + 0.06, t + 0.08, t + 0.10], start_tid=2) == []
+    (v,) = stream(rules, 1, [t + 0.11], start_tid=6)  # the third gap on: R9
+    assert v.check == "report-interval" and "R9" in v.rules
+
+
+def test_r9a_the_first_report_after_a_restart_comes_within_one_interval():
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0)
+    stream(rules, 1, [t, t + 0.02])
+    feed(rules, encode("can_test", {"option": cat.CAN_TEST_ON, "count": 0}, source=0), t + 0.025)
+    feed(rules, encode("can_test", {"option": cat.CAN_TEST_OFF, "count": 0}, source=0), t + 0.05)
+    (v,) = stream(rules, 1, [t + 0.08], start_tid=2)  # 30 ms after CAN Test off, the interval is 20 ms
+    assert v.check == "first-report" and v.rules[0] == "R9a" and v.strength == "READING"
+    assert "can_test 0x55" in v.message
+
+
+def test_r9a_a_set_freq_write_counts_from_the_write_with_the_new_interval():
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0)
+    stream(rules, 1, [t, t + 0.02])
+    feed(rules, encode("set_freq", {"option": 1, **INTERVALS, "msg1_interval": 25}, source=0, destination=1, transfer_id=1),
+         t + 0.03)
+    feed(rules, encode("set_freq", {"option": 1, **INTERVALS, "msg1_interval": 25}, kind="response", source=1, destination=0,
+                       transfer_id=1), t + 0.031)
+    (v,) = stream(rules, 1, [t + 0.09], start_tid=2)  # 60 ms after the write: later than the new 50 ms
+    assert v.check == "first-report" and "a Set Freq write" in v.message
+
+
+def test_r9a_a_power_cycle_voids_the_event():
+    """The first report after a power-up is the boot's: a resume before it is not what it answers; the first
+    two gaps after the power-up are not judged either."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0)
+    stream(rules, 1, [t, t + 0.02])
+    feed(rules, encode("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND}, source=0), t + 0.025)
+    _resume(rules, t + 0.03)
+    rules.power_switched(t + 0.031)
+    assert stream(rules, 1, [t + 1.5, t + 1.503, t + 1.523], start_tid=0) == []
+
+
+def test_r9a_in_a_capture_a_very_late_first_report_is_only_recorded():
+    """A capture does not show power cycles: a first report more than two intervals after the event may follow
+    one, and is recorded, not judged."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0)
+    stream(rules, 1, [t, t + 0.02])
+    _resume(rules, t + 0.03)
+    assert stream(rules, 1, [t + 2.0], start_tid=2) == []
+    assert [v.check for v in rules.findings(observations=True)] == ["first-report-unjudged"]

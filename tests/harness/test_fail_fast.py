@@ -15,6 +15,7 @@ import os
 import re
 import signal
 import subprocess
+import sys
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -155,8 +156,9 @@ def test_a_bus_with_no_esc_aborts_at_once_with_exit_3_and_says_so_everywhere(tmp
     assert 'class="v v-ABORTED"' in header and 'class="v v-PASS"' not in header and "role=alert" in header
 
 
-def _emulator(tmp: Path) -> tuple[subprocess.Popen, int, int]:
-    proc = subprocess.Popen([*CKESC, "emulate", "--nodes", "1", "--socketcand", "0", "--control", "0"], cwd=tmp,
+def _emulator(tmp: Path, *args: str) -> tuple[subprocess.Popen, int, int]:
+    """``ckesc emulate`` (one ESC, node 1, with ``args``) behind socketcand: (process, CAN port, control port)."""
+    proc = subprocess.Popen([*CKESC, "emulate", "--nodes", "1", "--socketcand", "0", "--control", "0", *args], cwd=tmp,
                             env=_env(tmp), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ports: dict[str, int] = {}
     assert proc.stdout is not None
@@ -200,6 +202,129 @@ def test_a_dut_that_loses_power_mid_run_aborts_the_rest(tmp_path):
     assert 1 <= len(errors) <= 3, [r["nodeid"] for r in errors]
     assert doc["not_run"], "the rest of the run was not listed as not run"
     assert "ABORTED" in summary
+
+
+# ----------------------------------------------------------------------------------------- readiness (issue #11)
+def _profile(tmp: Path, *, boot_s: float, error_s: float = 0.002) -> Path:
+    """A DUT profile for the emulator on a bench with a stated error of ``error_s`` and a boot time of ``boot_s``."""
+    profile = tmp / "bench.toml"
+    profile.write_text(f'[dut]\nname = "bench"\n[capabilities]\nled = true\nmotor = true\n'
+                       f'[timing]\nerror_s = {error_s}\nboot_s = {boot_s}\noff_s = 0.5\n')
+    return profile
+
+
+def _bus_run(tmp: Path, can_port: int, *args: str, boot_s: float = 3.0, timeout: float = 300) -> subprocess.CompletedProcess:
+    """``ckesc run --dut bus`` on the emulator behind socketcand, with a profile whose boot time is ``boot_s``."""
+    profile = _profile(tmp, boot_s=boot_s)
+    return ckesc(tmp, "run", "--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0", "--can-config",
+                 "host=127.0.0.1", "--can-config", f"port={can_port}", "--profile", str(profile), "--reports",
+                 str(tmp / "reports"), *args, timeout=timeout)
+
+
+def test_no_test_starts_before_the_dut_reports(tmp_path):
+    """An ESC that answers at once but reports only 6 s after power-on (``--report-delay``), just powered on
+    when the run starts: discovery finds it at once, and the first tests (payloads of MSG1 and MSG3) would
+    find no report; the run waits for its first reports (the profile says it boots in 7 s) and they pass."""
+    emu, can_port, control = _emulator(tmp_path, "--report-delay", "6", "--unpowered")
+    try:
+        subprocess.run([*CKESC, "control", "--port", str(control), "power", "on"], check=True, capture_output=True,
+                       timeout=30, env=_env(tmp_path))
+        done = _bus_run(tmp_path, can_port, "--", "-k", "msg1_is_six_bytes or msg3_is_reported_unasked", boot_s=7.0)
+    finally:
+        emu.terminate()
+        emu.wait(timeout=30)
+    doc, _, summary, _ = _read_run(tmp_path / "reports")
+    assert done.returncode == 0, done.stdout[-3000:]
+    assert [r["outcome"] for r in doc["results"]] == ["PASS", "PASS"], summary
+    first = doc["info"]["first_reports_s"]
+    assert set(first) == {"msg1", "msg2", "msg3"} and all(0.5 <= t <= 7.5 for t in first.values()), first
+
+
+def test_a_dut_that_answers_but_never_reports_aborts_the_run(tmp_path):
+    """An ESC that answers but sends no report (not even after MSG Control 0xAAAAAAAA) within its profile's boot
+    time and one longest report interval: the run aborts (exit 3) before any test, saying why."""
+    emu, can_port, _ = _emulator(tmp_path, "--report-delay", "60")
+    try:
+        done = _bus_run(tmp_path, can_port, "--", "-k", "msg1_is_six_bytes", boot_s=0.5)
+    finally:
+        emu.terminate()
+        emu.wait(timeout=30)
+    assert done.returncode == 3, done.stdout[-3000:]
+    doc, _, summary, _ = _read_run(tmp_path / "reports")
+    assert doc["results"] == [] and "ABORTED" in summary
+    assert "node 1 answers but sent no report" in doc["info"]["incomplete"], doc["info"]["incomplete"]
+
+
+def test_after_a_power_up_the_next_step_waits_for_the_reports(tmp_path):
+    """A power cycle mid-test on a DUT that reports 1.5 s after power-on, with a profile boot time of 1.2 s: the
+    harness waits for the reports (up to boot time + one longest interval), and a test that reads MSG1 after a
+    power cycle passes; the wait is recorded."""
+    emu, can_port, control = _emulator(tmp_path, "--report-delay", "1.25")
+    power = f"{sys.executable} -m ckesc control --port {control} power"
+    try:
+        done = _bus_run(tmp_path, can_port, "--power", "command", "--power-off-cmd", f"{power} off", "--power-on-cmd",
+                        f"{power} on", "--", "-k", "direction_reported_at_power_up", boot_s=1.2)
+    finally:
+        emu.terminate()
+        emu.wait(timeout=30)
+    doc, _, summary, _ = _read_run(tmp_path / "reports")
+    assert done.returncode == 0, done.stdout[-3000:]
+    assert [r["outcome"] for r in doc["results"]] == ["PASS"], summary
+    after = [v for r in doc["results"] for k, v in r["observations"] if k == "after power-up"]
+    assert after and all(v.startswith("first report 1") for v in after), after
+
+
+# ----------------------------------------------------------------------------------------- stagger on any bench (#11)
+SLOT_TESTS = "node_slot or reply_comes_in"
+
+
+def _outcomes(reports: Path) -> dict[str, str]:
+    doc, _, _, _ = _read_run(reports)
+    return {r["name"]: r["outcome"] for r in doc["results"]}
+
+
+@pytest.mark.parametrize("fault, verdict", [("", "PASS"), ("answer_at_once", "FAIL")])
+def test_on_a_2ms_bench_the_slot_checks_move_the_dut_to_a_wider_slot(tmp_path, fault, verdict):
+    """A profile stating a 2 ms error in the simulated lane: at node 1 (slot 2 ms) an ESC that answers at once
+    (1 ms) cannot be told from a correct one, so the slot tests move the DUT with Set ID to node 3 and back;
+    there the correct ESC passes and the one ignoring the stagger fails; the DUT ends at node 1."""
+    args = ["--emulator-faults", fault] if fault else []
+    done = ckesc(tmp_path, "run", "-q", "--profile", str(_profile(tmp_path, boot_s=0.5)), "--reports",
+                 str(tmp_path / "reports"), *args, "--", "-k", SLOT_TESTS)
+    outcomes = _outcomes(tmp_path / "reports")
+    assert len(outcomes) == 4 and set(outcomes.values()) == {verdict}, (outcomes, done.stdout[-2000:])
+    doc, _, _, _ = _read_run(tmp_path / "reports")
+    for r in doc["results"]:
+        moved = dict(r["observations"]).get("answer slots checked at", "")
+        assert moved.startswith("node 3 (moved from 1"), r["observations"]
+        if verdict == "FAIL":
+            assert "R2" in r["message"] and "slot start - bench error" in r["message"], r["message"]
+
+
+@pytest.mark.parametrize("fault, power, verdict", [("", True, "PASS"), ("answer_at_once", True, "FAIL"),
+                                                   ("", False, "INCONCLUSIVE")])
+def test_stagger_on_a_real_time_bench(tmp_path, fault, power, verdict):
+    """The same in real time, ``ckesc emulate`` behind socketcand as the DUT on a bus, a 2 ms profile: with power
+    control the correct ESC passes and the one answering at once fails; without it (no Set ID window, R11) the
+    test says INCONCLUSIVE and why."""
+    emu, can_port, control = _emulator(tmp_path, *(["--faults", fault] if fault else []))
+    cmd = f"{sys.executable} -m ckesc control --port {control} power"
+    args = ["--power", "command", "--power-off-cmd", f"{cmd} off", "--power-on-cmd", f"{cmd} on"] if power else []
+    try:
+        _bus_run(tmp_path, can_port, *args, "--", "-k", "reply_comes_in", boot_s=0.5)
+        doc, _, _, _ = _read_run(tmp_path / "reports")
+        after = subprocess.run([*CKESC, "control", "--port", str(control), "status"], capture_output=True, text=True,
+                               timeout=30, env=_env(tmp_path))
+    finally:
+        emu.terminate()
+        emu.wait(timeout=30)
+    (r,) = doc["results"]
+    assert r["outcome"] == verdict, r
+    if power:
+        assert dict(r["observations"])["answer slots checked at"].startswith("node 3 (moved from 1"), r["observations"]
+    else:
+        assert "not smaller than node 1's answer slot" in r["message"] and "no power control" in r["message"], r["message"]
+    assert [e["node_id"] for e in json.loads(after.stdout)["escs"]] == [1], after.stdout  # moved back (or never moved)
 
 
 # ----------------------------------------------------------------------------------------- interruptions
