@@ -654,9 +654,11 @@ class BusRules:
 
     def _first_report(self, out, st: _Stream, info: _Id, node: _Node, data, ts: float, start: float, busy_from: float):
         """R9a: the first report of a type after a resume / CAN Test off / Set Freq write comes within one
-        (new) interval of it; judged on the earliest it can have been due (bus queueing), tolerance on top."""
+        (new) interval of it; judged on the earliest it can have been due (bus queueing), tolerance and the
+        DUT's report-interval jitter allowance on top."""
         period = node.periods[st.interval]  # type: ignore[index]
-        if period is None or busy_from - node.event_ts <= period + self.tolerance:  # type: ignore[operator]
+        tol = self.tolerance + self.jitter
+        if period is None or busy_from - node.event_ts <= period + tol:  # type: ignore[operator]
             return out
         if not self.power_known and busy_from - node.event_ts > 2 * period + RESTART_SILENCE_S + self.tolerance:  # type: ignore[operator]
             self._observe(("R9a",), ts, node.id, "first-report-unjudged",
@@ -666,7 +668,7 @@ class BusRules:
         return self._violation(out, ("R9a",), ts, node.id, "first-report",
                                f"the first {st.name} {_ms(start - node.event_ts)} after {node.event_what} "  # type: ignore[operator]
                                f"(bus queueing allows no less than {_ms(busy_from - node.event_ts)}), expected within one "  # type: ignore[operator]
-                               f"interval, {_ms(period)} +- {_ms(self.tolerance)} ({node.period_note})",
+                               f"interval, {_ms(period)} +- {_ms(tol)} ({node.period_note})",
                                (quote(info.can_id, data, ts, note=st.name),))
 
     def _event(self, node: _Node, ts: float, what: str) -> None:
