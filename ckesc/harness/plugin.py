@@ -527,14 +527,14 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     strength = strongest(ids)
     d: Dut | None = item.stash.get(_DUT, None)
     if rep.when == "call":
+        asserted = call.excinfo is not None and isinstance(call.excinfo.value, AssertionError)
         if rep.failed and strength == "OBSERVE":
             rep.outcome = "passed"
             msg = str(call.excinfo.value) if call.excinfo else ""
             if d is not None:
                 d.record.observe("observed deviation", msg)
-        elif rep.failed and strength == "READING" and call.excinfo is not None:
-            readings = [i for i in ids if requirement(i).strength == "READING"]
-            rep.longrepr = f"[READING {', '.join(readings)}] {rep.longrepr}"
+        elif (rep.failed and asserted) or (rep.passed and d is not None and d.record.failed):
+            _judged(item, rep, call, ids, strength, d)
         elif rep.passed and d is not None and d.record.inconclusive:
             rep.outcome = "skipped"
             rep.longrepr = (str(item.path), item.location[1] or 0, "INCONCLUSIVE: " + "; ".join(d.record.inconclusive))
@@ -548,6 +548,34 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
         _watch_silence(item, d)
         _final_report(item, rep)
     return rep
+
+
+_MESSAGE = pytest.StashKey[str]()  # the test's failure message: what the DUT did (or the harness problem)
+
+
+def _judged(item: pytest.Item, rep: pytest.TestReport, call: pytest.CallInfo, ids: list[str], strength: str,
+            d: Dut | None) -> None:
+    """A test that failed an assert or a limit: its message says what the DUT did, the strongest broken
+    requirement first and every other failed limit after it (never the traceback's fixture repr; that
+    stays below on the console). An assert saying "harness: ..." is the suite's problem: an ERROR."""
+    own = ""
+    if rep.failed and call.excinfo is not None:
+        own = str(call.excinfo.value).strip()
+        if "\nassert " in own:  # pytest's explanation of the assert follows the test's own message: reprs
+            own = own.split("\nassert ", 1)[0].strip()
+        own = own or "assertion failed"
+        if not own.startswith("harness:") and not own.startswith("["):
+            tagged = [i for i in ids if requirement(i).strength == strength] or ids
+            own = f"[{' '.join(tagged)} {strength}] {own}"
+    if own.startswith("harness:"):
+        limits = d.record.failure_message() if d is not None else ""
+        message = own + (f"\nfailed limits before it:\n{limits}" if limits else "")
+    else:
+        message = d.record.failure_message(own, strength) if d is not None else own
+    item.stash[_MESSAGE] = message
+    trace = rep.longrepr
+    rep.outcome = "failed"
+    rep.longrepr = message if trace is None or not rep.failed else f"{message}\n\n{trace}"
 
 
 def _stop(item: pytest.Item, why: str) -> None:
@@ -616,6 +644,9 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
     res.duration += rep.duration
     if rep.when == "call" or (rep.when == "setup" and not rep.passed) or (rep.when == "teardown" and rep.failed):
         outcome, message = _outcome(rep, strength, d)
+        if rep.when == "call" and _MESSAGE in item.stash:
+            message = item.stash[_MESSAGE]
+            outcome = "ERROR" if message.startswith("harness:") else "FAIL"
         if rep.when == "teardown" and res.outcome not in ("FAIL",) and not item.stash.get(_BUS_TEARDOWN, False):
             outcome = "ERROR"
         if rep.when != "teardown" or res.outcome != "FAIL":
