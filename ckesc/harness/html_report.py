@@ -4,6 +4,8 @@ Built from what the run recorded (``results.json``), so ``ckesc report DIR`` can
 
 * the DUT's identity (ESC Information 240, node id, profile, lane, clock, bit rate, power, faults);
 * a matrix of spec sections by verdict;
+* the failures grouped by cause, first (causes.py): each distinct problem once, with its first
+  occurrence and the tests it showed in (collapsed);
 * what failed, with its evidence (measurements with limit, margin, clock; observations; traces);
 * plots (matplotlib, inlined as SVG): answer delay per node against the 64 ms limit, report
   intervals against their targets, the comm-loss (R8) timelines;
@@ -23,6 +25,7 @@ from typing import Any
 
 from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
+from .causes import groups
 from .verdict import incomplete_banner
 
 #: how a requirement's result is drawn from its tests' verdicts: the first that occurs
@@ -55,6 +58,7 @@ def render(doc: dict[str, Any], *, run: str = "") -> str:
         + ", ".join(f"{counts[v]} {v}" for v in VERDICTS if counts[v])
         + (f", {info.get('not_run', 0)} not run" if info.get("not_run") else "") + "</p>"
         + (f'<p class=banner role=alert>{_e(banner)}</p>' if banner else "") + "</header>",
+        _causes(results),
         _identity(info),
         _matrix(results),
         _failures(results),
@@ -149,7 +153,35 @@ def _failures(results: list[dict[str, Any]]) -> str:
         items.append(f'<article class="fail" data-nodeid="{_e(r["nodeid"])}"><h3>{_badge(r["outcome"])} {_e(r["nodeid"])}</h3>'
                      f"<p>{_e(r['section'])} {_e(SECTION_TITLES.get(r['section'], ''))} &middot; {reqs} ({_e(r['strength'])})</p>"
                      f"<pre>{_e(r.get('message', ''))}</pre>{_evidence(r)}</article>")
-    return f"<section id=failures><h2>Failures ({len(bad)})</h2>{''.join(items)}</section>"
+    return (f"<section id=failures><h2>Failures ({len(bad)})</h2><details{' open' if len(bad) <= 10 else ''}>"
+            f"<summary>every test that failed, errored or was inconclusive, with its evidence</summary>"
+            f"{''.join(items)}</details></section>")
+
+
+def _causes(results: list[dict[str, Any]]) -> str:
+    """The run's distinct problems first (causes.groups), each with its first occurrence, frames and
+    trace, the tests it showed in collapsed under it: never k copies of one."""
+    gs = groups(results)
+    if not gs:
+        return ""
+    items = []
+    for n, g in enumerate(gs, start=1):
+        traces = " ".join(f'<a href="{_e(p)}">{_e(lane or "DUT")}: {_e(Path(p).name)}</a>' for lane, p in g.traces.items())
+        reqs = ", ".join(f'<a href="#req-{_e(i)}">{_e(i)}</a>' for i in g.rules)
+        tests = "".join(f'<li><a href="#t-{_anchor(t)}">{_e(t)}</a></li>' for t in g.tests)
+        items.append(
+            f'<article class="cause" id="cause-{n}" data-tests="{len(g.tests)}" data-strength="{_e(g.strength)}">'
+            f'<h3>{_badge(g.outcome)} {_e(g.strength)} {_e(g.title)} <span class=count>&ndash; in {len(g.tests)} '
+            f'test{"s" if len(g.tests) != 1 else ""}</span></h3>'
+            f'<p>{reqs} &middot; first in <a href="#t-{_anchor(g.first_test)}">{_e(g.first_test)}</a>'
+            + (f" &middot; trace: {traces}" if traces else "") + "</p>"
+            f"<pre>{_e(g.first)}</pre>"
+            f"<details><summary>{len(g.tests)} test{'s' if len(g.tests) != 1 else ''} with this problem</summary>"
+            f"<ul class=tests>{tests}</ul></details></article>")
+    n_tests = len({t for g in gs for t in g.tests})
+    return (f"<section id=causes><h2>Failures by cause ({len(gs)} distinct, in {n_tests} tests)</h2>"
+            f"<p class=note>Each problem once, SHALL before READING, the most widespread first; a test can show "
+            f"several.</p>{''.join(items)}</section>")
 
 
 def _requirement_result(outcomes: list[str]) -> str:
@@ -337,6 +369,9 @@ th{background:#f6f8fa}.kv th{width:12rem}
 .c-INCONCLUSIVE{background:#fff8c5}.c-OBSERVED{background:#ddf4ff}.c-SKIPPED{background:#f6f8fa}
 .v{display:inline-block;padding:0 .35rem;border-radius:.6rem;color:#fff;font-size:.75rem;font-weight:600;white-space:nowrap}
 """ + "".join(f".v-{k.replace(' ', '-')}{{background:{c}}}" for k, c in _COLOURS.items()) + """
+article.cause{border-left:4px solid #cf222e;padding:.2rem .8rem;margin:.8rem 0;background:#fffafa}
+article.cause[data-strength=READING]{border-left-color:#bf8700}.count{color:#57606a;font-weight:400}
+summary{cursor:pointer;color:#0969da}
 article.fail{border-left:4px solid #cf222e;padding:.2rem .8rem;margin:.8rem 0;background:#fffafa}
 pre{white-space:pre-wrap;font-size:.8rem;background:#f6f8fa;padding:.4rem;max-height:14rem;overflow:auto}
 .meas{font-size:.8rem}.obs{font-size:.8rem;margin:.2rem 0}.traces{font-size:.8rem;margin:.2rem 0}.msg{color:#cf222e;font-size:.8rem}

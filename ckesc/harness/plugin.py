@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from ..evidence.live import LaneRules, failure_text
+from ..evidence.live import LaneRules, causes, failure_text
 from ..protocol.requirements import REQUIREMENTS, requirement, strongest
 from . import preflight
 from . import report as _report
@@ -107,6 +107,10 @@ class Result:
     #: requirement ids of the bus rules (ckesc/evidence) the traffic broke while the test ran: such a test
     #: FAILs, quoting the frames, and these ids are what it cites besides its own
     bus_rules: list[str] = field(default_factory=list)
+    #: the distinct problems among those violations (evidence.live.causes: a stable key per problem, its
+    #: title, rules, node, how often among the quoted ones, its first occurrence): report.html, summary.txt
+    #: and the console group the run's failures by them
+    bus_causes: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -475,6 +479,7 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
 
 # ----------------------------------------------------------------------------------------- bus rules
 _BUS_RULES = pytest.StashKey[list]()  # requirement ids of the bus rules broken while the test ran
+_BUS_CAUSES = pytest.StashKey[list]()  # the distinct problems among them (evidence.live.causes)
 _BUS_TEARDOWN = pytest.StashKey[bool]()  # the bus rules failed the test at teardown (a FAIL, not an ERROR)
 
 
@@ -506,6 +511,14 @@ def _bus_rules_verdict(item: pytest.Item, rep: pytest.TestReport) -> None:
         return
     text, ids = failure_text(found, count)
     item.stash[_BUS_RULES] = list(dict.fromkeys(item.stash.get(_BUS_RULES, []) + ids))
+    known = {c["key"]: c for c in item.stash.get(_BUS_CAUSES, [])}
+    for c in causes(found):
+        if c["key"] in known:
+            known[c["key"]]["count"] += c["count"]
+            known[c["key"]]["rules"] = list(dict.fromkeys(known[c["key"]]["rules"] + c["rules"]))
+        else:
+            known[c["key"]] = c
+    item.stash[_BUS_CAUSES] = list(known.values())
     if rep.failed:
         rep.sections.append(("bus rules", text))
         return
@@ -652,6 +665,7 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
         if rep.when != "teardown" or res.outcome != "FAIL":
             res.outcome, res.message = outcome, message
     res.bus_rules = item.stash.get(_BUS_RULES, [])
+    res.bus_causes = item.stash.get(_BUS_CAUSES, [])
     if d is not None and rep.when in ("call", "teardown"):
         res.lane_seconds = d.lane_seconds  # set when the dut fixture is torn down
         res.properties = {}
