@@ -546,7 +546,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
             msg = str(call.excinfo.value) if call.excinfo else ""
             if d is not None:
                 d.record.observe("observed deviation", msg)
-        elif (rep.failed and asserted) or (rep.passed and d is not None and d.record.failed):
+        elif (rep.failed and asserted) or (not rep.failed and d is not None and d.record.failed):  # INCONCLUSIVE after a failed limit: FAIL
             _judged(item, rep, call, ids, strength, d)
         elif rep.passed and d is not None and d.record.inconclusive:
             rep.outcome = "skipped"

@@ -40,6 +40,8 @@ _SUITE = '''
 import pytest
 from dataclasses import dataclass
 
+from ckesc.harness.verdict import Inconclusive
+
 SECTION = "4.4.2"
 
 
@@ -58,6 +60,12 @@ def test_harness_problem(dut):
 def test_all_limits(dut):
     dut.record.measure("answer end after the request", 80.2, limit=4, unit="ms", requirement="R2", strength="READING")
     dut.record.measure("answer delay", 80.2, limit=64, unit="ms", requirement="4.4.2-4")
+
+
+@pytest.mark.requirement("4.4.2-4")
+def test_failed_then_inconclusive(dut):
+    dut.record.measure("answer delay", 80.2, limit=64, unit="ms", requirement="4.4.2-4")
+    raise Inconclusive("power cycle not proven")
 
 
 @pytest.mark.requirement("F4")
@@ -82,6 +90,8 @@ def test_messages_say_what_the_dut_did_and_a_harness_problem_is_an_error(tmp_pat
     assert limits["message"].startswith("[4.4.2-4 SHALL] answer delay = 80.2ms (limit <= 64ms")
     assert "- [R2 READING] answer end after the request = 80.2ms (limit <= 4ms" in limits["message"]
     assert [limits["properties"][f"measurement.{n}.verdict"] for n in (0, 1)] == ["FAIL", "FAIL"]
+    late = res["conformance/test_messages.py::test_failed_then_inconclusive"]
+    assert late["outcome"] == "FAIL" and late["message"].startswith("[4.4.2-4 SHALL] answer delay = 80.2ms"), late
     reading = res["conformance/test_messages.py::test_reading_assert"]
     assert reading["outcome"] == "FAIL"
     assert reading["message"].startswith("[F4 READING] transfer id 1, the request's is 0"), reading["message"]
