@@ -74,7 +74,9 @@ def failure_text(found: list[Violation], count: int) -> tuple[str, list[str]]:
 
 _PARENS = re.compile(r"\s*\([^()]*\)")
 _DECIMAL = re.compile(r"\d+\.\d+")
-_NUMBER = re.compile(r"\d+(?:\.\d+)?")
+#: a number on its own (a transfer id, a time, a count; not the 1 of msg1 or the 14 of raw_command_14b)
+_VARYING = re.compile(r"(?<![A-Za-z_\d.])(?:0x[0-9A-Fa-f]+|\d+(?:\.\d+)?)(?=(?:ms|us|s|V|A|Hz|rpm)?(?![A-Za-z_\d]))")
+_LIST = re.compile(r"\[[^\]]*\]")
 
 
 def without_context(text: str) -> str:
@@ -84,6 +86,11 @@ def without_context(text: str) -> str:
         if out == text:
             return out
         text = out
+
+
+def generalise(text: str) -> str:
+    """``text`` with what varies per occurrence made ``#``: numbers on their own and bracketed lists."""
+    return _VARYING.sub("#", _LIST.sub("[#]", text))
 
 
 def shorten(text: str) -> str:
@@ -98,7 +105,7 @@ def cause_key(v: Violation) -> str:
     the same problem), strength, node, check and the message with its context left out and what varies
     per occurrence (the measured values before "expected ...") made ``#``; what was expected is kept."""
     head, sep, tail = without_context(v.message).partition("expected ")
-    what = _NUMBER.sub("#", head) + sep + _DECIMAL.sub(lambda m: f"{float(m.group()):g}", tail)
+    what = generalise(head) + sep + _DECIMAL.sub(lambda m: f"{float(m.group()):g}", tail)
     return f"{v.rules[0] if v.rules else ''}|{v.strength}|{v.node}|{v.check}|{what.strip()}"
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..evidence.live import causes as violation_causes
-from ..evidence.live import shorten, without_context
+from ..evidence.live import generalise, shorten, without_context
 from ..evidence.rules import Violation
 from .verdict import STRENGTH_ORDER
 
@@ -25,7 +25,6 @@ from .verdict import STRENGTH_ORDER
 _QUOTED = re.compile(r"^\[(?P<rules>.+?) (?P<strength>SHALL|READING)\] t=(?P<t>\S+) (?:node (?P<node>\d+)|bus): (?P<what>.*)$")
 _TAG = re.compile(r"^\[(?P<rules>[^\]]+?) (?P<strength>SHALL|READING|OBSERVE)\]\s*")
 _LIMIT = re.compile(r"\(limit ([^,)]+)")
-_NUMBER = re.compile(r"\d+(?:\.\d+)?")
 _OUTCOMES = ("FAIL", "ERROR")
 
 
@@ -66,7 +65,7 @@ def _own_cause(r: dict[str, Any]) -> tuple[str, str, str, list[str]] | None:
     strength = tag["strength"] if tag else ("" if r["outcome"] == "ERROR" else r.get("strength", ""))
     rules = tag["rules"].split() if tag else []
     text = line[tag.end():] if tag else line
-    key = f"{r['outcome']}|{' '.join(rules)}|{strength}|{_NUMBER.sub('#', without_context(text)).strip()}"
+    key = f"{r['outcome']}|{' '.join(rules)}|{strength}|{generalise(without_context(text)).strip()}"
     limit = _LIMIT.search(text)
     return key, (shorten(text) + (f" (limit {limit[1]})" if limit else ""))[:300], strength, rules
 
