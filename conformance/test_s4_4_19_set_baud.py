@@ -65,6 +65,19 @@ def _cycle(dut, expect):
     return rate
 
 
+def _silent_at(dut, old, new, what):
+    """The failure message when the DUT went silent at ``old`` bit/s after Set Baud to ``new``: whether it
+    answers at ``new`` already (the host is put back at ``old``)."""
+    _reopen(dut, new)
+    try:
+        at_once = _answers(dut)
+    finally:
+        _reopen(dut, old)
+    if at_once:
+        return f"answered at {new} bit/s at once; the new rate is due after the next power-up ({what})"
+    return f"{what}, and no answer at {new} bit/s either"
+
+
 def _set_baud(dut, code):
     return dut.request("set_baud", {"baud": code})
 
@@ -125,15 +138,15 @@ def test_new_rate_only_after_the_next_power_up(dut, rate0, code):
     _move_to(dut, start_code)  # from another rate, so that the change shows
     old = RATES[start_code]
     ex = _set_baud(dut, code)
-    assert ex.response is not None, "no answer to Set Baud"
+    assert ex.response is not None, _silent_at(dut, old, RATES[code], f"no answer to Set Baud at {old} bit/s")
     assert ex.response.fields["baud"] == code, f"Set Baud {code} answered {ex.response.fields}"
     interval = dut.settings()["msg1_interval"] * cat.INTERVAL_UNIT_S
     start = dut.now()
     dut.wait(3 * interval)
     heard = [f for f in dut.frames(since=start, source=dut.node_id) if f.timestamp > start]
     heard += [g for g in dut.garbled if (g.msg.timestamp or 0.0) > start and (g.msg.arbitration_id & 0x7F) == dut.node_id]
-    assert heard, f"nothing from the DUT at {old} bit/s before the next power-up: Set Baud took effect at once"
-    assert _answers(dut), f"Set Baud took effect at once: no answer at {old} bit/s before the next power-up"
+    assert heard, _silent_at(dut, old, RATES[code], f"nothing from the DUT at {old} bit/s before the next power-up")
+    assert _answers(dut), _silent_at(dut, old, RATES[code], f"no answer at {old} bit/s before the next power-up")
     rate = _cycle(dut, RATES[code])
     assert rate == RATES[code], f"after the power-up the DUT answers at {rate} bit/s, not {RATES[code]} (code {code})"
     _reopen(dut, old)

@@ -8,6 +8,9 @@ timestamps. What it finds while a test runs (setup, call and teardown) fails tha
 
 from __future__ import annotations
 
+import re
+from collections import Counter
+
 import can
 
 from .rules import BusRules, Violation
@@ -74,3 +77,68 @@ def failure_text(found: list[Violation], count: int) -> tuple[str, list[str]]:
     shown = "\n".join(str(v) for v in found[:QUOTED])
     more = f"\n... {count - QUOTED} more" if count > QUOTED else ""
     return f"{head}:\n{shown}{more}", ids
+
+
+_PARENS = re.compile(r"\s*\([^()]*\)")
+_DECIMAL = re.compile(r"\d+\.\d+")
+#: a number on its own (a transfer id, a time, a count; not the 1 of msg1 or the 14 of raw_command_14b)
+_VARYING = re.compile(r"(?<![A-Za-z_\d.])(?:0x[0-9A-Fa-f]+|\d+(?:\.\d+)?)(?=(?:ms|us|s|V|A|Hz|rpm)?(?![A-Za-z_\d]))")
+_LIST = re.compile(r"\[[^\]]*\]")
+
+
+def without_context(text: str) -> str:
+    """``text`` without its parenthesised parts, nested ones included."""
+    while True:
+        out = _PARENS.sub("", text)
+        if out == text:
+            return out
+        text = out
+
+
+def generalise(text: str) -> str:
+    """``text`` with what varies per occurrence made ``#``: numbers on their own and bracketed lists."""
+    return _VARYING.sub("#", _LIST.sub("[#]", text))
+
+
+def shorten(text: str) -> str:
+    """``text`` without its parenthesised context (when, what the queue allowed) and with decimals as
+    short as they go (``30.000 ms`` -> ``30 ms``)."""
+    return _DECIMAL.sub(lambda m: f"{float(m.group()):g}", without_context(text)).strip()
+
+
+def cause_key(v: Violation) -> str:
+    """A stable key of what was wrong, the same for every occurrence of one problem across tests: the
+    leading rule id (the clauses a violation adds to it, e.g. R13 for a period kept across a silence, are
+    the same problem), strength, node, check and the message with its context left out and what varies
+    per occurrence (the measured values before "expected ...") made ``#``; what was expected is kept."""
+    head, sep, tail = without_context(v.message).partition("expected ")
+    what = generalise(head) + sep + _DECIMAL.sub(lambda m: f"{float(m.group()):g}", tail)
+    return f"{v.rules[0] if v.rules else ''}|{v.strength}|{v.node}|{v.check}|{what.strip()}"
+
+
+_INTERVAL = re.compile(r"^(?P<frame>\S+) (?P<seen>[\d.]+ ms) after the previous one.*expected (?P<want>[\d.]+ ms)")
+
+
+def cause_what(v: Violation) -> str:
+    """What was wrong in one line, from an occurrence: ``MSG1 of node 1 every 30 ms, not 20 ms``."""
+    text = shorten(v.message)
+    where = f"node {v.node}" if v.node is not None else "the bus"
+    if m := _INTERVAL.match(text):
+        return f"{m['frame'].upper()} of {where} every {m['seen']}, not {m['want']}"
+    return f"{where}: {text}"
+
+
+def causes(found: list[Violation]) -> list[dict]:
+    """The distinct problems among ``found`` (a test's violations, in order), each with its key, what was
+    wrong (:func:`cause_what`), rules, strength, node, check, how many of ``found`` it is, and its first
+    occurrence with its frames."""
+    counts = Counter(cause_key(v) for v in found)
+    out: dict[str, dict] = {}
+    for v in found:
+        key = cause_key(v)
+        if key not in out:
+            out[key] = {"key": key, "what": cause_what(v), "rules": list(v.rules), "strength": v.strength,
+                        "node": v.node, "check": v.check, "count": counts[key], "first": str(v)}
+        else:
+            out[key]["rules"] = list(dict.fromkeys(out[key]["rules"] + list(v.rules)))
+    return list(out.values())

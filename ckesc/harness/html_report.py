@@ -4,9 +4,13 @@ Built from what the run recorded (``results.json``), so ``ckesc report DIR`` can
 
 * the DUT's identity (ESC Information 240, node id, profile, lane, clock, bit rate, power, faults);
 * a matrix of spec sections by verdict;
+* the failures grouped by cause, first (causes.py): each distinct problem once, with its first
+  occurrence and the tests it showed in (collapsed);
 * what failed, with its evidence (measurements with limit, margin, clock; observations; traces);
-* plots (matplotlib, inlined as SVG): answer delay per node against the 64 ms limit, report
-  intervals against their targets, the comm-loss (R8) timelines;
+* plots (matplotlib, inlined as SVG, full page width): answer delay per node against that node's own
+  limits (its R2 slot and the 64 ms bound), one marker per service, violations red and labelled;
+  report intervals as their deviation from the target with the tolerance band (intervals across a
+  power cycle, a suspension or a Set Freq change left out and counted); the comm-loss (R8) timelines;
 * every requirement of the table with its result, the tests that checked it and their evidence.
 
 Inline CSS and SVG only, no script and no external URL; traces are linked relative to the file.
@@ -23,6 +27,7 @@ from typing import Any
 
 from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
+from .causes import groups
 from .verdict import claim_text, incomplete_banner
 
 #: how a requirement's result is drawn from its tests' verdicts: the first that occurs
@@ -56,6 +61,7 @@ def render(doc: dict[str, Any], *, run: str = "") -> str:
         + (f", {info.get('not_run', 0)} not run" if info.get("not_run") else "") + "</p>"
         + (f'<p class=banner role=alert>{_e(banner)}</p>' if banner else "")
         + (f"<p class=claim>{_e(claim_text(info))}</p>" if info.get("not_claimed") else "") + "</header>",
+        _causes(results),
         _identity(info),
         _matrix(results),
         _failures(results),
@@ -156,7 +162,35 @@ def _failures(results: list[dict[str, Any]]) -> str:
         items.append(f'<article class="fail" data-nodeid="{_e(r["nodeid"])}"><h3>{_badge(r["outcome"])} {_e(r["nodeid"])}</h3>'
                      f"<p>{_e(r['section'])} {_e(SECTION_TITLES.get(r['section'], ''))} &middot; {reqs} ({_e(r['strength'])})</p>"
                      f"<pre>{_e(r.get('message', ''))}</pre>{_evidence(r)}</article>")
-    return f"<section id=failures><h2>Failures ({len(bad)})</h2>{''.join(items)}</section>"
+    return (f"<section id=failures><h2>Failures ({len(bad)})</h2><details{' open' if len(bad) <= 10 else ''}>"
+            f"<summary>every test that failed, errored or was inconclusive, with its evidence</summary>"
+            f"{''.join(items)}</details></section>")
+
+
+def _causes(results: list[dict[str, Any]]) -> str:
+    """The run's distinct problems first (causes.groups), each with its first occurrence, frames and
+    trace, the tests it showed in collapsed under it: never k copies of one."""
+    gs = groups(results)
+    if not gs:
+        return ""
+    items = []
+    for n, g in enumerate(gs, start=1):
+        traces = " ".join(f'<a href="{_e(p)}">{_e(lane or "DUT")}: {_e(Path(p).name)}</a>' for lane, p in g.traces.items())
+        reqs = ", ".join(f'<a href="#req-{_e(i)}">{_e(i)}</a>' for i in g.rules)
+        tests = "".join(f'<li><a href="#t-{_anchor(t)}">{_e(t)}</a></li>' for t in g.tests)
+        items.append(
+            f'<article class="cause" id="cause-{n}" data-tests="{len(g.tests)}" data-strength="{_e(g.strength)}">'
+            f'<h3>{_badge(g.outcome)} {_e(g.strength)} {_e(g.title)} <span class=count>&ndash; in {len(g.tests)} '
+            f'test{"s" if len(g.tests) != 1 else ""}</span></h3>'
+            f'<p>{reqs} &middot; first in <a href="#t-{_anchor(g.first_test)}">{_e(g.first_test)}</a>'
+            + (f" &middot; trace: {traces}" if traces else "") + "</p>"
+            f"<pre>{_e(g.first)}</pre>"
+            f"<details><summary>{len(g.tests)} test{'s' if len(g.tests) != 1 else ''} with this problem</summary>"
+            f"<ul class=tests>{tests}</ul></details></article>")
+    n_tests = len({t for g in gs for t in g.tests})
+    return (f"<section id=causes><h2>Failures by cause ({len(gs)} distinct, in {n_tests} tests)</h2>"
+            f"<p class=note>Each problem once, SHALL before READING, the most widespread first; a test can show "
+            f"several.</p>{''.join(items)}</section>")
 
 
 def _requirement_result(outcomes: list[str]) -> str:
@@ -199,39 +233,160 @@ def _tests(results: list[dict[str, Any]]) -> str:
 
 
 # ----------------------------------------------------------------------------------------- plots
+#: one marker per service in the answer-delay plot
+_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">", "h", "p")
+#: a report interval longer than this many times its target spans a power cycle, a suspension or a
+#: Set Freq change (the DUT was silent or on another schedule): left out of the plot and counted
+_ACROSS = 2.5
+
+
 def _plots(results: list[dict[str, Any]], info: dict[str, Any]) -> str:
     clock = info.get("clock", "")
+    err = (info.get("timing_error_s") or 0.0) * 1000
     parts = ["<section id=plots><h2>Timing</h2>"]
-    answers: dict[int, list[float]] = defaultdict(list)
+    answers: dict[int, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     intervals: dict[tuple[str, float], list[float]] = defaultdict(list)
     timelines = []
     for r in results:
         ev = r.get("evidence") or {}
         for node, by_request in ev.get("answers", {}).items():
-            for delays in by_request.values():
-                answers[int(node)].extend(delays)
+            for request, delays in by_request.items():
+                answers[int(node)][request].extend(delays)
         for report, by_target in ev.get("intervals", {}).items():
             for target, gaps in by_target.items():
                 intervals[(report, float(target))].extend(gaps)
         if "comm_loss" in ev:
             timelines.append((r, ev["comm_loss"]))
-    parts.append(_figure("answer-delay", "Answer delay per node", _answer_plot(answers),
-                         "Every service request the suite made and its answer, request on the bus to the answer's last bit "
-                         + (f"({_e(clock)} clock). " if info.get("echo") is not False else
-                            f"(the request by the host clock at send: the adapter does not echo; the answer by the {_e(clock)} "
-                            "clock). ") + f"Dashed: the {cat.ANSWER_DELAY_MAX_S * 1000:g} ms limit (4.4.2-4, 4.4.3-4).")
-                 if answers else "<p>No answered request was recorded.</p>")
-    parts.append(_figure("report-intervals", "Report intervals against their targets", _interval_plot(intervals),
-                         "Time between consecutive MSG1/MSG2/MSG3 of the DUT, grouped by the interval its latest Set/Get Freq "
-                         "answer stated (red tick: the target; box: quartiles; whiskers: min and max). Intervals across a "
-                         "power cycle or suspension are the long outliers.")
-                 if intervals else "<p>No report interval was recorded.</p>")
+    if answers:
+        svg, late = _answer_plot(answers, err)
+        parts.append(_figure(
+            "answer-delay", "Answer delay per node against its own limits", svg,
+            "Every service request the suite made and its answer, request on the bus to the answer's last bit "
+            + (f"({_e(clock)} clock)" if info.get("echo") is not False else
+               f"(the request by the host clock at send: the adapter does not echo; the answer by the {_e(clock)} clock)")
+            + f", one marker per service. Green band: the node's answer slot, (node id % 32) x "
+            f"{cat.ANSWER_SLOT_S * 1000:g} ms to {cat.ANSWER_SLOT_S * 1000:g} ms later (R2); dashed: the "
+            f"{cat.ANSWER_DELAY_MAX_S * 1000:g} ms bound (4.4.2-4, 4.4.3-4). Red: {late} answer(s) outside a limit"
+            + (f" (beyond the stated error of +-{err:g} ms)" if err else "") + "; each node's latest is labelled."))
+    else:
+        parts.append("<p>No answered request was recorded.</p>")
+    if intervals:
+        tol = float(info.get("interval_tolerance_ms") or 0.0)
+        svg, left_out, outside = _interval_plot(intervals, tol)
+        parts.append(_figure(
+            "report-intervals", "Report intervals: deviation from their target", svg,
+            f"Time between consecutive MSG1/MSG2/MSG3 of the DUT minus the interval its latest Set/Get Freq answer "
+            f"stated (ms, linear; box: quartiles, whiskers: min and max). Grey band: the tolerance, +-{tol:g} ms; red: "
+            f"{outside} interval(s) outside it (the bus rules also allow for bus queueing). {left_out} interval(s) "
+            f"longer than {_ACROSS:g} x their target are left out: they span a power cycle, a suspension or a Set "
+            f"Freq change."))
+    else:
+        parts.append("<p>No report interval was recorded.</p>")
     if timelines:
         parts.append(_figure("comm-loss", "Comm-loss timelines (R8)", _comm_loss_plot(timelines),
                              f"MSG1 around the end of a throttle stream: grey ticks are commands, dots MSG1 with bit 13 "
                              f"(comm fault) clear or set. Dashed: {cat.COMM_LOSS_TIMEOUT_S * 1000:g} ms after the last command."))
     parts.append("</section>")
     return "".join(parts)
+
+
+def _answer_plot(answers: dict[int, dict[str, list[float]]], err: float) -> tuple[str, int]:
+    """The answer-delay plot and how many answers broke a limit: their node's slot end (R2) or 64 ms."""
+    import numpy as np
+
+    nodes = sorted(answers)
+    services = sorted({s for by in answers.values() for s in by})
+    marker = {s: _MARKERS[i % len(_MARKERS)] for i, s in enumerate(services)}
+    fig = _new_figure(11.0, 4.2)
+    ax = fig.add_subplot()
+    limit = cat.ANSWER_DELAY_MAX_S * 1000
+    slot_w = cat.ANSWER_SLOT_S * 1000
+    rng = np.random.default_rng(0)
+    late = 0
+    top = limit
+    for i, node in enumerate(nodes):
+        start = (node % round(cat.ANSWER_DELAY_MAX_S / cat.ANSWER_SLOT_S)) * slot_w
+        band = ax.fill_between([i - 0.42, i + 0.42], start, start + slot_w, color="#1a7f37", alpha=0.25, linewidth=0)
+        band.set_gid(f"slot-node-{node}")
+        worst: tuple[float, str] | None = None
+        for s in services:
+            d = np.array(answers[node].get(s, [])) * 1000
+            if not len(d):
+                continue
+            bad = (d > start + slot_w + err) | (d > limit + err)
+            late += int(bad.sum())
+            x = i + rng.uniform(-0.3, 0.3, len(d))
+            ax.scatter(x[~bad], d[~bad], s=14, marker=marker[s], facecolors="none", edgecolors="#0969da",
+                       linewidths=0.7, alpha=0.6, rasterized=int((~bad).sum()) > 400)
+            if bad.any():
+                pts = ax.scatter(x[bad], d[bad], s=22, marker=marker[s], color="#cf222e", zorder=3,
+                                 rasterized=int(bad.sum()) > 400)
+                pts.set_gid(f"late-node-{node}-{s}")
+                if worst is None or d[bad].max() > worst[0]:
+                    worst = (float(d[bad].max()), s)
+            top = max(top, float(d.max()))
+        if worst is not None:
+            ax.annotate(f"{worst[0]:.1f} ms", (i, worst[0]), textcoords="offset points", xytext=(0, 6), ha="center",
+                        color="#cf222e", fontsize=10)
+    line = ax.axhline(limit, color="#cf222e", linestyle="--", linewidth=1.2)
+    line.set_gid("answer-delay-limit")
+    ax.text(1.0, limit, f" limit {limit:g} ms", transform=ax.get_yaxis_transform(), va="center", color="#cf222e")
+    for s in services:
+        ax.scatter([], [], marker=marker[s], facecolors="none", edgecolors="#0969da", label=s)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.08, 1.0), title="service", frameon=False)
+    ax.set_xticks(range(len(nodes)), [f"node {n}\nn={sum(len(v) for v in answers[n].values())}" for n in nodes])
+    ax.set_xlim(-0.6, len(nodes) - 0.4)
+    ax.set_ylabel("answer delay (ms)")
+    ax.set_ylim(0, top * 1.18)
+    ax.grid(axis="y", alpha=0.3)
+    return _svg(fig), late
+
+
+def _interval_plot(intervals: dict[tuple[str, float], list[float]], tol: float) -> tuple[str, int, int]:
+    """The deviation plot - one panel per report and target, each on its own linear scale - how many
+    intervals were left out (across a power cycle, a suspension, a Set Freq change) and how many of the
+    rest are outside the tolerance band."""
+    import numpy as np
+
+    keys = sorted(intervals)
+    cols = min(7, len(keys))
+    rows = -(-len(keys) // cols)
+    fig = _new_figure(11.0, 2.4 * rows + 0.4)
+    axes = fig.subplots(rows, cols, squeeze=False)
+    rng = np.random.default_rng(0)
+    left_out = outside = 0
+    for ax, k in zip(axes.flat, keys):
+        gaps = np.array(intervals[k])
+        kept = gaps[gaps <= _ACROSS * k[1]]
+        left_out += len(gaps) - len(kept)
+        dev = (kept - k[1]) * 1000
+        band = ax.axhspan(-tol, tol, color="#6e7781", alpha=0.25, linewidth=0)
+        band.set_gid(f"tolerance-{k[0]}-{k[1] * 1000:g}ms")
+        tick = ax.axhline(0, color="#1a7f37", linewidth=1.5)
+        tick.set_gid(f"target-{k[0]}-{k[1] * 1000:g}ms")
+        off = np.abs(dev) > tol
+        outside += int(off.sum())
+        x = rng.uniform(-0.3, 0.3, len(dev))
+        if len(dev):
+            ax.boxplot([dev], positions=[0], whis=(0, 100), widths=0.7, showfliers=False)
+            ax.scatter(x[~off], dev[~off], s=6, color="#0969da", alpha=0.35, linewidths=0, rasterized=int((~off).sum()) > 400)
+        if off.any():
+            pts = ax.scatter(x[off], dev[off], s=10, color="#cf222e", zorder=3, rasterized=int(off.sum()) > 400)
+            pts.set_gid(f"outside-{k[0]}-{k[1] * 1000:g}ms")
+        ax.set_title(f"{k[0].upper()} {k[1] * 1000:g} ms", fontsize=10)
+        ax.set_xticks([0], [f"n={len(dev)}" + (f"\n{int(off.sum())} outside" if off.any() else "")])
+        for label in ax.get_xticklabels():
+            label.set_color("#cf222e" if off.any() else "#1f2328")
+        ax.set_xlim(-0.6, 0.6)
+        span = max(tol * 2, float(np.abs(dev).max()) if len(dev) else 0.0, 0.1)
+        ax.set_ylim(-span * 1.15, span * 1.15)
+        ax.grid(axis="y", alpha=0.3)
+    for ax in axes.flat[len(keys):]:
+        ax.set_visible(False)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("interval - target (ms)")
+    fig.tight_layout()
+    return _svg(fig), left_out, outside
 
 
 def _figure(fid: str, title: str, svg: str, caption: str) -> str:
@@ -248,59 +403,14 @@ def _svg(fig) -> str:
 def _new_figure(width: float, height: float):
     import matplotlib
 
-    matplotlib.rcParams.update({"svg.fonttype": "none", "svg.hashsalt": "ckesc", "font.size": 9})
+    matplotlib.rcParams.update({"svg.fonttype": "none", "svg.hashsalt": "ckesc", "font.size": 10})
     from matplotlib.figure import Figure
 
     return Figure(figsize=(width, height))
 
 
-def _answer_plot(answers: dict[int, list[float]]) -> str:
-    import numpy as np
-
-    nodes = sorted(answers)
-    fig = _new_figure(max(4.0, 1.0 + 0.9 * len(nodes)), 3.2)
-    ax = fig.add_subplot()
-    data = [np.array(answers[n]) * 1000 for n in nodes]
-    ax.boxplot(data, whis=(0, 100), widths=0.5, showfliers=False)
-    rng = np.random.default_rng(0)
-    for i, d in enumerate(data, start=1):
-        ax.scatter(i + rng.uniform(-0.18, 0.18, len(d)), d, s=6, alpha=0.35, color="#0969da", linewidths=0,
-                   rasterized=len(d) > 400)
-        ax.annotate(f"max {d.max():.2f}", (i, d.max()), textcoords="offset points", xytext=(0, 4), ha="center", fontsize=7)
-    limit = cat.ANSWER_DELAY_MAX_S * 1000
-    line = ax.axhline(limit, color="#cf222e", linestyle="--", linewidth=1.2)
-    line.set_gid("answer-delay-limit")
-    ax.text(0.55, limit, f" limit {limit:g} ms", va="bottom", color="#cf222e", fontsize=8)
-    ax.set_xticks(range(1, len(nodes) + 1), [f"node {n}\nn={len(answers[n])}" for n in nodes])
-    ax.set_ylabel("answer delay (ms)")
-    ax.set_ylim(0, max(limit * 1.15, max(d.max() for d in data) * 1.1))
-    ax.grid(axis="y", alpha=0.3)
-    return _svg(fig)
-
-
-def _interval_plot(intervals: dict[tuple[str, float], list[float]]) -> str:
-    import numpy as np
-
-    keys = sorted(intervals)
-    fig = _new_figure(max(5.0, 1.0 + 0.75 * len(keys)), 3.6)
-    ax = fig.add_subplot()
-    data = [np.array(intervals[k]) * 1000 for k in keys]
-    ax.boxplot(data, whis=(0, 100), widths=0.5, showfliers=False)
-    for i, (k, d) in enumerate(zip(keys, data), start=1):
-        tick = ax.hlines(k[1] * 1000, i - 0.35, i + 0.35, color="#cf222e", linewidth=2)
-        tick.set_gid(f"target-{k[0]}-{k[1] * 1000:g}ms")
-        off = d[np.abs(d - k[1] * 1000) > max(0.05 * k[1] * 1000, 1.0)]
-        if len(off):
-            ax.scatter(np.full(len(off), i), off, s=8, color="#bf8700", zorder=3)
-    ax.set_yscale("log")
-    ax.set_xticks(range(1, len(keys) + 1), [f"{k[0].upper()}\n{k[1] * 1000:g} ms\nn={len(intervals[k])}" for k in keys], fontsize=7)
-    ax.set_ylabel("interval (ms, log)")
-    ax.grid(axis="y", alpha=0.3, which="both")
-    return _svg(fig)
-
-
 def _comm_loss_plot(timelines: list[tuple[dict[str, Any], dict[str, Any]]]) -> str:
-    fig = _new_figure(7.0, 0.6 + 0.75 * len(timelines))
+    fig = _new_figure(11.0, 0.6 + 0.9 * len(timelines))
     axes = fig.subplots(len(timelines), 1, sharex=True, squeeze=False)[:, 0]
     timeout = cat.COMM_LOSS_TIMEOUT_S * 1000
     for ax, (r, tl) in zip(axes, timelines):
@@ -308,7 +418,7 @@ def _comm_loss_plot(timelines: list[tuple[dict[str, Any], dict[str, Any]]]) -> s
         msg1 = tl.get("msg1", [])
         last = _last_command(commands)
         ax.set_yticks([])
-        ax.set_ylabel(r["name"].split("[")[-1].rstrip("]") or r["name"], rotation=0, ha="right", va="center", fontsize=8)
+        ax.set_ylabel(r["name"].split("[")[-1].rstrip("]") or r["name"], rotation=0, ha="right", va="center")
         if last is None:
             ax.text(0.5, 0.5, "no throttle command recorded", transform=ax.transAxes, ha="center")
             continue
@@ -320,7 +430,7 @@ def _comm_loss_plot(timelines: list[tuple[dict[str, Any], dict[str, Any]]]) -> s
         line.set_gid("comm-loss-timeout")
         ax.axvline(0, color="#6e7781", linewidth=0.8)
         ax.set_ylim(0, 1)
-    axes[0].legend(loc="upper right", fontsize=7, ncols=2)
+    axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)  # outside the data
     axes[-1].set_xlim(-150, timeout + 250)
     axes[-1].set_xlabel("time since the last command of the stream (ms)")
     return _svg(fig)
@@ -346,11 +456,14 @@ th{background:#f6f8fa}.kv th{width:12rem}
 .c-INCONCLUSIVE{background:#fff8c5}.c-OBSERVED{background:#ddf4ff}.c-SKIPPED{background:#f6f8fa}
 .v{display:inline-block;padding:0 .35rem;border-radius:.6rem;color:#fff;font-size:.75rem;font-weight:600;white-space:nowrap}
 """ + "".join(f".v-{k.replace(' ', '-')}{{background:{c}}}" for k, c in _COLOURS.items()) + """
+article.cause{border-left:4px solid #cf222e;padding:.2rem .8rem;margin:.8rem 0;background:#fffafa}
+article.cause[data-strength=READING]{border-left-color:#bf8700}.count{color:#57606a;font-weight:400}
+summary{cursor:pointer;color:#0969da}
 article.fail{border-left:4px solid #cf222e;padding:.2rem .8rem;margin:.8rem 0;background:#fffafa}
 pre{white-space:pre-wrap;font-size:.8rem;background:#f6f8fa;padding:.4rem;max-height:14rem;overflow:auto}
 .meas{font-size:.8rem}.obs{font-size:.8rem;margin:.2rem 0}.traces{font-size:.8rem;margin:.2rem 0}.msg{color:#cf222e;font-size:.8rem}
 .reqs q{quotes:none;font-style:italic}.note{color:#57606a;font-size:.8rem}.tests{margin:.2rem 0;padding-left:1rem;font-size:.8rem}
-figure{margin:1rem 0;break-inside:avoid}figure svg{max-width:100%;height:auto}figcaption{font-size:.85rem;color:#57606a}
+figure{margin:1rem 0;break-inside:avoid}figure svg{width:100%;height:auto}figcaption{font-size:.85rem;color:#57606a}
 .tests td{font-size:.85rem}
 @media print{body{max-width:none;margin:0;font-size:11px}a{color:inherit;text-decoration:none}pre{max-height:none}
  section{break-inside:auto}tr,article{break-inside:avoid}h2{break-after:avoid}}

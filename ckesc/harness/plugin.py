@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from ..evidence.live import LaneRules, failure_text
+from ..evidence.live import LaneRules, causes, failure_text
 from ..protocol import catalogue as cat
 from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, requirement, strongest
@@ -126,6 +126,10 @@ class Result:
     #: requirement ids of the bus rules (ckesc/evidence) the traffic broke while the test ran: such a test
     #: FAILs, quoting the frames, and these ids are what it cites besides its own
     bus_rules: list[str] = field(default_factory=list)
+    #: the distinct problems among those violations (evidence.live.causes: a stable key per problem, its
+    #: title, rules, node, how often among the quoted ones, its first occurrence): report.html, summary.txt
+    #: and the console group the run's failures by them
+    bus_causes: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -600,6 +604,7 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
 
 # ----------------------------------------------------------------------------------------- bus rules
 _BUS_RULES = pytest.StashKey[list]()  # requirement ids of the bus rules broken while the test ran
+_BUS_CAUSES = pytest.StashKey[list]()  # the distinct problems among them (evidence.live.causes)
 _BUS_TEARDOWN = pytest.StashKey[bool]()  # the bus rules failed the test at teardown (a FAIL, not an ERROR)
 
 
@@ -632,6 +637,14 @@ def _bus_rules_verdict(item: pytest.Item, rep: pytest.TestReport) -> None:
         return
     text, ids = failure_text(found, count)
     item.stash[_BUS_RULES] = list(dict.fromkeys(item.stash.get(_BUS_RULES, []) + ids))
+    known = {c["key"]: c for c in item.stash.get(_BUS_CAUSES, [])}
+    for c in causes(found):
+        if c["key"] in known:
+            known[c["key"]]["count"] += c["count"]
+            known[c["key"]]["rules"] = list(dict.fromkeys(known[c["key"]]["rules"] + c["rules"]))
+        else:
+            known[c["key"]] = c
+    item.stash[_BUS_CAUSES] = list(known.values())
     if rep.failed:
         rep.sections.append(("bus rules", text))
         return
@@ -655,14 +668,14 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     # the bus or the bench failed under the test, not the DUT: an ERROR whatever the requirement's strength
     harness = call.excinfo is not None and isinstance(call.excinfo.value, (BusFault, BenchGone))
     if rep.when == "call" and not harness:
+        asserted = call.excinfo is not None and isinstance(call.excinfo.value, AssertionError)
         if rep.failed and strength == "OBSERVE":
             rep.outcome = "passed"
             msg = str(call.excinfo.value) if call.excinfo else ""
             if d is not None:
                 d.record.observe("observed deviation", msg)
-        elif rep.failed and strength == "READING" and call.excinfo is not None:
-            readings = [i for i in ids if requirement(i).strength == "READING"]
-            rep.longrepr = f"[READING {', '.join(readings)}] {rep.longrepr}"
+        elif (rep.failed and asserted) or (not rep.failed and d is not None and d.record.failed):  # INCONCLUSIVE after a failed limit: FAIL
+            _judged(item, rep, call, ids, strength, d)
         elif rep.passed and d is not None and d.record.inconclusive:
             rep.outcome = "skipped"
             rep.longrepr = (str(item.path), item.location[1] or 0, "INCONCLUSIVE: " + "; ".join(d.record.inconclusive))
@@ -676,6 +689,34 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
         _watch_silence(item, d)
         _final_report(item, rep)
     return rep
+
+
+_MESSAGE = pytest.StashKey[str]()  # the test's failure message: what the DUT did (or the harness problem)
+
+
+def _judged(item: pytest.Item, rep: pytest.TestReport, call: pytest.CallInfo, ids: list[str], strength: str,
+            d: Dut | None) -> None:
+    """A test that failed an assert or a limit: its message says what the DUT did, the strongest broken
+    requirement first and every other failed limit after it (never the traceback's fixture repr; that
+    stays below on the console). An assert saying "harness: ..." is the suite's problem: an ERROR."""
+    own = ""
+    if rep.failed and call.excinfo is not None:
+        own = str(call.excinfo.value).strip()
+        if "\nassert " in own:  # pytest's explanation of the assert follows the test's own message: reprs
+            own = own.split("\nassert ", 1)[0].strip()
+        own = own or "assertion failed"
+        if not own.startswith("harness:") and not own.startswith("["):
+            tagged = [i for i in ids if requirement(i).strength == strength] or ids
+            own = f"[{' '.join(tagged)} {strength}] {own}"
+    if own.startswith("harness:"):
+        limits = d.record.failure_message() if d is not None else ""
+        message = own + (f"\nfailed limits before it:\n{limits}" if limits else "")
+    else:
+        message = d.record.failure_message(own, strength) if d is not None else own
+    item.stash[_MESSAGE] = message
+    trace = rep.longrepr
+    rep.outcome = "failed"
+    rep.longrepr = message if trace is None or not rep.failed else f"{message}\n\n{trace}"
 
 
 def _stop(item: pytest.Item, why: str) -> None:
@@ -744,11 +785,15 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
     res.duration += rep.duration
     if rep.when == "call" or (rep.when == "setup" and not rep.passed) or (rep.when == "teardown" and rep.failed):
         outcome, message = _outcome(rep, strength, d)
+        if rep.when == "call" and _MESSAGE in item.stash:
+            message = item.stash[_MESSAGE]
+            outcome = "ERROR" if message.startswith("harness:") else "FAIL"
         if rep.when == "teardown" and res.outcome not in ("FAIL",) and not item.stash.get(_BUS_TEARDOWN, False):
             outcome = "ERROR"
         if rep.when != "teardown" or res.outcome != "FAIL":
             res.outcome, res.message = outcome, message
     res.bus_rules = item.stash.get(_BUS_RULES, [])
+    res.bus_causes = item.stash.get(_BUS_CAUSES, [])
     if d is not None and rep.when in ("call", "teardown"):
         res.lane_seconds = d.lane_seconds  # set when the dut fixture is torn down
         res.properties = {}

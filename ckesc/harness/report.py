@@ -28,7 +28,7 @@ from .. import __version__
 from ..protocol import catalogue as cat
 from ..protocol.ids import Kind
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
-from . import html_report
+from . import causes, html_report
 from .verdict import claim_text, incomplete_banner
 
 
@@ -192,9 +192,7 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
     if banner := incomplete_banner(info):
         lines.insert(0, banner)
         lines.append(banner)
-    fails = [r for r in results if r.outcome in ("FAIL", "ERROR")]
-    for r in fails[:20]:
-        lines.append(f"  {r.outcome}: {r.nodeid}: {r.message.splitlines()[0][:160] if r.message else ''}")
+    lines += causes.summary_lines(results)
     return "\n".join(lines)
 
 

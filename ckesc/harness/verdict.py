@@ -4,6 +4,10 @@ A check compares a measured value with a limit and records value, limit, margin 
 measured it. In a lane whose timing has a stated measurement error, a result whose margin is
 smaller than that error is INCONCLUSIVE, neither PASS nor FAIL. OBSERVE requirements record what
 was seen and never fail.
+
+A failed limit does not stop the test: :class:`Record` keeps every failed limit and the plugin fails
+the test at its end (:meth:`Record.failure_message`), the strongest broken requirement first, so an
+answer after 80 ms is reported as breaking the SHALL 64 ms bound as well as its READING slot.
 """
 
 from __future__ import annotations
@@ -15,6 +19,9 @@ from typing import Any
 import pytest
 
 CLOCKS = ("simulated", "bus timestamp", "host clock")
+
+#: the order in which broken requirements lead a failure message
+STRENGTH_ORDER = ("SHALL", "READING", "OBSERVE")
 
 _OPS = {"<=": operator.le, "<": operator.lt, ">=": operator.ge, ">": operator.gt, "==": operator.eq}
 
@@ -86,6 +93,8 @@ class Record:
     measurements: list[Measurement] = field(default_factory=list)
     observations: list[tuple[str, Any]] = field(default_factory=list)
     inconclusive: list[str] = field(default_factory=list)
+    #: the failed limits, (strength, "[requirement strength] measurement"), in the order measured
+    failed: list[tuple[str, str]] = field(default_factory=list)
 
     def observe(self, what: str, value: Any) -> None:
         self.observations.append((what, value))
@@ -93,8 +102,9 @@ class Record:
     def measure(self, name: str, value: float, *, limit: float | None = None, op: str = "<=", unit: str = "",
                 clock: str = "simulated", error: float = 0.0, requirement: str | None = None,
                 strength: str = "SHALL") -> Measurement:
-        """Record a measurement and judge it. FAIL raises AssertionError (unless the requirement is
-        OBSERVE); a margin inside ``error`` raises :class:`Inconclusive` at the end of the test."""
+        """Record a measurement and judge it. A FAIL (unless the requirement is OBSERVE) is kept in
+        :attr:`failed` and fails the test at its end; a margin inside ``error`` makes it
+        :class:`Inconclusive` at the end of the test (unless a limit failed)."""
         if clock not in CLOCKS:
             raise ValueError(f"clock must be one of {CLOCKS}")
         m = Measurement(name, value, limit, op, unit, clock, error, requirement=requirement)
@@ -110,10 +120,34 @@ class Record:
         if not ok:
             m.verdict = "OBSERVED" if strength == "OBSERVE" else "FAIL"
             if strength != "OBSERVE":
-                tag = f"[{requirement} {strength}] " if requirement else ""
-                raise AssertionError(f"{tag}{m}")
+                tag = f"[{requirement} {strength}] " if requirement else f"[{strength}] "
+                self.failed.append((strength, f"{tag}{m}"))
+                return m
             self.observe(name, str(m))
         return m
+
+    def failure_message(self, assertion: str = "", strength: str = "SHALL") -> str:
+        """The test's failure message: every failed limit and ``assertion`` (the test's own failed
+        assert, of ``strength``), the strongest broken requirement first, the others listed after it;
+        "" when nothing failed."""
+        broken = list(self.failed)
+        if assertion:
+            broken.append((_tag_strength(assertion) or strength, assertion))
+        if not broken:
+            return ""
+        broken.sort(key=lambda sb: STRENGTH_ORDER.index(sb[0]) if sb[0] in STRENGTH_ORDER else len(STRENGTH_ORDER))
+        head, *others = [text for _, text in broken]
+        if not others:
+            return head
+        return head + f"\nalso broken ({len(others)}):\n" + "\n".join(f"- {o}" for o in others)
+
+
+def _tag_strength(message: str) -> str | None:
+    """The strength a message's leading ``[ids STRENGTH]`` tag names, if it has one."""
+    first = message.lstrip().split("]", 1)[0]
+    if message.lstrip().startswith("[") and first.rsplit(" ", 1)[-1] in STRENGTH_ORDER:
+        return first.rsplit(" ", 1)[-1]
+    return None
 
 
 def incomplete_banner(info: dict[str, Any]) -> str:

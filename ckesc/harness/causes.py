@@ -1,0 +1,133 @@
+"""A run's failures grouped by cause: the k distinct problems of a run, never k copies of one.
+
+One broken bus rule fails every test during which it shows (ckesc/evidence/live.py): 303 tests with
+one violation. A group is one problem - a bus rule's violation by its stable key (leading rule id,
+node, check, what was wrong: ``evidence.live.cause_key``, recorded per test in ``bus_causes``), or a
+test's own failure by its message's first line with the measured values made ``#`` - with every test
+it showed in and its first occurrence (message, frames, traces). Groups of FAIL come before ERROR (the
+suite's problems), SHALL before READING, then the most widespread first.
+
+Built from ``results.json``'s records (or the plugin's results), so ``ckesc report DIR`` rebuilds it.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..evidence.live import causes as violation_causes
+from ..evidence.live import generalise, shorten, without_context
+from ..evidence.rules import Violation
+from .verdict import STRENGTH_ORDER
+
+#: a violation quoted in a bus-rule failure message (read back from records without ``bus_causes``)
+_QUOTED = re.compile(r"^\[(?P<rules>.+?) (?P<strength>SHALL|READING)\] t=(?P<t>\S+) (?:node (?P<node>\d+)|bus): (?P<what>.*)$")
+_TAG = re.compile(r"^\[(?P<rules>[^\]]+?) (?P<strength>SHALL|READING|OBSERVE)\]\s*")
+_LIMIT = re.compile(r"\(limit ([^,)]+)")
+_OUTCOMES = ("FAIL", "ERROR")
+
+
+@dataclass
+class Group:
+    key: str
+    outcome: str  # FAIL (the DUT's) or ERROR (the suite's)
+    strength: str  # SHALL / READING ("" for an ERROR)
+    rules: list[str]
+    what: str  # what was wrong, from the first occurrence
+    first: str  # the first occurrence: the failure message, or the violation with its frames
+    first_test: str
+    traces: dict[str, str] = field(default_factory=dict)
+    tests: list[str] = field(default_factory=list)
+    occurrences: int = 0
+
+    @property
+    def title(self) -> str:
+        return f"{' '.join(self.rules)}: {self.what}" if self.rules else self.what
+
+    @property
+    def headline(self) -> str:
+        n = len(self.tests)
+        return f"{self.title} - in {n} test{'s' if n != 1 else ''}"
+
+
+def _record(r: Any) -> dict[str, Any]:
+    return r if isinstance(r, dict) else r.__dict__
+
+
+def _own_cause(r: dict[str, Any]) -> tuple[str, str, str, list[str]] | None:
+    """(key, what, strength, rules) of a test's own failure (not the bus rules'), or None."""
+    message = (r.get("message") or "").strip()
+    if not message or message.startswith("[bus rules"):
+        return None
+    line = message.splitlines()[0].strip().removeprefix("AssertionError: ")
+    tag = _TAG.match(line)
+    strength = tag["strength"] if tag else ("" if r["outcome"] == "ERROR" else r.get("strength", ""))
+    rules = tag["rules"].split() if tag else []
+    text = line[tag.end():] if tag else line
+    key = f"{r['outcome']}|{' '.join(rules)}|{strength}|{generalise(without_context(text)).strip()}"
+    limit = _LIMIT.search(text)
+    return key, (shorten(text) + (f" (limit {limit[1]})" if limit else ""))[:300], strength, rules
+
+
+def _bus_causes(r: dict[str, Any]) -> list[dict[str, Any]]:
+    """The test's bus-rule problems: as recorded, or read back from its message (older records)."""
+    if r.get("bus_causes"):
+        return r["bus_causes"]
+    lines = (r.get("message") or "").splitlines()
+    if not lines or not lines[0].startswith("[bus rules"):
+        return []
+    found = []
+    for n, line in enumerate(lines):
+        if m := _QUOTED.match(line):
+            frames = tuple(f.strip() for f in lines[n + 1:n + 3] if f.startswith("    "))
+            found.append(Violation(tuple(m["rules"].split()), m["strength"], float(m["t"]),
+                                   int(m["node"]) if m["node"] else None, "", m["what"], frames))
+    return violation_causes(found)
+
+
+def groups(results: list) -> list[Group]:
+    """The run's FAILs and ERRORs grouped by cause, the first to read first."""
+    found: dict[str, Group] = {}
+    for r in map(_record, results):
+        if r.get("outcome") not in _OUTCOMES:
+            continue
+        traces = r.get("traces") or {}
+        own = _own_cause(r)
+        if own is not None:
+            key, what, strength, rules = own
+            g = found.setdefault(key, Group(key, r["outcome"], strength, rules, what, r.get("message", ""),
+                                            r["nodeid"], traces))
+            g.tests.append(r["nodeid"])
+            g.occurrences += 1
+        for c in _bus_causes(r) if r["outcome"] == "FAIL" else []:
+            key = "bus|" + c["key"]
+            g = found.setdefault(key, Group(key, "FAIL", c["strength"], list(c["rules"]), c["what"], c["first"],
+                                            r["nodeid"], traces))
+            g.rules = list(dict.fromkeys(g.rules + list(c["rules"])))
+            if r["nodeid"] not in g.tests:
+                g.tests.append(r["nodeid"])
+            g.occurrences += c.get("count", 1)
+    order = list(found)
+    return sorted(found.values(), key=lambda g: (_OUTCOMES.index(g.outcome),
+                                                 STRENGTH_ORDER.index(g.strength) if g.strength in STRENGTH_ORDER else 9,
+                                                 -len(g.tests), order.index(g.key)))
+
+
+def summary_lines(results: list, *, shown: int = 20, names: int = 3) -> list[str]:
+    """The grouped failures for summary.txt and the console: one block per cause."""
+    gs = groups(results)
+    if not gs:
+        return []
+    tests = {t for g in gs for t in g.tests}
+    lines = [f"failures by cause: {len(gs)} distinct, in {len(tests)} tests (SHALL first; the tests of each below it)"]
+    for n, g in enumerate(gs[:shown], start=1):
+        lines.append(f"{n:>3}. [{g.outcome} {g.strength}]".replace(" ]", "]") + f" {g.headline}")
+        trace = next(iter(g.traces.values()), None)
+        lines.append(f"       first: {g.first_test}" + (f" (trace {trace})" if trace else ""))
+        more = len(g.tests) - names
+        lines.append("       tests: " + ", ".join(t.split("::", 1)[-1] for t in g.tests[:names])
+                     + (f" ... and {more} more" if more > 0 else ""))
+    if len(gs) > shown:
+        lines.append(f"  ... {len(gs) - shown} more causes: see report.html")
+    return lines

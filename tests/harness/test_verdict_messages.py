@@ -1,0 +1,126 @@
+"""Every limit judged, every message about the DUT (issue #12, item 3): a test evaluates all of its
+measurements before it fails, its message leads with the strongest broken requirement and lists the
+others, says what the DUT did (never a fixture repr), and a "harness:" assertion is an ERROR of the
+suite, never the DUT's FAIL. Tried in real ``ckesc run`` / pytest processes against the emulator."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from ckesc.harness.verdict import Record
+
+CKESC = [sys.executable, "-m", "ckesc"]
+
+
+def _results(reports: Path) -> dict[str, dict]:
+    run = next(p for p in reports.iterdir() if p.is_dir() and not p.is_symlink())
+    return {r["nodeid"]: r for r in json.loads((run / "results.json").read_text())["results"]}
+
+
+def test_a_failed_limit_does_not_stop_the_test_and_the_shall_leads():
+    rec = Record()
+    rec.measure("answer end after the request", 80.0, limit=4.0, unit="ms", requirement="R2", strength="READING")
+    rec.measure("answer delay", 80.0, limit=64.0, unit="ms", requirement="4.4.2-4")
+    rec.measure("answer start", 3.0, limit=2.0, op=">=", unit="ms", requirement="R2", strength="READING")
+    assert [m.verdict for m in rec.measurements] == ["FAIL", "FAIL", "PASS"]
+    text = rec.failure_message()
+    head, *rest = text.splitlines()
+    assert head.startswith("[4.4.2-4 SHALL] answer delay = 80ms (limit <= 64ms")
+    assert rest[0] == "also broken (1):" and rest[1].startswith("- [R2 READING] answer end after the request = 80ms")
+    # the test's own failed assert is one more broken requirement, placed by its strength
+    mixed = rec.failure_message("[F4 READING] transfer id 1, the request's is 0", "READING")
+    assert mixed.splitlines()[0].startswith("[4.4.2-4 SHALL]") and "- [F4 READING] transfer id 1" in mixed
+    assert Record().failure_message() == ""
+
+
+_SUITE = '''
+import pytest
+from dataclasses import dataclass
+
+from ckesc.harness.verdict import Inconclusive
+
+SECTION = "4.4.2"
+
+
+@dataclass
+class Traffic:
+    node: int
+    frames: tuple
+
+
+@pytest.mark.requirement("4.4.2-4")
+def test_harness_problem(dut):
+    assert False, "harness: the throttle stream sent nothing"
+
+
+@pytest.mark.requirement("R2", "4.4.2-4")
+def test_all_limits(dut):
+    dut.record.measure("answer end after the request", 80.2, limit=4, unit="ms", requirement="R2", strength="READING")
+    dut.record.measure("answer delay", 80.2, limit=64, unit="ms", requirement="4.4.2-4")
+
+
+@pytest.mark.requirement("4.4.2-4")
+def test_failed_then_inconclusive(dut):
+    dut.record.measure("answer delay", 80.2, limit=64, unit="ms", requirement="4.4.2-4")
+    raise Inconclusive("power cycle not proven")
+
+
+@pytest.mark.requirement("F4")
+def test_reading_assert(dut):
+    traffic = Traffic(node=1, frames=(1, 2, 3))
+    assert traffic.node == 2, "transfer id 1, the request's is 0"
+'''
+
+
+def test_messages_say_what_the_dut_did_and_a_harness_problem_is_an_error(tmp_path):
+    (tmp_path / "conformance").mkdir()
+    (tmp_path / "conformance" / "__init__.py").write_text("")
+    (tmp_path / "conformance" / "test_messages.py").write_text(_SUITE)
+    done = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "--rootdir", str(tmp_path),
+                           "conformance/test_messages.py", "--ckesc-reports", "reports", "--ckesc-summary"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    res = _results(tmp_path / "reports")
+    harness = res["conformance/test_messages.py::test_harness_problem"]
+    assert harness["outcome"] == "ERROR" and harness["message"] == "harness: the throttle stream sent nothing"
+    limits = res["conformance/test_messages.py::test_all_limits"]
+    assert limits["outcome"] == "FAIL"
+    assert limits["message"].startswith("[4.4.2-4 SHALL] answer delay = 80.2ms (limit <= 64ms")
+    assert "- [R2 READING] answer end after the request = 80.2ms (limit <= 4ms" in limits["message"]
+    assert [limits["properties"][f"measurement.{n}.verdict"] for n in (0, 1)] == ["FAIL", "FAIL"]
+    late = res["conformance/test_messages.py::test_failed_then_inconclusive"]
+    assert late["outcome"] == "FAIL" and late["message"].startswith("[4.4.2-4 SHALL] answer delay = 80.2ms"), late
+    reading = res["conformance/test_messages.py::test_reading_assert"]
+    assert reading["outcome"] == "FAIL"
+    assert reading["message"].startswith("[F4 READING] transfer id 1, the request's is 0"), reading["message"]
+    assert "Traffic(" not in reading["message"]
+    summary = done.stdout.split("CKESC conformance summary")[-1]  # the console's closing summary
+    assert "[FAIL READING] F4: transfer id 1, the request's is 0 - in 1 test" in summary
+    assert "Traffic(" not in summary
+    assert "[ERROR] harness: the throttle stream sent nothing - in 1 test" in summary
+    assert summary.index("[FAIL SHALL]") < summary.index("[FAIL READING]") < summary.index("[ERROR]")
+
+
+def _run(tmp_path: Path, fault: str, selection: str) -> dict[str, dict]:
+    subprocess.run([*CKESC, "run", "-q", "--reports", str(tmp_path), "--trace-format", "none",
+                    "--emulator-faults", fault, "--", "-k", selection],
+                   capture_output=True, text=True, timeout=600)
+    return _results(tmp_path)
+
+
+def test_an_answer_after_80_ms_breaks_the_shall_bound_and_its_slot(tmp_path):
+    res = _run(tmp_path, "answer_late", "test_answer_is_command_zero_in_the_node_slot")
+    assert res and all(r["outcome"] == "FAIL" for r in res.values())
+    for r in res.values():
+        head = r["message"].splitlines()[0]
+        assert head.startswith("[4.4.2-4 SHALL] MSG Control node 1: answer delay = 80."), r["message"]
+        assert "- [R2 READING] MSG Control node 1: answer end after the request = 80." in r["message"]
+
+
+def test_a_set_baud_that_takes_effect_at_once_says_so(tmp_path):
+    res = _run(tmp_path, "set_baud_immediate", "test_new_rate_only_after_the_next_power_up and code2")
+    (r,) = res.values()
+    assert r["outcome"] == "FAIL"
+    assert "answered at 250000 bit/s at once; the new rate is due after the next power-up" in r["message"]
