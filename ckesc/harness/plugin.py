@@ -716,7 +716,16 @@ def _judged(item: pytest.Item, rep: pytest.TestReport, call: pytest.CallInfo, id
     item.stash[_MESSAGE] = message
     trace = rep.longrepr
     rep.outcome = "failed"
-    rep.longrepr = message if trace is None or not rep.failed else f"{message}\n\n{trace}"
+    crash = getattr(trace, "reprcrash", None) if rep.failed else None
+    if crash is not None and hasattr(crash, "message"):
+        # keep pytest's traceback for the FAILURES section, and make its one-line crash message ours: the
+        # short test summary (whole on CI, where pytest does not trim it) then says what the DUT did
+        crash.message = message
+        rep.sections.append(("ckesc verdict", message))
+    elif isinstance(trace, tuple):  # a skip (INCONCLUSIVE) raised after a failed limit: the FAIL, then why it stopped
+        rep.longrepr = f"{message}\nthen: {trace[2]}"
+    else:
+        rep.longrepr = message if trace is None or not rep.failed else f"{message}\n\n{trace}"
 
 
 def _stop(item: pytest.Item, why: str) -> None:
