@@ -15,10 +15,11 @@ with ``reports/latest`` pointing at it, and exits 0 only when no test FAILed or 
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import re
 import sys
 from pathlib import Path
+
+from .protocol.requirements import section_key
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ABORTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
@@ -27,9 +28,10 @@ def _suite_root() -> str:
     """The directory holding the ``conformance`` package (a checkout, or site-packages of a wheel install):
     pytest's rootdir, so that test ids read ``conformance/test_s4_4_22_set_freq.py::...`` however the
     suite was installed and wherever it is run from."""
-    spec = importlib.util.find_spec("conformance")
-    locations = list(spec.submodule_search_locations or []) if spec else []
-    return str(Path(locations[0]).resolve().parent) if locations else "."
+    from .harness.plugin import conformance_dir  # pytest with it: only when a run is about to start
+
+    where = conformance_dir()
+    return str(where.parent) if where else "."
 
 
 class SelectionError(ValueError):
@@ -68,12 +70,13 @@ def split_selection(tokens: list[str]) -> tuple[list[str], list[str]]:
 
 
 def section_modules(where: Path) -> dict[str, Path]:
-    """Section number ("4.4.22", "4.1", "attachment") -> its test module, from the module names."""
+    """Section number ("4.4.22", "4.1", "attachment") -> its test module, from the module names, in the
+    document's order."""
     out: dict[str, Path] = {}
     for path in where.glob("test_*.py"):
         m = re.match(r"test_s(\d+(?:_\d+)*)_", path.name)
         out[m.group(1).replace("_", ".") if m else path.stem.removeprefix("test_").split("_")[0]] = path
-    return out
+    return dict(sorted(out.items(), key=lambda kv: section_key(kv[0])))
 
 
 def resolve_selection(selectors: list[str], cwd: Path | None = None) -> list[str]:
@@ -91,9 +94,8 @@ def resolve_selection(selectors: list[str], cwd: Path | None = None) -> list[str
         elif head in {p.stem for p in modules.values()}:
             path = where / f"{head}.py"
         elif _SECTION.match(head) and ".py" not in head:
-            known = sorted(modules, key=lambda k: [int(x) if x.isdigit() else 1 << 30 for x in k.split(".")])
             what = "test module" if head.startswith("test_") else "section"
-            raise SelectionError(f"no conformance {what} {head!r} (sections: {', '.join(known)})")
+            raise SelectionError(f"no conformance {what} {head!r} (sections: {', '.join(modules)})")
         else:
             given = Path(head).expanduser()
             tries = [given] if given.is_absolute() else [cwd / given, root / given]

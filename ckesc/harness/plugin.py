@@ -84,7 +84,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     g.addoption("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")
     g.addoption("--emulator-seed", type=int, default=0, help="emulator: random seed")
     g.addoption("--emulator-option", action="append", default=[], metavar="KEY=VALUE",
-                help="emulator: a setting of every emulated ESC (repeatable): " + ", ".join(EMULATOR_OPTIONS))
+                help="emulator: a setting of every emulated ESC (repeatable): " + ", ".join(preflight.EMULATOR_OPTIONS))
     g.addoption("--ckesc-reports", default=None, metavar="DIR",
                 help="write JUnit, JSON and text reports under DIR/<timestamp>/ (ckesc run sets reports/)")
     g.addoption("--ckesc-summary", action="store_true", default=False,
@@ -178,7 +178,8 @@ def item_requirements(item: pytest.Item) -> list[str]:
     return list(dict.fromkeys(ids))
 
 
-def _conformance_dir() -> Path | None:
+def conformance_dir() -> Path | None:
+    """The installed ``conformance`` package's directory (a checkout, or site-packages of a wheel)."""
     spec = importlib.util.find_spec(CONFORMANCE_PACKAGE)
     locations = list(spec.submodule_search_locations or []) if spec else []
     return Path(locations[0]).resolve() if locations else None
@@ -187,7 +188,7 @@ def _conformance_dir() -> Path | None:
 def targets_conformance(config: pytest.Config) -> bool:
     """Whether the command line names the conformance suites (``--pyargs conformance[.module]``, or a
     path inside the package), so that set-up mistakes are found before pytest even collects."""
-    where = _conformance_dir()
+    where = conformance_dir()
     for arg in config.args:
         head = arg.split("::")[0]
         if config.option.pyargs and head.split(".")[0] == CONFORMANCE_PACKAGE:
@@ -204,7 +205,7 @@ def _preflight(config: pytest.Config) -> None:
         return
     st.preflight_done = True
     try:
-        preflight.run(config.getoption, bus_kwargs=lambda: _bus_kwargs(config))
+        st.profile = preflight.run(config.getoption, bus_kwargs=lambda: _bus_kwargs(config))
     except preflight.PreflightError as exc:
         raise pytest.UsageError(f"preflight: {exc}") from None
 
@@ -291,48 +292,27 @@ class _null:
         return False
 
 
-#: What --emulator-option sets in every emulated ESC (ckesc.emulator.model.EscConfig), and how it is read
-EMULATOR_OPTIONS = {"boot_time": "S (power-on to the first answer)", "report_delay": "S (boot to the first report)",
-                    "report_timer": "restart|grid (R9a)"}
-
-
 def emulator_options(config: pytest.Config) -> dict[str, Any]:
-    """--emulator-option KEY=VALUE, checked: {EscConfig field: value}."""
-    out: dict[str, Any] = {}
-    for kv in config.getoption("emulator_option"):
-        key, sep, value = kv.partition("=")
-        if not sep or key not in EMULATOR_OPTIONS:
-            raise pytest.UsageError(f"--emulator-option takes KEY=VALUE with KEY one of {', '.join(EMULATOR_OPTIONS)}; "
-                                    f"got {kv!r}")
-        if key == "report_timer":
-            out[key] = value
-            continue
-        try:
-            out[key] = float(value)
-        except ValueError:
-            raise pytest.UsageError(f"--emulator-option {key}: seconds, got {value!r}") from None
-        if out[key] < 0:
-            raise pytest.UsageError(f"--emulator-option {key}: seconds, 0 or more, got {value!r}")
-    return out
+    """--emulator-option KEY=VALUE, checked (preflight): {EscConfig field: value}."""
+    return preflight.emulator_options(config.getoption("emulator_option"))
+
+
+def emulator_faults(config: pytest.Config) -> list[str]:
+    return preflight.fault_names(config.getoption("emulator_faults"))
 
 
 def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
     dut_kind = config.getoption("dut")
-    faults = [f for f in config.getoption("emulator_faults").split(",") if f]
-    nodes = [int(n, 0) for n in (config.getoption("nodes") or "1").split(",")]
+    faults = emulator_faults(config)
+    nodes = preflight.node_list(config.getoption("nodes") or "1")
     options = emulator_options(config)
-    if options and dut_kind != "emulator":
-        raise pytest.UsageError("--emulator-option sets the emulator's ESCs: it needs --dut emulator")
     if dut_kind == "emulator":
         if config.getoption("lane") == "realtime":
             return RealtimeEmulatorLane(nodes=nodes, faults=faults, temp_flash=True, esc_options=options,
                                         seed=config.getoption("emulator_seed"), timing_error=max(profile.error_s, 0.002))
         # in one process the emulated ESCs keep their flash contents across power cycles: no file needed
-        try:
-            lane = SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"),
-                           esc_config={"boot_time": 0.25, **options})
-        except ValueError as exc:  # a report_timer the model does not know
-            raise pytest.UsageError(f"--emulator-option: {exc}") from None
+        lane = SimLane(nodes=nodes, faults=faults, seed=config.getoption("emulator_seed"),
+                       esc_config={"boot_time": 0.25, **options})
         # exact timestamps; a profile may still state a bench's error (0 for the emulator's own): margins below it
         # are then INCONCLUSIVE as on that bench, e.g. to see what a 2 ms bench can tell
         lane.timing_error = profile.error_s
@@ -354,8 +334,7 @@ def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
 def ckesc_lane(request: pytest.FixtureRequest):
     config = request.config
     st = state(config)
-    profile = DutProfile.load(config.getoption("profile") or ("emulator" if config.getoption("dut") == "emulator"
-                                                              else "ckesc-generic"))
+    profile = st.profile or preflight.profile(config.getoption)  # loaded by the preflight, before any test
     lane = make_lane(config, profile)
     st.lane, st.profile = lane, profile
     _trace_lane(config, lane, "")
@@ -482,8 +461,7 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
             lane: Lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=ckesc_lane.timing_error,
                                               esc_options=emulator_options(config))
         else:
-            faults = [f for f in config.getoption("emulator_faults").split(",") if f]
-            lane = SimLane(nodes=MULTI_NODES, faults=faults, seed=config.getoption("emulator_seed"),
+            lane = SimLane(nodes=MULTI_NODES, faults=emulator_faults(config), seed=config.getoption("emulator_seed"),
                            esc_config={"boot_time": 0.25, **emulator_options(config)})
             lane.timing_error = ckesc_lane.timing_error  # the profile's stated error, as on the DUT's lane
         _trace_lane(config, lane, "bench")
@@ -863,7 +841,7 @@ def _completeness(session: pytest.Session, exitstatus: int) -> tuple[str | None,
                 "reason": why_not} for it in st.selected if it.nodeid not in st.results]
     not_run += [{"nodeid": n, "name": n.split("::")[-1], "section": "", "requirements": [], "reason": "not run: deselected"}
                 for n in st.deselected]
-    where = _conformance_dir()
+    where = conformance_dir()
     suite = {p.stem for p in where.glob("test_*.py")} if where else set()
     ran = {_module_name(it) for it in st.selected} | {_module_name(n) for n in st.deselected}
     left_out = sorted(suite - ran)

@@ -14,6 +14,7 @@ import errno
 import os
 import shlex
 import shutil
+import socket
 import sys
 import tempfile
 from collections.abc import Callable
@@ -21,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from ..emulator.faults import FAULTS
+from ..emulator.model import REPORT_TIMERS
 from ..protocol.ids import ESC_NODE_IDS
 from .profile import DutProfile, ProfileError
 
@@ -67,6 +69,33 @@ def fault_names(text: str) -> list[str]:
     return names
 
 
+#: What --emulator-option sets in every emulated ESC (ckesc.emulator.model.EscConfig), and how it is read
+EMULATOR_OPTIONS = {"boot_time": "S (power-on to the first answer)", "report_delay": "S (boot to the first report)",
+                    "report_timer": "restart|grid (R9a)"}
+
+
+def emulator_options(items: list[str]) -> dict[str, Any]:
+    """--emulator-option KEY=VALUE, checked: {EscConfig field: value}."""
+    out: dict[str, Any] = {}
+    for kv in items:
+        key, sep, value = kv.partition("=")
+        if not sep or key not in EMULATOR_OPTIONS:
+            raise PreflightError(f"--emulator-option takes KEY=VALUE with KEY one of {', '.join(EMULATOR_OPTIONS)}; "
+                                 f"got {kv!r}")
+        if key == "report_timer":
+            if value not in REPORT_TIMERS:
+                raise PreflightError(f"--emulator-option: report_timer {value!r}: one of {', '.join(REPORT_TIMERS)}")
+            out[key] = value
+            continue
+        try:
+            out[key] = float(value)
+        except ValueError:
+            raise PreflightError(f"--emulator-option {key}: seconds, got {value!r}") from None
+        if out[key] < 0:
+            raise PreflightError(f"--emulator-option {key}: seconds, 0 or more, got {value!r}")
+    return out
+
+
 def reports_writable(base: str | os.PathLike) -> None:
     """``base`` is a directory this user can write into (made if missing; a file is written to it and
     removed again, since permission bits alone do not tell about a read-only or special file system)."""
@@ -100,6 +129,7 @@ def command(cmd: str | None, option: str) -> None:
 
 
 def profile(get: Option) -> DutProfile:
+    """The run's DUT profile: ``--profile``, else the emulator's or the generic one."""
     name = get("profile") or ("emulator" if get("dut") == "emulator" else "ckesc-generic")
     try:
         return DutProfile.load(name)
@@ -118,7 +148,7 @@ def open_bus(kwargs: dict[str, Any]) -> None:
         cause = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         hint = ""
         if getattr(exc, "errno", None) == errno.EAFNOSUPPORT or "Address family not supported" in str(exc) or (
-                kwargs.get("interface") == "socketcan" and not hasattr(__import__("socket"), "AF_CAN")):
+                kwargs.get("interface") == "socketcan" and not hasattr(socket, "AF_CAN")):
             hint = (" - this kernel has no SocketCAN (AF_CAN): run the suite on a Linux host with can0/vcan0, or in "
                     "the VM lane (tools/vm-lane)")
         elif isinstance(exc, can.CanInterfaceNotImplementedError) or "Unknown interface" in str(exc):
@@ -144,6 +174,10 @@ def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None) 
         if dut != "emulator":
             raise PreflightError("--emulator-faults switches faults of the emulator: it needs --dut emulator")
         fault_names(get("emulator_faults"))
+    if get("emulator_option"):
+        if dut != "emulator":
+            raise PreflightError("--emulator-option sets the emulator's ESCs: it needs --dut emulator")
+        emulator_options(get("emulator_option"))
     prof = profile(get)
     if get("ckesc_reports"):
         reports_writable(get("ckesc_reports"))
