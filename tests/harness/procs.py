@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -17,3 +18,38 @@ def env(tmp: Path) -> dict[str, str]:
     for key in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
         out.pop(key, None)
     return out
+
+
+class Emulator:
+    """``ckesc emulate`` (node 1, and ``args``) in its own process, serving socketcand and its control channel
+    on 127.0.0.1: ``port`` (socketcand) and ``control``. A context manager; :meth:`close` ends it."""
+
+    def __init__(self, tmp: Path, *args: str) -> None:
+        self.proc = subprocess.Popen([*CKESC, "emulate", "--nodes", "1", "--socketcand", "0", "--control", "0", *args],
+                                     cwd=tmp, env=env(tmp), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        ports: dict[str, int] = {}
+        assert self.proc.stdout is not None
+        while len(ports) < 2:
+            line = self.proc.stdout.readline()
+            assert line, self.proc.stderr.read() if self.proc.stderr else "emulator died"
+            kind, _, addr = line.strip().partition(" ")
+            if kind in ("socketcand", "control"):
+                ports[kind] = int(addr.rsplit(":", 1)[1])
+        self.port, self.control = ports["socketcand"], ports["control"]
+
+    def close(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(timeout=30)
+        for pipe in (self.proc.stdout, self.proc.stderr):
+            if pipe is not None:
+                pipe.close()
+
+    def __enter__(self) -> Emulator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -19,7 +19,7 @@ from pathlib import Path
 import can
 import flaky_bus
 import pytest
-from procs import CKESC
+from procs import CKESC, Emulator
 from procs import env as _env
 
 from ckesc.emulator.bench import Bench
@@ -117,17 +117,8 @@ def _run(tmp: Path, port: int, *config: str) -> tuple[subprocess.CompletedProces
 
 @pytest.fixture
 def emulator(tmp_path):
-    proc = subprocess.Popen([*CKESC, "emulate", "--nodes", "1", "--socketcand", "0"], cwd=tmp_path, env=_env(tmp_path),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert proc.stdout is not None
-    line = proc.stdout.readline()
-    assert line.startswith("socketcand "), proc.stderr.read() if proc.stderr else line
-    yield int(line.split(":")[-1])
-    proc.terminate()
-    proc.wait(timeout=30)
-    for pipe in (proc.stdout, proc.stderr):
-        if pipe is not None:
-            pipe.close()
+    with Emulator(tmp_path) as emu:
+        yield emu.port
 
 
 def test_ckesc_run_errors_the_test_under_a_bus_fault_and_goes_on(tmp_path, emulator):

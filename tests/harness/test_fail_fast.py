@@ -21,7 +21,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from procs import CKESC
+from procs import CKESC, Emulator
 from procs import env as _env
 
 
@@ -57,6 +57,10 @@ SETUP_MISTAKES = [
     pytest.param(["--nodes", "0"], ["node id 0", "1..125"], id="nodes-0"),
     pytest.param(["--nodes", "1,1"], ["twice"], id="nodes-duplicate"),
     pytest.param(["--emulator-faults", "report_interval_wrng"], ["unknown fault", "report_interval_wrong"], id="fault-name"),
+    pytest.param(["--emulator-option", "report_timer=sometimes"], ["report_timer 'sometimes'", "restart, grid"],
+                 id="emulator-option-value"),
+    pytest.param(["--emulator-option", "boot_tim=1"], ["--emulator-option takes KEY=VALUE", "boot_time"],
+                 id="emulator-option-key"),
     pytest.param(["--profile", "no-such-profile"], ["no DUT profile 'no-such-profile'", "ckesc-generic"], id="profile-missing"),
     *[pytest.param(["--profile", name], list(expect), id=f"profile-{name}") for name, (_, *expect) in BAD_PROFILES.items()],
     pytest.param(["--dut", "bus", "--can-interface", "no-such-adapter"], ["Unknown interface", "socketcan"], id="interface"),
@@ -156,25 +160,11 @@ def test_a_bus_with_no_esc_aborts_at_once_with_exit_3_and_says_so_everywhere(tmp
     assert 'class="v v-ABORTED"' in header and 'class="v v-PASS"' not in header and "role=alert" in header
 
 
-def _emulator(tmp: Path, *args: str) -> tuple[subprocess.Popen, int, int]:
-    """``ckesc emulate`` (one ESC, node 1, with ``args``) behind socketcand: (process, CAN port, control port)."""
-    proc = subprocess.Popen([*CKESC, "emulate", "--nodes", "1", "--socketcand", "0", "--control", "0", *args], cwd=tmp,
-                            env=_env(tmp), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    ports: dict[str, int] = {}
-    assert proc.stdout is not None
-    while len(ports) < 2:
-        line = proc.stdout.readline()
-        assert line, proc.stderr.read() if proc.stderr else "emulator died"
-        kind, _, addr = line.strip().partition(" ")
-        if kind in ("socketcand", "control"):
-            ports[kind] = int(addr.rsplit(":", 1)[1])
-    return proc, ports["socketcand"], ports["control"]
-
-
 def test_a_dut_that_loses_power_mid_run_aborts_the_rest(tmp_path):
     """A bench whose ESC goes dark: ``ckesc emulate`` behind socketcand as a third-party DUT, its power
     switched off while the suite runs; the run aborts after a few silent tests, not 300 ERRORs."""
-    emu, can_port, control = _emulator(tmp_path)
+    emu = Emulator(tmp_path)
+    can_port, control = emu.port, emu.control
     reports = tmp_path / "reports"
     try:
         run = subprocess.Popen([*CKESC, "run", "--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0",
@@ -192,8 +182,7 @@ def test_a_dut_that_loses_power_mid_run_aborts_the_rest(tmp_path):
         rest, _ = run.communicate(timeout=300)
         out.append(rest)
     finally:
-        emu.terminate()
-        emu.wait(timeout=30)
+        emu.close()
     text = "".join(out)
     assert run.returncode == 3, text
     doc, junit, summary, _ = _read_run(reports)
@@ -225,14 +214,14 @@ def test_no_test_starts_before_the_dut_reports(tmp_path):
     """An ESC that answers at once but reports only 6 s after power-on (``--report-delay``), just powered on
     when the run starts: discovery finds it at once, and the first tests (payloads of MSG1 and MSG3) would
     find no report; the run waits for its first reports (the profile says it boots in 7 s) and they pass."""
-    emu, can_port, control = _emulator(tmp_path, "--report-delay", "6", "--unpowered")
+    emu = Emulator(tmp_path, "--report-delay", "6", "--unpowered")
+    can_port, control = emu.port, emu.control
     try:
         subprocess.run([*CKESC, "control", "--port", str(control), "power", "on"], check=True, capture_output=True,
                        timeout=30, env=_env(tmp_path))
         done = _bus_run(tmp_path, can_port, "--", "-k", "msg1_is_six_bytes or msg3_is_reported_unasked", boot_s=7.0)
     finally:
-        emu.terminate()
-        emu.wait(timeout=30)
+        emu.close()
     doc, _, summary, _ = _read_run(tmp_path / "reports")
     assert done.returncode == 0, done.stdout[-3000:]
     assert [r["outcome"] for r in doc["results"]] == ["PASS", "PASS"], summary
@@ -243,12 +232,12 @@ def test_no_test_starts_before_the_dut_reports(tmp_path):
 def test_a_dut_that_answers_but_never_reports_aborts_the_run(tmp_path):
     """An ESC that answers but sends no report (not even after MSG Control 0xAAAAAAAA) within its profile's boot
     time and one longest report interval: the run aborts (exit 3) before any test, saying why."""
-    emu, can_port, _ = _emulator(tmp_path, "--report-delay", "60")
+    emu = Emulator(tmp_path, "--report-delay", "60")
+    can_port = emu.port
     try:
         done = _bus_run(tmp_path, can_port, "--", "-k", "msg1_is_six_bytes", boot_s=0.5)
     finally:
-        emu.terminate()
-        emu.wait(timeout=30)
+        emu.close()
     assert done.returncode == 3, done.stdout[-3000:]
     doc, _, summary, _ = _read_run(tmp_path / "reports")
     assert doc["results"] == [] and "ABORTED" in summary
@@ -259,14 +248,14 @@ def test_after_a_power_up_the_next_step_waits_for_the_reports(tmp_path):
     """A power cycle mid-test on a DUT that reports 1.5 s after power-on, with a profile boot time of 1.2 s: the
     harness waits for the reports (up to boot time + one longest interval), and a test that reads MSG1 after a
     power cycle passes; the wait is recorded."""
-    emu, can_port, control = _emulator(tmp_path, "--report-delay", "1.25")
+    emu = Emulator(tmp_path, "--report-delay", "1.25")
+    can_port, control = emu.port, emu.control
     power = f"{sys.executable} -m ckesc control --port {control} power"
     try:
         done = _bus_run(tmp_path, can_port, "--power", "command", "--power-off-cmd", f"{power} off", "--power-on-cmd",
                         f"{power} on", "--", "-k", "direction_reported_at_power_up", boot_s=1.2)
     finally:
-        emu.terminate()
-        emu.wait(timeout=30)
+        emu.close()
     doc, _, summary, _ = _read_run(tmp_path / "reports")
     assert done.returncode == 0, done.stdout[-3000:]
     assert [r["outcome"] for r in doc["results"]] == ["PASS"], summary
@@ -307,7 +296,8 @@ def test_stagger_on_a_real_time_bench(tmp_path, fault, power, verdict):
     """The same in real time, ``ckesc emulate`` behind socketcand as the DUT on a bus, a 2 ms profile: with power
     control the correct ESC passes and the one answering at once fails; without it (no Set ID window, R11) the
     test says INCONCLUSIVE and why."""
-    emu, can_port, control = _emulator(tmp_path, *(["--faults", fault] if fault else []))
+    emu = Emulator(tmp_path, *(["--faults", fault] if fault else []))
+    can_port, control = emu.port, emu.control
     cmd = f"{sys.executable} -m ckesc control --port {control} power"
     args = ["--power", "command", "--power-off-cmd", f"{cmd} off", "--power-on-cmd", f"{cmd} on"] if power else []
     try:
@@ -316,8 +306,7 @@ def test_stagger_on_a_real_time_bench(tmp_path, fault, power, verdict):
         after = subprocess.run([*CKESC, "control", "--port", str(control), "status"], capture_output=True, text=True,
                                timeout=30, env=_env(tmp_path))
     finally:
-        emu.terminate()
-        emu.wait(timeout=30)
+        emu.close()
     (r,) = doc["results"]
     assert r["outcome"] == verdict, r
     if power:

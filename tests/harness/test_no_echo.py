@@ -23,7 +23,7 @@ from pathlib import Path
 
 import can
 import pytest
-from procs import CKESC
+from procs import CKESC, Emulator
 from procs import env as _env
 
 from ckesc import harness
@@ -106,33 +106,6 @@ def test_without_echo_the_host_frames_are_handed_out_in_time_order_and_rules_lea
 
 
 # ------------------------------------------------------------------------------------------ ckesc run
-class Emulator:
-    """``ckesc emulate`` in its own process, serving socketcand on 127.0.0.1."""
-
-    def __init__(self, tmp: Path, *args: str) -> None:
-        self.proc = subprocess.Popen([*CKESC, "emulate", "--nodes", "1", "--socketcand", "0", *args], cwd=tmp,
-                                     env=_env(tmp), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        assert self.proc.stdout is not None
-        while True:
-            line = self.proc.stdout.readline()
-            assert line, self.proc.stderr.read() if self.proc.stderr else "emulator died"
-            kind, _, addr = line.strip().partition(" ")
-            if kind == "socketcand":
-                self.port = int(addr.rsplit(":", 1)[1])
-                return
-
-    def close(self) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(timeout=30)
-        for pipe in (self.proc.stdout, self.proc.stderr):
-            if pipe is not None:
-                pipe.close()
-
-
 #: the sections that time the host's own frames: comm loss (4.4.4), answer delays (4.4.2, 4.4.3) and report
 #: intervals (4.4.22)
 SECTIONS = "comm_loss or test_s4_4_2_msg_control or test_s4_4_3_get_esc_id or test_s4_4_22_set_freq"
