@@ -8,6 +8,7 @@ moved to an unexpected id is still found.
 
 import pytest
 
+from ckesc.harness.epochs import AFTER, INSIDE
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
@@ -30,7 +31,6 @@ ILLEGAL_IDS = sorted({c.value for c in illegal_cases(SPEC) if c.field == "node_i
 TARGETS = sorted({c.value for c in field_cases(SPEC, NODE_FIELD) if c.legal and c.value != DEFAULT_ESC_NODE_ID}
                  | {(ID_MIN + ID_MAX) // 2, ID_MAX - 1})
 ARDUPILOT_NODE = 10  # F6: the node id ArduPilot sends from (INTERPRETATIONS.md), not a protocol constant
-MARGIN_S = 1.0  # how far inside / outside the 120 s window the window tests send (lane time)
 WINDOW_TEST_TIMEOUT_S = int(3 * cat.CONFIG_WINDOW_S)  # they wait the window out: in real time, minutes
 REPORT_NAMES = frozenset(s.name for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
 REPORT_IDS = frozenset(cat.spec(name).type_id for name in REPORT_NAMES)
@@ -267,30 +267,29 @@ def test_observe_requests_from_a_non_zero_host(dut, original):
 
 @pytest.mark.requirement("R11")
 @pytest.mark.power_cycle
+@pytest.mark.window(INSIDE)
 @pytest.mark.timeout(WINDOW_TEST_TIMEOUT_S)
 def test_set_id_just_inside_the_window_is_obeyed(dut, original):
     """Sent a second before 120 s after power-up, Set ID takes effect."""
     node, channel = original
-    t0 = dut.now()
-    _open_window(dut)
-    power_on_earliest = t0 + dut.profile.off_s  # the DUT was switched on no earlier than this
-    dut.read_until(power_on_earliest + cat.CONFIG_WINDOW_S - MARGIN_S)
+    epoch = dut.at_window_moment(INSIDE)
     target = _other_id(node)
     ex = dut.request("set_id", {"node_id": target, "throttle_channel": channel})
     dut.node_id = target
-    dut.record.observe("sent at (s after power-on, at most)", round(ex.sent.time - power_on_earliest, 3))
+    dut.record.observe("sent at (s after power-on, at most)", round(ex.sent.time - epoch.on_earliest, 3))
     assert esc_ids(dut) == [(target, channel)], f"Set ID inside the window not obeyed: GET_ESC_ID answers {esc_ids(dut)}"
 
 
 @pytest.mark.requirement("R11", "R10-answer")
 @pytest.mark.power_cycle
+@pytest.mark.window(AFTER)
 @pytest.mark.timeout(WINDOW_TEST_TIMEOUT_S)
 def test_set_id_after_the_window_is_ignored(dut, original):
     """Sent a second after 120 s from power-up, Set ID changes nothing."""
     node, channel = original
-    _open_window(dut)
-    ready = dut.now()  # the DUT has answered by now: its window started no later
-    dut.read_until(ready + cat.CONFIG_WINDOW_S + MARGIN_S)
+    epoch = dut.at_window_moment(AFTER)
     ex = dut.request("set_id", {"node_id": _other_id(node), "throttle_channel": channel})
+    dut.record.observe("sent at (s after power-on, at least)", round(ex.sent.time - epoch.ready, 3))
     dut.record.observe("answer to the late Set ID", {"source": ex.response.source, **ex.response.fields} if ex.response else "none")
-    assert esc_ids(dut) == [(node, channel)], f"Set ID {cat.CONFIG_WINDOW_S + MARGIN_S:.0f} s after power-up obeyed: {esc_ids(dut)}"
+    assert esc_ids(dut) == [(node, channel)], (
+        f"Set ID {ex.sent.time - epoch.ready:.1f} s after power-up obeyed: {esc_ids(dut)}")

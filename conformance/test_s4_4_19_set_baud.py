@@ -10,6 +10,7 @@ at whichever rate the DUT answers after it.
 import pytest
 
 from ckesc.harness.dut import DutError
+from ckesc.harness.epochs import AFTER, INSIDE
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
@@ -19,7 +20,6 @@ SPEC = cat.spec("set_baud")
 RATES = cat.BAUD_RATES  # 4.4.19-T: code -> bit/s
 CODES = {rate: code for code, rate in RATES.items()}
 ILLEGAL = illegal_cases(SPEC)  # R10: codes above 6
-MARGIN_S = 1.0  # how far inside / outside the 120 s window the window tests send (lane time)
 WINDOW_TEST_TIMEOUT_S = int(3 * cat.CONFIG_WINDOW_S)  # they wait the window out: in real time, minutes
 
 
@@ -182,29 +182,28 @@ def test_illegal_code_changes_nothing(dut, rate0, case):
 
 @pytest.mark.requirement("R11", "R13")
 @pytest.mark.power_cycle
+@pytest.mark.window(INSIDE)
 @pytest.mark.timeout(WINDOW_TEST_TIMEOUT_S)
 def test_set_baud_just_inside_the_window_is_obeyed(dut, rate0):
     """Sent a second before 120 s after power-up, Set Baud takes effect at the next power-up."""
     code = _other_code(rate0)
-    t0 = dut.now()
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
-    power_on_earliest = t0 + dut.profile.off_s
-    dut.read_until(power_on_earliest + cat.CONFIG_WINDOW_S - MARGIN_S)
-    _set_baud(dut, code)
+    epoch = dut.at_window_moment(INSIDE)
+    ex = _set_baud(dut, code)
+    dut.record.observe("sent at (s after power-on, at most)", round(ex.sent.time - epoch.on_earliest, 3))
     rate = _cycle(dut, RATES[code])
     assert rate == RATES[code], f"Set Baud {code} inside the window: after a power-up the DUT answers at {rate}"
 
 
 @pytest.mark.requirement("R11", "R10-answer")
 @pytest.mark.power_cycle
+@pytest.mark.window(AFTER)
 @pytest.mark.timeout(WINDOW_TEST_TIMEOUT_S)
 def test_set_baud_after_the_window_is_ignored(dut, rate0):
     """Sent a second after 120 s from power-up, Set Baud changes nothing, after the next power-up either."""
     code = _other_code(rate0)
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
-    ready = dut.now()  # the DUT has answered by now: its window started no later
-    dut.read_until(ready + cat.CONFIG_WINDOW_S + MARGIN_S)
+    epoch = dut.at_window_moment(AFTER)
     ex = _set_baud(dut, code)
+    dut.record.observe("sent at (s after power-on, at least)", round(ex.sent.time - epoch.ready, 3))
     dut.record.observe("answer to the late Set Baud", ex.response.fields if ex.response else "none")
     rate = _cycle(dut, rate0)
     assert rate == rate0, f"Set Baud {code} after the window: after a power-up the DUT answers at {rate}, not {rate0}"

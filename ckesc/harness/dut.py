@@ -20,12 +20,15 @@ from ..protocol.frame import Frame, WireFrame, classify, frame_bits
 from ..protocol.host import Garbled, HostProtocol, Pending, Response
 from ..protocol.ids import Kind
 from ..protocol.transfer import TRANSFER_ID_MODULO
+from .epochs import WINDOW_MARGIN_S, WINDOW_REQUESTS, PowerEpoch, unusable
 from .lanes import Lane, OwnFrame
 from .profile import DutProfile
 from .verdict import Inconclusive, NotClaimed, Record
 
 #: Frames that did not decode kept per test (the latest): about 0.5 kB each
 MAX_GARBLED = 20_000
+#: type id -> name of the requests the 120 s window governs (R11): a power-up epoch records each one sent
+_WINDOW_IDS = {cat.spec(name).type_id: name for name in WINDOW_REQUESTS}
 
 
 @dataclass
@@ -188,6 +191,9 @@ class Dut:
     def send_wire(self, wire: WireFrame) -> Sent:
         msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id)
         sent = Sent(wire, self.now(), bus_clock=(self.lane.clock, self.lane.timing_error), host_clock=self.lane.host_clock)
+        kind, type_id = classify(wire.arbitration_id)[:2]
+        if kind is Kind.REQUEST and type_id in _WINDOW_IDS and self.lane.epoch is not None:
+            self.lane.epoch.config.append((_WINDOW_IDS[type_id], sent.host_time))
         self._sent.append(sent)
         if len(self._sent) > 256:
             del self._sent[:128]
@@ -379,6 +385,33 @@ class Dut:
                            f"did it come back, at {self.lane.bitrate} bit/s?")
         if before is None or after is None or after != (before + 1) & 0xFFFF:
             raise Inconclusive(f"power cycle not proven: power-up counter {before} -> {after} (241 option 2)")
+        epoch = self.lane.epoch
+        if epoch is not None and epoch.on_earliest <= on:
+            epoch.proven, epoch.counter = True, (before, after)
+            if not self.heard_from(on):  # no report came: the answer to the counter is the first sign of life
+                epoch.ready = self.now()
+
+    def at_window_moment(self, kind: str, margin: float = WINDOW_MARGIN_S) -> PowerEpoch:
+        """Wait for the moment of the 120 s Set ID / Set Baud window (R11) a window test acts at: ``margin``
+        inside its earliest end (``kind`` "inside") or ``margin`` after its latest end ("after"). The window
+        of the DUT's current power-up is used when the power-up counter proved it and nothing since can
+        have changed where it stands or what the DUT does in it (:func:`epochs.unusable`); the run-order
+        scheduler has other tests run meanwhile. Otherwise a fresh window is opened with a proven power
+        cycle, and the whole window waited out. Returns the power-up epoch the moment belongs to."""
+        why = unusable(self.lane.epoch, kind, now=self.now(), node_id=self.node_id, bitrate=self.lane.bitrate,
+                       margin=margin)
+        if why is None:
+            epoch = self.lane.epoch
+            assert epoch is not None
+            self.record.observe("window", f"shared: {epoch.describe()}")
+        else:
+            self.power_cycle(self.profile.off_s, self.profile.boot_s)
+            epoch = self.lane.epoch
+            assert epoch is not None
+            epoch.opened_by = epoch.opened_by or "this test"
+            self.record.observe("window", f"opened by this test ({why}): {epoch.describe()}")
+        self.read_until(epoch.moment(kind, margin))
+        return epoch
 
     def switch_power(self, off_time: float | None = None, boot_wait: float | None = None) -> float:
         """Power off, wait, on, and wait for the boot (default: the profile's off and boot times): until the
@@ -386,14 +419,17 @@ class Dut:
         of a DUT still booting. Without proof: :meth:`power_cycle` proves it; this alone only puts things
         back, where the state is verified afterwards. Returns the lane time of power-on."""
         self.stop_throttle()
+        self.lane.epoch = None  # no window stands until the DUT is up again
         self.lane.power.off()
         self._power_switched()
         self.lane.wait_power(self.profile.off_s if off_time is None else off_time)
+        earliest = self.now()  # the DUT cannot have been switched on before this
         self.lane.power.on()
         on = self.now()
         self._power_switched()
         heard = self.await_reports(on, on + self.ready_bound_s(boot_wait))
         first = min((t for t in heard.values()), default=None)
+        self.lane.epoch = PowerEpoch(earliest, first if first is not None else self.now(), self.node_id, self.lane.bitrate)
         self.record.observe("after power-up", f"first report {(first - on) * 1000:.1f} ms after power-on" if first is not None
                             else f"no report within {self.ready_bound_s(boot_wait):.2f} s of power-on")
         return on

@@ -34,6 +34,7 @@ import can
 
 from ..emulator import sim_bus
 from ..protocol.catalogue import DEFAULT_BITRATE
+from .epochs import PowerEpoch
 
 _SIM_CHANNELS = itertools.count()
 
@@ -78,6 +79,8 @@ class Lane(ABC):
     #: how much later than the host clock at send a frame may reach the bus (s; see HOST_SEND_ERROR_S)
     host_send_error: float = HOST_SEND_ERROR_S
     can_change_bitrate: bool = True  # reopen() really moves the host to another bit rate (Set Baud's tests)
+    #: the DUT's current power-up as the harness made it (None: unknown, or off); see epochs.py
+    epoch: PowerEpoch | None = None
     bus: can.BusABC
     power: PowerControl
     bitrate: int

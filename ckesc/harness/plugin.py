@@ -23,7 +23,8 @@ from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, requirement, strongest
 from . import preflight
 from . import report as _report
-from .dut import Dut, DutUnreachable, echo_probe
+from .dut import Dut, DutError, DutUnreachable, echo_probe
+from .epochs import INSIDE, PowerEpoch, unusable
 from .lanes import (
     HOST_SEND_ERROR_S,
     BenchGone,
@@ -37,6 +38,7 @@ from .lanes import (
     SimLane,
 )
 from .profile import DutProfile
+from .schedule import LEAD_S, Plan
 from .traces import TRACE_FORMATS, TestTraces
 from .verdict import Inconclusive, NotClaimed
 
@@ -94,6 +96,10 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     g.addoption("--ckesc-trace-format", choices=TRACE_FORMATS, default="blf",
                 help="with --ckesc-reports: each test's CAN traffic in <run>/traces/, written by python-can: blf "
                      "(default; Vector BLF), asc (Vector ASCII), log (candump -L, `ckesc decode` reads it), none")
+    g.addoption("--ckesc-order", choices=("overlap", "collection"), default="overlap",
+                help="overlap (default): tests that neither power-cycle nor reconfigure the DUT run while a 120 s "
+                     "Set ID / Set Baud window elapses, and each window test runs at its moment; collection: "
+                     "every test in collection order, each window test sitting its window out")
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -101,6 +107,8 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "power_cycle: the test cycles the DUT's power")
     config.addinivalue_line("markers", "spins_motor: the test commands non-zero throttle")
     config.addinivalue_line("markers", "last: run after every other conformance test (run-wide checks)")
+    config.addinivalue_line("markers", "window(kind): acts at a moment of the 120 s Set ID / Set Baud window "
+                            "(kind 'inside' or 'after'; the run order overlaps the window with other tests)")
     config.stash[_STATE] = _State()
 
 
@@ -249,6 +257,130 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
     items.sort(key=lambda it: 1 if it.get_closest_marker("last") else 0)
 
 
+# ----------------------------------------------------------------------------------------- run order
+def _kind(item: pytest.Item) -> str:
+    """How the run-order plan (schedule.py) treats a test."""
+    if not _is_conformance(item):
+        return "cycle"  # not ours: run in collection order with the rest
+    if item.get_closest_marker("last"):
+        return "last"
+    window = item.get_closest_marker("window")
+    if window is not None:
+        return f"window-{window.args[0]}"
+    return "cycle" if item.get_closest_marker("power_cycle") else "filler"
+
+
+def _function_key(item: pytest.Item) -> str:
+    return item.nodeid.split("[", 1)[0]
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtestloop(session: pytest.Session) -> bool | None:
+    """The conformance run in the order of :mod:`schedule` (waits that overlap): pytest's own loop, but
+    the next test is chosen one test ahead, and a window is opened between two tests when one is due.
+    pytest's loop runs instead with ``--ckesc-order collection``, under pytest-xdist, with nothing to
+    overlap, and where the lane has no power control (no window test can run then)."""
+    config = session.config
+    if (config.getoption("ckesc_order") != "overlap" or config.option.collectonly or session.testsfailed
+            or hasattr(config, "workerinput") or config.getoption("power", None) == "none"):
+        return None
+    plan = Plan(list(session.items), kind=_kind, key=_function_key)
+    if not plan.overlapping:
+        return None
+    st = state(config)
+    st.info["order"] = "overlap"
+    st.info["epochs"] = []
+    item = plan.first()
+    while item is not None:
+        lane = st.lane
+        start = lane.now() if lane is not None else None
+        if lane is not None and start is not None:
+            hint = plan.hint(item, start + plan.estimates.get(_function_key(item)), _moment(st, plan))
+        else:
+            hint = plan.hint(item, None, None)
+        epoch = lane.epoch if lane is not None else None
+        item.config.hook.pytest_runtest_protocol(item=item, nextitem=hint)
+        if session.shouldfail:
+            raise session.Failed(session.shouldfail)
+        if session.shouldstop:
+            raise session.Interrupted(session.shouldstop)
+        lane = st.lane
+        if lane is None or hint is None:
+            item = plan.choose(0.0, lambda w, now: float("inf"), _shares(item, hint)) if hint is not None else None
+            continue
+        now = lane.now()
+        if start is not None:
+            plan.learn(item, now - start)
+        if lane.epoch is not None and lane.epoch is not epoch and not lane.epoch.opened_by:
+            lane.epoch.opened_by = item.nodeid
+        item = plan.choose(now, _moment(st, plan), _shares(item, hint))
+        if item is not None and plan.needs_epoch_before(item):
+            _open_epoch(st, plan)
+    return True
+
+
+def _shares(ended: pytest.Item, hint: pytest.Item | None):
+    """Which tests may run after ``ended`` when pytest was told ``hint`` runs next: those whose collector
+    chain starts with what the two share (pytest tore down the rest; SetupState keeps that prefix)."""
+    if hint is None:
+        return lambda item: False
+    prefix = []
+    for a, b in zip(ended.listchain(), hint.listchain()):
+        if a is not b:
+            break
+        prefix.append(a)
+    return lambda item: item.listchain()[: len(prefix)] == prefix
+
+
+def _window_for(st: _State, plan: Plan) -> tuple[pytest.Item | None, str]:
+    w = next((w for w in plan.windows if w not in plan.done), None)
+    return w, (plan.window_kind(w) if w is not None else INSIDE)
+
+
+def _moment(st: _State, plan: Plan):
+    """``moment(w, end)`` for the plan: when window test ``w`` acts if the test before it ends at ``end``."""
+    lane, profile = st.lane, st.profile
+    assert lane is not None and profile is not None
+
+    def moment(w: pytest.Item, end: float) -> float:
+        kind = plan.window_kind(w)
+        epoch = lane.epoch
+        if st.node_id is not None and unusable(epoch, kind, now=end, node_id=st.node_id, bitrate=lane.bitrate) is None:
+            assert epoch is not None
+            return epoch.moment(kind)
+        on = end + profile.off_s  # a fresh epoch opened after the test ending at ``end``
+        return PowerEpoch(on, on + profile.boot_s, 0, 0).moment(kind)
+    return moment
+
+
+def _open_epoch(st: _State, plan: Plan) -> None:
+    """Open a 120 s window with a proven power cycle between two tests, unless the current one still
+    serves the next window test. A failure here is recorded, not raised: the window test then opens its own
+    window (and meets the problem as its own)."""
+    lane, profile = st.lane, st.profile
+    w, kind = _window_for(st, plan)
+    if lane is None or profile is None or st.node_id is None or w is None or not lane.power.available:
+        return
+    if unusable(lane.epoch, kind, now=lane.now(), node_id=st.node_id, bitrate=lane.bitrate, lead=LEAD_S) is None:
+        return
+    name = f"power-up epoch {len(st.info['epochs']) + 1}"
+    entry: dict[str, Any] = {"name": name, "for": w.nodeid, "at": round(lane.now(), 3)}
+    st.info["epochs"].append(entry)
+    traces = st.traces
+    if traces is not None:
+        traces.begin(name)
+    try:
+        Dut(lane, profile, node_id=st.node_id).power_cycle(profile.off_s, profile.boot_s)
+    except (DutError, Inconclusive) as exc:
+        entry["error"] = str(exc)
+    finally:
+        if traces is not None:
+            entry["traces"] = [p.relative_to(traces.directory.parent).as_posix() for p in traces.end().values()]
+    if lane.epoch is not None and "error" not in entry:
+        lane.epoch.opened_by = f"the run-order scheduler between two tests ({name})"
+        entry["power_up"] = lane.epoch.describe()
+
+
 # ----------------------------------------------------------------------------------------- lane / dut
 def _bus_kwargs(config: pytest.Config) -> dict[str, Any]:
     import can
@@ -346,7 +478,9 @@ def ckesc_lane(request: pytest.FixtureRequest):
                    jitter_s=profile.jitter_s, not_claimed=functions.not_claimed_text(profile.absent),
                    faults=config.getoption("emulator_faults") or "", **echo_info(lane))
     _install_signal_guard(config)
+    opened = lane.now()
     yield lane
+    st.info["lane_seconds"] = round(lane.now() - opened, 3)  # the whole run on the lane's clock (bench_suite.py)
     try:
         if st.node_id is not None:
             Dut(lane, profile, node_id=st.node_id).zero_throttle()
