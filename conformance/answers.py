@@ -119,15 +119,27 @@ def esc_ids(dut) -> list[tuple[int, int]]:
     return sorted(set(esc_id_replies(dut)))
 
 
+#: lane seconds of the current window that must be left to restore the node id in it without a power cycle
+RESTORE_IN_WINDOW_S = 10.0
+
+
+def _set_id_at(dut, ids: list[int], node: int, channel: int) -> None:
+    for dest in dict.fromkeys([*ids, node]):  # to each id it may listen at (R11 says any)
+        dut.request("set_id", {"node_id": node, "throttle_channel": channel}, destination=dest)
+
+
 def put_back(dut, node: int, channel: int) -> None:
-    """Put the DUT back at ``node`` on ``channel`` (pseudo-broadcast Set ID in a fresh window, R11) and verify:
-    DutError when it is not."""
+    """Put the DUT back at ``node`` on ``channel`` and verify: DutError when it is not. Set ID (a pseudo-broadcast,
+    R11) goes inside the window of the DUT's current power-up while :data:`RESTORE_IN_WINDOW_S` of it is left (no
+    power cycle), else, or when that did not take, inside a fresh window after a power cycle."""
     found = esc_ids(dut)
+    if found and found != [(node, channel)] and dut.window_left() >= RESTORE_IN_WINDOW_S:
+        _set_id_at(dut, [n for n, _ in found], node, channel)
+        found = esc_ids(dut)
     if found != [(node, channel)]:
         dut.switch_power()  # a fresh 120 s window (R11)
         found = esc_ids(dut)
-        for dest in dict.fromkeys([n for n, _ in found] + [node]):  # to each id it may listen at (R11 says any)
-            dut.request("set_id", {"node_id": node, "throttle_channel": channel}, destination=dest)
+        _set_id_at(dut, [n for n, _ in found], node, channel)
         found = esc_ids(dut)
     dut.node_id = node
     if found != [(node, channel)]:
@@ -160,7 +172,7 @@ def slot_node(dut):
     if [n for n, _ in found] != [dut.node_id]:
         raise Inconclusive(f"{why} (node {target}); GET_ESC_ID answers {found}: Set ID would move every ESC on the bus")
     node, channel = found[0]
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)  # the Set ID window opens now (R11)
+    dut.open_window()  # a Set ID window (R11) with nothing sent in it yet
     try:
         dut.request("set_id", {"node_id": target, "throttle_channel": channel})
         dut.node_id = target

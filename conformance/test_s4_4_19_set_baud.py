@@ -15,6 +15,8 @@ from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
+from .answers import RESTORE_IN_WINDOW_S
+
 SECTION = "4.4.19"
 SPEC = cat.spec("set_baud")
 RATES = cat.BAUD_RATES  # 4.4.19-T: code -> bit/s
@@ -56,12 +58,13 @@ def _cycle(dut, expect):
     if not dut.lane.power.available:
         raise Inconclusive("this test needs a power cycle and no power control was given (--power)")
     before = dut.power_up_count() if _find_rate(dut, first=dut.lane.bitrate) is not None else None
-    dut.switch_power()
+    on = dut.switch_power()
     rate = _find_rate(dut, first=expect)
     after = dut.power_up_count() if rate is not None else None
     dut.record.observe("power-up counter", f"{before} -> {after} (answering at {rate} bit/s)")
     if before is None or after is None or after != (before + 1) & 0xFFFF:
         raise Inconclusive(f"power cycle not proven: power-up counter {before} -> {after} (DUT found at {rate} bit/s)")
+    dut.proved_power_up(on, before, after)
     return rate
 
 
@@ -86,9 +89,9 @@ def _move_to(dut, code):
     """Setup: the DUT running at ``code``'s rate, its window freshly open (raises Inconclusive if Set
     Baud cannot get it there: what that test checks is then another test's business)."""
     if dut.lane.bitrate == RATES[code] and _answers(dut):
-        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+        dut.open_window()
         return
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    dut.open_window()
     _set_baud(dut, code)
     rate = _cycle(dut, RATES[code])
     if rate != RATES[code]:
@@ -96,15 +99,23 @@ def _move_to(dut, code):
 
 
 def _restore(dut, rate0):
-    """Put the DUT back at ``rate0`` and the host with it; verified."""
+    """Put the DUT back at ``rate0`` and the host with it; verified. Set Baud goes inside the window of the
+    DUT's current power-up while enough of it is left, else (or when that did not take) in a fresh one."""
     rate = _find_rate(dut, first=rate0)
     if rate == rate0:
         return
     if rate is None:
         raise DutError(f"the DUT answers at no rate of the code table; it was at {rate0} bit/s")
-    dut.switch_power()  # a fresh 120 s window (R11)
-    _set_baud(dut, CODES[rate0])
-    dut.switch_power()
+    if dut.window_left() >= RESTORE_IN_WINDOW_S:  # inside the window of the current power-up, while it lasts
+        _set_baud(dut, CODES[rate0])
+        try:
+            rate = _cycle(dut, rate0)  # proven: the next test may act in this window
+        except Inconclusive:
+            rate = _find_rate(dut, first=rate0)
+    if rate != rate0:
+        dut.switch_power()  # a fresh 120 s window (R11)
+        _set_baud(dut, CODES[rate0])
+        dut.switch_power()
     if _find_rate(dut, first=rate0) != rate0:
         raise DutError(f"could not put the DUT back at {rate0} bit/s (it answers at {dut.lane.bitrate})")
 
@@ -159,7 +170,7 @@ def test_new_rate_only_after_the_next_power_up(dut, rate0, code):
 def test_rate_persists_across_power_cycles(dut, rate0):
     """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""
     code = _other_code(rate0, cat.DEFAULT_BITRATE)
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    dut.open_window()
     _set_baud(dut, code)
     for n in (1, 2):
         rate = _cycle(dut, RATES[code])

@@ -20,7 +20,7 @@ from ..protocol.frame import Frame, WireFrame, classify, frame_bits
 from ..protocol.host import Garbled, HostProtocol, Pending, Response
 from ..protocol.ids import Kind
 from ..protocol.transfer import TRANSFER_ID_MODULO
-from .epochs import WINDOW_MARGIN_S, WINDOW_REQUESTS, PowerEpoch, unusable
+from .epochs import INSIDE, WINDOW_MARGIN_S, WINDOW_REQUESTS, PowerEpoch, unusable
 from .lanes import Lane, OwnFrame
 from .profile import DutProfile
 from .verdict import Inconclusive, NotClaimed, Record
@@ -385,11 +385,38 @@ class Dut:
                            f"did it come back, at {self.lane.bitrate} bit/s?")
         if before is None or after is None or after != (before + 1) & 0xFFFF:
             raise Inconclusive(f"power cycle not proven: power-up counter {before} -> {after} (241 option 2)")
+        self.proved_power_up(on, before, after)
+
+    def proved_power_up(self, on: float, before: int, after: int) -> None:
+        """The power-up counter proved the power-up at lane time ``on`` (``before`` -> ``after``): its epoch is
+        proven (what a window test may share). For tests that prove a cycle their own way (another rate)."""
         epoch = self.lane.epoch
-        if epoch is not None and epoch.on_earliest <= on:
+        if epoch is not None and epoch.on_earliest <= on and after == (before + 1) & 0xFFFF:
             epoch.proven, epoch.counter = True, (before, after)
+            epoch.node_id, epoch.bitrate = self.node_id, self.lane.bitrate  # where it answered the counter
             if not self.heard_from(on):  # no report came: the answer to the counter is the first sign of life
                 epoch.ready = self.now()
+
+    def window_left(self) -> float:
+        """Lane seconds left, at the least, of the 120 s Set ID / Set Baud window (R11) of the DUT's current
+        power-up as the harness made it (0 when it made none, or the window has closed)."""
+        epoch = self.lane.epoch
+        if epoch is None:
+            return 0.0
+        return max(0.0, epoch.on_earliest + cat.CONFIG_WINDOW_S - self.now())
+
+    def open_window(self, left_s: float = 60.0) -> PowerEpoch:
+        """A 120 s Set ID / Set Baud window (R11) for a test to act in: of a power-up the counter proved, in which
+        no Set ID / Set Baud has been sent, at the DUT's node id and bit rate, with at least ``left_s`` of it
+        left. The current power-up's when it is such (a power cycle spared), else a proven power cycle's."""
+        if unusable(self.lane.epoch, INSIDE, now=self.now(), node_id=self.node_id, bitrate=self.lane.bitrate,
+                    lead=left_s) is None:
+            assert self.lane.epoch is not None
+            self.record.observe("window", f"of the current power-up: {self.lane.epoch.describe()}")
+        else:
+            self.power_cycle(self.profile.off_s, self.profile.boot_s)
+        assert self.lane.epoch is not None
+        return self.lane.epoch
 
     def at_window_moment(self, kind: str, margin: float = WINDOW_MARGIN_S) -> PowerEpoch:
         """Wait for the moment of the 120 s Set ID / Set Baud window (R11) a window test acts at: ``margin``

@@ -35,7 +35,9 @@ UNKNOWN_S = 10.0
 #: lane seconds a window test is started ahead of its moment (its fixtures' set-up: settings, GET_ESC_ID)
 LEAD_S = 2.0
 #: lane seconds to spare before pytest is told a filler of the same module comes next (then it must)
-COMMIT_SLACK_S = 5.0
+COMMIT_SLACK_S = 3.0
+#: lane seconds before a window test's start from which the longest filler that fits is chosen, not the next
+BEST_FIT_S = 30.0
 #: what an estimate is stretched by (a test function's cases do not all take the same time)
 STRETCH = 1.2
 
@@ -121,9 +123,11 @@ class Plan(Generic[T]):
         w = windows[0]
         start_by = moment(w, now) - LEAD_S
         candidates = [f for f in self.fillers if f not in self.done and allowed(f)]
-        for f in candidates:
-            if now + self.estimates.get(self.key(f)) <= start_by:
-                return self._take(f)
+        fitting = [f for f in candidates if now + self.estimates.get(self.key(f)) <= start_by]
+        if fitting and start_by - now <= BEST_FIT_S:  # the last stretch: the longest that fits, the short ones kept
+            return self._take(max(fitting, key=lambda f: self.estimates.get(self.key(f))))
+        if fitting:  # in order (a module's tests together), learning how long each function takes
+            return self._take(fitting[0])
         if allowed(w) or not candidates:
             return self._take(w)
         return self._take(candidates[0])  # pytest was told this module's next filler comes: it does
