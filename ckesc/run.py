@@ -113,7 +113,9 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
     """pytest's command line for ``args``; raises :class:`SelectionError` for a selection of nothing."""
     selectors, extra = split_selection(list(args.pytest_args))
     targets = resolve_selection(selectors) or ["--pyargs", "conformance"]
-    argv = [*targets, "-p", "no:cacheprovider", "--rootdir", _suite_root(), "--ckesc-summary", "--ckesc-reports", args.reports,
+    # the run order is the plugin's (harness/schedule.py); pytest-randomly, when installed, only on request
+    # (`-- -p randomly`, which comes later on the command line and so wins)
+    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:randomly", "--rootdir", _suite_root(), "--ckesc-summary", "--ckesc-reports", args.reports,
             "--dut", args.dut, "--lane", args.lane, "--ckesc-trace-format", args.trace_format,
             "-o", "console_output_style=count",
             # ckesc itself is the plugin and is imported before pytest starts: nothing of it needs rewriting

@@ -95,6 +95,7 @@ class Dut:
         self._tasks: list[Any] = []
         self.record = Record()
         self.lane_seconds = 0.0  # lane time the test took (set by the dut fixture)
+        self.throttled = False  # a non-zero throttle was sent: the dut fixture waits for the motor to stop
         self.node_id = node_id if node_id is not None else self.discover()
         # every ESC that answered discovery (multi_dut); just the DUT when its id was given
         self.nodes: list[int] = getattr(self, "discovered", [self.node_id])
@@ -512,8 +513,10 @@ class Dut:
 
     # ------------------------------------------------------------------ throttle (safety)
     def _check_throttle(self, name: str, fields: Mapping[str, Any]) -> None:
-        if any(fields.get("channels", ())) and not self.allow_motor_spin:
-            raise Inconclusive("this test spins the motor: run with --allow-motor-spin (and the propeller off)")
+        if any(fields.get("channels", ())):
+            if not self.allow_motor_spin:
+                raise Inconclusive("this test spins the motor: run with --allow-motor-spin (and the propeller off)")
+            self.throttled = True
 
     def throttle_stream(self, name: str, fields: Mapping[str, Any], period: float = 0.0025) -> Any:
         """Send a throttle frame every ``period`` s with its transfer id counting (F3) until

@@ -541,6 +541,8 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     finally:
         d.lane_seconds = ckesc_lane.now() - started
         d.zero_throttle()
+        if d.throttled:  # a motor still coasting refuses setting changes (R12): the next test must not meet it
+            d.wait_motor_stopped()
         keep_segment(config, [f for f in d.trace if f.source == d.node_id])
         if d.node_id != st.node_id:
             st.node_id = d.node_id
