@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -174,6 +175,9 @@ def test_a_shared_place_is_acquired_cycled_through_labgrid_and_released(tmp_path
     doc = _results(tmp_path)
     assert [r["outcome"] for r in doc["results"]] == ["PASS"], doc["results"]
     assert "on place rig1" in doc["info"]["power_labgrid"], doc["info"]
+    junit = ET.parse(tmp_path / "reports" / "latest" / "junit.xml").getroot()
+    props = {p.get("name"): p.get("value") for p in junit.find("testsuite").find("properties")}
+    assert props["power"] == "labgrid" and props["power_labgrid"] == doc["info"]["power_labgrid"]
     assert switch.switched[:2] == ["off", "on"], switch.switched
     assert lab.holder("rig1") is None  # released
     assert "acquired place" not in done.stdout  # labgrid's own chatter stays out of the run's output
@@ -193,6 +197,47 @@ def test_a_place_locked_by_someone_else_is_refused_with_who_holds_it(tmp_path, b
     assert len(lines) == 1 and f"labgrid place rig1 is locked by {holder}" in lines[0], done.stderr
     assert lab.holder("rig1") == holder and switch.switched == []  # theirs still, and their DUT untouched
     assert not (tmp_path / "reports" / "latest").exists()
+
+
+PLACE_MISTAKES = [
+    pytest.param("rig1", ["--labgrid-place", "rig2"], ["--labgrid-place rig2, but target esc of", "is on place rig1"],
+                 id="other-place"),
+    pytest.param("rig7", [], ["--labgrid-place rig7: no such place on the coordinator", "places: rig1"], id="no-such-place"),
+    pytest.param("rig1", ["--mine"], ["labgrid place rig1 is already acquired by you", "labgrid-client -p rig1 release"],
+                 id="held-by-me"),
+]
+
+
+@needs_lab
+@pytest.mark.parametrize("place, args, expect", PLACE_MISTAKES)
+def test_a_place_mistake_is_one_line_exit_2(tmp_path, bench, lab, place, args, expect):
+    emu, switch = bench
+    if "--mine" in args:  # as this user on this host, outside the run (a leftover acquire)
+        args = []
+        assert lab.client("-p", "rig1", "acquire").returncode == 0
+    done = _ckesc(tmp_path, "run", "-q", *_bus_args(tmp_path, emu.port), "--power", "labgrid", "--labgrid-env",
+                  str(_place_env(tmp_path, place)), "--labgrid-coordinator", lab.address, *args, timeout=120)
+    assert done.returncode == 2, done.stdout + done.stderr
+    lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, done.stderr
+    for text in expect:
+        assert text in lines[0], lines[0]
+    assert switch.switched == []
+
+
+@needs_lab
+def test_a_place_only_locks_a_bench_whose_power_is_reached_directly(tmp_path, bench, lab):
+    """--labgrid-place with a target that has its own NetworkPowerPort (no RemotePlace): the place is held for the
+    run and released after; the power goes through the target's own port."""
+    emu, switch = bench
+    env_file = _env_file(tmp_path, f"      NetworkPowerPort:\n        model: simplerest\n        host: '{switch.url}'\n"
+                                   "        index: 0\n")
+    done = _ckesc(tmp_path, "run", *_bus_args(tmp_path, emu.port), "--power", "labgrid", "--labgrid-env", str(env_file),
+                  "--labgrid-place", "rig1", "--labgrid-coordinator", lab.address, "--", "-k", POWER_CYCLE_TEST)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr
+    doc = _results(tmp_path)
+    assert [r["outcome"] for r in doc["results"]] == ["PASS"] and "on place rig1" in doc["info"]["power_labgrid"]
+    assert switch.switched[:2] == ["off", "on"] and lab.holder("rig1") is None
 
 
 @needs_lab
@@ -227,6 +272,7 @@ def test_an_interrupted_run_releases_the_place(tmp_path, bench, lab, sig):
     assert held and "/" in held, ("the place was not acquired during the run", held, text[-2000:])
     assert proc.returncode == 130, text[-3000:]
     assert lab.holder("rig1") is None, text[-2000:]
+    assert "Traceback" not in text, text[-3000:]
 
 
 @needs_lab
