@@ -3,6 +3,7 @@
     ckesc run                                   # the emulator, simulated time (exact timing)
     ckesc run --lane realtime                   # `ckesc emulate` in its own process, through socketcand
     ckesc run --dut bus --can-interface socketcan --can-channel can0 --power manual
+    ckesc run --dut bus ... --power labgrid --labgrid-env env.yaml --labgrid-target esc   # power by labgrid
     ckesc run 4.4.22 4.4.3                      # some sections (numbers as in the document)
     ckesc run conformance/test_s4_4_22_set_freq.py   # a test module, by path (absolute or relative)
 
@@ -113,15 +114,17 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
     """pytest's command line for ``args``; raises :class:`SelectionError` for a selection of nothing."""
     selectors, extra = split_selection(list(args.pytest_args))
     targets = resolve_selection(selectors) or ["--pyargs", "conformance"]
-    # the run order is the plugin's (harness/schedule.py); pytest-randomly, when installed, only on request
+    # labgrid (the rig extra) is a library here: its pytest plugin (step logging, LG_ENV) stays out of the run;
+    # the run order is the plugin's (harness/schedule.py): pytest-randomly, when installed, only on request
     # (`-- -p randomly`, which comes later on the command line and so wins)
-    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:randomly", "--rootdir", _suite_root(), "--ckesc-summary", "--ckesc-reports", args.reports,
+    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:labgrid", "-p", "no:randomly", "--rootdir", _suite_root(), "--ckesc-summary", "--ckesc-reports", args.reports,
             "--dut", args.dut, "--lane", args.lane, "--ckesc-trace-format", args.trace_format,
             "-o", "console_output_style=count",
             # ckesc itself is the plugin and is imported before pytest starts: nothing of it needs rewriting
             "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning"]
     for opt in ("can_interface", "can_channel", "can_bitrate", "node_id", "nodes", "profile", "power", "power_off_cmd",
-                "power_on_cmd", "emulator_faults", "can_bitrate_cmd", "host_send_error"):
+                "power_on_cmd", "emulator_faults", "can_bitrate_cmd", "host_send_error", "labgrid_env", "labgrid_target",
+                "labgrid_place", "labgrid_coordinator"):
         value = getattr(args, opt)
         if value not in (None, ""):
             argv += [f"--{opt.replace('_', '-')}", str(value)]

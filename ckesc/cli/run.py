@@ -35,9 +35,17 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
     g.add_argument("--nodes", help="emulator: node ids of the emulated bench (default 1)")
     g.add_argument("--profile", help="DUT profile name (fixtures/duts) or path")
-    g.add_argument("--power", choices=("emulator", "command", "manual", "none"), help="power control")
+    g.add_argument("--power", choices=("emulator", "command", "labgrid", "manual", "none"), help="power control")
     g.add_argument("--power-off-cmd", help="--power command: switches the DUT off")
     g.add_argument("--power-on-cmd", help="--power command: switches the DUT on")
+    g.add_argument("--labgrid-env", metavar="FILE", help="--power labgrid: labgrid environment file (a target with a power driver)")
+    g.add_argument("--labgrid-target", metavar="NAME", help="--power labgrid: the target in --labgrid-env (default: its only one)")
+    g.add_argument("--labgrid-place", metavar="NAME",
+                   help="--power labgrid: acquire this labgrid place for the run, release it at the end (default: the "
+                        "target's RemotePlace, if any)")
+    g.add_argument("--labgrid-coordinator", metavar="HOST:PORT",
+                   help="--power labgrid: the labgrid coordinator (default: the env file's coordinator_address, "
+                        "LG_COORDINATOR, 127.0.0.1:20408)")
     g.add_argument("--allow-motor-spin", action="store_true", default=None,
                    help="allow non-zero throttle on a real ESC (propellers off!)")
     g.add_argument("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")

@@ -34,6 +34,7 @@ from .lanes import (
     Lane,
     ManualPower,
     NoPower,
+    PowerControl,
     RealtimeEmulatorLane,
     SimLane,
 )
@@ -77,10 +78,18 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     g.addoption("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
     g.addoption("--nodes", help="emulator: node ids of the emulated bench (default 1); the DUT is the first")
     g.addoption("--profile", help="DUT profile: a shipped one by name (emulator, ckesc-generic, vcan-vm), a name in ./fixtures/duts, or a path (default: emulator / ckesc-generic)")
-    g.addoption("--power", choices=("emulator", "command", "manual", "none"),
+    g.addoption("--power", choices=("emulator", "command", "labgrid", "manual", "none"),
                 help="power control (default: emulator for --dut emulator, none for --dut bus)")
     g.addoption("--power-off-cmd", help="--power command: shell command that switches the DUT off")
     g.addoption("--power-on-cmd", help="--power command: shell command that switches the DUT on")
+    g.addoption("--labgrid-env", metavar="FILE",
+                help="--power labgrid: labgrid environment file whose target has a power driver (PowerProtocol)")
+    g.addoption("--labgrid-target", metavar="NAME", help="--power labgrid: the target in --labgrid-env (default: its only one)")
+    g.addoption("--labgrid-place", metavar="NAME",
+                help="--power labgrid: acquire this labgrid place for the run (default: the target's RemotePlace, if any)")
+    g.addoption("--labgrid-coordinator", metavar="HOST:PORT",
+                help="--power labgrid: the labgrid coordinator (default: the env file's coordinator_address, "
+                     "LG_COORDINATOR, 127.0.0.1:20408)")
     g.addoption("--allow-motor-spin", action="store_true", default=None,
                 help="allow non-zero throttle (default: only for the emulator). PROPELLERS OFF.")
     g.addoption("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")
@@ -213,9 +222,23 @@ def _preflight(config: pytest.Config) -> None:
         return
     st.preflight_done = True
     try:
-        st.profile = preflight.run(config.getoption, bus_kwargs=lambda: _bus_kwargs(config))
+        st.profile = preflight.run(config.getoption, bus_kwargs=lambda: _bus_kwargs(config),
+                                   labgrid=lambda: _open_labgrid(config))
     except preflight.PreflightError as exc:
         raise pytest.UsageError(f"preflight: {exc}") from None
+
+
+_LABGRID = pytest.StashKey[PowerControl]()
+
+
+def _open_labgrid(config: pytest.Config) -> None:
+    """--power labgrid: its driver (and place, acquired), released by pytest's cleanup on every way out."""
+    from .labgrid_power import open_power
+
+    power = open_power(config.getoption)
+    config.add_cleanup(power.close)
+    config.stash[_LABGRID] = power
+    state(config).info["power_labgrid"] = power.where
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -456,6 +479,8 @@ def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
         power = ManualPower(_prompt(config))
     elif power_kind == "none":
         power = NoPower()
+    elif power_kind == "labgrid":
+        power = config.stash[_LABGRID]  # opened by the preflight
     else:
         raise pytest.UsageError("--power emulator works only with --dut emulator")
     return BusLane(_bus_kwargs(config), power, timing_error=profile.error_s, bitrate_cmd=config.getoption("can_bitrate_cmd"),

@@ -4,7 +4,8 @@ a new report directory or a moved ``reports/latest``.
 
 Checked: node ids (1..125 everywhere), emulator fault names, option combinations, the DUT profile
 (schema: see :mod:`.profile`), the reports directory (writable), the power commands (found and
-executable), the bit-rate command, and the bus itself (opened once and closed again, with the way
+executable), labgrid power (the environment file, target and power driver; the place acquired, or refused
+with who holds it), the bit-rate command, and the bus itself (opened once and closed again, with the way
 out named for a kernel without SocketCAN).
 """
 
@@ -160,9 +161,29 @@ def open_bus(kwargs: dict[str, Any]) -> None:
         pass
 
 
-def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None) -> DutProfile:
+LABGRID_OPTIONS = ("labgrid_env", "labgrid_target", "labgrid_place", "labgrid_coordinator")
+
+
+def labgrid_options(get: Option) -> None:
+    """--power labgrid's options: given together, the environment file there (labgrid itself is not needed yet)."""
+    if get("power") != "labgrid":
+        for opt in LABGRID_OPTIONS:
+            if get(opt):
+                raise PreflightError(f"--{opt.replace('_', '-')} is for --power labgrid")
+        return
+    env_file = get("labgrid_env")
+    if not env_file:
+        raise PreflightError("--power labgrid needs --labgrid-env FILE (a labgrid environment file whose target has a "
+                             "power driver) and --labgrid-target NAME")
+    if not Path(env_file).is_file():
+        raise PreflightError(f"--labgrid-env {env_file}: no such file")
+
+
+def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None,
+        labgrid: Callable[[], None] | None = None) -> DutProfile:
     """Every check, in the order a person fixes them; the first failure raises :class:`PreflightError`.
-    Returns the loaded profile. ``bus_kwargs`` resolves the python-can arguments (``--dut bus``)."""
+    Returns the loaded profile. ``bus_kwargs`` resolves the python-can arguments (``--dut bus``); ``labgrid``
+    opens --power labgrid (and acquires its place) before the bus is touched."""
     dut = get("dut")
     if get("node_id") is not None:
         node_id(get("node_id"), "--node-id")
@@ -182,11 +203,13 @@ def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None) 
     if get("ckesc_reports"):
         reports_writable(get("ckesc_reports"))
     power = get("power")
+    labgrid_options(get)
     if dut == "emulator" and power not in (None, "emulator"):
         raise PreflightError(f"--power {power} is for --dut bus; the emulator's power is switched by the suite")
     if dut == "bus":
         if power == "emulator":
-            raise PreflightError("--power emulator works only with --dut emulator (for a real ESC: command, manual or none)")
+            raise PreflightError("--power emulator works only with --dut emulator (for a real ESC: command, labgrid, manual "
+                                 "or none)")
         if power == "command":
             if not get("power_off_cmd") or not get("power_on_cmd"):
                 raise PreflightError("--power command needs both --power-off-cmd and --power-on-cmd")
@@ -197,6 +220,8 @@ def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None) 
                                  "(use --power command, or --power none to skip the persistence tests)")
         if get("can_bitrate_cmd"):
             command(get("can_bitrate_cmd").replace("{bitrate}", "500000"), "--can-bitrate-cmd")
+        if power == "labgrid" and labgrid is not None:  # a shared place is locked before its bus is opened
+            labgrid()
         if bus_kwargs is not None:
             open_bus(bus_kwargs())
     return prof
