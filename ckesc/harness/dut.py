@@ -29,6 +29,8 @@ from .verdict import Inconclusive, NotClaimed, Record
 MAX_GARBLED = 20_000
 #: type id -> name of the requests the 120 s window governs (R11): a power-up epoch records each one sent
 _WINDOW_IDS = {cat.spec(name).type_id: name for name in WINDOW_REQUESTS}
+#: type ids of the frames that change how the DUT reports (MSG Control, CAN Test): restore resumes after them
+_MODE_IDS = frozenset(cat.spec(name).type_id for name in ("msg_control", "can_test"))
 
 
 @dataclass
@@ -96,6 +98,7 @@ class Dut:
         self.record = Record()
         self.lane_seconds = 0.0  # lane time the test took (set by the dut fixture)
         self.throttled = False  # a non-zero throttle was sent: the dut fixture waits for the motor to stop
+        self.sent_types: set[int] = set()  # type ids of every frame sent (restore: was the reporting mode touched?)
         self.node_id = node_id if node_id is not None else self.discover()
         # every ESC that answered discovery (multi_dut); just the DUT when its id was given
         self.nodes: list[int] = getattr(self, "discovered", [self.node_id])
@@ -193,6 +196,7 @@ class Dut:
         msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id)
         sent = Sent(wire, self.now(), bus_clock=(self.lane.clock, self.lane.timing_error), host_clock=self.lane.host_clock)
         kind, type_id = classify(wire.arbitration_id)[:2]
+        self.sent_types.add(type_id)
         if kind is Kind.REQUEST and type_id in _WINDOW_IDS and self.lane.epoch is not None:
             self.lane.epoch.config.append((_WINDOW_IDS[type_id], sent.host_time))
         self._sent.append(sent)
@@ -348,9 +352,13 @@ class Dut:
         }
 
     def restore(self, snapshot: Mapping[str, int]) -> list[str]:
-        """Put back what a test changed; returns what could not be restored (after verifying)."""
-        self.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
-        self.wait(cat.ANSWER_DELAY_MAX_S)
+        """Put back what a test changed; returns what could not be restored (after verifying). Normal reporting
+        is resumed (MSG Control) unless nothing the test sent can have left it and the DUT's MSG1 still comes."""
+        interval = snapshot["msg1_interval"] * cat.INTERVAL_UNIT_S
+        still = self.frames("msg1", since=self.now() - 2 * interval - self.lane.timing_error, source=self.node_id)
+        if not still or self.sent_types & _MODE_IDS:
+            self.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+            self.wait(cat.ANSWER_DELAY_MAX_S)
         now = self.settings()
         if any(now[k] != snapshot[k] for k in ("msg1_interval", "msg2_interval", "msg3_interval")):
             self.ask("set_freq", {"option": 1, **{k: snapshot[k] for k in ("msg1_interval", "msg2_interval", "msg3_interval")}})
