@@ -82,26 +82,30 @@ class PlaceLock:
         except Exception as exc:  # noqa: BLE001 - grpc and labgrid raise many kinds; all mean "no coordinator"
             raise PreflightError(f"--labgrid-place {self.name}: cannot reach the labgrid coordinator at {self.address}: "
                                  f"{_one_line(exc)} (give --labgrid-coordinator HOST:PORT or LG_COORDINATOR)") from None
-        place = self.session.places.get(self.name)
-        if place is None:
-            known = ", ".join(sorted(self.session.places)) or "none"
-            raise PreflightError(f"--labgrid-place {self.name}: no such place on the coordinator {self.address} "
-                                 f"(places: {known}; create it with `labgrid-client -p {self.name} create`)")
-        if place.acquired:
-            raise PreflightError(self.held_by(place.acquired))
-        self._guard_sigterm()
-        # pytest's cleanup (the plugin registers it) releases it, even when the session's teardown breaks; this is
-        # the backstop for a process that ends some other way before that cleanup is registered
-        atexit.register(self.release)
         try:
-            self._run(self.session.acquire())
-        except Error as exc:
-            holder = self.session.places.get(self.name)
-            if holder is not None and holder.acquired and holder.acquired != self.me:
-                raise PreflightError(self.held_by(holder.acquired)) from None
-            raise PreflightError(f"--labgrid-place {self.name}: the coordinator {self.address} refused to lock it: "
-                                 f"{_one_line(exc)}") from None
-        self.acquired = True
+            place = self.session.places.get(self.name)
+            if place is None:
+                known = ", ".join(sorted(self.session.places)) or "none"
+                raise PreflightError(f"--labgrid-place {self.name}: no such place on the coordinator {self.address} "
+                                     f"(places: {known}; create it with `labgrid-client -p {self.name} create`)")
+            if place.acquired:
+                raise PreflightError(self.held_by(place.acquired))
+            self._guard_sigterm()
+            # pytest's cleanup (the plugin registers it) releases it, even when the session's teardown breaks; this
+            # is the backstop for a process that ends some other way before that cleanup is registered
+            atexit.register(self.release)
+            self.acquired = True  # from here on (an interruption may come before the answer) release() looks
+            try:
+                self._run(self.session.acquire())
+            except Error as exc:
+                holder = self.session.places.get(self.name)
+                if holder is not None and holder.acquired and holder.acquired != self.me:
+                    raise PreflightError(self.held_by(holder.acquired)) from None
+                raise PreflightError(f"--labgrid-place {self.name}: the coordinator {self.address} refused to lock "
+                                     f"it: {_one_line(exc)}") from None
+        except BaseException:
+            self.release()
+            raise
 
     @property
     def me(self) -> str:
@@ -132,9 +136,12 @@ class PlaceLock:
         if session is None:
             return
         try:
-            if self.acquired:
+            if self.acquired:  # this run asked for it: release it if the coordinator says it is ours
                 self.acquired = False
-                self._run(session.release())
+                self._run(session.sync_with_coordinator())
+                place = session.places.get(self.name)
+                if place is not None and place.acquired == self.me:
+                    self._run(session.release())
         except Exception as exc:  # noqa: BLE001 - the coordinator may be gone by now
             print(f"ckesc: could not release labgrid place {self.name} ({self.address}): {_one_line(exc)}; release it "
                   f"with `labgrid-client -p {self.name} release`", file=sys.stderr)
