@@ -98,28 +98,38 @@ def test_only_the_low_three_bits_of_colour_count(dut, value):
     assert _led(dut) == (want, blink), f"242 shows {_led(dut)} after colour {value:#04x} (low bits {want})"
 
 
-@pytest.mark.requirement("4.4.20-2", "R13", "4.4.28-1")
-@pytest.mark.power_cycle
-def test_unsaved_setting_is_lost_at_power_off(dut):
-    """Option 0: the LED changes at once, and after a power cycle the saved setting is back."""
+def _write_unsaved(dut):
     saved = _led(dut)
     _ensure(dut, SAVE, *saved)  # what the power cycle must bring back is saved
     colour, blink = _other_colour(saved[0]), _other_blink(saved[1])
     _set(dut, NO_SAVE, colour, blink)
     assert _led(dut) == (colour, blink), f"option 0 did not update the LED at once: 242 shows {_led(dut)}"
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    return saved
+
+
+@pytest.mark.requirement("4.4.20-2", "R13", "4.4.28-1")
+@pytest.mark.power_cycle
+@pytest.mark.cold_boot(_write_unsaved, touches="led")
+def test_unsaved_setting_is_lost_at_power_off(dut, cold_boot):
+    """Option 0: the LED changes at once, and after a power cycle the saved setting is back."""
+    saved = cold_boot()
     assert _led(dut) == saved, f"after a power cycle 242 shows {_led(dut)}, the saved setting is {saved}"
 
 
-@pytest.mark.requirement("4.4.20-2", "4.4.20-5", "R13", "4.4.28-1")
-@pytest.mark.power_cycle
-def test_saved_setting_survives_power_off(dut):
-    """Option 1: the LED changes at once and is still so after a power cycle."""
+def _write_saved(dut):
     before = _led(dut)
     colour, blink = _other_colour(before[0]), _other_blink(before[1])
     _set(dut, SAVE, colour, blink)
     assert _led(dut) == (colour, blink), f"option 1 did not update the LED at once: 242 shows {_led(dut)}"
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    return colour, blink
+
+
+@pytest.mark.requirement("4.4.20-2", "4.4.20-5", "R13", "4.4.28-1")
+@pytest.mark.power_cycle
+@pytest.mark.cold_boot(_write_saved, touches="led")
+def test_saved_setting_survives_power_off(dut, cold_boot):
+    """Option 1: the LED changes at once and is still so after a power cycle."""
+    colour, blink = cold_boot()
     assert _led(dut) == (colour, blink), f"after a power cycle 242 shows {_led(dut)}, saved was {(colour, blink)}"
 
 

@@ -90,15 +90,20 @@ def test_illegal_value_changes_nothing(dut, case, start):
         f"Set Rotation {case.value:#04x} changed the direction from {start}: query {_query(dut)}, 242 {_direction(dut)}")
 
 
-@pytest.mark.requirement("R10", "4.4.21-4", "R13", "4.4.28-1")
-@pytest.mark.power_cycle
-@pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
-def test_illegal_value_changes_nothing_after_power_cycle(dut, case):
-    """Nothing of an illegal value surfaces after a power cycle either."""
+def _write_illegal(dut, case):
     start = DIRECTIONS[0]
     _ensure(dut, start)
     dut.request("set_rotation", {"rotation": case.value})
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    return start
+
+
+@pytest.mark.requirement("R10", "4.4.21-4", "R13", "4.4.28-1")
+@pytest.mark.power_cycle
+@pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
+@pytest.mark.cold_boot(_write_illegal, touches="rotation")
+def test_illegal_value_changes_nothing_after_power_cycle(dut, cold_boot, case):
+    """Nothing of an illegal value surfaces after a power cycle either."""
+    start = cold_boot()
     assert (_query(dut), _direction(dut)) == (start, start), f"after {case.value:#04x} and a power cycle: {_direction(dut)}"
 
 
@@ -138,13 +143,18 @@ def test_not_set_while_the_motor_runs(dut):
     assert _direction(dut) == before, f"Set Rotation sent while running took effect later: 242 shows {_direction(dut)}"
 
 
-@pytest.mark.requirement("4.4.21-4", "R13", "4.4.28-1")
-@pytest.mark.power_cycle
-def test_direction_persists_across_power_cycle(dut):
-    """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""
+def _write_other_direction(dut):
     direction = _other(_direction(dut))
     _ensure(dut, direction)
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    return direction
+
+
+@pytest.mark.requirement("4.4.21-4", "R13", "4.4.28-1")
+@pytest.mark.power_cycle
+@pytest.mark.cold_boot(_write_other_direction, touches="rotation")
+def test_direction_persists_across_power_cycle(dut, cold_boot):
+    """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""
+    direction = cold_boot()
     assert (_query(dut), _direction(dut)) == (direction, direction), f"after a power cycle: 242 {_direction(dut)}"
 
 

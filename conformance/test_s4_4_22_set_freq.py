@@ -55,23 +55,33 @@ def test_illegal_write_changes_nothing(dut, case):
     assert not changed, f"illegal {case.field}={case.value} changed {changed} (R10: ignored, never partly applied)"
 
 
-@pytest.mark.requirement("R10", "4.4.22-3", "4.4.22-6")
-@pytest.mark.power_cycle
-def test_illegal_write_changes_nothing_after_power_cycle(dut):
-    """Nothing of an illegal write surfaces after a power cycle either."""
+def _write_illegal(dut):
     before = dut.settings()
     dut.request("set_freq", {"option": 1, "msg1_interval": 20, "msg2_interval": 9, "msg3_interval": 200})
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    return before
+
+
+@pytest.mark.requirement("R10", "4.4.22-3", "4.4.22-6")
+@pytest.mark.power_cycle
+@pytest.mark.cold_boot(_write_illegal, touches="intervals")
+def test_illegal_write_changes_nothing_after_power_cycle(dut, cold_boot):
+    """Nothing of an illegal write surfaces after a power cycle either."""
+    before = cold_boot()
     after = dut.settings()
     assert {k: after[k] for k in INTERVALS} == {k: before[k] for k in INTERVALS}
 
 
-@pytest.mark.requirement("4.4.22-6", "R13", "4.4.22-2")  # read back through Set/Get Freq's read (4.4.22-2)
-@pytest.mark.power_cycle
-def test_intervals_persist_across_power_cycle(dut):
+def _write_intervals(dut):
     fields = {"msg1_interval": 15, "msg2_interval": 45, "msg3_interval": 240}
     dut.ask("set_freq", {"option": 1, **fields})
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    return fields
+
+
+@pytest.mark.requirement("4.4.22-6", "R13", "4.4.22-2")  # read back through Set/Get Freq's read (4.4.22-2)
+@pytest.mark.power_cycle
+@pytest.mark.cold_boot(_write_intervals, touches="intervals")
+def test_intervals_persist_across_power_cycle(dut, cold_boot):
+    fields = cold_boot()
     after = dut.settings()
     assert {k: after[k] for k in INTERVALS} == fields, f"after a power cycle: {after}"
 

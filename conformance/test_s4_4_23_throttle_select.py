@@ -130,29 +130,39 @@ def test_illegal_source_changes_nothing(dut, case, start):
         dut.request("throttle_select", {"source": start})  # whatever the DUT stored, a legal value again
 
 
+def _write_illegal(dut, case):
+    start = _other(case.value & 1)
+    _ensure(dut, start)
+    dut.request("throttle_select", {"source": case.value})
+    return start
+
+
 @pytest.mark.requirement("R10", "4.4.23-4", "R13", "4.4.28-1")
 @pytest.mark.power_cycle
 @pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
-def test_illegal_source_changes_nothing_after_power_cycle(dut, case):
+@pytest.mark.cold_boot(_write_illegal, touches="throttle_source")
+def test_illegal_source_changes_nothing_after_power_cycle(dut, cold_boot, case):
     """Nothing of an illegal source surfaces after a power cycle either (from the source the illegal
     value's low bit does not name, so a device that keeps only bit 0 shows)."""
-    start = _other(case.value & 1)
-    _ensure(dut, start)
     try:
-        dut.request("throttle_select", {"source": case.value})
-        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+        start = cold_boot()
         assert _source(dut) == start, f"after {case.value:#04x} and a power cycle 242 shows {_source(dut)}"
     finally:
-        dut.request("throttle_select", {"source": start})
+        dut.request("throttle_select", {"source": _other(case.value & 1)})  # whatever the DUT stored, a legal value
+
+
+def _write_other_source(dut):
+    source = _other(_source(dut))
+    _ensure(dut, source)
+    return source
 
 
 @pytest.mark.requirement("4.4.23-4", "R13", "4.4.28-1")
 @pytest.mark.power_cycle
-def test_source_persists_across_power_cycle(dut):
+@pytest.mark.cold_boot(_write_other_source, touches="throttle_source")
+def test_source_persists_across_power_cycle(dut, cold_boot):
     """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""
-    source = _other(_source(dut))
-    _ensure(dut, source)
-    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    source = cold_boot()
     assert _source(dut) == source, f"after a power cycle 242 shows {_source(dut)}, selected was {source}"
 
 

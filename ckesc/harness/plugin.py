@@ -116,6 +116,8 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "power_cycle: the test cycles the DUT's power")
     config.addinivalue_line("markers", "spins_motor: the test commands non-zero throttle")
     config.addinivalue_line("markers", "last: run after every other conformance test (run-wide checks)")
+    config.addinivalue_line("markers", "cold_boot(write, touches=setting): needs a cold boot between write(dut, "
+                            "**params) and its read (cold_boot fixture); the run order may share one power cycle")
     config.addinivalue_line("markers", "window(kind): acts at a moment of the 120 s Set ID / Set Baud window "
                             "(kind 'inside' or 'after'; the run order overlaps the window with other tests)")
     config.stash[_STATE] = _State()
@@ -173,6 +175,7 @@ class _State:
     stopped: str | None = None
     silent_errors: int = 0  # tests in a row that ERRORed without a frame from the DUT
     ready: bool = False  # the DUT has been seen reporting (no test starts before: _await_ready)
+    cold_boots: dict[str, Any] = field(default_factory=dict)  # test id -> its shared power cycle (_ColdBoot)
 
 
 _STATE = pytest.StashKey[_State]()
@@ -290,7 +293,14 @@ def _kind(item: pytest.Item) -> str:
     window = item.get_closest_marker("window")
     if window is not None:
         return f"window-{window.args[0]}"
+    if item.get_closest_marker("cold_boot") is not None:
+        return "cold-boot"
     return "cycle" if item.get_closest_marker("power_cycle") else "filler"
+
+
+def _touches(item: pytest.Item) -> str:
+    mark = item.get_closest_marker("cold_boot")
+    return mark.kwargs.get("touches", item.nodeid) if mark is not None else ""
 
 
 def _function_key(item: pytest.Item) -> str:
@@ -307,8 +317,8 @@ def pytest_runtestloop(session: pytest.Session) -> bool | None:
     if (config.getoption("ckesc_order") != "overlap" or config.option.collectonly or session.testsfailed
             or hasattr(config, "workerinput") or config.getoption("power", None) == "none"):
         return None
-    plan = Plan(list(session.items), kind=_kind, key=_function_key)
-    if not plan.overlapping:
+    plan = Plan(list(session.items), kind=_kind, key=_function_key, touches=_touches)
+    if not plan.useful:
         return None
     st = state(config)
     st.info["order"] = "overlap"
@@ -316,6 +326,8 @@ def pytest_runtestloop(session: pytest.Session) -> bool | None:
     item = plan.first()
     while item is not None:
         lane = st.lane
+        if (group := plan.group_of(item)) is not None:
+            _stage(st, group)
         start = lane.now() if lane is not None else None
         if lane is not None and start is not None:
             hint = plan.hint(item, start + plan.estimates.get(_function_key(item)), _moment(st, plan))
@@ -353,6 +365,132 @@ def _shares(ended: pytest.Item, hint: pytest.Item | None):
             break
         prefix.append(a)
     return lambda item: item.listchain()[: len(prefix)] == prefix
+
+
+# ----------------------------------------------------------------------------------------- shared cold boots
+@dataclass
+class _Written:
+    """One test's write, made before the power cycle its group shares."""
+
+    value: Any = None
+    error: BaseException | None = None  # what the write raised: raised again in the test, as its own
+    observations: list[tuple[str, Any]] = field(default_factory=list)
+    traces: dict[str, str] = field(default_factory=dict)
+    used: bool = False
+
+
+@dataclass
+class _ColdBoot:
+    """Tests sharing one proven power cycle between their writes and their reads (``@pytest.mark.cold_boot``)."""
+
+    members: list[str]
+    before: dict[str, int]  # the settings before the first write: what the group's last test puts back
+    name: str
+    written: dict[str, _Written] = field(default_factory=dict)
+    epoch: PowerEpoch | None = None
+    power_up: str = ""
+    dissolved: bool = False  # a test of it failed after the shared cycle and ran again alone: the rest run alone
+
+
+def _params(item: pytest.Item) -> dict[str, Any]:
+    callspec = getattr(item, "callspec", None)
+    return dict(callspec.params) if callspec is not None else {}
+
+
+def _stage(st: _State, group: list[pytest.Item]) -> None:
+    """Each test's write, in collection order, each in its own trace file and record, then one proven power cycle
+    (its own trace). The tests then run one after another, each reading back its own (``cold_boot``); a group that
+    cannot be staged (no lane yet, a failed power cycle) is simply not shared: its tests run alone."""
+    lane, profile = st.lane, st.profile
+    if lane is None or profile is None or st.node_id is None or not lane.power.available:
+        return
+    for it in group:
+        if any((cap := requirement(rid).capability) and not profile.has(cap) for rid in item_requirements(it)):
+            return  # it would be skipped: nothing of it may run first
+    name = f"shared power cycle {len(st.info.setdefault('cold_boots', [])) + 1}"
+    traces = st.traces
+    d = Dut(lane, profile, node_id=st.node_id)
+    boot = _ColdBoot([it.nodeid for it in group], d.settings(), name)
+    entry: dict[str, Any] = {"name": name, "tests": boot.members}
+    st.info["cold_boots"].append(entry)
+    for it in group:
+        if traces is not None:
+            traces.begin(f"{it.nodeid} write")
+        w = Dut(lane, profile, node_id=st.node_id)
+        written = boot.written[it.nodeid] = _Written()
+        try:
+            written.value = it.get_closest_marker("cold_boot").args[0](w, **_params(it))
+        except (Exception, pytest.skip.Exception) as exc:  # noqa: BLE001 - the test's own outcome, raised in it
+            written.error = exc
+        finally:
+            w.zero_throttle()
+            written.observations = list(w.record.observations)
+            if traces is not None:
+                written.traces = {f"write{'.' + k if k else ''}": p.relative_to(traces.directory.parent).as_posix()
+                                  for k, p in traces.end().items()}
+    if traces is not None:
+        traces.begin(name)
+    try:
+        d.power_cycle(profile.off_s, profile.boot_s)
+        boot.epoch = lane.epoch
+        if boot.epoch is not None:
+            boot.epoch.opened_by = f"the run-order scheduler ({name})"
+            boot.power_up = entry["power_up"] = boot.epoch.describe()
+    except (DutError, Inconclusive) as exc:
+        entry["error"] = str(exc)
+    finally:
+        if traces is not None:
+            entry["traces"] = [p.relative_to(traces.directory.parent).as_posix() for p in traces.end().values()]
+    for it in group:
+        st.cold_boots[it.nodeid] = boot
+
+
+@pytest.fixture
+def cold_boot(request: pytest.FixtureRequest, dut: Dut):
+    """``cold_boot()`` in a ``@pytest.mark.cold_boot(write, touches=...)`` test: ``write(dut, **params)`` has been
+    made and then a proven power cycle; returns what ``write`` returned (and raises what it raised). When the run
+    order staged the test (schedule.py) its write was made before a power cycle shared with other tests' writes
+    (each touching another setting), its observations and trace are the test's own, and the cycle is said; else
+    the write and a proven power cycle are made now, as a test alone does."""
+    item = request.node
+    st = state(request.config)
+
+    def boot() -> Any:
+        group = st.cold_boots.get(item.nodeid)
+        if group is not None and not group.dissolved and group.epoch is not None and dut.lane.epoch is group.epoch:
+            written = group.written[item.nodeid]
+            written.used = True
+            dut.record.observations.extend(written.observations)
+            others = [m for m in group.members if m != item.nodeid]
+            dut.record.observe("power cycle", f"{group.name}, after this test's write and those of {others}: "
+                               f"{group.power_up}")
+            if written.error is not None:
+                raise written.error
+            return written.value
+        value = item.get_closest_marker("cold_boot").args[0](dut, **_params(item))
+        dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+        return value
+    return boot
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_pyfunc_call(pyfuncitem: pytest.Function):
+    """A test that fails (or is INCONCLUSIVE) after a shared power cycle runs again alone before it is judged: the
+    other tests' writes are undone, it writes, power-cycles and reads on its own, and that is its verdict (what it
+    met in the shared cycle is recorded). So sharing never changes a verdict, and a write that disturbs another
+    test's setting shows as that observation, not as that test's failure."""
+    try:
+        return (yield)
+    except (Exception, Inconclusive) as exc:
+        st = state(pyfuncitem.config)
+        group = st.cold_boots.get(pyfuncitem.nodeid)
+        if group is None or not group.written[pyfuncitem.nodeid].used or group.dissolved:
+            raise
+        group.dissolved = True
+        d: Dut = pyfuncitem.funcargs["dut"]
+        d.record.observe("after the shared power cycle", f"{type(exc).__name__}: {str(exc)[:300]}; run again alone")
+        d.restore(group.before)
+        return pyfuncitem.ihook.pytest_pyfunc_call(pyfuncitem=pyfuncitem)
 
 
 def _window_for(st: _State, plan: Plan) -> tuple[pytest.Item | None, str]:
@@ -571,6 +709,9 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
         keep_segment(config, [f for f in d.trace if f.source == d.node_id])
         if d.node_id != st.node_id:
             st.node_id = d.node_id
+        group = st.cold_boots.get(request.node.nodeid)
+        if group is not None and (group.dissolved or group.members[-1] == request.node.nodeid):
+            snapshot = group.before  # the group's writes are put back after its last test (or once it broke up)
         try:
             problems = d.restore(snapshot)
         except (DutError, Inconclusive) as exc:
@@ -744,9 +885,13 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
         return (yield)
     finally:
         paths = traces.end()
-        res = state(item.config).results.get(item.nodeid)
+        st = state(item.config)
+        res = st.results.get(item.nodeid)
         if res is not None:
             res.traces = {lane: p.relative_to(traces.directory.parent).as_posix() for lane, p in paths.items()}
+            group = st.cold_boots.get(item.nodeid)
+            if group is not None and group.written[item.nodeid].used:  # its write, made before the shared cycle
+                res.traces.update(group.written[item.nodeid].traces)
 
 
 # ----------------------------------------------------------------------------------------- bus rules

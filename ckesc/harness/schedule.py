@@ -18,6 +18,14 @@ has taken so far in this run (:class:`Estimates`), so it works on any DUT; a fun
 assumed to take :data:`UNKNOWN_S`. pytest is told the pending window test is next (:meth:`Plan.hint`):
 it tears the ended test down to what the two share, and a filler sharing that runs instead when it fits.
 
+Shared cold boots: tests that need only *a* cold boot between their write and their read
+(``@pytest.mark.cold_boot(write, touches=setting)``) are grouped, no two in a group touching one setting
+(:attr:`Plan.groups`), and each group runs back to back after the other tests: the plugin makes every
+write of the group (each in its own trace and record), one proven power cycle, and then each test reads
+back its own. A test failing after the shared cycle runs again alone (its write, its own cycle, its read)
+and that is its verdict, so a write that disturbs another test's setting can never pass or fail that
+test; the group's settings are put back after its last test.
+
 Plain objects, no pytest or clock here: the plugin feeds lane times in and gets items out.
 """
 
@@ -59,16 +67,26 @@ class Estimates:
 @dataclass
 class Plan(Generic[T]):
     """The run order, decided one test ahead. ``kind`` of an item: "window-inside", "window-after",
-    "filler", "cycle" or "last"; ``key`` names its test function, ``path::name`` (what :class:`Estimates` learns)."""
+    "filler", "cycle", "cold-boot", "last"; ``key`` names its test function, ``path::name`` (what :class:`Estimates` learns)."""
 
     items: list[T]
     kind: Callable[[T], str]
     key: Callable[[T], str]
+    #: of a "cold-boot" item: the setting its write touches (two tests touching one never share a cycle)
+    touches: Callable[[T], str] = lambda item: ""
     estimates: Estimates = field(default_factory=Estimates)
 
     def __post_init__(self) -> None:
         by = {k: [it for it in self.items if self.kind(it) == k] for k in
-              ("window-inside", "window-after", "filler", "cycle", "last")}
+              ("window-inside", "window-after", "filler", "cycle", "cold-boot", "last")}
+        # tests that need a cold boot between their write and their read: groups that share one power cycle,
+        # each group's tests touching different settings, formed in collection order, run one after another
+        self.groups: list[list[T]] = []
+        for it in by["cold-boot"]:
+            group = next((g for g in self.groups if self.touches(it) not in {self.touches(m) for m in g}), None)
+            if group is None:
+                self.groups.append(group := [])
+            group.append(it)
         # acting inside a window changes the DUT: one epoch each; after-window tests share the last one
         self.windows: list[T] = by["window-inside"] + by["window-after"]
         # fillers from a window test's own module last: pytest keeps that module set up after one of them
@@ -76,6 +94,7 @@ class Plan(Generic[T]):
         window_modules = {self._module(w) for w in self.windows}
         self.fillers: list[T] = sorted(by["filler"], key=lambda it: self._module(it) in window_modules)
         self.rest: list[T] = [it for it in self.items if self.kind(it) in ("filler", "cycle")]
+        self.rest += [it for g in self.groups for it in g]
         self.last: list[T] = by["last"]
         self.done: set[T] = set()
 
@@ -83,6 +102,16 @@ class Plan(Generic[T]):
     def overlapping(self) -> bool:
         """Whether there is anything to overlap: a window test, and a filler to run during its window."""
         return bool(self.windows and self.fillers)
+
+    @property
+    def useful(self) -> bool:
+        """Whether this order differs from collection order in what it saves: waits to overlap, or power
+        cycles to share."""
+        return self.overlapping or any(len(g) > 1 for g in self.groups)
+
+    def group_of(self, item: T) -> list[T] | None:
+        """The cold-boot group ``item`` opens (it is its first test), when the group has more than one."""
+        return next((g for g in self.groups if len(g) > 1 and g[0] == item), None)
 
     def _module(self, item: T) -> str:
         return self.key(item).split("::", 1)[0]
