@@ -3,7 +3,7 @@ the waits the protocol itself imposes, in both run orders side by side (issue #1
 
 In the simulated lane time advances only while the suite waits, so the run's simulated duration is
 exactly the waiting the protocol imposes on it (answer windows, report intervals, the 200 ms comm-loss
-flag, power cycles, the 120 s Set ID / Set Baud window). ``--ckesc-order collection`` runs every test in
+flag, power cycles, the 120 s Set ID / Set Baud window). ``ckesc run --order collection`` runs every test in
 collection order, each window test sitting its window out (the "before"); ``overlap`` (the default) runs
 other tests while a window elapses. Targets: the whole run <= 600 s of simulated protocol time, and
 <= 600 s wall in the real-time lane.
@@ -28,7 +28,7 @@ def run(lane: str, order: str = "overlap") -> tuple[float, dict]:
     with tempfile.TemporaryDirectory(prefix="ckesc-bench-suite-") as tmp:
         t0 = time.perf_counter()
         done = subprocess.run([sys.executable, "-m", "ckesc", "run", "--lane", lane, "--reports", tmp, "-q",
-                               "--", "--ckesc-order", order], capture_output=True, text=True)
+                               "--order", order], capture_output=True, text=True)
         wall = time.perf_counter() - t0
         reports = sorted(Path(tmp).glob("*/results.json"))
         if not reports:

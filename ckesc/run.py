@@ -119,6 +119,7 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
     # (`-- -p randomly`, which comes later on the command line and so wins)
     argv = [*targets, "-p", "no:cacheprovider", "-p", "no:labgrid", "-p", "no:randomly", "--rootdir", _suite_root(), "--ckesc-summary", "--ckesc-reports", args.reports,
             "--dut", args.dut, "--lane", args.lane, "--ckesc-trace-format", args.trace_format,
+            "--ckesc-order", getattr(args, "order", "overlap"),
             "-o", "console_output_style=count",
             # ckesc itself is the plugin and is imported before pytest starts: nothing of it needs rewriting
             "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning"]

@@ -53,6 +53,10 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--emulator-option", action="append", default=[], metavar="KEY=VALUE",
                    help="emulator: a setting of every emulated ESC (repeatable): boot_time=S, report_delay=S, "
                    "report_timer=restart|grid")
+    g.add_argument("--order", choices=("overlap", "collection"), default="overlap",
+                   help="overlap (default): tests that neither power-cycle nor reconfigure the DUT run while a 120 s "
+                   "Set ID / Set Baud window elapses, persistence tests share power cycles; collection: one test "
+                   "after another, each with its own waits and cycles (verdicts are the same)")
     o = p.add_argument_group("output")
     o.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
     o.add_argument("--strict", action="store_true", help="INCONCLUSIVE results fail the run too")
