@@ -79,6 +79,12 @@ def main() -> None:
                 "wall_s": round(rt_wall, 1), "ratio_to_simulated": round(rt_wall / protocol, 2), "target_wall_s": 600,
                 "outcomes": outcomes(rt_doc)}
             print(f"real-time lane, order {order}: {rt_wall:.1f} s wall = {rt_wall / protocol:.2f} x the simulated run")
+            windows = {r["nodeid"].split("::")[1]: (round(r["lane_seconds"], 1), dict(r["observations"]).get("window", ""))
+                       for r in rt_doc["results"] if "window" in r["nodeid"]}
+            entry["window_tests"] = {k: {"lane_s": v[0], "window": v[1][:160]} for k, v in windows.items()}
+            entry["lane_s"] = rt_doc["info"].get("lane_seconds")
+            for name, (secs, how) in windows.items():  # shared: overlapped; opened by this test: sat it out
+                print(f"  {secs:7.1f} s  {name}: {how[:100]}")
             odd = [r for r in rt_doc["results"] if r["outcome"] not in ("PASS", "OBSERVED")]
             entry["not_passed"] = [{"nodeid": r["nodeid"], "outcome": r["outcome"], "message": r["message"][:300]}
                                    for r in odd]
