@@ -250,15 +250,13 @@ def run_batch(args: argparse.Namespace) -> int:
         print("ckesc run: error: --rig runs its benches through pytest-xdist, which is not installed: "
               "pip install 'ckesc-conformance[rig]' (or pip install -e '.[rig]' in a checkout)", file=sys.stderr)
         return EXIT_USAGE
-    from .harness import batch, batch_report
+    from .harness import batch, batch_report, preflight
     from .harness import report as reports
 
     try:
         rig, benches = batch_plan(args)
         selectors, extra = split_selection(list(args.pytest_args))
         targets = resolve_selection(selectors) or ["--pyargs", "conformance"]
-        from .harness import preflight
-
         preflight.reports_writable(args.reports)
     except (BatchError, SelectionError, preflight.PreflightError) as exc:
         print(f"ckesc run: error: {exc}", file=sys.stderr)
@@ -286,7 +284,9 @@ def run_batch(args: argparse.Namespace) -> int:
         print(batch_report.progress_line(records[name], records[name]["seconds"], batch_dir), flush=True)
 
     controller = batch.Controller(plans, on_finished=finished)
-    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:terminal", "--rootdir", _suite_root(),
+    # no:tmpdir: xdist would make a pytest-of-<user> base directory for the workers' tmp_path, which no
+    # conformance test uses (a one-bench run makes none either)
+    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:terminal", "-p", "no:tmpdir", "--rootdir", _suite_root(),
             "--ckesc-reports", str(batch_dir), "--ckesc-trace-format", args.trace_format,
             "-p", "ckesc.harness.batch", "-n", str(len(benches)), "--dist", "each", "--max-worker-restart", "0",
             "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning", *extra]

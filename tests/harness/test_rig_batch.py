@@ -1,0 +1,189 @@
+"""``ckesc run --rig`` for real (issue #13): pytest-xdist workers, simulated benches and ``ckesc emulate``
+processes behind their own socketcand and control ports, a bench whose DUT is not there, a failing bench and
+Ctrl-C mid-batch; each bench's report whole in ``reports/<ts>/<bench>/`` and the batch's own beside them,
+read back with junitparser and python-can. A few quick sections keep it short."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import pytest
+from junitparser import JUnitXml
+from procs import CKESC, Emulator
+from procs import env as _env
+
+from ckesc.protocol.frame import decode
+
+pytest.importorskip("xdist", reason="the batch runs through pytest-xdist: pip install -e '.[rig]'")
+
+SECTIONS = ("4.4.3", "4.4.28")
+
+
+def _power(emu: Emulator) -> str:
+    cmd = f"{sys.executable} -m ckesc control --port {emu.control} power"
+    return f"power = {{ command = {{ off = {json.dumps(cmd + ' off')}, on = {json.dumps(cmd + ' on')} }} }}"
+
+
+#: the emulator on a real-time bench: a stated timing error as on a real one (the process is scheduled late at times)
+PROFILE = """[dut]
+name = "ckesc emulate behind socketcand"
+[capabilities]
+led = true
+motor = true
+multi_node = false
+[timing]
+error_s = 0.005
+boot_s = 0.5
+"""
+
+
+def _socketcand_bench(name: str, emu: Emulator) -> str:
+    return (f"[bench.{name}]\nbus = {{ interface = \"socketcand\", host = \"127.0.0.1\", port = {emu.port}, channel = \"can0\" }}\n"
+            f"profile = \"realtime.toml\"\n{_power(emu)}\n")
+
+
+def _write_rig(tmp: Path, rig: str) -> None:
+    (tmp / "rig.toml").write_text(rig)
+    (tmp / "realtime.toml").write_text(PROFILE)  # beside the rig file: its paths are taken from there
+
+
+def _batch(tmp: Path, rig: str, *args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    _write_rig(tmp, rig)
+    return subprocess.run([*CKESC, "run", "--rig", "rig.toml", "--reports", str(tmp / "reports"), *args], cwd=tmp,
+                          env=_env(tmp), capture_output=True, text=True, timeout=timeout)
+
+
+def _batch_dir(tmp: Path) -> Path:
+    dirs = [p for p in (tmp / "reports").iterdir() if p.is_dir() and not p.is_symlink()]
+    assert len(dirs) == 1, dirs
+    assert (tmp / "reports" / "latest").resolve() == dirs[0].resolve()
+    return dirs[0]
+
+
+def _litter(tmp: Path) -> list[str]:
+    return sorted(p.name for p in (tmp / "tmp").iterdir())
+
+
+def test_a_batch_of_emulated_benches_reports_each_whole_and_one_absent_dut_never_stops_the_others(tmp_path):
+    """Two simulated benches, a real-time ``ckesc emulate`` over socketcand, and a bench whose ESC has no power
+    (it answers nothing): three PASS with their own reports, the fourth ABSENT; exit 3."""
+    with Emulator(tmp_path) as live, Emulator(tmp_path, "--unpowered") as dark:
+        rig = ("[bench.sim-a]\n\n[bench.sim-b]\nemulator = { nodes = [1], seed = 3, options = { report_timer = \"grid\" } }\n\n"
+               + _socketcand_bench("live", live) + "\n" + _socketcand_bench("dark", dark))
+        done = _batch(tmp_path, rig, *SECTIONS)
+    out = done.stdout
+    assert done.returncode == 3, out[-3000:] + done.stderr[-3000:]
+    batch = _batch_dir(tmp_path)
+    # one line per bench finished, each with its status
+    lines = [line for line in out.splitlines() if line.startswith("bench ")]
+    assert sorted(line.split(":")[0] for line in lines) == ["bench dark", "bench live", "bench sim-a", "bench sim-b"], out
+    assert any(line.startswith("bench dark: ABSENT") and "the DUT did not answer" in line for line in lines), out
+    doc = json.loads((batch / "batch.json").read_text())
+    status = {b["name"]: b["status"] for b in doc["benches"]}
+    assert status == {"sim-a": "PASS", "sim-b": "PASS", "live": "PASS", "dark": "ABSENT"}, doc
+    assert doc["exit_status"] == 3 and doc["sections"] == list(SECTIONS)
+    by_name = {b["name"]: b for b in doc["benches"]}
+    assert by_name["live"]["identity"]["lane"] == "bus" and by_name["live"]["identity"]["power"] == "command"
+    assert by_name["sim-a"]["sections"] == {"4.4.3": "PASS", "4.4.28": "PASS"}
+    # each bench's report, exactly as one bench's run writes it, in reports/<ts>/<bench>/
+    for name in ("sim-a", "sim-b", "live"):
+        run = json.loads((batch / name / "results.json").read_text())
+        assert run["info"]["run_id"] == f"{batch.name}/{name}"
+        assert {r["section"] for r in run["results"]} == set(SECTIONS)
+        assert all(r["outcome"] in ("PASS", "OBSERVED", "INCONCLUSIVE", "SKIPPED") for r in run["results"]), run["results"]
+        assert (batch / name / "report.html").is_file() and (batch / name / "summary.txt").is_file()
+        assert list((batch / name / "traces").glob("*.blf"))
+    assert json.loads((batch / "sim-b" / "results.json").read_text())["info"]["faults"] == ""
+    dark_run = json.loads((batch / "dark" / "results.json").read_text())
+    assert dark_run["results"] == [] and dark_run["info"]["incomplete"].startswith("aborted: the DUT did not answer")
+    # the merged JUnit: one testsuite per bench and section, each case in its bench's package
+    xml = JUnitXml.fromfile(str(batch / "junit.xml"))
+    suites = {s.name: s for s in xml}
+    for name in ("sim-a", "sim-b", "live"):
+        assert {n.split(": ")[1].split(" ")[0] for n in suites if n.startswith(f"{name}: ")} == set(SECTIONS)
+        assert all(case.classname.startswith(f"ckesc.{name}.s4_4_") for n, s in suites.items() if n.startswith(name + ":")
+                   for case in s)
+    dark_suites = [s for n, s in suites.items() if n.startswith("dark: ")]
+    assert dark_suites and all(s.properties() and dict((p.name, p.value) for p in s.properties())["bench_status"] == "ABSENT"
+                               for s in dark_suites)
+    # batch.html: the bench x section matrix, the identities and links to each report
+    page = (batch / "batch.html").read_text()
+    for name in ("sim-a", "sim-b", "live", "dark"):
+        assert f'data-bench="{name}"' in page
+    assert 'href="sim-a/report.html"' in page and 'data-section="4.4.28"' in page and "id=identity" in page
+    assert "id=matrix" in page  # the requirement x bench matrix of ckesc compare
+    assert _litter(tmp_path) == []
+
+
+def test_a_failing_bench_fails_the_batch_and_the_others_still_pass(tmp_path):
+    done = _batch(tmp_path, "[bench.good]\n\n[bench.bad]\nemulator = { faults = [\"get_esc_id_wrong_node\"] }\n", "4.4.3")
+    assert done.returncode == 1, done.stdout[-3000:] + done.stderr[-3000:]
+    batch = _batch_dir(tmp_path)
+    doc = json.loads((batch / "batch.json").read_text())
+    assert {b["name"]: b["status"] for b in doc["benches"]} == {"good": "PASS", "bad": "FAIL"}
+    xml = JUnitXml.fromfile(str(batch / "junit.xml"))
+    failures = {s.name.split(":")[0]: s.failures for s in xml}
+    assert failures["good"] == 0 and failures["bad"] > 0
+    assert '<span class="v v-FAIL">FAIL</span>' in (batch / "batch.html").read_text()
+
+
+def _host_throttles(trace: Path) -> list[list[int]]:
+    """The channels of every RawCommand the host sent in a trace, in order."""
+    out = []
+    with can.BLFReader(str(trace)) as reader:
+        for msg in reader:
+            try:
+                f = decode(msg)
+            except Exception:  # noqa: BLE001 - frames of no known layout are not throttle commands
+                continue
+            if f.name.startswith("raw_command") and f.source == 0:
+                out.append(list(f.fields["channels"]))
+    return out
+
+
+def test_ctrl_c_stops_every_bench_with_zero_throttle_and_still_writes_the_batch_report(tmp_path):
+    with Emulator(tmp_path) as live:
+        _write_rig(tmp_path, "[bench.sim-a]\n\n[bench.sim-b]\n\n" + _socketcand_bench("live", live))
+        proc = subprocess.Popen([*CKESC, "run", "--rig", "rig.toml", "--reports", str(tmp_path / "reports")], cwd=tmp_path,
+                                env=_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                start_new_session=True)
+        try:
+            deadline = time.monotonic() + 240
+            while time.monotonic() < deadline:  # every bench is some tests into the suite
+                traces = [len(list(p.glob("*/traces/*"))) for p in (tmp_path / "reports").glob("2*")]
+                counts = [len(list(d.glob("traces/*"))) for b in (tmp_path / "reports").glob("2*") for d in b.iterdir()
+                          if d.is_dir()]
+                if traces and len(counts) == 3 and min(counts) >= 3:
+                    break
+                time.sleep(0.2)
+            else:
+                pytest.fail("the benches did not get going")
+            os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C at a terminal: the foreground process group
+            out, _ = proc.communicate(timeout=180)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert proc.returncode == 130, out[-3000:]
+    assert "SIGINT: stopping every bench" in out and "Traceback" not in out, out[-3000:]
+    batch = _batch_dir(tmp_path)
+    doc = json.loads((batch / "batch.json").read_text())
+    assert doc["interrupted"] is True and doc["exit_status"] == 130
+    assert {b["name"]: b["status"] for b in doc["benches"]} == {"sim-a": "INTERRUPTED", "sim-b": "INTERRUPTED",
+                                                                 "live": "INTERRUPTED"}, doc["benches"]
+    for name in ("sim-a", "sim-b", "live"):
+        run = json.loads((batch / name / "results.json").read_text())
+        assert run["info"]["incomplete"].startswith("interrupted"), run["info"]
+        assert run["not_run"] and not [r for r in run["results"] if r["outcome"] == "ERROR"]
+        last = max((batch / name / "traces").glob("*.blf"), key=lambda p: p.stat().st_mtime)
+        throttles = _host_throttles(last)
+        assert throttles and not any(throttles[-1]), (name, last.name, throttles[-3:])  # zero throttle, last
+    assert (batch / "batch.html").is_file() and (batch / "junit.xml").is_file()
+    assert _litter(tmp_path) == []
