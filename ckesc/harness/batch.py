@@ -15,6 +15,12 @@ loaded in every worker too), and :class:`Controller` in the controlling process,
   the terminal's Ctrl-C reaches it only this way, exactly once) and keeps waiting for them: each stops
   with zero throttle through the plugin's own signal guard, tears its fixtures down and writes its report.
 
+Why ``--dist each`` with a bench per worker, and not the load-sharing modes or N separate ``ckesc run``
+processes: the ckesc plugin's whole state (lane, DUT, preflight, abort, signal guard, report) lives in one
+pytest session; a worker that runs every test keeps that state, and so the bench's report, whole and exactly
+as a one-bench run writes it, while xdist does what would otherwise be written here (starting and watching
+the processes, the event stream from each, a worker that dies).
+
 A worker's set-up mistake found by its preflight (its bus does not open, ...) does not end the worker as
 a crash would: it is kept as the bench's ``setup_error``, the worker runs none of its tests, and the
 batch reports the bench ABSENT.
@@ -22,6 +28,7 @@ batch reports the bench ABSENT.
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import sys
@@ -65,10 +72,16 @@ def pytest_configure(config: pytest.Config) -> None:
     st = plugin.state(config)
     st.report_dir = out  # reports/<batch>/<bench>/, not a new timestamped directory
     st.info["run_id"] = f"{out.parent.name}/{bench['name']}"
+    # pytest's logging capture is not on yet: log records of the preflight (python-can's socketcand client warns
+    # ten times a millisecond while it retries a refused connection) go nowhere, as in a one-bench run's preflight
+    quiet = logging.NullHandler()
+    logging.getLogger().addHandler(quiet)
     try:
         plugin._preflight(config)  # noqa: SLF001 - here, so that a bench's mistake is its own and not a crash
     except pytest.UsageError as exc:
         config.stash[_SETUP_ERROR] = str(exc)
+    finally:
+        logging.getLogger().removeHandler(quiet)
 
 
 @pytest.hookimpl(trylast=True)
