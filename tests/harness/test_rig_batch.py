@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -71,23 +72,39 @@ def _litter(tmp: Path) -> list[str]:
     return sorted(p.name for p in (tmp / "tmp").iterdir())
 
 
+def _closed_port() -> int:
+    """A port on 127.0.0.1 nothing listens on (a socketcand host that is down)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def test_a_batch_of_emulated_benches_reports_each_whole_and_one_absent_dut_never_stops_the_others(tmp_path):
-    """Two simulated benches, a real-time ``ckesc emulate`` over socketcand, and a bench whose ESC has no power
-    (it answers nothing): three PASS with their own reports, the fourth ABSENT; exit 3."""
+    """Two simulated benches and a real-time ``ckesc emulate`` over socketcand pass with their own reports; a
+    bench whose ESC has no power (it answers nothing), a bus with no ESC on it and a socketcand host that is
+    down are ABSENT; exit 3."""
     with Emulator(tmp_path) as live, Emulator(tmp_path, "--unpowered") as dark:
         rig = ("[bench.sim-a]\n\n[bench.sim-b]\nemulator = { nodes = [1], seed = 3, options = { report_timer = \"grid\" } }\n\n"
-               + _socketcand_bench("live", live) + "\n" + _socketcand_bench("dark", dark))
+               + _socketcand_bench("live", live) + "\n" + _socketcand_bench("dark", dark)
+               + "\n[bench.empty]\nbus = { interface = \"virtual\", channel = \"nobody-here\" }\n"
+               + f"\n[bench.down]\nbus = {{ interface = \"socketcand\", host = \"127.0.0.1\", port = {_closed_port()}, "
+                 "channel = \"can0\" }\n")
         done = _batch(tmp_path, rig, *SECTIONS)
     out = done.stdout
     assert done.returncode == 3, out[-3000:] + done.stderr[-3000:]
+    assert len(out.splitlines()) == 8 and not done.stderr, out + done.stderr  # no retry warnings of python-can
     batch = _batch_dir(tmp_path)
     # one line per bench finished, each with its status
     lines = [line for line in out.splitlines() if line.startswith("bench ")]
-    assert sorted(line.split(":")[0] for line in lines) == ["bench dark", "bench live", "bench sim-a", "bench sim-b"], out
+    assert sorted(line.split(":")[0] for line in lines) == ["bench dark", "bench down", "bench empty", "bench live",
+                                                            "bench sim-a", "bench sim-b"], out
     assert any(line.startswith("bench dark: ABSENT") and "the DUT did not answer" in line for line in lines), out
+    assert any(line.startswith("bench down: ABSENT") and "cannot open the CAN bus" in line for line in lines), out
     doc = json.loads((batch / "batch.json").read_text())
     status = {b["name"]: b["status"] for b in doc["benches"]}
-    assert status == {"sim-a": "PASS", "sim-b": "PASS", "live": "PASS", "dark": "ABSENT"}, doc
+    assert status == {"sim-a": "PASS", "sim-b": "PASS", "live": "PASS", "dark": "ABSENT", "empty": "ABSENT",
+                      "down": "ABSENT"}, doc
+    assert "cannot open the CAN bus" in (batch / "down" / "setup-error.txt").read_text()
     assert doc["exit_status"] == 3 and doc["sections"] == list(SECTIONS)
     by_name = {b["name"]: b for b in doc["benches"]}
     assert by_name["live"]["identity"]["lane"] == "bus" and by_name["live"]["identity"]["power"] == "command"
@@ -115,7 +132,7 @@ def test_a_batch_of_emulated_benches_reports_each_whole_and_one_absent_dut_never
                                for s in dark_suites)
     # batch.html: the bench x section matrix, the identities and links to each report
     page = (batch / "batch.html").read_text()
-    for name in ("sim-a", "sim-b", "live", "dark"):
+    for name in ("sim-a", "sim-b", "live", "dark", "down"):
         assert f'data-bench="{name}"' in page
     assert 'href="sim-a/report.html"' in page and 'data-section="4.4.28"' in page and "id=identity" in page
     assert "id=matrix" in page  # the requirement x bench matrix of ckesc compare
@@ -187,3 +204,57 @@ def test_ctrl_c_stops_every_bench_with_zero_throttle_and_still_writes_the_batch_
         assert throttles and not any(throttles[-1]), (name, last.name, throttles[-3:])  # zero throttle, last
     assert (batch / "batch.html").is_file() and (batch / "junit.xml").is_file()
     assert _litter(tmp_path) == []
+
+
+def _wait_for(what: str, check, timeout: float = 240.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = check()
+        if found:
+            return found
+        time.sleep(0.2)
+    pytest.fail(f"never happened: {what}")
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+def test_a_bench_whose_dut_goes_dark_or_whose_worker_dies_is_reported_and_the_others_finish(tmp_path):
+    """Mid-batch, one bench's ESC loses its power (ABORTED: what ran has verdicts) and another bench's worker
+    process is killed (BROKEN: no report); the simulated bench runs its whole selection and passes; exit 3."""
+    with Emulator(tmp_path) as live:
+        _write_rig(tmp_path, "[bench.sim]\n\n[bench.rt]\nlane = \"realtime\"\n\n" + _socketcand_bench("live", live))
+        proc = subprocess.Popen([*CKESC, "run", "--rig", "rig.toml", "--reports", str(tmp_path / "reports"), "4.4.22", "4.4.4",
+                                 "4.4.27"], cwd=tmp_path, env=_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                text=True, start_new_session=True)
+        try:
+            reports = tmp_path / "reports"
+            _wait_for("a test of the live bench ran", lambda: list(reports.glob("2*/live/traces/*")))
+            subprocess.run([*CKESC, "control", "--port", str(live.control), "power", "off"], check=True, capture_output=True,
+                           timeout=30, env=_env(tmp_path))
+            # the worker of bench rt is the one whose child is its own `ckesc emulate` (the real-time lane)
+            worker = _wait_for("the rt bench's worker", lambda: [w for w in _children(proc.pid) if _children(w)]
+                               and list(reports.glob("2*/rt/traces/*")))
+            rt_worker = next(w for w in _children(proc.pid) if _children(w))
+            assert worker
+            os.kill(rt_worker, signal.SIGKILL)
+            out, _ = proc.communicate(timeout=300)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert proc.returncode == 3, out[-3000:]
+    batch = _batch_dir(tmp_path)
+    doc = json.loads((batch / "batch.json").read_text())
+    by_name = {b["name"]: b for b in doc["benches"]}
+    assert by_name["sim"]["status"] == "PASS", by_name["sim"]
+    assert by_name["live"]["status"] == "ABORTED" and "stopped answering" in by_name["live"]["why"], by_name["live"]
+    assert by_name["rt"]["status"] == "BROKEN" and "worker process ended" in by_name["rt"]["why"], by_name["rt"]
+    sim = json.loads((batch / "sim" / "results.json").read_text())
+    assert not sim["not_run"] and {r["section"] for r in sim["results"]} == {"4.4.22", "4.4.4", "4.4.27"}
+    assert any(line.startswith("bench rt: BROKEN") for line in out.splitlines()), out
+    assert (batch / "batch.html").is_file()
