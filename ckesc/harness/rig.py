@@ -31,14 +31,14 @@ from __future__ import annotations
 import difflib
 import re
 import shlex
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from ..protocol.ids import ESC_NODE_IDS
+from .profile import validated
 
 BENCH_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
 POWER_WORDS = ("emulator", "none", "manual")
@@ -324,14 +324,7 @@ def parse(text: str, path: str | Path = "<rig>") -> Rig:
     """A :class:`Rig` from a rig file's text (``path`` names it in errors, and relative paths in it are
     taken from its directory)."""
     path = Path(path)
-    try:
-        raw: dict[str, Any] = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RigError(f"{path}: not valid TOML: {exc}") from None
-    try:
-        doc = _RigDoc.model_validate(raw)
-    except ValidationError as exc:
-        raise RigError("; ".join(_errors(path, exc.errors()))) from None
+    doc = validated(_RigDoc, text, path, RigError, lambda errors: "; ".join(_errors(path, errors)))
     base = path.parent
     return Rig(path=str(path), description=doc.rig.description,
                benches={name: _bench(name, b, base) for name, b in doc.bench.items()})

@@ -5,6 +5,7 @@ read back with junitparser and python-can. A few quick sections keep it short.""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -165,47 +166,6 @@ def _host_throttles(trace: Path) -> list[list[int]]:
     return out
 
 
-def test_ctrl_c_stops_every_bench_with_zero_throttle_and_still_writes_the_batch_report(tmp_path):
-    with Emulator(tmp_path) as live:
-        _write_rig(tmp_path, "[bench.sim-a]\n\n[bench.sim-b]\n\n" + _socketcand_bench("live", live))
-        proc = subprocess.Popen([*CKESC, "run", "--rig", "rig.toml", "--reports", str(tmp_path / "reports")], cwd=tmp_path,
-                                env=_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                start_new_session=True)
-        try:
-            deadline = time.monotonic() + 240
-            while time.monotonic() < deadline:  # every bench is some tests into the suite
-                traces = [len(list(p.glob("*/traces/*"))) for p in (tmp_path / "reports").glob("2*")]
-                counts = [len(list(d.glob("traces/*"))) for b in (tmp_path / "reports").glob("2*") for d in b.iterdir()
-                          if d.is_dir()]
-                if traces and len(counts) == 3 and min(counts) >= 3:
-                    break
-                time.sleep(0.2)
-            else:
-                pytest.fail("the benches did not get going")
-            os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C at a terminal: the foreground process group
-            out, _ = proc.communicate(timeout=180)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-    assert proc.returncode == 130, out[-3000:]
-    assert "SIGINT: stopping every bench" in out and "Traceback" not in out, out[-3000:]
-    batch = _batch_dir(tmp_path)
-    doc = json.loads((batch / "batch.json").read_text())
-    assert doc["interrupted"] is True and doc["exit_status"] == 130
-    assert {b["name"]: b["status"] for b in doc["benches"]} == {"sim-a": "INTERRUPTED", "sim-b": "INTERRUPTED",
-                                                                 "live": "INTERRUPTED"}, doc["benches"]
-    for name in ("sim-a", "sim-b", "live"):
-        run = json.loads((batch / name / "results.json").read_text())
-        assert run["info"]["incomplete"].startswith("interrupted"), run["info"]
-        assert run["not_run"] and not [r for r in run["results"] if r["outcome"] == "ERROR"]
-        last = max((batch / name / "traces").glob("*.blf"), key=lambda p: p.stat().st_mtime)
-        throttles = _host_throttles(last)
-        assert throttles and not any(throttles[-1]), (name, last.name, throttles[-3:])  # zero throttle, last
-    assert (batch / "batch.html").is_file() and (batch / "junit.xml").is_file()
-    assert _litter(tmp_path) == []
-
-
 def _wait_for(what: str, check, timeout: float = 240.0):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -223,30 +183,62 @@ def _children(pid: int) -> list[int]:
         return []
 
 
+@contextlib.contextmanager
+def _running_batch(tmp: Path, *args: str):
+    """``ckesc run --rig rig.toml`` in its own session (as a terminal's foreground job), killed if the test fails."""
+    proc = subprocess.Popen([*CKESC, "run", "--rig", "rig.toml", "--reports", str(tmp / "reports"), *args], cwd=tmp,
+                            env=_env(tmp), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_ctrl_c_stops_every_bench_with_zero_throttle_and_still_writes_the_batch_report(tmp_path):
+    with Emulator(tmp_path) as live:
+        _write_rig(tmp_path, "[bench.sim-a]\n\n[bench.sim-b]\n\n" + _socketcand_bench("live", live))
+        with _running_batch(tmp_path) as proc:
+            benches = tmp_path / "reports"
+            _wait_for("every bench is 3 tests into the suite", lambda: len(found := [
+                len(list(d.glob("traces/*"))) for d in benches.glob("2*/*") if d.is_dir()]) == 3 and min(found) >= 3)
+            os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C at a terminal: the foreground process group
+            out, _ = proc.communicate(timeout=180)
+    assert proc.returncode == 130, out[-3000:]
+    assert "SIGINT: stopping every bench" in out and "Traceback" not in out, out[-3000:]
+    batch = _batch_dir(tmp_path)
+    doc = json.loads((batch / "batch.json").read_text())
+    assert doc["interrupted"] is True and doc["exit_status"] == 130
+    assert {b["name"]: b["status"] for b in doc["benches"]} == {"sim-a": "INTERRUPTED", "sim-b": "INTERRUPTED",
+                                                                 "live": "INTERRUPTED"}, doc["benches"]
+    for name in ("sim-a", "sim-b", "live"):
+        run = json.loads((batch / name / "results.json").read_text())
+        assert run["info"]["incomplete"].startswith("interrupted"), run["info"]
+        assert run["not_run"] and not [r for r in run["results"] if r["outcome"] == "ERROR"]
+        # the DUT's own lane (not a multi-ESC test's private bench, <test>.bench.blf): the last throttle it was sent
+        last = max((p for p in (batch / name / "traces").glob("*.blf") if not p.name.endswith(".bench.blf")),
+                   key=lambda p: p.stat().st_mtime)
+        throttles = _host_throttles(last)
+        assert throttles and not any(throttles[-1]), (name, last.name, throttles[-3:])  # zero throttle, last
+    assert (batch / "batch.html").is_file() and (batch / "junit.xml").is_file()
+    assert _litter(tmp_path) == []
+
+
 def test_a_bench_whose_dut_goes_dark_or_whose_worker_dies_is_reported_and_the_others_finish(tmp_path):
     """Mid-batch, one bench's ESC loses its power (ABORTED: what ran has verdicts) and another bench's worker
     process is killed (BROKEN: no report); the simulated bench runs its whole selection and passes; exit 3."""
     with Emulator(tmp_path) as live:
         _write_rig(tmp_path, "[bench.sim]\n\n[bench.rt]\nlane = \"realtime\"\n\n" + _socketcand_bench("live", live))
-        proc = subprocess.Popen([*CKESC, "run", "--rig", "rig.toml", "--reports", str(tmp_path / "reports"), "4.4.22", "4.4.4",
-                                 "4.4.27"], cwd=tmp_path, env=_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                text=True, start_new_session=True)
-        try:
+        with _running_batch(tmp_path, "4.4.22", "4.4.4", "4.4.27") as proc:
             reports = tmp_path / "reports"
             _wait_for("a test of the live bench ran", lambda: list(reports.glob("2*/live/traces/*")))
             subprocess.run([*CKESC, "control", "--port", str(live.control), "power", "off"], check=True, capture_output=True,
                            timeout=30, env=_env(tmp_path))
             # the worker of bench rt is the one whose child is its own `ckesc emulate` (the real-time lane)
-            worker = _wait_for("the rt bench's worker", lambda: [w for w in _children(proc.pid) if _children(w)]
-                               and list(reports.glob("2*/rt/traces/*")))
-            rt_worker = next(w for w in _children(proc.pid) if _children(w))
-            assert worker
-            os.kill(rt_worker, signal.SIGKILL)
+            _wait_for("a test of the rt bench ran", lambda: list(reports.glob("2*/rt/traces/*")))
+            os.kill(next(w for w in _children(proc.pid) if _children(w)), signal.SIGKILL)
             out, _ = proc.communicate(timeout=300)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
     assert proc.returncode == 3, out[-3000:]
     batch = _batch_dir(tmp_path)
     doc = json.loads((batch / "batch.json").read_text())
