@@ -181,7 +181,8 @@ def page(doc: dict[str, Any], batch_dir: Path) -> str:
         cmp = compare.compare([r for _, r in runs])
         for head, (name, _) in zip(cmp["runs"], runs):
             head["letter"] = name  # the benches head the columns
-        parts += [compare._identity_table(cmp["runs"]), compare._matrix_table(cmp)]  # noqa: SLF001 - one renderer
+        matrix = compare._matrix_table(cmp).replace("Requirements x runs", "Requirements x benches")  # noqa: SLF001
+        parts += [compare._identity_table(cmp["runs"]), matrix]  # noqa: SLF001 - one renderer for both
     elif runs:
         name, run = runs[0]
         parts.append(compare._identity_table([{"letter": name, "label": run.label,  # noqa: SLF001
