@@ -140,6 +140,15 @@ def test_a_batch_of_emulated_benches_reports_each_whole_and_one_absent_dut_never
     assert _litter(tmp_path) == []
 
 
+def test_the_example_rig_runs_here(tmp_path):
+    example = Path(__file__).resolve().parents[2] / "fixtures" / "rigs" / "example.toml"
+    done = subprocess.run([*CKESC, "run", "--rig", str(example), "--reports", str(tmp_path / "reports"), "4.4.28"],
+                          cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    doc = json.loads((_batch_dir(tmp_path) / "batch.json").read_text())
+    assert [(b["name"], b["status"]) for b in doc["benches"]] == [("sim-a", "PASS"), ("sim-b", "PASS"), ("realtime-c", "PASS")]
+
+
 def test_a_failing_bench_fails_the_batch_and_the_others_still_pass(tmp_path):
     done = _batch(tmp_path, "[bench.good]\n\n[bench.bad]\nemulator = { faults = [\"get_esc_id_wrong_node\"] }\n", "4.4.3")
     assert done.returncode == 1, done.stdout[-3000:] + done.stderr[-3000:]
