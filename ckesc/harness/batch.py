@@ -21,9 +21,11 @@ pytest session; a worker that runs every test keeps that state, and so the bench
 as a one-bench run writes it, while xdist does what would otherwise be written here (starting and watching
 the processes, the event stream from each, a worker that dies).
 
-A worker's set-up mistake found by its preflight (its bus does not open, ...) does not end the worker as
-a crash would: it is kept as the bench's ``setup_error``, the worker runs none of its tests, and the
-batch reports the bench ABSENT.
+A worker's set-up mistake found by its preflight (its bus does not open, ...), or anything else that breaks
+its set-up, does not end the worker as a crash would: it is kept as the bench's ``setup_error``, the worker
+runs none of its tests, and the batch reports the bench ABSENT. (A worker process that dies before every
+worker has collected its tests would still end the batch early: xdist stops scheduling once a worker is
+lost and none may be restarted; a worker that dies later is reported BROKEN and the others go on.)
 """
 
 from __future__ import annotations
@@ -67,19 +69,22 @@ def pytest_configure(config: pytest.Config) -> None:
         return
     for dest, value in bench["options"].items():
         setattr(config.option, dest, value)
-    out = Path(bench["report_dir"])
-    out.mkdir(parents=True, exist_ok=True)
-    st = plugin.state(config)
-    st.report_dir = out  # reports/<batch>/<bench>/, not a new timestamped directory
-    st.info["run_id"] = f"{out.parent.name}/{bench['name']}"
     # pytest's logging capture is not on yet: log records of the preflight (python-can's socketcand client warns
     # ten times a millisecond while it retries a refused connection) go nowhere, as in a one-bench run's preflight
     quiet = logging.NullHandler()
     logging.getLogger().addHandler(quiet)
     try:
+        out = Path(bench["report_dir"])
+        out.mkdir(parents=True, exist_ok=True)
+        st = plugin.state(config)
+        st.report_dir = out  # reports/<batch>/<bench>/, not a new timestamped directory
+        st.info["run_id"] = f"{out.parent.name}/{bench['name']}"
         plugin._preflight(config)  # noqa: SLF001 - here, so that a bench's mistake is its own and not a crash
     except pytest.UsageError as exc:
         config.stash[_SETUP_ERROR] = str(exc)
+    except Exception as exc:  # noqa: BLE001 - whatever breaks one bench's set-up must not end its worker: xdist
+        # would then stop the benches that have not collected their tests yet
+        config.stash[_SETUP_ERROR] = f"the bench's set-up failed: {type(exc).__name__}: {exc}"
     finally:
         logging.getLogger().removeHandler(quiet)
 
