@@ -6,19 +6,28 @@
     ckesc run --dut bus ... --power labgrid --labgrid-env env.yaml --labgrid-target esc   # power by labgrid
     ckesc run 4.4.22 4.4.3                      # some sections (numbers as in the document)
     ckesc run conformance/test_s4_4_22_set_freq.py   # a test module, by path (absolute or relative)
+    ckesc run --rig fixtures/rigs/example.toml [--benches a,b] [4.4.3 ...]   # every bench of a rig at once
+
 
 Runs pytest in this process over the installed ``conformance`` package with the ckesc plugin's
 options, shows one progress line per test, writes ``reports/<timestamp>/`` (JUnit, JSON, summary)
 with ``reports/latest`` pointing at it, and exits 0 only when no test FAILed or ERRORed
 (INCONCLUSIVE and SKIPPED are reported, and ``--strict`` makes INCONCLUSIVE fail the run too).
+
+With ``--rig``, the same on every bench of a rig file at once (:func:`run_batch`): pytest-xdist, one worker
+per bench (:mod:`ckesc.harness.batch`), each bench's report in ``reports/<timestamp>/<bench>/`` and the
+batch's own (``batch.html``, ``batch.json``, ``junit.xml``: :mod:`ckesc.harness.batch_report`) beside them.
 """
 
 from __future__ import annotations
 
 import argparse
 import re
+import shutil
 import sys
+import time
 from pathlib import Path
+from typing import Any
 
 from .protocol.requirements import section_key
 
@@ -144,6 +153,12 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
 def run_command(args: argparse.Namespace) -> int:
     import pytest
 
+    if getattr(args, "rig", None):
+        return run_batch(args)
+    if getattr(args, "benches", None):
+        print("ckesc run: error: --benches chooses benches of a rig: it needs --rig FILE", file=sys.stderr)
+        return EXIT_USAGE
+
     collector = _Collector()
     try:
         argv = pytest_argv(args)
@@ -184,3 +199,124 @@ class _Collector:
         st = state(session.config)
         self.results = list(st.results.values())
         self.stopped = st.stopped
+
+
+# ----------------------------------------------------------------------------------------- batches
+#: ``ckesc run``'s options that a rig file sets per bench, with their defaults (given with --rig: an error)
+BENCH_OPTIONS = {"dut": "emulator", "lane": "simulated", "can_interface": None, "can_channel": None, "can_bitrate": None,
+                 "can_config": [], "node_id": None, "nodes": None, "profile": None, "power": None, "power_off_cmd": None,
+                 "power_on_cmd": None, "emulator_faults": "", "emulator_seed": 0, "emulator_option": [],
+                 "can_bitrate_cmd": None, "host_send_error": None, "allow_motor_spin": None,
+                 "labgrid_env": None, "labgrid_target": None, "labgrid_place": None}
+
+
+class BatchError(ValueError):
+    """A batch that cannot start: the rig file, a bench's set-up, the options (one line, exit 2)."""
+
+
+def _static_preflight(bench) -> None:
+    """The bench's preflight without its bus (that is opened by its own worker: a bench that is not there is
+    ABSENT, not a set-up mistake of the batch)."""
+    from .harness import preflight
+
+    opts = {**BENCH_OPTIONS, "ckesc_reports": None, **bench.options()}
+    if opts.get("power") == "manual":
+        raise BatchError(f"bench {bench.name}: power 'manual' prompts an operator at the console, which a batch cannot; "
+                         f"run that bench alone: {bench.command_line()}")
+    try:
+        preflight.run(lambda dest: opts.get(dest), bus_kwargs=None)
+    except preflight.PreflightError as exc:
+        raise BatchError(f"bench {bench.name}: {exc}") from None
+
+
+def batch_plan(args: argparse.Namespace) -> tuple[Any, list]:
+    """The rig and its chosen benches, each checked (:class:`BatchError`)."""
+    from .harness import rig as rigs
+
+    given = [f"--{dest.replace('_', '-')}" for dest, default in BENCH_OPTIONS.items()
+             if getattr(args, dest, default) not in (default, None, [], "")]
+    if given:
+        raise BatchError(f"{given[0]} is set per bench in the rig file (with --rig, the rig says it)")
+    try:
+        rig = rigs.load(args.rig)
+        benches = rig.select([b.strip() for b in (args.benches or "").split(",") if b.strip()])
+    except rigs.RigError as exc:
+        raise BatchError(str(exc)) from None
+    for bench in benches:
+        _static_preflight(bench)
+    return rig, benches
+
+
+def run_batch(args: argparse.Namespace) -> int:
+    """``ckesc run --rig FILE [--benches a,b]``: the selected sections on every chosen bench at once."""
+    import pytest
+
+    try:
+        import xdist  # noqa: F401 - the batch's engine
+    except ImportError:
+        print("ckesc run: error: --rig runs its benches through pytest-xdist, which is not installed: "
+              "pip install 'ckesc-conformance[rig]' (or pip install -e '.[rig]' in a checkout)", file=sys.stderr)
+        return EXIT_USAGE
+    from .harness import batch, batch_report, preflight
+    from .harness import report as reports
+
+    try:
+        rig, benches = batch_plan(args)
+        selectors, extra = split_selection(list(args.pytest_args))
+        targets = resolve_selection(selectors) or ["--pyargs", "conformance"]
+        preflight.reports_writable(args.reports)
+    except (BatchError, SelectionError, preflight.PreflightError) as exc:
+        print(f"ckesc run: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    started = time.time()
+    batch_dir = reports.run_dir(Path(args.reports), started)
+    plans = [{"name": b.name, "options": b.options(), "report_dir": str((batch_dir / b.name).resolve())} for b in benches]
+    records: dict[str, dict[str, Any]] = {}
+
+    def record(name: str, said: dict[str, Any]) -> dict[str, Any]:
+        bench = rig.benches[name]
+        if said.get("setup_error"):
+            (batch_dir / name).mkdir(exist_ok=True)
+            (batch_dir / name / "setup-error.txt").write_text(said["setup_error"] + "\n", encoding="utf-8")
+        rec = batch_report.bench_record(name, batch_dir / name, batch_dir, description=bench.description,
+                                        command=bench.command_line(), setup_error=said.get("setup_error"),
+                                        crash=said.get("crash"), strict=args.strict)
+        if said.get("setup_error"):
+            rec.setdefault("files", {})["setup-error.txt"] = f"{name}/setup-error.txt"
+        rec["seconds"] = round(said.get("seconds") or (time.time() - started), 3)
+        return rec
+
+    def finished(name: str, said: dict[str, Any]) -> None:
+        records[name] = record(name, said)
+        print(batch_report.progress_line(records[name], records[name]["seconds"], batch_dir), flush=True)
+
+    controller = batch.Controller(plans, on_finished=finished)
+    # no:tmpdir: xdist would make a pytest-of-<user> base directory for the workers' tmp_path, which no
+    # conformance test uses (a one-bench run makes none either)
+    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:terminal", "-p", "no:tmpdir", "--rootdir", _suite_root(),
+            "--ckesc-reports", str(batch_dir), "--ckesc-trace-format", args.trace_format,
+            "-p", "ckesc.harness.batch", "-n", str(len(benches)), "--dist", "each", "--max-worker-restart", "0",
+            "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning", *extra]
+    print(f"ckesc run: batch of {len(benches)} benches ({', '.join(b.name for b in benches)}) from {rig.path}; "
+          f"reports in {batch_dir}/", flush=True)
+    controller.install_signals()
+    try:
+        code = pytest.main(argv, plugins=[controller])
+    finally:
+        controller.restore_signals()
+    if code in (pytest.ExitCode.USAGE_ERROR, pytest.ExitCode.INTERNAL_ERROR) and not records:
+        print("ckesc run: error: the batch could not start (pytest's message above)", file=sys.stderr)
+        shutil.rmtree(batch_dir, ignore_errors=True)
+        return EXIT_USAGE
+    for b in benches:
+        if b.name not in records:  # its worker never reported back
+            records[b.name] = record(b.name, {"crash": "its worker ended without reporting back"})
+    latest = batch_dir / "latest"  # each bench's run pointed its base's latest at itself: the batch is the run here
+    if latest.is_symlink():
+        latest.unlink()
+    doc = batch_report.write(batch_dir, [records[b.name] for b in benches], rig=str(rig.path), started=started,
+                             finished=time.time(), interrupted=controller.interrupted)
+    reports.point_latest(batch_dir)
+    print(f"batch: {', '.join(f'{n} {s}' for s, n in doc['statuses'].items())} in {doc['seconds']:.1f} s; "
+          f"{batch_dir / 'batch.html'}", flush=True)
+    return doc["exit_status"]

@@ -18,6 +18,11 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
                "conformance/test_s4_4_22_set_freq.py`; a selection that matches nothing is an error (exit 2). Any "
                "other pytest option can follow `--`, e.g. `ckesc run -- -k set_freq -x`.",
     )
+    r = p.add_argument_group("several benches at once (pytest-xdist: pip install 'ckesc-conformance[rig]')")
+    r.add_argument("--rig", metavar="FILE", help="a rig file (fixtures/rigs/*.toml): run on every bench of it at once, one "
+                   "pytest-xdist worker per bench; each bench's report in <reports>/<timestamp>/<bench>/, and batch.html, "
+                   "batch.json and a merged junit.xml beside them. The options below are then set per bench by the rig")
+    r.add_argument("--benches", metavar="A,B", help="--rig: only these benches (default: every bench of the rig)")
     g = p.add_argument_group("device under test")
     g.add_argument("--dut", choices=("emulator", "bus"), default="emulator", help="default: emulator")
     g.add_argument("--lane", choices=("simulated", "realtime"), default="simulated",

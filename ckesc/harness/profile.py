@@ -23,14 +23,17 @@ from __future__ import annotations
 
 import difflib
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from ..protocol.functions import CORE, OPTIONAL
+
+M = TypeVar("M", bound=BaseModel)
 
 CAPABILITIES = ("led", "motor", "pwm_input", "motor_temperature", "multi_node")
 
@@ -132,6 +135,19 @@ def _describe(path: Path, err: dict[str, Any]) -> str:
     return f"{path}: {where} = {value!r}: {err['msg'].lower()}"
 
 
+def validated(model: type[M], text: str, path: Path, error: type[Exception], describe: Callable[[list], str]) -> M:
+    """A TOML document of ``model``'s schema (a DUT profile, a rig file); ``error`` says what is wrong: not TOML,
+    or ``describe(pydantic's errors)``."""
+    try:
+        raw: dict[str, Any] = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: not valid TOML: {exc}") from None
+    try:
+        return model.model_validate(raw)
+    except ValidationError as exc:
+        raise error(describe(exc.errors())) from None
+
+
 # ----------------------------------------------------------------------------------------- profile
 @dataclass
 class DutProfile:
@@ -174,14 +190,7 @@ class DutProfile:
                                "or give the path of a .toml file") from None
         except (OSError, UnicodeDecodeError) as exc:
             raise ProfileError(f"{path}: cannot read the DUT profile: {exc}") from None
-        try:
-            raw: dict[str, Any] = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise ProfileError(f"{path}: not valid TOML: {exc}") from None
-        try:
-            doc = _ProfileDoc.model_validate(raw)
-        except ValidationError as exc:
-            raise ProfileError("; ".join(_describe(path, e) for e in exc.errors())) from None
+        doc = validated(_ProfileDoc, text, path, ProfileError, lambda errors: "; ".join(_describe(path, e) for e in errors))
         return cls(name=doc.dut.name or path.name.removesuffix(".toml"), description=doc.dut.description,
                    capabilities=doc.capabilities.model_dump(), error_s=doc.timing.error_s, jitter_s=doc.timing.jitter_s,
                    boot_s=doc.timing.boot_s, off_s=doc.timing.off_s, readings=doc.readings.model_dump(), path=str(path),

@@ -281,21 +281,9 @@ def evidence(frames: list, *, host: int, node: int | None, comm_loss: bool = Fal
     return out
 
 
-def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: list[dict[str, Any]] = (),
-                  html: bool = True) -> Path:
-    """Write the run's reports into ``out`` (from :func:`run_dir`), ``report.html`` last (built from
-    ``results.json``; ``html=False``: not at all), and point ``latest`` at it. ``info`` gains the run's
-    id (the directory's name), the suite's version and its git revision (None outside a checkout)."""
+def point_latest(out: Path) -> None:
+    """``out.parent/latest`` -> ``out`` (replaced at once; a text file ``LATEST`` where there are no symlinks)."""
     base = out.parent
-    info.setdefault("run_id", out.name)
-    info.setdefault("suite_version", __version__)
-    info.setdefault("git_revision", git_revision())
-    (out / "junit.xml").write_text(junit_xml(results, info, out, not_run), encoding="utf-8")
-    (out / "results.json").write_text(json.dumps({"info": info, "coverage": coverage(results),
-                                                  "results": [r.__dict__ for r in results], "not_run": list(not_run)},
-                                                 indent=1, default=str),
-                                      encoding="utf-8")
-    (out / "summary.txt").write_text(summary_text(results, info) + "\n", encoding="utf-8")
     latest = base / "latest"
     tmp = base / f".latest-{os.getpid()}"
     try:
@@ -305,6 +293,23 @@ def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: li
         os.replace(tmp, latest)
     except OSError:  # no symlinks here: a text pointer instead
         (base / "LATEST").write_text(out.name + "\n")
+
+
+def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: list[dict[str, Any]] = (),
+                  html: bool = True) -> Path:
+    """Write the run's reports into ``out`` (from :func:`run_dir`), ``report.html`` last (built from
+    ``results.json``; ``html=False``: not at all), and point ``latest`` at it. ``info`` gains the run's
+    id (the directory's name), the suite's version and its git revision (None outside a checkout)."""
+    info.setdefault("run_id", out.name)
+    info.setdefault("suite_version", __version__)
+    info.setdefault("git_revision", git_revision())
+    (out / "junit.xml").write_text(junit_xml(results, info, out, not_run), encoding="utf-8")
+    (out / "results.json").write_text(json.dumps({"info": info, "coverage": coverage(results),
+                                                  "results": [r.__dict__ for r in results], "not_run": list(not_run)},
+                                                 indent=1, default=str),
+                                      encoding="utf-8")
+    (out / "summary.txt").write_text(summary_text(results, info) + "\n", encoding="utf-8")
+    point_latest(out)
     if html:
         html_report.build(out)
     return out

@@ -1,0 +1,204 @@
+"""Several benches in one pytest session through pytest-xdist (``ckesc run --rig``): one worker per bench,
+each running every selected test against its own bench, with its own plugin state and its own report.
+
+How: ``-n N --dist each`` (xdist sends every test to every worker), ``-p ckesc.harness.batch`` (this module,
+loaded in every worker too), and :class:`Controller` in the controlling process, which
+
+* gives each worker its bench when xdist sets it up (``pytest_configure_node``: the bench's plugin options
+  and report directory go in ``workerinput``; the worker sets its ``config.option`` from them before the
+  session starts, so each worker's session is a one-bench run as ``ckesc run`` would make it);
+* schedules with :class:`BenchScheduling`, xdist's own ``each`` scheduling, except that a bench whose worker
+  ends early (its DUT did not answer: abort, exit 3; its worker died) is not a "crashed item" of the
+  batch and does not hold up the others;
+* prints one line per bench finished (``pytest_testnodedown``);
+* on Ctrl-C / SIGTERM, sends SIGINT once to each worker (each worker is in a process group of its own, so
+  the terminal's Ctrl-C reaches it only this way, exactly once) and keeps waiting for them: each stops
+  with zero throttle through the plugin's own signal guard, tears its fixtures down and writes its report.
+
+Why ``--dist each`` with a bench per worker, and not the load-sharing modes or N separate ``ckesc run``
+processes: the ckesc plugin's whole state (lane, DUT, preflight, abort, signal guard, report) lives in one
+pytest session; a worker that runs every test keeps that state, and so the bench's report, whole and exactly
+as a one-bench run writes it, while xdist does what would otherwise be written here (starting and watching
+the processes, the event stream from each, a worker that dies).
+
+A worker's set-up mistake found by its preflight (its bus does not open, ...), or anything else that breaks
+its set-up, does not end the worker as a crash would: it is kept as the bench's ``setup_error``, the worker
+runs none of its tests, and the batch reports the bench ABSENT. (A worker process that dies before every
+worker has collected its tests would still end the batch early: xdist stops scheduling once a worker is
+lost and none may be restarted; a worker that dies later is reported BROKEN and the others go on.)
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+from xdist.scheduler import EachScheduling
+
+from . import plugin
+
+WORKER_KEY = "ckesc_bench"
+_SETUP_ERROR = pytest.StashKey[str]()
+
+
+# ----------------------------------------------------------------------------------------- worker
+def _bench_of(config: pytest.Config) -> dict[str, Any] | None:
+    return getattr(config, "workerinput", {}).get(WORKER_KEY)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_configure(config: pytest.Config) -> None:
+    bench = _bench_of(config)
+    if bench is None:
+        return
+    try:
+        os.setpgid(0, 0)  # the terminal's Ctrl-C goes to the controller, which passes it on once
+    except OSError:
+        pass
+    unknown = [dest for dest in bench["options"] if not hasattr(config.option, dest)]
+    if unknown:
+        config.stash[_SETUP_ERROR] = (f"this ckesc has no option --{unknown[0].replace('_', '-')} (the rig asks for it; "
+                                      "labgrid power and places need the labgrid support: pip install -e '.[rig]')")
+        return
+    for dest, value in bench["options"].items():
+        setattr(config.option, dest, value)
+    # pytest's logging capture is not on yet: log records of the preflight (python-can's socketcand client warns
+    # ten times a millisecond while it retries a refused connection) go nowhere, as in a one-bench run's preflight
+    quiet = logging.NullHandler()
+    logging.getLogger().addHandler(quiet)
+    try:
+        out = Path(bench["report_dir"])
+        out.mkdir(parents=True, exist_ok=True)
+        st = plugin.state(config)
+        st.report_dir = out  # reports/<batch>/<bench>/, not a new timestamped directory
+        st.info["run_id"] = f"{out.parent.name}/{bench['name']}"
+        plugin._preflight(config)  # noqa: SLF001 - here, so that a bench's mistake is its own and not a crash
+    except pytest.UsageError as exc:
+        config.stash[_SETUP_ERROR] = str(exc)
+    except Exception as exc:  # noqa: BLE001 - whatever breaks one bench's set-up must not end its worker: xdist
+        # would then stop the benches that have not collected their tests yet
+        config.stash[_SETUP_ERROR] = f"the bench's set-up failed: {type(exc).__name__}: {exc}"
+    finally:
+        logging.getLogger().removeHandler(quiet)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if _bench_of(config) is not None and _SETUP_ERROR in config.stash:
+        items[:] = []  # nothing of this bench can run: its worker ends at once, the others go on
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    config = session.config
+    bench = _bench_of(config)
+    if bench is None:
+        return
+    st = plugin.state(config)
+    config.workeroutput[WORKER_KEY] = {"name": bench["name"], "setup_error": config.stash.get(_SETUP_ERROR, None),
+                                       "stopped": st.stopped, "exitstatus": int(session.exitstatus)}
+
+
+# ----------------------------------------------------------------------------------------- controller
+class BenchScheduling(EachScheduling):
+    """xdist's ``each`` scheduling (every test to every worker), for benches that may end early: a worker
+    that ends with tests pending (its bench aborted, or the worker died) is recorded, not reported as a
+    crashed test of the batch, and one that ends before its collection does not keep the others waiting."""
+
+    def __init__(self, config: pytest.Config, log=None) -> None:
+        super().__init__(config, log)
+        self.ended_early: dict[str, int] = {}  # worker id -> tests it did not get to
+
+    def remove_node(self, node) -> str | None:
+        pending = self.node2pending.pop(node, None)
+        if pending:
+            self.ended_early[node.gateway.id] = len(pending)
+        if node not in self.node2collection and not self.collection_is_completed:
+            self.numnodes -= 1  # it will never send a collection
+            if self.node2collection and len(self.node2collection) >= self.numnodes:
+                self.collection_is_completed = True
+                self.schedule()
+        return None
+
+
+class Controller:
+    """The controlling process's side of a batch (registered by :func:`ckesc.run.run_batch`)."""
+
+    def __init__(self, benches: list[dict[str, Any]], *, on_finished: Callable[[str, dict[str, Any]], None]) -> None:
+        #: per bench: name, options (plugin dests), report_dir
+        self.benches = benches
+        self.on_finished = on_finished
+        self.nodes: dict[str, dict[str, Any]] = {}  # worker id -> its bench
+        self.pids: dict[str, int] = {}
+        self.finished: dict[str, dict[str, Any]] = {}  # bench name -> what its worker said (or how it died)
+        self.started = time.time()
+        self.interrupted = False
+        self._previous: dict[int, Any] = {}
+
+    # xdist hooks
+    @pytest.hookimpl
+    def pytest_xdist_make_scheduler(self, config: pytest.Config, log):
+        return BenchScheduling(config, log)
+
+    @pytest.hookimpl
+    def pytest_configure_node(self, node) -> None:
+        free = [b for b in self.benches if b["name"] not in {n["name"] for n in self.nodes.values()}]
+        bench = free[0] if free else None  # a replacement for a dead worker gets no bench (none is started: 0 restarts)
+        if bench is None:
+            return
+        self.nodes[node.gateway.id] = bench
+        node.workerinput[WORKER_KEY] = bench
+        try:
+            # execnet asked the worker for its facts (pid among them) before this hook; xdist caches them
+            self.pids[node.gateway.id] = int(node.gateway._rinfo().pid)  # noqa: SLF001
+        except Exception:  # noqa: BLE001 - without it a Ctrl-C still reaches the workers through their gateway
+            pass
+        if self.interrupted:
+            self._signal(node.gateway.id)
+
+    @pytest.hookimpl
+    def pytest_testnodedown(self, node, error) -> None:
+        bench = self.nodes.get(node.gateway.id)
+        if bench is None or bench["name"] in self.finished:
+            return
+        said = dict(getattr(node, "workeroutput", {}).get(WORKER_KEY) or {})
+        if error is not None and not said:
+            said["crash"] = f"its worker process ended: {error}"
+        said["seconds"] = time.time() - self.started
+        self.finished[bench["name"]] = said
+        self.on_finished(bench["name"], said)
+
+    # Ctrl-C
+    def install_signals(self) -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.signal(sig, self._stop)
+
+    def restore_signals(self) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    def _stop(self, signum, frame) -> None:  # noqa: ARG002
+        if self.interrupted:
+            print("ckesc run: still stopping: every bench ends its test with zero throttle and writes its report",
+                  file=sys.stderr, flush=True)
+            return
+        self.interrupted = True
+        print(f"ckesc run: {signal.Signals(signum).name}: stopping every bench (zero throttle, then its report)",
+              file=sys.stderr, flush=True)
+        for wid in self.pids:
+            self._signal(wid)
+
+    def _signal(self, wid: str) -> None:
+        bench = self.nodes.get(wid)
+        if wid in self.pids and bench is not None and bench["name"] not in self.finished:
+            try:
+                os.kill(self.pids[wid], signal.SIGINT)
+            except (ProcessLookupError, PermissionError):
+                pass
