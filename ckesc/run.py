@@ -293,7 +293,9 @@ def run_batch(args: argparse.Namespace) -> int:
     controller = batch.Controller(plans, on_finished=finished)
     # no:tmpdir: xdist would make a pytest-of-<user> base directory for the workers' tmp_path, which no
     # conformance test uses (a one-bench run makes none either)
-    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:terminal", "-p", "no:tmpdir", "--rootdir", _suite_root(),
+    # no:labgrid, no:randomly: as in a one-bench run (labgrid is a library here; the run order is the plugin's)
+    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:terminal", "-p", "no:tmpdir", "-p", "no:labgrid",
+            "-p", "no:randomly", "--rootdir", _suite_root(),
             "--ckesc-reports", str(batch_dir), "--ckesc-trace-format", args.trace_format,
             "-p", "ckesc.harness.batch", "-n", str(len(benches)), "--dist", "each", "--max-worker-restart", "0",
             "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning", *extra]

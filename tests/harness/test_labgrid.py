@@ -299,3 +299,44 @@ def test_a_run_interrupted_while_the_dut_is_off_releases_the_place(tmp_path, ben
     assert "Traceback" not in text and "INTERRUPTED" in text, text[-3000:]
     assert "settings were not restored" in text, text[-3000:]  # the DUT was off: said, not raised
     assert lab.holder("rig1") is None, text[-2000:]
+
+
+# ----------------------------------------------------------------------------------------- a rig with a shared place
+@needs_lab
+def test_a_rig_bench_on_a_shared_place_is_acquired_cycled_and_released_beside_a_simulated_bench(tmp_path, bench, lab):
+    """``ckesc run --rig``: a bench that is labgrid place rig1 (its CAN over socketcand, its power through labgrid),
+    beside a simulated bench. The place's bench is acquired in its own worker, its power cycled through labgrid and
+    proven, the place released; both benches PASS; a second batch while someone else holds the place reports that
+    bench ABSENT with who holds it, and the simulated bench still passes."""
+    emu, switch = bench
+    _profile(tmp_path)
+    _place_env(tmp_path)
+    (tmp_path / "rig.toml").write_text(
+        "[bench.shared]\n"
+        f'bus = {{ interface = "socketcand", host = "127.0.0.1", port = {emu.port}, channel = "can0" }}\n'
+        'profile = "bench.toml"\n'
+        'power = { labgrid = { env = "env.yaml", target = "esc" } }\n'
+        'place = "rig1"\n\n'
+        "[bench.sim]\n")
+    env = {**_env(tmp_path), "LG_COORDINATOR": lab.address}
+
+    def batch(reports: str) -> tuple[subprocess.CompletedProcess, dict]:
+        done = subprocess.run([*CKESC, "run", "--rig", "rig.toml", "--reports", str(tmp_path / reports), "4.4.27",
+                               "--", "-k", POWER_CYCLE_TEST], cwd=tmp_path, env=env, capture_output=True, text=True,
+                              timeout=300)
+        [run] = [p for p in (tmp_path / reports).iterdir() if p.is_dir() and not p.is_symlink()]
+        assert (run / "batch.json").is_file(), done.stdout[-3000:] + done.stderr[-3000:]
+        return done, {b["name"]: b for b in json.loads((run / "batch.json").read_text())["benches"]}
+
+    done, benches = batch("reports")
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    assert {n: b["status"] for n, b in benches.items()} == {"shared": "PASS", "sim": "PASS"}, benches
+    assert switch.switched[:2] == ["off", "on"], switch.switched  # through labgrid's NetworkPowerDriver
+    assert lab.holder("rig1") is None  # released by the bench's worker
+    taken = lab.client("-p", "rig1", "acquire", user="alice")
+    assert taken.returncode == 0, taken.stderr
+    done, benches = batch("reports2")
+    assert done.returncode == 3, done.stdout[-3000:] + done.stderr[-3000:]
+    assert benches["sim"]["status"] == "PASS" and benches["shared"]["status"] == "ABSENT", benches
+    assert "locked by" in benches["shared"]["why"] and "alice" in benches["shared"]["why"], benches["shared"]
+    assert lab.holder("rig1").endswith("/alice")
