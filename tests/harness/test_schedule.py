@@ -130,6 +130,7 @@ def overlap_run(tmp_path_factory):
 def test_overlap_order_shares_windows_and_changes_no_verdict(overlap_run, tmp_path):
     serial = _ckesc_run(tmp_path, "--order", "collection")
     assert _verdicts(overlap_run) == _verdicts(serial)
+    assert overlap_run["coverage"] == serial["coverage"]  # the same requirements, judged the same
     assert set(_verdicts(overlap_run).values()) <= {"PASS", "OBSERVED"}
     assert overlap_run["info"]["order"] == "overlap" and "order" not in serial["info"]
     assert overlap_run["info"]["lane_seconds"] < serial["info"]["lane_seconds"] - 3 * W  # windows overlapped
