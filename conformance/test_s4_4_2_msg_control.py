@@ -71,6 +71,7 @@ def _change(name: str, before: dict) -> tuple[dict[str, Any], dict[str, int]]:
 
 # ------------------------------------------------------------------------------------------ tests
 @pytest.mark.requirement("R2", "4.4.2-4", "4.4.2-T")
+@pytest.mark.may_power_cycle  # slot_node: Set ID in a fresh window on a coarse bench
 @pytest.mark.parametrize("command", list(COMMANDS))
 def test_answer_is_command_zero_in_the_node_slot(dut, command):
     """Every command is answered once: a 20010 message with option 0 and command 0x00000000, from the

@@ -55,6 +55,7 @@ def test_reply_is_node_id_and_throttle_channel(dut):
 
 
 @pytest.mark.requirement("4.4.3-4", "R2")
+@pytest.mark.may_power_cycle  # slot_node: Set ID in a fresh window on a coarse bench
 def test_reply_comes_in_the_node_slot(dut):
     """The reply starts (node_id % 32) x 2 ms after the query, within that 2 ms slot, never later than
     64 ms. Three queries, each meeting the periodic reports at another phase. On a bench whose error is not

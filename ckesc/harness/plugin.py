@@ -116,6 +116,8 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "power_cycle: the test cycles the DUT's power")
     config.addinivalue_line("markers", "spins_motor: the test commands non-zero throttle")
     config.addinivalue_line("markers", "last: run after every other conformance test (run-wide checks)")
+    config.addinivalue_line("markers", "may_power_cycle: on some benches the test power-cycles or sends Set ID (e.g. "
+                            "answer slots on a coarse bench): never run while a Set ID / Set Baud window elapses")
     config.addinivalue_line("markers", "cold_boot(write, touches=setting): needs a cold boot between write(dut, "
                             "**params) and its read (cold_boot fixture); the run order may share one power cycle")
     config.addinivalue_line("markers", "window(kind): acts at a moment of the 120 s Set ID / Set Baud window "
@@ -295,7 +297,9 @@ def _kind(item: pytest.Item) -> str:
         return f"window-{window.args[0]}"
     if item.get_closest_marker("cold_boot") is not None:
         return "cold-boot"
-    return "cycle" if item.get_closest_marker("power_cycle") else "filler"
+    if item.get_closest_marker("power_cycle") or item.get_closest_marker("may_power_cycle"):
+        return "cycle"
+    return "filler"
 
 
 def _touches(item: pytest.Item) -> str:
