@@ -82,7 +82,8 @@ def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full
     run = FaultRun(fault, rules)
     with tempfile.TemporaryDirectory(prefix="ckesc-selftest-") as tmp:
         cmd = [sys.executable, "-m", "pytest", "--pyargs", *scope_targets(fault, scope), "-q", "-p", "no:cacheprovider",
-               "--ckesc-reports", tmp, "--ckesc-trace-format", "none", "--ckesc-no-html", *pytest_args]  # results.json is read
+               # deterministic, as ckesc run: the plugin's run order (pytest-randomly off), labgrid only a library
+               "-p", "no:randomly", "-p", "no:labgrid", "--ckesc-reports", tmp, "--ckesc-trace-format", "none", "--ckesc-no-html", *pytest_args]  # results.json is read
         if fault:
             cmd += ["--emulator-faults", fault]
         try:
