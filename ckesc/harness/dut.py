@@ -414,12 +414,16 @@ class Dut:
             return 0.0
         return max(0.0, epoch.on_earliest + cat.CONFIG_WINDOW_S - self.now())
 
+    def _window_unusable(self, kind: str, *, lead: float = 0.0, margin: float = WINDOW_MARGIN_S) -> str | None:
+        """Why the current power-up's window cannot serve an act of ``kind`` now (:func:`epochs.unusable`)."""
+        return unusable(self.lane.epoch, kind, now=self.now(), node_id=self.node_id, bitrate=self.lane.bitrate,
+                        lead=lead, margin=margin)
+
     def open_window(self, left_s: float = 60.0) -> PowerEpoch:
         """A 120 s Set ID / Set Baud window (R11) for a test to act in: of a power-up the counter proved, in which
         no Set ID / Set Baud has been sent, at the DUT's node id and bit rate, with at least ``left_s`` of it
         left. The current power-up's when it is such (a power cycle spared), else a proven power cycle's."""
-        if unusable(self.lane.epoch, INSIDE, now=self.now(), node_id=self.node_id, bitrate=self.lane.bitrate,
-                    lead=left_s) is None:
+        if self._window_unusable(INSIDE, lead=left_s) is None:
             assert self.lane.epoch is not None
             self.record.observe("window", f"of the current power-up: {self.lane.epoch.describe()}")
         else:
@@ -434,8 +438,7 @@ class Dut:
         have changed where it stands or what the DUT does in it (:func:`epochs.unusable`); the run-order
         scheduler has other tests run meanwhile. Otherwise a fresh window is opened with a proven power
         cycle, and the whole window waited out. Returns the power-up epoch the moment belongs to."""
-        why = unusable(self.lane.epoch, kind, now=self.now(), node_id=self.node_id, bitrate=self.lane.bitrate,
-                       margin=margin)
+        why = self._window_unusable(kind, margin=margin)
         if why is None:
             epoch = self.lane.epoch
             assert epoch is not None

@@ -24,7 +24,7 @@ from ..protocol.requirements import REQUIREMENTS, requirement, strongest
 from . import preflight
 from . import report as _report
 from .dut import Dut, DutError, DutUnreachable, echo_probe
-from .epochs import INSIDE, PowerEpoch, unusable
+from .epochs import PowerEpoch, unusable
 from .lanes import (
     HOST_SEND_ERROR_S,
     BenchGone,
@@ -333,7 +333,7 @@ def pytest_runtestloop(session: pytest.Session) -> bool | None:
         if (group := plan.group_of(item)) is not None:
             _stage(st, group)
         start = lane.now() if lane is not None else None
-        if lane is not None and start is not None:
+        if start is not None:
             hint = plan.hint(item, start + plan.estimates.get(_function_key(item)), _moment(st, plan))
         else:
             hint = plan.hint(item, None, None)
@@ -408,9 +408,8 @@ def _stage(st: _State, group: list[pytest.Item]) -> None:
     lane, profile = st.lane, st.profile
     if lane is None or profile is None or st.node_id is None or not lane.power.available:
         return
-    for it in group:
-        if any((cap := requirement(rid).capability) and not profile.has(cap) for rid in item_requirements(it)):
-            return  # it would be skipped: nothing of it may run first
+    if any(_lacking(it, profile) for it in group):
+        return  # one would be skipped: nothing of it may run first
     name = f"shared power cycle {len(st.info.setdefault('cold_boots', [])) + 1}"
     traces = st.traces
     d = Dut(lane, profile, node_id=st.node_id)
@@ -430,21 +429,9 @@ def _stage(st: _State, group: list[pytest.Item]) -> None:
             w.zero_throttle()
             written.observations = list(w.record.observations)
             if traces is not None:
-                written.traces = {f"write{'.' + k if k else ''}": p.relative_to(traces.directory.parent).as_posix()
-                                  for k, p in traces.end().items()}
-    if traces is not None:
-        traces.begin(name)
-    try:
-        d.power_cycle(profile.off_s, profile.boot_s)
-        boot.epoch = lane.epoch
-        if boot.epoch is not None:
-            boot.epoch.opened_by = f"the run-order scheduler ({name})"
-            boot.power_up = entry["power_up"] = boot.epoch.describe()
-    except (DutError, Inconclusive) as exc:
-        entry["error"] = str(exc)
-    finally:
-        if traces is not None:
-            entry["traces"] = [p.relative_to(traces.directory.parent).as_posix() for p in traces.end().values()]
+                written.traces = {f"write{'.' + k if k else ''}": p for k, p in traces.end_relative().items()}
+    boot.epoch = _traced_power_cycle(st, name, entry)
+    boot.power_up = entry.get("power_up", "")
     for it in group:
         st.cold_boots[it.nodeid] = boot
 
@@ -497,11 +484,6 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function):
         return pyfuncitem.ihook.pytest_pyfunc_call(pyfuncitem=pyfuncitem)
 
 
-def _window_for(st: _State, plan: Plan) -> tuple[pytest.Item | None, str]:
-    w = next((w for w in plan.windows if w not in plan.done), None)
-    return w, (plan.window_kind(w) if w is not None else INSIDE)
-
-
 def _moment(st: _State, plan: Plan):
     """``moment(w, end)`` for the plan: when window test ``w`` acts if the test before it ends at ``end``."""
     lane, profile = st.lane, st.profile
@@ -523,27 +505,38 @@ def _open_epoch(st: _State, plan: Plan) -> None:
     serves the next window test. A failure here is recorded, not raised: the window test then opens its own
     window (and meets the problem as its own)."""
     lane, profile = st.lane, st.profile
-    w, kind = _window_for(st, plan)
+    w = plan.pending_window()
     if lane is None or profile is None or st.node_id is None or w is None or not lane.power.available:
         return
-    if unusable(lane.epoch, kind, now=lane.now(), node_id=st.node_id, bitrate=lane.bitrate, lead=LEAD_S) is None:
+    if unusable(lane.epoch, plan.window_kind(w), now=lane.now(), node_id=st.node_id, bitrate=lane.bitrate,
+                lead=LEAD_S) is None:
         return
     name = f"power-up epoch {len(st.info['epochs']) + 1}"
     entry: dict[str, Any] = {"name": name, "for": w.nodeid, "at": round(lane.now(), 3)}
     st.info["epochs"].append(entry)
-    traces = st.traces
+    _traced_power_cycle(st, name, entry)
+
+
+def _traced_power_cycle(st: _State, name: str, entry: dict[str, Any]) -> PowerEpoch | None:
+    """A proven power cycle between two tests, in a trace of its own named ``name``; ``entry`` (the run's record of
+    it) gets its trace files and the power-up, or the error: that is recorded, not raised (the tests that were to
+    use the power-up meet the problem as their own). Returns the power-up's epoch, None when it failed."""
+    lane, profile, traces = st.lane, st.profile, st.traces
+    assert lane is not None and profile is not None
     if traces is not None:
         traces.begin(name)
     try:
         Dut(lane, profile, node_id=st.node_id).power_cycle(profile.off_s, profile.boot_s)
     except (DutError, Inconclusive) as exc:
         entry["error"] = str(exc)
+        return None
     finally:
         if traces is not None:
-            entry["traces"] = [p.relative_to(traces.directory.parent).as_posix() for p in traces.end().values()]
-    if lane.epoch is not None and "error" not in entry:
+            entry["traces"] = list(traces.end_relative().values())
+    if lane.epoch is not None:
         lane.epoch.opened_by = f"the run-order scheduler between two tests ({name})"
         entry["power_up"] = lane.epoch.describe()
+    return lane.epoch
 
 
 # ----------------------------------------------------------------------------------------- lane / dut
@@ -680,10 +673,8 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     profile = st.profile
     assert profile is not None
     _check_claims(request.node, profile)
-    for rid in item_requirements(request.node):
-        cap = requirement(rid).capability
-        if cap and not profile.has(cap):
-            pytest.skip(f"the DUT profile {profile.name!r} lacks capability '{cap}' ({rid})")
+    if (lacks := _lacking(request.node, profile)) is not None:
+        pytest.skip(f"the DUT profile {profile.name!r} lacks capability '{lacks[1]}' ({lacks[0]})")
     if request.node.get_closest_marker("power_cycle") and not ckesc_lane.power.available:
         pytest.skip("needs a power cycle; no power control (--power none)")
     node = config.getoption("node_id") or st.node_id
@@ -730,6 +721,15 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
 
 
 _DUT = pytest.StashKey[Dut]()
+
+
+def _lacking(item: pytest.Item, profile: DutProfile) -> tuple[str, str] | None:
+    """(requirement id, capability) of the first requirement ``item`` cites whose capability the profile lacks."""
+    for rid in item_requirements(item):
+        cap = requirement(rid).capability
+        if cap and not profile.has(cap):
+            return rid, cap
+    return None
 
 
 def _check_claims(item: pytest.Item, profile: DutProfile) -> None:
@@ -888,11 +888,11 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     try:
         return (yield)
     finally:
-        paths = traces.end()
+        paths = traces.end_relative()
         st = state(item.config)
         res = st.results.get(item.nodeid)
         if res is not None:
-            res.traces = {lane: p.relative_to(traces.directory.parent).as_posix() for lane, p in paths.items()}
+            res.traces = dict(paths)
             group = st.cold_boots.get(item.nodeid)
             if group is not None and group.written[item.nodeid].used:  # its write, made before the shared cycle
                 res.traces.update(group.written[item.nodeid].traces)

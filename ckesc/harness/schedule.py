@@ -132,10 +132,9 @@ class Plan(Generic[T]):
         the window test must start (so that module's set-up, e.g. a module-scoped capture, is kept), else
         the window test itself (a filler of another module may still run first, see :meth:`choose`).
         Otherwise the next test in order, which is then what runs."""
-        windows = [w for w in self.windows if w not in self.done]
-        if not windows:
-            return next((it for it in self.windows + self.rest + self.last if it not in self.done), None)
-        w = windows[0]
+        w = self.pending_window()
+        if w is None:
+            return self._peek_in_order()
         same = next((f for f in self.fillers if f not in self.done and self._module(f) == self._module(current)), None)
         if same is not None and end is not None and moment is not None:
             if end + self.estimates.get(self.key(same)) <= moment(w, end) - LEAD_S - COMMIT_SLACK_S:
@@ -146,10 +145,9 @@ class Plan(Generic[T]):
         """The test to run at lane time ``now``: while a window test is pending, the first filler (that
         ``allowed`` accepts: pytest kept set up what it shares with the hint) expected to end
         :data:`LEAD_S` before the window test's moment (``moment(w, now)``), else the window test."""
-        windows = [w for w in self.windows if w not in self.done]
-        if not windows:
+        w = self.pending_window()
+        if w is None:
             return self._next_in_order()
-        w = windows[0]
         start_by = moment(w, now) - LEAD_S
         candidates = [f for f in self.fillers if f not in self.done and allowed(f)]
         fitting = [f for f in candidates if now + self.estimates.get(self.key(f)) <= start_by]
@@ -161,8 +159,15 @@ class Plan(Generic[T]):
             return self._take(w)
         return self._take(candidates[0])  # pytest was told this module's next filler comes: it does
 
+    def pending_window(self) -> T | None:
+        """The next window test not run yet."""
+        return next((w for w in self.windows if w not in self.done), None)
+
+    def _peek_in_order(self) -> T | None:
+        return next((it for it in self.windows + self.rest + self.last if it not in self.done), None)
+
     def _next_in_order(self) -> T | None:
-        it = next((it for it in self.windows + self.rest + self.last if it not in self.done), None)
+        it = self._peek_in_order()
         return None if it is None else self._take(it)
 
     def _take(self, item: T) -> T:
@@ -174,4 +179,4 @@ class Plan(Generic[T]):
 
     def needs_epoch_before(self, item: T) -> bool:
         """Whether a window is to be opened before ``item``: a filler run while window tests wait."""
-        return self.kind(item) == "filler" and any(w not in self.done for w in self.windows)
+        return self.kind(item) == "filler" and self.pending_window() is not None

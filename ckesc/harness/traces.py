@@ -87,6 +87,10 @@ class TestTraces:
             writer.stop()
         return {lane: path for lane, (path, _) in writers.items()}
 
+    def end_relative(self) -> dict[str, str]:
+        """:meth:`end`, each file named relative to the run's report directory (as the reports name it)."""
+        return {lane: path.relative_to(self.directory.parent).as_posix() for lane, path in self.end().items()}
+
 
 class _LaneTrace(can.Listener):
     def __init__(self, traces: TestTraces, lane: str) -> None:
