@@ -144,6 +144,8 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
         argv += ["--emulator-option", kv]
     if args.emulator_seed:
         argv += ["--emulator-seed", str(args.emulator_seed)]
+    if getattr(args, "emulator_variants", None) is not None:
+        argv += ["--emulator-variants", str(args.emulator_variants)]
     if args.allow_motor_spin:
         argv.append("--allow-motor-spin")
     argv.append("-q" if args.quiet else "-v")
@@ -205,7 +207,7 @@ class _Collector:
 #: ``ckesc run``'s options that a rig file sets per bench, with their defaults (given with --rig: an error)
 BENCH_OPTIONS = {"dut": "emulator", "lane": "simulated", "can_interface": None, "can_channel": None, "can_bitrate": None,
                  "can_config": [], "node_id": None, "nodes": None, "profile": None, "power": None, "power_off_cmd": None,
-                 "power_on_cmd": None, "emulator_faults": "", "emulator_seed": 0, "emulator_option": [],
+                 "power_on_cmd": None, "emulator_faults": "", "emulator_seed": 0, "emulator_option": [], "emulator_variants": None,
                  "can_bitrate_cmd": None, "host_send_error": None, "allow_motor_spin": None,
                  "labgrid_env": None, "labgrid_target": None, "labgrid_place": None}
 

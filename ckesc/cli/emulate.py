@@ -8,6 +8,7 @@ from typing import Any
 
 import can
 
+from ..emulator import variants
 from ..protocol.assignments import parse_int
 from .common import EXIT_FRAMES_FAILED, EXIT_OK, UsageError, _int_arg
 
@@ -84,6 +85,9 @@ def _run_emulate(args: argparse.Namespace) -> int:
     from ..emulator.flash import FlashError
     from ..emulator.realtime import RealtimeEmulator, stagger_boot
 
+    if args.list_variants:
+        print(variants.table())
+        return EXIT_OK
     if args.socketcand is None and args.interface is None:
         raise UsageError("give --socketcand PORT (a hub for python-can's socketcand client) or --interface/--channel (a python-can bus)")
     if args.interface is not None and args.channel is None:
@@ -145,8 +149,13 @@ def _run_emulate(args: argparse.Namespace) -> int:
 
 
 def _model_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The EscConfig fields the command line sets for every ESC."""
-    return {"boot_time": args.boot_time, "report_delay": args.report_delay, "report_timer": args.report_timer}
+    """The EscConfig fields the command line sets for every ESC: --boot-time, --report-delay, --report-timer,
+    then the conforming combination --variants SEED draws, then each --option NAME=VALUE."""
+    out = {"boot_time": args.boot_time, "report_delay": args.report_delay, "report_timer": args.report_timer}
+    try:
+        return {**out, **variants.combination(args.option or (), args.variants)}
+    except variants.VariantError as exc:
+        raise UsageError(f"--option: {exc}") from None
 
 
 def add_emulate_command(sub: argparse._SubParsersAction) -> None:
@@ -192,6 +201,14 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
                    help="when reporting comes back (a resume, leaving CAN Test): restart (default: the first report at once, "
                    "the next ones an interval apart) or grid (one report at once, then the old grid goes on); both are "
                    "conformant (R9a)")
+    p.add_argument("--option", action="append", metavar="NAME=VALUE",
+                   help="one conforming variant for every ESC (repeatable): a behaviour the document leaves free, "
+                   "e.g. report_timer=grid; --list-variants lists them with the requirements that allow each")
+    p.add_argument("--variants", type=_int_arg, metavar="SEED",
+                   help="play the conforming combination drawn from SEED (every freedom at a random conforming value; "
+                   "--option wins over it)")
+    p.add_argument("--list-variants", action="store_true",
+                   help="list the conforming variants (name, values, the requirements that allow it) and exit")
     p.add_argument("--rt-priority", type=_int_arg, metavar="N",
                    help="run the scheduler thread SCHED_FIFO at priority N (1..99; needs CAP_SYS_NICE, else a warning): "
                    "on a loaded machine this keeps other processes from delaying frames by milliseconds")

@@ -55,9 +55,11 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
                    help="allow non-zero throttle on a real ESC (propellers off!)")
     g.add_argument("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")
     g.add_argument("--emulator-seed", type=int, default=0)
-    g.add_argument("--emulator-option", action="append", default=[], metavar="KEY=VALUE",
-                   help="emulator: a setting of every emulated ESC (repeatable): boot_time=S, report_delay=S, "
-                   "report_timer=restart|grid")
+    g.add_argument("--emulator-option", action="append", default=[], metavar="NAME=VALUE",
+                   help="emulator: one conforming variant for every emulated ESC (repeatable; names, values and the "
+                   "requirements that allow each: ckesc emulate --list-variants)")
+    g.add_argument("--emulator-variants", type=int, default=None, metavar="SEED",
+                   help="emulator: play the conforming combination drawn from SEED (--emulator-option wins over it)")
     g.add_argument("--order", choices=("overlap", "collection"), default="overlap",
                    help="overlap (default): tests that neither power-cycle nor reconfigure the DUT run while a 120 s "
                    "Set ID / Set Baud window elapses, persistence tests share power cycles; collection: one test "

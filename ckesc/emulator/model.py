@@ -45,14 +45,15 @@ from ..protocol.frame import Decoder, Frame, WireFrame, encode
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, Priority, message_id, service_id
 from ..protocol.transfer import TransferIdCounter, tail_byte
 from . import faults as _faults
+from . import variants as _variants
 
 # Reporting states (MSG Control, 4.4.2)
 REPORTING = "normal"
 SUSPENDED = "suspended"
 EXP_MODE = "exp"
 
-#: How the report timer may behave when reporting comes back (EscConfig.report_timer; R9a allows both)
-REPORT_TIMERS = ("restart", "grid")
+#: How the report timer may behave when reporting comes back (EscConfig.report_timer; R9a allows each)
+REPORT_TIMERS = _variants.FREEDOMS["report_timer"].choices
 
 #: Fault code 1 -> the MSG1 self-test error bit it lights (4.4.4 status bits 7..0).
 _FAULT_BITS = {
@@ -108,8 +109,8 @@ class EscConfig:
 
     def __post_init__(self) -> None:
         self.faults = _faults.check(self.faults)
-        if self.report_timer not in REPORT_TIMERS:
-            raise ValueError(f"report_timer {self.report_timer!r}: one of {', '.join(REPORT_TIMERS)}")
+        # the freedoms the document leaves (conforming variants): each field only at a value that conforms
+        _variants.check({name: getattr(self, name) for name in _variants.FREEDOMS})
 
 
 def factory_nvm(config: EscConfig) -> dict[str, Any]:

@@ -571,8 +571,8 @@ class RealtimeEmulatorLane(BusLane):
                  timing_error: float = 0.002, temp_flash: bool = False, esc_options: dict[str, Any] | None = None) -> None:
         cmd = [sys.executable, "-m", "ckesc", "emulate", "--nodes", ",".join(map(str, nodes)), "--socketcand", "0",
                "--control", "0", "--seed", str(seed)]
-        for key, value in (esc_options or {}).items():  # EscConfig fields: boot_time -> --boot-time
-            cmd += [f"--{key.replace('_', '-')}", str(value)]
+        for key, value in (esc_options or {}).items():  # conforming variants (EscConfig fields): --option NAME=VALUE
+            cmd += ["--option", f"{key}={value}"]
         if faults:
             cmd += ["--faults", ",".join(faults)]
         # temp_flash: the emulated ESCs keep their flash across power cycles in a file that lives as long as

@@ -7,6 +7,7 @@ options exist, but nothing is opened and no report is written.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import json
 import signal
@@ -17,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from ..emulator import variants
 from ..evidence.live import LaneRules, causes, failure_text
 from ..protocol import catalogue as cat
 from ..protocol import functions
@@ -94,8 +96,12 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                 help="allow non-zero throttle (default: only for the emulator). PROPELLERS OFF.")
     g.addoption("--emulator-faults", default="", help="emulator: comma-separated fault names to switch on")
     g.addoption("--emulator-seed", type=int, default=0, help="emulator: random seed")
-    g.addoption("--emulator-option", action="append", default=[], metavar="KEY=VALUE",
-                help="emulator: a setting of every emulated ESC (repeatable): " + ", ".join(preflight.EMULATOR_OPTIONS))
+    g.addoption("--emulator-option", action="append", default=[], metavar="NAME=VALUE",
+                help="emulator: one conforming variant for every emulated ESC (repeatable; the names, values and the "
+                     "requirements that allow each: ckesc emulate --list-variants): " + ", ".join(variants.FREEDOMS))
+    g.addoption("--emulator-variants", type=int, default=None, metavar="SEED",
+                help="emulator: every emulated ESC plays the conforming combination drawn from SEED (--emulator-option "
+                     "wins over the draw); the run's reports name the combination")
     g.addoption("--ckesc-reports", default=None, metavar="DIR",
                 help="write JUnit, JSON and text reports under DIR/<timestamp>/ (ckesc run sets reports/)")
     g.addoption("--ckesc-summary", action="store_true", default=False,
@@ -583,8 +589,9 @@ class _null:
 
 
 def emulator_options(config: pytest.Config) -> dict[str, Any]:
-    """--emulator-option KEY=VALUE, checked (preflight): {EscConfig field: value}."""
-    return preflight.emulator_options(config.getoption("emulator_option"))
+    """The conforming variant the emulated ESCs play: --emulator-variants SEED's draw with --emulator-option
+    NAME=VALUE on top, checked (preflight): {EscConfig field: value}."""
+    return preflight.emulator_options(config.getoption("emulator_option"), config.getoption("emulator_variants"))
 
 
 def emulator_faults(config: pytest.Config) -> list[str]:
@@ -627,6 +634,10 @@ def ckesc_lane(request: pytest.FixtureRequest):
     config = request.config
     st = state(config)
     profile = st.profile or preflight.profile(config.getoption)  # loaded by the preflight, before any test
+    played = emulator_options(config) if config.getoption("dut") == "emulator" else {}
+    for key, value in variants.declared(played).items():  # what the emulated ESC's vendor would state in its profile
+        if value > getattr(profile, key):
+            profile = dataclasses.replace(profile, **{key: value})
     lane = make_lane(config, profile)
     st.lane, st.profile = lane, profile
     _trace_lane(config, lane, "")
@@ -637,6 +648,8 @@ def ckesc_lane(request: pytest.FixtureRequest):
                    bitrate=lane.bitrate, power=lane.power.name, timing_error_s=lane.timing_error,
                    jitter_s=profile.jitter_s, not_claimed=functions.not_claimed_text(profile.absent),
                    faults=config.getoption("emulator_faults") or "", **echo_info(lane))
+    if config.getoption("dut") == "emulator":  # the conforming variant the emulator played, to replay a verdict
+        st.info.update(emulator_variants=variants.describe(played), emulator_variants_seed=config.getoption("emulator_variants"))
     _install_signal_guard(config)
     opened = lane.now()
     yield lane

@@ -22,8 +22,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ..emulator import variants
 from ..emulator.faults import FAULTS
-from ..emulator.model import REPORT_TIMERS
 from ..protocol.ids import ESC_NODE_IDS
 from .profile import DutProfile, ProfileError
 
@@ -70,31 +70,13 @@ def fault_names(text: str) -> list[str]:
     return names
 
 
-#: What --emulator-option sets in every emulated ESC (ckesc.emulator.model.EscConfig), and how it is read
-EMULATOR_OPTIONS = {"boot_time": "S (power-on to the first answer)", "report_delay": "S (boot to the first report)",
-                    "report_timer": "restart|grid (R9a)"}
-
-
-def emulator_options(items: list[str]) -> dict[str, Any]:
-    """--emulator-option KEY=VALUE, checked: {EscConfig field: value}."""
-    out: dict[str, Any] = {}
-    for kv in items:
-        key, sep, value = kv.partition("=")
-        if not sep or key not in EMULATOR_OPTIONS:
-            raise PreflightError(f"--emulator-option takes KEY=VALUE with KEY one of {', '.join(EMULATOR_OPTIONS)}; "
-                                 f"got {kv!r}")
-        if key == "report_timer":
-            if value not in REPORT_TIMERS:
-                raise PreflightError(f"--emulator-option: report_timer {value!r}: one of {', '.join(REPORT_TIMERS)}")
-            out[key] = value
-            continue
-        try:
-            out[key] = float(value)
-        except ValueError:
-            raise PreflightError(f"--emulator-option {key}: seconds, got {value!r}") from None
-        if out[key] < 0:
-            raise PreflightError(f"--emulator-option {key}: seconds, 0 or more, got {value!r}")
-    return out
+def emulator_options(items: list[str], seed: int | None = None) -> dict[str, Any]:
+    """--emulator-option NAME=VALUE over the combination --emulator-variants SEED draws, checked: {EscConfig
+    field: value}. The names and their conforming values are ckesc/emulator/variants.py's."""
+    try:
+        return variants.combination(items, seed)
+    except variants.VariantError as exc:
+        raise PreflightError(f"--emulator-option: {exc}") from None
 
 
 def reports_writable(base: str | os.PathLike) -> None:
@@ -195,10 +177,10 @@ def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None,
         if dut != "emulator":
             raise PreflightError("--emulator-faults switches faults of the emulator: it needs --dut emulator")
         fault_names(get("emulator_faults"))
-    if get("emulator_option"):
+    if get("emulator_option") or get("emulator_variants") is not None:
         if dut != "emulator":
-            raise PreflightError("--emulator-option sets the emulator's ESCs: it needs --dut emulator")
-        emulator_options(get("emulator_option"))
+            raise PreflightError("--emulator-option and --emulator-variants set the emulator's ESCs: they need --dut emulator")
+        emulator_options(get("emulator_option"), get("emulator_variants"))
     prof = profile(get)
     if get("ckesc_reports"):
         reports_writable(get("ckesc_reports"))

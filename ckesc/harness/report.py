@@ -175,6 +175,9 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
                  + (f" ({', '.join(cov['uncovered'][:12])}{' ...' if len(cov['uncovered']) > 12 else ''})" if cov["uncovered"] else ""))
     dut = ", ".join(f"{k}={info[k]}" for k in ("dut", "lane", "profile", "node_id", "bitrate", "power", "faults") if info.get(k) not in (None, ""))
     lines.append(f"DUT: {dut}")
+    if info.get("emulator_variants") not in (None, "", "defaults"):  # a conforming variant: replayable from these
+        seed = info.get("emulator_variants_seed")
+        lines.append(f"variant: {info['emulator_variants']}" + (f" (drawn from --emulator-variants {seed})" if seed is not None else ""))
     if info.get("clock"):  # the bench's stated error: timing margins inside it are INCONCLUSIVE
         lines.append(f"timing: {info['clock']} clock, stated error +-{(info.get('timing_error_s') or 0.0) * 1000:g} ms "
                      f"(the bench's), report-interval jitter allowance {(info.get('jitter_s') or 0.0) * 1000:g} ms (the DUT's)")

@@ -17,7 +17,7 @@
       place          a labgrid place to acquire before the run (passed on as --labgrid-place)
       bitrate_cmd, host_send_error_ms, allow_motor_spin: as --can-bitrate-cmd, --host-send-error,
                      --allow-motor-spin
-      emulator       --dut emulator: { nodes = [1], faults = [...], seed = 0, options = { boot_time = 0.5 } }
+      emulator       --dut emulator: { nodes = [1], faults = [...], seed = 0, options = { boot_time = 0.2 }, variants = SEED }
 
 A rig is checked against this schema (pydantic) when it is loaded, as DUT profiles are: an unknown
 section or key, a wrong type or a value out of range is a :class:`RigError` naming the file, the bench
@@ -100,6 +100,7 @@ class _Emulator(_Section):
     faults: list[str] = []
     seed: int = 0
     options: dict[str, Scalar] = {}
+    variants: int | None = None  # the seed of a drawn conforming combination (ckesc/emulator/variants.py)
 
 
 class _BenchDoc(_Section):
@@ -238,7 +239,7 @@ class Bench:
             elif isinstance(value, list):
                 for v in value:
                     out += [flag, str(v)]
-            elif value not in (None, False, ""):
+            elif value is not None and value is not False and value != "":  # (a seed 0 is a value)
                 out += [flag, str(value)]
         return out
 
@@ -288,6 +289,8 @@ def _bench(name: str, doc: _BenchDoc, base: Path) -> Bench:
             s["emulator_seed"] = emu.seed
         if emu.options:
             s["emulator_option"] = [f"{k}={v}" for k, v in emu.options.items()]
+        if emu.variants is not None:
+            s["emulator_variants"] = emu.variants
     else:
         assert doc.bus is not None
         s["can_interface"] = doc.bus.interface

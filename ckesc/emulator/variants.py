@@ -1,0 +1,153 @@
+"""Conforming variants: every behaviour the document leaves free, as the emulator can play it.
+
+A fault (``faults.py``) makes an emulated ESC break a rule; a *variant* makes it take another of the
+choices the document, or a stated READING, allows. The suite must pass every variant: a FAIL or an
+ERROR on one is the suite's bug (a reading stricter than the document), never the DUT's. This module
+is the one list of those freedoms, each citing the requirement ids (``ckesc/protocol/requirements.toml``:
+``R..`` from ``spec/INTERPRETATIONS.md``, section clauses) that leave it open.
+
+Each freedom is an :class:`~ckesc.emulator.model.EscConfig` field. Its conforming values are either
+named alternatives (``choices``; the first is what the emulator does by default) or a span of
+seconds (``span``; the default is the field's default). ``--emulator-option NAME=VALUE`` (``ckesc
+run``, the pytest plugin) and ``ckesc emulate --option NAME=VALUE`` set one; ``--emulator-variants SEED``
+and ``ckesc emulate --variants SEED`` draw a whole combination from a seed (:func:`draw`), options
+given by name winning over the draw.
+"""
+
+from __future__ import annotations
+
+import difflib
+import random
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any, Iterable, Mapping
+
+
+class VariantError(ValueError):
+    """A variant name or value the emulator cannot play (a usage error, said in one line)."""
+
+
+@dataclass(frozen=True)
+class Freedom:
+    name: str  # the EscConfig field it sets
+    allowed_by: tuple[str, ...]  # requirement ids whose text leaves this open
+    description: str
+    choices: tuple[str, ...] = ()  # named conforming alternatives; the first is the emulator's default
+    span: tuple[float, float] | None = None  # or: any number of seconds in [lo, hi]
+    #: a DUT profile [timing] key the emulated DUT declares as this value (what a vendor would state in its
+    #: profile for an ESC that behaves so; e.g. its report jitter is its ``jitter_s``)
+    declares: str | None = None
+
+    def __post_init__(self) -> None:
+        if bool(self.choices) == (self.span is not None):
+            raise ValueError(f"freedom {self.name}: give either choices or a span")
+
+    @property
+    def kind(self) -> str:
+        return "seconds" if self.span is not None else "choice"
+
+    def values_text(self) -> str:
+        if self.span is not None:
+            return f"{self.span[0]:g}..{self.span[1]:g} s"
+        return "|".join(self.choices)
+
+    def parse(self, text: Any) -> Any:
+        """A value given as text (or already typed), checked against what conforms."""
+        if self.span is not None:
+            try:
+                value = float(text)
+            except (TypeError, ValueError):
+                raise VariantError(f"{self.name}: seconds ({self.values_text()}), got {text!r}") from None
+            lo, hi = self.span
+            if not lo <= value <= hi:
+                raise VariantError(f"{self.name}={value:g}: conforming values are {self.values_text()} "
+                                   f"({', '.join(self.allowed_by)})")
+            return value
+        value = str(text)
+        if value not in self.choices:
+            raise VariantError(f"{self.name}={value}: one of {self.values_text()} ({', '.join(self.allowed_by)})")
+        return value
+
+    def draw(self, rng: random.Random) -> Any:
+        if self.span is not None:
+            return round(rng.uniform(*self.span), 4)
+        return rng.choice(self.choices)
+
+
+# Each freedom names the field of EscConfig it sets; keep one entry per freedom, grouped by where the
+# document leaves it open. New freedoms go in the group of their requirement.
+_FREEDOMS = (
+    # power-up (profile [timing] boot_s: power-on to the first report; the emulator profile says 0.5 s)
+    Freedom("boot_time", ("1-2",), "power-on to the first answer: the ESC hears nothing before",
+            span=(0.05, 0.3)),
+    Freedom("report_delay", ("1-2",), "boot to the first report: an ESC may answer services before it reports",
+            span=(0.0, 0.15)),
+    # report timers (R9a)
+    Freedom("report_timer", ("R9a",),
+            "when reporting comes back (a resume, leaving CAN Test): restart (the first report at once, the next ones "
+            "an interval apart) or grid (one report at once, then the old grid goes on)",
+            choices=("restart", "grid")),
+)
+
+FREEDOMS: Mapping[str, Freedom] = MappingProxyType({f.name: f for f in _FREEDOMS})
+
+
+def freedom(name: str) -> Freedom:
+    try:
+        return FREEDOMS[name]
+    except KeyError:
+        close = difflib.get_close_matches(name, list(FREEDOMS), n=3)
+        raise VariantError(f"unknown emulator option {name!r}" + (f" (did you mean {', '.join(close)}?)" if close else "")
+                           + f"; one of {', '.join(FREEDOMS)}") from None
+
+
+def parse(items: Iterable[str]) -> dict[str, Any]:
+    """``NAME=VALUE`` items, checked: {EscConfig field: value}."""
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, value = str(item).partition("=")
+        if not sep:
+            raise VariantError(f"takes NAME=VALUE with NAME one of {', '.join(FREEDOMS)}; got {item!r}")
+        out[name.strip()] = freedom(name.strip()).parse(value.strip())
+    return out
+
+
+def check(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Typed values (an EscConfig's, a rig file's), checked as :func:`parse` checks text."""
+    return {name: freedom(name).parse(value) for name, value in values.items()}
+
+
+def draw(seed: int, names: Iterable[str] | None = None) -> dict[str, Any]:
+    """A random conforming combination: every freedom (or those ``names``) at a value drawn from ``seed``.
+    The same seed draws the same combination, whatever else changes in the run."""
+    rng = random.Random(f"ckesc-variants-{seed}")
+    chosen = list(FREEDOMS) if names is None else [freedom(n).name for n in names]
+    return {name: FREEDOMS[name].draw(rng) for name in chosen}
+
+
+def combination(options: Iterable[str] = (), seed: int | None = None) -> dict[str, Any]:
+    """What a run plays: the combination drawn from ``seed`` (none: the defaults), with ``options``
+    (``NAME=VALUE``) on top."""
+    return {**(draw(seed) if seed is not None else {}), **parse(options)}
+
+
+def declared(values: Mapping[str, Any]) -> dict[str, float]:
+    """The DUT profile [timing] keys the emulated ESC declares for this combination (e.g. its jitter)."""
+    out: dict[str, float] = {}
+    for name, value in values.items():
+        f = FREEDOMS.get(name)
+        if f is not None and f.declares:
+            out[f.declares] = max(out.get(f.declares, 0.0), float(value))
+    return out
+
+
+def describe(values: Mapping[str, Any]) -> str:
+    """One line for reports and the console: ``report_timer=grid boot_time=0.12``."""
+    return " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in values.items()) or "defaults"
+
+
+def table() -> str:
+    """The freedoms as a text table (``ckesc emulate --list-variants``, the README)."""
+    rows = [(f.name, f.values_text(), ", ".join(f.allowed_by), f.description) for f in FREEDOMS.values()]
+    w = [max(len(r[i]) for r in rows) for i in range(3)]
+    return "\n".join(f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {d}" for a, b, c, d in rows)
