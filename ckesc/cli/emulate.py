@@ -198,8 +198,9 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report-delay", type=float, default=0.0, metavar="S",
                    help="boot to the first report: an ESC that answers before it reports (default 0)")
     p.add_argument("--report-timer", choices=REPORT_TIMERS, default="restart",
-                   help="when reporting comes back (a resume, leaving CAN Test): restart (default: the first report at once, "
-                   "the next ones an interval apart) or grid (one report at once, then the old grid goes on); both are "
+                   help="when reporting comes back (a resume, leaving CAN Test or MSG_EXP mode): restart (default: the first "
+                   "report at once, the next ones an interval apart), grid (one report at once, then the old grid goes on), "
+                   "next_tick (the first at the old grid's next point) or one_interval (the first one interval later); all "
                    "conformant (R9a)")
     p.add_argument("--option", action="append", metavar="NAME=VALUE",
                    help="one conforming variant for every ESC (repeatable): a behaviour the document leaves free, "

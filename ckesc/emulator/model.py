@@ -54,6 +54,9 @@ EXP_MODE = "exp"
 
 #: How the report timer may behave when reporting comes back (EscConfig.report_timer; R9a allows each)
 REPORT_TIMERS = _variants.FREEDOMS["report_timer"].choices
+#: ... and when a report comes next after a Set Freq write changed its interval (EscConfig.set_freq_timer; R9a)
+SET_FREQ_TIMERS = _variants.FREEDOMS["set_freq_timer"].choices
+_REPORT_NAMES = ("msg1", "msg2", "msg3")
 
 #: Fault code 1 -> the MSG1 self-test error bit it lights (4.4.4 status bits 7..0).
 _FAULT_BITS = {
@@ -96,10 +99,20 @@ class EscConfig:
     has_motor_sensor: bool = False
     boot_time: float = 0.25  # power-on to first answer; the ESC hears nothing before
     report_delay: float = 0.0  # boot to first report: an ESC may answer services before it reports
-    #: what the report timer does when reporting comes back (resume, leaving CAN Test) - R9a leaves it open:
-    #: "restart" (the first report at once, the next ones one interval apart) or "grid" (one report at once,
-    #: "immediately", then the old grid goes on, as if the timer had never stopped)
+    #: what the report timer does when reporting comes back (resume, leaving CAN Test or MSG_EXP mode) - R9a
+    #: leaves it open: "restart" (the first report at once, the next ones one interval apart), "grid" (one report
+    #: at once, "immediately", then the old grid goes on, as if the timer had never stopped), "next_tick" (nothing
+    #: at once: the first report at the old grid's next point) or "one_interval" (the timer restarted at the
+    #: event: the first report one full interval later)
     report_timer: str = "restart"
+    #: when a report whose interval a Set Freq write changed comes next - R9a leaves it open: "last_report" (the
+    #: new interval counted from the last report), "old_deadline" (the report already scheduled on the old
+    #: interval first, the new interval from it), "restart" (one new interval after the write) or "at_once"
+    #: (a report at the write, the new interval from it)
+    set_freq_timer: str = "last_report"
+    #: the ESC's own report timing jitter, as its profile would declare it (jitter_s, R9): each report goes out
+    #: within +- half of it of its grid point (so one interval strays by at most this much), the grid itself exact
+    report_jitter_s: float = 0.0
     service_delay: float = 0.0005  # request to response for services
     max_rpm: int = 9000
     motor_tau: float = 0.15  # rpm first-order lag
@@ -212,6 +225,10 @@ class EscModel:
         self._last_thermal = now
         self._next_report: dict[str, float] = {}
         self._regrid: dict[str, float] = {}  # report_timer "grid": the old grid's next point after a report sent at once
+        # report_jitter_s: each report's offset from its grid point (empty without jitter: the hot path stays as it was),
+        # and the earliest a jittered report may go out (not before the event that set its timer)
+        self._offset: dict[str, float] = {k: self._jitter() for k in _REPORT_NAMES} if self.config.report_jitter_s else {}
+        self._report_floor = now
         self._reports_were_active = True
         self._next_can_test = 0.0
 
@@ -230,6 +247,7 @@ class EscModel:
         self.nvm_dirty = True
         start = self.ready_at + self.config.report_delay
         self._next_report = {"msg1": start, "msg2": start, "msg3": start}
+        self._report_floor = start
         self._next_can_test = start
 
     def power_off(self, now: float) -> None:
@@ -475,23 +493,44 @@ class EscModel:
         return period
 
     def _restart_reports(self, now: float) -> None:
-        """Reporting comes back (a resume, leaving CAN Test): the first report of each type at once (R9a: within
-        one interval), then every interval from it ("restart") or on the grid the timer kept ("grid"); with the
-        fault 'report_restart_late', one and a half intervals after the event."""
+        """Reporting comes back (a resume, leaving CAN Test or MSG_EXP mode; R9a: the first report of each type
+        within one interval plus a slack), as ``report_timer`` says: the first report at once, then every interval
+        from it ("restart") or on the grid the timer kept ("grid"); the first at the kept grid's next point
+        ("next_tick"); or one full interval after the event ("one_interval"). With the fault 'report_restart_late',
+        one and a half intervals after the event."""
         self._regrid = {}
+        self._report_floor = now
+        timer = self.config.report_timer
         for k, due in self._next_report.items():
+            period = self._interval(k)
             if "report_restart_late" in self.faults:
-                self._next_report[k] = round(now + 1.5 * self._interval(k), 9)
-            elif self.config.report_timer == "grid" and (period := self._interval(k)) > 0:
-                if due < now:  # the old grid's next point at or after now
-                    due = round(due + math.ceil(round((now - due) / period, 9)) * period, 9)
-                self._next_report[k] = now
-                if due > now:
+                self._next_report[k] = round(now + 1.5 * period, 9)
+            elif timer == "one_interval":
+                self._next_report[k] = round(now + period, 9)
+            elif timer in ("grid", "next_tick") and period > 0:
+                due = self._grid_point(due, now, period)
+                self._next_report[k] = now if timer == "grid" else due
+                if timer == "grid" and due > now:
                     self._regrid[k] = due
             else:
                 self._next_report[k] = now
 
+    @staticmethod
+    def _grid_point(due: float, now: float, period: float) -> float:
+        """The next point at or after ``now`` of the grid through ``due`` with spacing ``period``."""
+        if due >= now:
+            return due
+        return round(due + math.ceil(round((now - due) / period, 9)) * period, 9)
+
+    def _jitter(self) -> float:
+        """A report's offset from its grid point (report_jitter_s: within +- half of it)."""
+        half = self.config.report_jitter_s / 2
+        return self._rng.uniform(-half, half)
+
     def _next_report_times(self) -> list[float]:
+        if self._offset:
+            floor = self._report_floor
+            return [max(t + self._offset[k], floor) for k, t in self._next_report.items()]
         return list(self._next_report.values())
 
     def _schedule_reports(self, now: float) -> None:
@@ -505,12 +544,17 @@ class EscModel:
         if not self._reports_were_active:  # leaving 0x7D, suspension or CAN Test: start afresh, no catch-up burst
             self._reports_were_active = True
             for k in self._next_report:  # (a resume or CAN Test off has set it already: _restart_reports)
-                self._next_report[k] = max(self._next_report[k], now)
-        for which in ("msg1", "msg2", "msg3"):
-            while self._next_report[which] <= now:
-                due = self._next_report[which]
-                self._emit_report(which, due)
-                self._next_report[which] = self._regrid.pop(which, None) or round(due + self._interval(which), 9)  # no float drift
+                if self._next_report[k] < now:
+                    self._next_report[k] = self._report_floor = now
+        offset = self._offset
+        for which in _REPORT_NAMES:
+            while (grid := self._next_report[which]) + (offset[which] if offset else 0.0) <= now:
+                if offset:  # jitter: off the grid point by its offset, never before the event that set the timer
+                    self._emit_report(which, max(grid + offset[which], self._report_floor))
+                    offset[which] = self._jitter()
+                else:
+                    self._emit_report(which, grid)
+                self._next_report[which] = self._regrid.pop(which, None) or round(grid + self._interval(which), 9)  # no float drift
 
     # ------------------------------------------------------------------------------------------
     # reports
@@ -640,8 +684,8 @@ class EscModel:
             return  # the answer packet (0) or an unknown command: nothing to do
         if was == SUSPENDED and self.reporting != SUSPENDED:
             self._restart_reports(now)  # "immediate recovery"
-        elif was == EXP_MODE and self.reporting == REPORTING and "report_restart_late" in self.faults:
-            self._restart_reports(now)  # leaving MSG_EXP mode (R9a); otherwise the reports go on on their grid
+        elif was == EXP_MODE and self.reporting == REPORTING:
+            self._restart_reports(now)  # leaving MSG_EXP mode: reporting comes back as after a resume (R9a)
         if "msg_control_no_answer" in self.faults:
             return
         answer = command if "msg_control_answer_echo" in self.faults else cat.MSG_CONTROL_ANSWER
@@ -800,17 +844,33 @@ class EscModel:
             if len(legal) == 3 or ("set_freq_partial" in self.faults and legal):
                 old = {k: self.nvm[k] for k in names}
                 self._set_nvm(**legal)
-                for which in ("msg1", "msg2", "msg3"):  # the new interval counts from the last report
+                for which in _REPORT_NAMES:
                     key = f"{which}_interval"
                     if key in legal and legal[key] != old[key]:
-                        last = self._next_report.get(which, now) - old[key] * INTERVAL_UNIT_S
-                        self._next_report[which] = max(now, last + self._interval(which))
-                        if "report_restart_late" in self.faults:  # R9a: later than one new interval
-                            self._next_report[which] = round(now + 1.5 * self._interval(which), 9)
+                        self._next_report[which] = self._set_freq_next(which, now, old[key] * INTERVAL_UNIT_S)
         current = {k: self.nvm[k] for k in names}
         if "set_freq_read_wrong" in self.faults and f.fields["option"] == 0:
             current = dict(cat.DEFAULT_REPORT_INTERVALS)
         self._respond(f, now, {"option": f.fields["option"], **current})
+
+    def _set_freq_next(self, which: str, now: float, old: float) -> float:
+        """When ``which`` reports next after a Set Freq write changed its interval from ``old`` seconds (R9a:
+        within the longer of the old and new interval plus a slack), as ``set_freq_timer`` says; with the fault
+        'report_restart_late', one and a half of the longer interval after the write."""
+        self._regrid.pop(which, None)
+        self._report_floor = now
+        scheduled = self._next_report.get(which, now)  # the report already due on the old interval
+        new = self._interval(which)
+        if "report_restart_late" in self.faults:
+            return round(now + 1.5 * max(old, new), 9)
+        timer = self.config.set_freq_timer
+        if timer == "old_deadline":
+            return max(scheduled, now)
+        if timer == "restart":
+            return round(now + new, 9)
+        if timer == "at_once":
+            return now
+        return max(now, round(scheduled - old + new, 9))  # "last_report": the new interval from the last report
 
     def _on_throttle_select(self, f: Frame, now: float) -> None:
         if not self._addressed(f):

@@ -84,9 +84,20 @@ _FREEDOMS = (
             span=(0.0, 0.15)),
     # report timers (R9a)
     Freedom("report_timer", ("R9a",),
-            "when reporting comes back (a resume, leaving CAN Test): restart (the first report at once, the next ones "
-            "an interval apart) or grid (one report at once, then the old grid goes on)",
-            choices=("restart", "grid")),
+            "when reporting comes back (a resume, leaving CAN Test or MSG_EXP mode): restart (the first report at once, "
+            "the next ones an interval apart), grid (one report at once, then the old grid goes on), next_tick (the "
+            "first report at the old grid's next point) or one_interval (the timer restarted: the first one interval "
+            "later)",
+            choices=("restart", "grid", "next_tick", "one_interval")),
+    Freedom("set_freq_timer", ("R9a",),
+            "when a report whose interval a Set Freq write changed comes next: last_report (the new interval from the "
+            "last report), old_deadline (the report already scheduled on the old interval, then the new interval from "
+            "it), restart (one new interval after the write) or at_once (a report at the write, then the new interval)",
+            choices=("last_report", "old_deadline", "restart", "at_once")),
+    Freedom("report_jitter_s", ("R9",),
+            "the ESC's own report timing jitter, declared as its profile's jitter_s: each report within +- half of it "
+            "of its grid point (one interval strays by at most this much; the mean interval stays exact)",
+            span=(0.0, 0.003), declares="jitter_s"),
 )
 
 FREEDOMS: Mapping[str, Freedom] = MappingProxyType({f.name: f for f in _FREEDOMS})

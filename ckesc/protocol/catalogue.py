@@ -230,6 +230,15 @@ ANSWER_SLOT_S = 0.002  # R2: answer after (node_id % 32) x 2 ms
 ANSWER_DELAY_MAX_S = 0.064  # 4.4.2 clarification 4, 4.4.3 clarification 4
 COMM_LOSS_TIMEOUT_S = 0.200  # 4.4.4 clarification 3 (R8)
 CONFIG_WINDOW_S = 120.0  # 4.3.2 table, R11: Set ID / Set Baud valid 120 s after power-up
+RESTART_SLACK_MIN_S = 0.003  # R9a: the first report after a restart within one interval + max(3 ms, interval / 4)
+
+
+def restart_limit_s(interval: float) -> float:
+    """R9a (READING): the first report of a type after a restart (power-up, a resume, leaving MSG_EXP mode, CAN
+    Test off) comes within its interval plus a slack of max(3 ms, a quarter of it); after a Set Freq write,
+    ``interval`` is the longer of its old and new interval."""
+    return interval + max(RESTART_SLACK_MIN_S, interval / 4)
+
 
 #: Throttle scales (4.4.15-4.4.17, 4.4.23 clarification 5).
 THROTTLE_MAX = 2000
