@@ -48,7 +48,7 @@ _FAULTS = (
     Fault("report_interval_wrong", ("R9", "R9a"), "MSG1 comes every N x 3 ms instead of N x 2 ms"),
     Fault("report_jitter", ("R9", "R9a"), "report intervals jitter by up to +-30 %"),
     Fault("report_restart_late", ("R9a",), "after a resume, leaving MSG_EXP mode or CAN Test, or a Set Freq write, the first "
-          "report of each type comes 1.5 new intervals later"),
+          "report of each type comes 1.5 intervals later (after a write, 1.5 x the longer of its old and new interval)"),
     Fault("msg2_interval_ignores_setting", ("R9",), "MSG2 keeps its default interval after Set Freq"),
     Fault("status_direction_bit14", ("R7",), "MSG1 reports the direction on bit 14 instead of bit 15"),
     Fault("status_running_wrong", ("R7",), "MSG1 bit 8 (run/stop) stays 0 while the motor runs"),

@@ -32,9 +32,11 @@ judges only what it can tell:
   boots and self-tests first).
 * **Cadence.** MSG Control (suspend, resume, MSG_EXP), CAN Test on/off and Set/Get Freq writes restart
   the cadence they concern; Set ID (a pseudo-broadcast) makes every node's intervals unknown again.
-* **R9a restarts.** After a resume (MSG Control 0xAAAAAAAA, which also leaves MSG_EXP mode), CAN Test off or
-  a Set Freq write, the first report of each type must come within one (new) interval of the command
-  (R9a, READING: measured from the command's timestamp to the earliest the report can have been due);
+* **R9a restarts.** After a resume (MSG Control 0xAAAAAAAA, which also leaves MSG_EXP mode) or CAN Test off,
+  the first report of each type must come within one interval plus a slack of max(3 ms, a quarter interval) of
+  the command; after a Set Freq write, within the longer of its old and new interval plus that slack (R9a,
+  READING: measured from the command's timestamp to the earliest the report can have been due; the old
+  interval is the one the node last stated, the longest legal one when it stated none);
   the gaps up to and including the second report after such an event, or after a power cycle the host
   reports (:meth:`BusRules.power_switched`), are not judged (R9a-gaps, OBSERVE): whether the ESC restarts its timer or keeps
   its grid is not written. From the third report on R9 holds. A power cycle voids the pending event. (A
@@ -78,6 +80,7 @@ from ..protocol.transfer import SINGLE_FRAME, TRANSFER_ID_MODULO, parse_tail
 _INTERVAL_FIELDS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
 REPORT_INTERVAL = {cat.BY_NAME[k.removesuffix("_interval")].type_id: i for i, k in enumerate(_INTERVAL_FIELDS)}
 SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
+LONGEST_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
 #: A node silent for longer than this may have been power cycled: its frames before and after are not compared.
 RESTART_SILENCE_S = 2 * SHORTEST_S
 #: How long after a request its response may still come (the document sets no bound for services; 64 ms for
@@ -238,7 +241,7 @@ class Intervals:
 class _Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
                  "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
-                 "event_reset", "event_ts", "event_what", "grace_chain")
+                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -253,6 +256,10 @@ class _Node:
         self.event_reset = -1
         self.event_ts: float | None = None
         self.event_what = ""
+        self.event_old: list[float | None] | None = None  # a Set Freq write's: the periods before it (R9a)
+        # per report: the latest an earlier event's first report may still come, when a new event came before it
+        # (a resume right after a Set Freq write: the report due on the old interval may still go first)
+        self.pending: list[float | None] = [None] * len(_INTERVAL_FIELDS)
         self.grace_chain = -1  # the stretch after a power cycle the host made (power_switched): R9a-gaps too
         self.periods: list[float | None] = [None] * len(_INTERVAL_FIELDS)  # seconds, as the node last said
         self.period_note = ""  # where the periods come from (for messages)
@@ -653,28 +660,60 @@ class BusRules:
                                f"{_ms(hi)}), {expected}", self._pair(st, info, data, ts))
 
     def _first_report(self, out, st: _Stream, info: _Id, node: _Node, data, ts: float, start: float, busy_from: float):
-        """R9a: the first report of a type after a resume / CAN Test off / Set Freq write comes within one
-        (new) interval of it; judged on the earliest it can have been due (bus queueing), tolerance and the
-        DUT's report-interval jitter allowance on top."""
-        period = node.periods[st.interval]  # type: ignore[index]
-        tol = self.tolerance + self.jitter
-        if period is None or busy_from - node.event_ts <= period + tol:  # type: ignore[operator]
+        """R9a: the first report of a type after a resume / CAN Test off comes within one interval plus a slack of
+        max(3 ms, a quarter interval) of it; after a Set Freq write, within the longer of its old and new interval
+        plus that slack; and never sooner than an earlier event's first report that had not come yet could. Judged
+        on the earliest it can have been due (bus queueing), tolerance and the DUT's report-interval jitter
+        allowance on top."""
+        period, which = self._restart_period(node, st.interval)  # type: ignore[arg-type]
+        if period is None:
             return out
-        if not self.power_known and busy_from - node.event_ts > 2 * period + RESTART_SILENCE_S + self.tolerance:  # type: ignore[operator]
+        limit = cat.restart_limit_s(period)
+        carried = node.pending[st.interval]  # type: ignore[index]
+        if carried is not None and carried - node.event_ts > limit:  # type: ignore[operator]
+            limit, which = carried - node.event_ts, "what an earlier restart still allowed"  # type: ignore[operator]
+        tol = self.tolerance + self.jitter
+        since = busy_from - node.event_ts  # type: ignore[operator]
+        if since <= limit + tol:
+            return out
+        if not self.power_known and since > limit + period + RESTART_SILENCE_S + self.tolerance:
             self._observe(("R9a",), ts, node.id, "first-report-unjudged",
                           f"the first {st.name} {_ms(start - node.event_ts)} after {node.event_what}: not judged, the node "  # type: ignore[operator]
                           "may have been power cycled meanwhile (a capture does not show it)", (quote(info.can_id, data, ts),))
             return out
         return self._violation(out, ("R9a",), ts, node.id, "first-report",
                                f"the first {st.name} {_ms(start - node.event_ts)} after {node.event_what} "  # type: ignore[operator]
-                               f"(bus queueing allows no less than {_ms(busy_from - node.event_ts)}), expected within one "  # type: ignore[operator]
-                               f"interval, {_ms(period)} +- {_ms(tol)} ({node.period_note})",
+                               f"(bus queueing allows no less than {_ms(since)}), expected within {which} plus a slack, "
+                               f"{_ms(limit)} +- {_ms(tol)} ({node.period_note})",
                                (quote(info.can_id, data, ts, note=st.name),))
 
-    def _event(self, node: _Node, ts: float, what: str) -> None:
-        """An R9a event for ``node``: its reports (come back and) count from ``ts``."""
+    @staticmethod
+    def _restart_period(node: _Node, i: int) -> tuple[float | None, str]:
+        """R9a: the interval the first report of report ``i`` after the node's event counts (None: unknown), and
+        which: one interval, or after a Set Freq write the longer of its old and new one (the longest legal one
+        when the node had stated none)."""
+        period = node.periods[i]
+        if period is None or node.event_old is None:
+            return period, "one interval"
+        old = node.event_old[i]
+        return max(period, LONGEST_S if old is None else old), "the longer of its old and new interval"
+
+    def _event(self, node: _Node, ts: float, what: str, old: list[float | None] | None = None) -> None:
+        """An R9a event for ``node``: its reports (come back and) count from ``ts``; ``old``: a Set Freq write's
+        periods before it. A report whose first since the previous event has not come keeps that event's limit."""
+        if node.event_ts is None:
+            node.pending = [None] * len(_INTERVAL_FIELDS)
+        else:
+            for type_id, i in REPORT_INTERVAL.items():
+                st = self._streams.get((node.id, type_id))
+                if st is not None and st.event == node.event_reset:  # it came: nothing of before is pending
+                    node.pending[i] = None
+                    continue
+                period = self._restart_period(node, i)[0]
+                due = node.event_ts + cat.restart_limit_s(LONGEST_S if period is None else period)
+                node.pending[i] = due if node.pending[i] is None else max(node.pending[i], due)  # type: ignore[type-var]
         node.reset += 1
-        node.event_reset, node.event_ts, node.event_what = node.reset, ts, what
+        node.event_reset, node.event_ts, node.event_what, node.event_old = node.reset, ts, what, old
 
     def power_switched(self, ts: float) -> None:
         """The host switched the DUT's power (off or on) at ``ts``: a pending R9a event is void (the first
@@ -743,7 +782,8 @@ class BusRules:
             key = (info.source, info.dest, type_id)
             if type_id == _SET_FREQ.type_id and _field(data, _SET_FREQ_OPTION) == _SET_FREQ_WRITE:
                 dest = self._node(info.dest)  # type: ignore[arg-type]
-                self._event(dest, ts, "a Set Freq write")  # the new intervals count from the write (its answer tells them)
+                # the new intervals count from the write (its answer tells them), the old ones as the node last said
+                self._event(dest, ts, "a Set Freq write", list(dest.periods))
         q = self._requests.get(key)
         if q is None:
             if len(self._requests) > 4096:

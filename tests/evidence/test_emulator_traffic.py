@@ -25,7 +25,7 @@ EXPECTED = {
     "debug_frames_reserved_source": {"reserved-node"},
     # a longer interval also brings the first report after a Set Freq write late (R9a)
     "report_interval_wrong": {"report-interval", "first-report"},
-    "report_jitter": {"report-interval", "first-report"},
+    "report_jitter": {"report-interval"},  # +-30 %: its first reports after a restart fall within R9a's quarter slack here
     "report_restart_late": {"first-report"},
     "msg2_interval_ignores_setting": {"report-interval"},
     "intervals_not_persisted": {"report-interval"},  # the intervals stated before the power cycle are not kept

@@ -345,7 +345,108 @@ def test_r9a_the_first_report_after_a_restart_comes_within_one_interval():
     feed(rules, encode("can_test", {"option": cat.CAN_TEST_OFF, "count": 0}, source=0), t + 0.05)
     (v,) = stream(rules, 1, [t + 0.08], start_tid=2)  # 30 ms after CAN Test off, the interval is 20 ms
     assert v.check == "first-report" and v.rules[0] == "R9a" and v.strength == "READING"
-    assert "can_test 0x55" in v.message
+    assert "can_test 0x55" in v.message and "expected within one interval plus a slack, 25.000 ms" in v.message
+
+
+D7 = frame_bits(7) / BITRATE  # an MSG1 frame (6 payload bytes + tail) on the bus
+EDGE = 1e-6  # just inside or just outside a limit (the simulated lane is exact: its tolerance is 0)
+
+
+def _can_test_off(rules: BusRules, ts: float) -> None:
+    feed(rules, encode("can_test", {"option": cat.CAN_TEST_ON, "count": 0}, source=0), ts - 0.01)
+    feed(rules, encode("can_test", {"option": cat.CAN_TEST_OFF, "count": 0}, source=0), ts)
+
+
+def _set_freq_write(rules: BusRules, ts: float, msg1_interval: int) -> None:
+    fields = {"option": 1, **INTERVALS, "msg1_interval": msg1_interval}
+    feed(rules, encode("set_freq", fields, source=0, destination=1, transfer_id=1), ts)
+    feed(rules, encode("set_freq", fields, kind="response", source=1, destination=0, transfer_id=1), ts + 0.001)
+
+
+def _first_msg1_after(event, limit: float, inside: bool, before: int = 10) -> list:
+    """The violations of an MSG1 that starts ``limit`` (+- EDGE) after ``event(rules, ts)``, on a bus that was
+    idle (so it was due when it started); MSG1 stated at ``before`` x 2 ms."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0, {**INTERVALS, "msg1_interval": before})
+    stream(rules, 1, [t, t + before * 0.002])
+    ev = t + before * 0.002 + 0.005
+    event(rules, ev)
+    return checks(stream(rules, 1, [ev + limit + (-EDGE if inside else EDGE) + D7], start_tid=2))
+
+
+@pytest.mark.parametrize("inside", [True, False], ids=["inside", "outside"])
+@pytest.mark.parametrize("event, before, limit", [
+    (_resume, 10, 0.025),  # 20 ms + a quarter of it (5 ms > 3 ms)
+    (_resume, 250, 0.625),  # 500 ms + 125 ms
+    (_can_test_off, 10, 0.025),
+    (_can_test_off, 100, 0.25),  # 200 ms + 50 ms
+], ids=["resume-20ms", "resume-500ms", "can-test-off-20ms", "can-test-off-200ms"])
+def test_r9a_the_first_report_after_a_restart_within_one_interval_and_a_quarter(event, before, limit, inside):
+    """R9a: within one interval plus a slack of max(3 ms, a quarter interval) (for every legal interval, 20 ms
+    and up, the quarter is the larger); exact timestamps: a report just inside passes, just outside fails."""
+    assert _first_msg1_after(event, limit, inside, before) == ([] if inside else ["first-report"])
+
+
+@pytest.mark.parametrize("inside", [True, False], ids=["inside", "outside"])
+@pytest.mark.parametrize("before, after, limit", [
+    (10, 25, 0.0625),  # 20 -> 50 ms: the new one is the longer, 50 + 12.5 ms
+    (25, 10, 0.0625),  # 50 -> 20 ms: the report already due on the old 50 ms may go first
+    (10, 250, 0.625),  # 20 -> 500 ms
+    (250, 10, 0.625),  # 500 -> 20 ms
+], ids=["20-to-50ms", "50-to-20ms", "20-to-500ms", "500-to-20ms"])
+def test_r9a_after_a_set_freq_write_within_the_longer_of_old_and_new_interval(before, after, limit, inside):
+    """R9a: after a Set Freq write the first report comes within the longer of its old and new interval plus
+    the same slack (the old interval is what the node last said)."""
+    found = _first_msg1_after(lambda rules, ts: _set_freq_write(rules, ts, after), limit, inside, before)
+    assert found == ([] if inside else ["first-report"])
+
+
+def test_r9a_a_set_freq_write_to_a_node_that_stated_no_interval_allows_the_longest_legal_one():
+    """Without an old interval the node said, the first report after a write may come as late as the longest
+    legal interval and its slack (500 + 125 ms) allow."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    stream(rules, 1, [0.0, 0.02])
+    _set_freq_write(rules, 0.025, 10)
+    assert stream(rules, 1, [0.025 + 0.625 - EDGE + D7], start_tid=2) == []
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    stream(rules, 1, [0.0, 0.02])
+    _set_freq_write(rules, 0.025, 10)
+    (v,) = stream(rules, 1, [0.025 + 0.625 + EDGE + D7], start_tid=2)
+    assert v.check == "first-report" and "the longer of its old and new interval" in v.message
+
+
+def test_r9a_after_a_set_freq_write_the_gaps_up_to_the_second_report_are_not_judged():
+    """The ESC that lets the report due on the old interval go first (MSG1 at 50 ms, then 20 ms): the first
+    within the old interval, the gap to the second not judged, R9 with the new interval from the third on."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0, {**INTERVALS, "msg1_interval": 25})
+    stream(rules, 1, [t, t + 0.05])
+    _set_freq_write(rules, t + 0.052, 10)  # 50 -> 20 ms; the next report was due at t + 0.1 on the old grid
+    assert stream(rules, 1, [t + 0.1, t + 0.113, t + 0.133], start_tid=2) == []  # first; 13 ms: not judged; 20 ms
+    (v,) = stream(rules, 1, [t + 0.163], start_tid=5)  # 30 ms: the third gap on is R9's
+    assert v.check == "report-interval" and "expected 20.000 ms" in v.message
+
+
+def test_r9a_a_restart_before_the_first_report_after_a_set_freq_write_keeps_its_limit():
+    """A resume right after a write from 500 to 20 ms (a test's restore): the report still due on the old 500 ms
+    may come first, as the write allowed (within 625 ms of it), though later than 25 ms after the resume; once it
+    has come, the next resume is judged on its own again."""
+    rules = BusRules(bitrate=BITRATE, complete=True, power_known=True)
+    t = stated(rules, 1, 0.0, {**INTERVALS, "msg1_interval": 250})
+    stream(rules, 1, [t, t + 0.5])
+    _set_freq_write(rules, t + 0.51, 10)
+    _resume(rules, t + 0.52)
+    assert stream(rules, 1, [t + 0.51 + 0.625 - EDGE + D7], start_tid=2) == []
+    _resume(rules, t + 1.2)
+    (v,) = stream(rules, 1, [t + 1.2 + 0.025 + EDGE + D7], start_tid=3)
+    assert v.check == "first-report" and "expected within one interval plus a slack, 25.000 ms" in v.message
+    rules = BusRules(bitrate=BITRATE, complete=True, power_known=True)
+    t = stated(rules, 1, 0.0, {**INTERVALS, "msg1_interval": 250})
+    stream(rules, 1, [t, t + 0.5])
+    _set_freq_write(rules, t + 0.51, 10)
+    _resume(rules, t + 0.52)
+    (v,) = stream(rules, 1, [t + 0.51 + 0.625 + EDGE + D7], start_tid=2)
+    assert v.check == "first-report" and "what an earlier restart still allowed" in v.message
 
 
 def test_r9a_a_set_freq_write_counts_from_the_write_with_the_new_interval():
@@ -356,7 +457,7 @@ def test_r9a_a_set_freq_write_counts_from_the_write_with_the_new_interval():
          t + 0.03)
     feed(rules, encode("set_freq", {"option": 1, **INTERVALS, "msg1_interval": 25}, kind="response", source=1, destination=0,
                        transfer_id=1), t + 0.031)
-    (v,) = stream(rules, 1, [t + 0.09], start_tid=2)  # 60 ms after the write: later than the new 50 ms
+    (v,) = stream(rules, 1, [t + 0.095], start_tid=2)  # 65 ms after the write: later than the new 50 ms + 12.5 ms
     assert v.check == "first-report" and "a Set Freq write" in v.message
 
 
