@@ -90,6 +90,7 @@ RESPONSE_WINDOW_S = 5.0
 _SET_FREQ = cat.spec("set_freq")
 _SET_FREQ_OPTION = _SET_FREQ.request.field("option")  # type: ignore[union-attr]
 _SET_FREQ_WRITE = next(k for k, v in (_SET_FREQ_OPTION.codes or {}).items() if v == "write")
+_SET_ID_NODE = cat.spec("set_id").request.field("node_id")  # type: ignore[union-attr]
 _PSEUDO_BROADCAST = frozenset({cat.spec("set_id").type_id})  # R11: answered by every ESC, from its (new) node id
 _MSG1 = cat.spec("msg1")
 _STATUS = _MSG1.layouts[0].field("status")
@@ -778,6 +779,7 @@ class BusRules:
                 node.periods = [None] * len(_INTERVAL_FIELDS)
                 node.reset += 1
                 node.shared = False  # ... nor whether two of them share an id
+            self._set_id_shared(data, ts)
         else:
             key = (info.source, info.dest, type_id)
             if type_id == _SET_FREQ.type_id and _field(data, _SET_FREQ_OPTION) == _SET_FREQ_WRITE:
@@ -817,6 +819,18 @@ class BusRules:
                                    frames)
         self._observe(("F4",), ts, node.id, "response-unmatched", text + " (the capture may have missed it)", frames)
         return out or _NONE
+
+    def _set_id_shared(self, data, ts: float) -> None:
+        """Set ID while more than one ESC reports: any of them may take the id (R11: it ignores the destination), and
+        their answers from it, alike and in the same slot, may reach the bus as one frame; so the id is taken as
+        shared (4.4.18-2): its reports are not compared with one another."""
+        escs = sum(1 for n in self._nodes.values() if n.esc and ts - n.last_ts <= LONGEST_S + RESTART_SILENCE_S)
+        if escs > 1 and len(data) > _SET_ID_NODE.offset + _SET_ID_NODE.size:
+            node = self._node(_field(data, _SET_ID_NODE))
+            node.shared = True
+            self._observe(("4.4.18-2",), ts, node.id, "shared-node-id",
+                          f"Set ID {node.id} while {escs} ESCs report: any of them may take it, their reports from it are "
+                          "not compared with one another")
 
     def _answer(self, node: _Node, ts: float) -> None:
         """An answer to a broadcast every ESC answers once (Set ID, GET_ESC_ID): a second one from the same

@@ -319,6 +319,23 @@ def test_two_escs_sharing_a_node_id_are_not_compared():
     assert o["node"] == 9
 
 
+def test_set_id_while_several_escs_report_takes_the_id_as_shared():
+    """Two ESCs that take one id answer alike in the same slot (one frame on the bus): that they share it is
+    known from there being two ESCs reporting when the Set ID went out; a single ESC's new id is still judged."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    for i in range(2):
+        stream(rules, 1, [0.02 * i], start_tid=i)
+        stream(rules, 2, [0.02 * i + 0.001], start_tid=i)
+    feed(rules, encode("set_id", {"node_id": 9, "throttle_channel": 1}, source=0, destination=1, transfer_id=0), 0.03)
+    feed(rules, encode("set_id", {"node_id": 9, "throttle_channel": 1}, kind="response", source=9, destination=0), 0.049)
+    assert stream(rules, 9, [0.06, 0.0603, 0.08, 0.0803], tids=[0, 0, 1, 1]) == []
+    assert [o["check"] for o in rules.summary()["observations"]] == ["shared-node-id"]
+    single = BusRules(bitrate=BITRATE, complete=True)
+    stream(single, 1, [0.0, 0.02])
+    feed(single, encode("set_id", {"node_id": 9, "throttle_channel": 1}, source=0, destination=1, transfer_id=0), 0.03)
+    assert checks(stream(single, 9, [0.06, 0.0603], tids=[0, 0])) == ["transfer-id", "report-interval"]
+
+
 # ------------------------------------------------------------------------------------------ R9a restarts
 def _resume(rules: BusRules, ts: float) -> None:
     feed(rules, encode("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME}, source=0), ts)
