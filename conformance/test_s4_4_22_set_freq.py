@@ -5,7 +5,7 @@ import pytest
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
-from .reports import check_restart
+from .reports import R9_GAPS, at_report_phase, check_restart, settle_reports
 
 SECTION = "4.4.22"
 INTERVALS = ("msg1_interval", "msg2_interval", "msg3_interval")
@@ -31,13 +31,18 @@ def test_read_answers_the_current_settings(dut):
 @pytest.mark.requirement("4.4.22-1", "4.4.22-3", "R9", "R9a", "4.4.5-2", "4.4.6-2")
 @pytest.mark.parametrize("values", [(10, 50, 250), (25, 10, 100), (250, 250, 10)], ids=lambda v: "-".join(map(str, v)))
 def test_write_sets_the_report_intervals(dut, values):
-    """After a legal write every report comes at its new interval (value x 2 ms): the first within one new
-    interval of the write, the gaps up to the second not judged, the next ones the interval (R9a)."""
+    """After a legal write every report comes at its new interval (value x 2 ms): the first within the longer of
+    its old and new interval plus a slack, the gaps up to the second not judged (R9a), the mean of ten gaps from
+    the third on the new interval (R9). The write goes half an MSG1 interval off MSG1's grid."""
     fields = dict(zip(INTERVALS, values))
+    before = dut.settings()
+    settle_reports(dut)  # no report still due on an interval of before (a previous test's restore)
+    at_report_phase(dut, "msg1", before)
     ex = dut.request("set_freq", {"option": 1, **fields})
     assert ex.response is not None, "no answer to Set/Get Freq write"
     assert {k: ex.response.fields[k] for k in INTERVALS} == fields
-    check_restart(dut, ex.sent.time, fields, "the Set Freq write", clock=ex.sent.clock, error_ms=ex.sent.error * 1000)
+    check_restart(dut, ex.sent.time, fields, "the Set Freq write", gaps=R9_GAPS, old=before, clock=ex.sent.clock,
+                  error_ms=ex.sent.error * 1000)
 
 
 @pytest.mark.requirement("R10", "4.4.22-3")

@@ -7,8 +7,8 @@ your own is a path, or a name found in ``./fixtures/duts/``.
     [capabilities] led, motor, pwm_input, motor_temperature, multi_node   (true/false)
     [timing]       error_s: the bench's measurement error (host + adapter timestamps); margins below it
                    are INCONCLUSIVE
-                   jitter_s: the DUT's report-interval jitter allowance (R9): widens what its report
-                   intervals may do, in the interval tests and the live bus rules alike
+                   jitter_s: the DUT's report-interval jitter allowance (R9): widens what a single report
+                   interval may do (the live bus rules, R9a's first reports), never the mean a test judges
                    boot_s: power-on to first report; off_s: off time of a power cycle
     [readings]     R4 = "lsb" | "swapped"   (12-bit nibble order)
     [functions]    absent = ["get_rec", ...]: optional functions the ESC lacks (R9b; the names are
