@@ -7,7 +7,15 @@ import pytest
 from ckesc.protocol import catalogue as cat
 
 from .physics import check_voltage_current, esc_limits
-from .reports import check_interval_follows_set_freq, describe_garbled, garbled, interval_s, ms, need_decoded
+from .reports import (
+    check_interval_follows_set_freq,
+    describe_garbled,
+    garbled,
+    interval_s,
+    ms,
+    need_decoded,
+    settle_reports,
+)
 
 SECTION = "4.4.5"
 
@@ -39,6 +47,7 @@ def test_voltage_and_current_units(dut):
     """Voltage in 0.01 V within [two cells, max_cells x 4.35 V] of ESC Information (240); current in
     0.01 A, unsigned, at most the ESC's maximum current."""
     cells, amps = esc_limits(dut)
+    settle_reports(dut, ("msg2",))  # a write just before (a restore) may hold the next MSG2 as long as R9a allows
     t = dut.now()
     frames = need_decoded(dut, "msg2", dut.reports("msg2", 3 * interval_s(dut.settings(), "msg2")), t, "voltage and current")
     assert frames, "no MSG2"
