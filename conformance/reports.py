@@ -9,7 +9,7 @@ tests here).
 - Set Freq (4.4.22) as the reports follow it: :func:`check_interval_follows_set_freq`;
 - the reports after a restart (R9a: a resume, leaving MSG_EXP mode, CAN Test off, a Set Freq write):
   :func:`check_restart`, its limit :func:`restart_limit_s`, and placing the stimulus off the DUT's report
-  grid: :func:`at_report_phase`, :func:`last_report_start`.
+  grid: :func:`at_report_phase`, :func:`next_report_start`.
 """
 
 from __future__ import annotations
@@ -248,7 +248,7 @@ def at_report_phase(dut, which: str, settings: dict, fraction: float = 0.5, last
     (the test judges it)."""
     interval = interval_s(settings, which)
     if last is None:
-        last = settle_reports(dut, (which,)).get(which)
+        last = next_report_start(dut, which)
         if last is None:
             return
     k = max(0, math.ceil(round((dut.now() - last) / interval - fraction, 9)))
@@ -263,10 +263,10 @@ def settle_reports(dut, names=REPORTS) -> dict[str, float]:
     return _first_reports(dut, now, names, dict.fromkeys(names, now + cat.restart_limit_s(LONGEST_INTERVAL_S) + react_s(dut)))
 
 
-def last_report_start(dut, which: str, settings: dict) -> float | None:
-    """The start of the DUT's latest ``which`` report within two of its intervals (None: none)."""
-    stamps = report_starts(dut, which, dut.now() - 2 * interval_s(settings, which))
-    return stamps[-1] if stamps else None
+def next_report_start(dut, which: str) -> float | None:
+    """The start of the DUT's next ``which`` report, read now (None: none within R9a's longest limit): a point of
+    its report grid, for :func:`at_report_phase` after a suspension or another mode."""
+    return settle_reports(dut, (which,)).get(which)
 
 
 def check_restart(dut, event: float, settings: dict, what: str, names=REPORTS, gaps: int | None = None, *,

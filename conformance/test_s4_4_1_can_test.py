@@ -16,10 +16,10 @@ from .reports import (
     at_report_phase,
     check_restart,
     check_suspended,
-    last_report_start,
     longest_interval_s,
     ms,
     msg_control,
+    next_report_start,
     reported,
     resume,
 )
@@ -142,7 +142,7 @@ def test_reports_after_test_mode_ends(dut):
     are not judged)."""
     s = dut.settings()
     try:
-        last = last_report_start(dut, "msg1", s)
+        last = next_report_start(dut, "msg1")
         on = can_test(dut, cat.CAN_TEST_ON)
         dut.wait(_window(dut))
         if not _test_frames(dut, on.time, dut.node_id):

@@ -31,10 +31,10 @@ from .reports import (
     exp_mode,
     garbled,
     interval_s,
-    last_report_start,
     longest_interval_s,
     ms,
     msg_control,
+    next_report_start,
     react_s,
     report_starts,
     reported,
@@ -110,7 +110,7 @@ def test_suspend_stops_and_resume_restarts_reporting(dut):
     longest = max(interval_s(s, w) for w in REPORTS)
     err = dut.lane.timing_error
     try:
-        last = last_report_start(dut, "msg1", s)
+        last = next_report_start(dut, "msg1")
         off = msg_control(dut, cat.MSG_CONTROL_SUSPEND)
         dut.wait(2 * longest + err)
         leaked = reported(dut, off.time + err, source=dut.node_id)  # not held against it: react_s()
@@ -220,7 +220,7 @@ def test_reports_after_leaving_exp_mode(dut):
     """0xAAAAAAAA after MSG_EXP mode: each of MSG1..MSG3 comes back within one of its intervals plus a slack, and from its
     third frame on at its interval (R9a: the gaps up to the second are not judged)."""
     s = dut.settings()
-    last = last_report_start(dut, "msg1", s)
+    last = next_report_start(dut, "msg1")
     with exp_mode(dut) as on:
         dut.wait(longest_interval_s(dut) + react_s(dut))
         if not reported(dut, on.time + react_s(dut), source=dut.node_id, names=EXP_FRAMES):
