@@ -375,6 +375,7 @@ class BusRules:
         self._by_rule: dict[str, int] = {}
         self._last_throttle: tuple[float, str, int] | None = None
         self._answered: set[int] = set()  # nodes that answered the last Set ID / GET_ESC_ID (a second answer: shared id)
+        self._set_id_ts = -math.inf  # the last Set ID: a node id not heard since may have been left by its ESC
         self._bus_end = -math.inf
         self._busy_from = -math.inf
         self.set_bitrate(bitrate)
@@ -823,8 +824,11 @@ class BusRules:
     def _set_id_shared(self, data, ts: float) -> None:
         """Set ID while more than one ESC reports: any of them may take the id (R11: it ignores the destination), and
         their answers from it, alike and in the same slot, may reach the bus as one frame; so the id is taken as
-        shared (4.4.18-2): its reports are not compared with one another."""
-        escs = sum(1 for n in self._nodes.values() if n.esc and ts - n.last_ts <= LONGEST_S + RESTART_SILENCE_S)
+        shared (4.4.18-2): its reports are not compared with one another. An ESC reports if heard lately and since
+        the Set ID before (a node id an ESC left then is heard no more)."""
+        since = max(self._set_id_ts, ts - LONGEST_S - RESTART_SILENCE_S)
+        self._set_id_ts = ts
+        escs = sum(1 for n in self._nodes.values() if n.esc and n.last_ts > since)
         if escs > 1 and len(data) > _SET_ID_NODE.offset + _SET_ID_NODE.size:
             node = self._node(_field(data, _SET_ID_NODE))
             node.shared = True

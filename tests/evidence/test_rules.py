@@ -330,10 +330,12 @@ def test_set_id_while_several_escs_report_takes_the_id_as_shared():
     feed(rules, encode("set_id", {"node_id": 9, "throttle_channel": 1}, kind="response", source=9, destination=0), 0.049)
     assert stream(rules, 9, [0.06, 0.0603, 0.08, 0.0803], tids=[0, 0, 1, 1]) == []
     assert [o["check"] for o in rules.summary()["observations"]] == ["shared-node-id"]
-    single = BusRules(bitrate=BITRATE, complete=True)
+    single = BusRules(bitrate=BITRATE, complete=True)  # one ESC moved to 9 and back: node 1 is not a second ESC
     stream(single, 1, [0.0, 0.02])
     feed(single, encode("set_id", {"node_id": 9, "throttle_channel": 1}, source=0, destination=1, transfer_id=0), 0.03)
     assert checks(stream(single, 9, [0.06, 0.0603], tids=[0, 0])) == ["transfer-id", "report-interval"]
+    feed(single, encode("set_id", {"node_id": 1, "throttle_channel": 1}, source=0, destination=9, transfer_id=1), 0.07)
+    assert checks(stream(single, 1, [0.1, 0.1003], tids=[2, 2])) == ["transfer-id", "report-interval"]
 
 
 # ------------------------------------------------------------------------------------------ R9a restarts
