@@ -129,6 +129,19 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "window(kind): acts at a moment of the 120 s Set ID / Set Baud window "
                             "(kind 'inside' or 'after'; the run order overlaps the window with other tests)")
     config.stash[_STATE] = _State()
+    _print_ids_as_reported(config)
+
+
+def _print_ids_as_reported(config: pytest.Config) -> None:
+    """The console names a conformance test by its id as the reports write it (``conformance/test_...``), from
+    any directory and any install: pytest would print it relative to the directory it was started in
+    (``../../site-packages/conformance/...`` from elsewhere, or against an editable install)."""
+    relative = config.cwd_relative_nodeid
+
+    def as_reported(nodeid):
+        return nodeid if str(nodeid).startswith("conformance/") else relative(nodeid)  # a str, or pytest 9.2+'s NodeId
+
+    config.cwd_relative_nodeid = as_reported  # type: ignore[method-assign]
 
 
 @dataclass
