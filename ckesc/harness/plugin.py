@@ -22,7 +22,7 @@ from ..emulator import variants
 from ..evidence.live import LaneRules, causes, failure_text
 from ..protocol import catalogue as cat
 from ..protocol import functions
-from ..protocol.requirements import REQUIREMENTS, requirement, strongest
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, requirement, strongest
 from . import preflight
 from . import report as _report
 from .dut import Dut, DutError, DutUnreachable, echo_probe
@@ -41,6 +41,7 @@ from .lanes import (
     SimLane,
 )
 from .profile import DutProfile
+from .progress import ProgressReporter
 from .schedule import LEAD_S, Plan
 from .traces import TRACE_FORMATS, TestTraces
 from .verdict import Inconclusive, NotClaimed
@@ -111,6 +112,12 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     g.addoption("--ckesc-trace-format", choices=TRACE_FORMATS, default="blf",
                 help="with --ckesc-reports: each test's CAN traffic in <run>/traces/, written by python-can: blf "
                      "(default; Vector BLF), asc (Vector ASCII), log (candump -L, `ckesc decode` reads it), none")
+    g.addoption("--ckesc-durations", default=None, metavar="RESULTS_JSON",
+                help="time left: expect each test to take the lane time it took in this earlier run (its results.json; "
+                     "default: the suite's own table of a faultless simulated run, conformance/durations.json)")
+    g.addoption("--ckesc-progress", choices=("on", "off"), default="on",
+                help="a line per section with the protocol time planned, elapsed and an estimate of what is left "
+                     "(on a terminal also after pytest's counter); off: none")
     g.addoption("--ckesc-order", choices=("overlap", "collection"), default="overlap",
                 help="overlap (default): tests that neither power-cycle nor reconfigure the DUT run while a 120 s "
                      "Set ID / Set Baud window elapses, and each window test runs at its moment; collection: "
@@ -130,6 +137,9 @@ def pytest_configure(config: pytest.Config) -> None:
                             "(kind 'inside' or 'after'; the run order overlaps the window with other tests)")
     config.stash[_STATE] = _State()
     _print_ids_as_reported(config)
+    st = config.stash[_STATE]
+    config.pluginmanager.register(ProgressReporter(config, lambda: st.lane.now() if st.lane is not None else None,
+                                                   _section_title, _is_conformance), "ckesc-progress")
 
 
 def _print_ids_as_reported(config: pytest.Config) -> None:
@@ -1202,6 +1212,11 @@ def _completeness(session: pytest.Session, exitstatus: int) -> tuple[str | None,
 def _section_of(item: pytest.Item) -> str:
     ids = item_requirements(item)
     return getattr(getattr(item, "module", None), "SECTION", None) or (requirement(ids[0]).section if ids else "")
+
+
+def _section_title(item: pytest.Item) -> str:
+    section = _section_of(item)
+    return f"{section} {SECTION_TITLES.get(section, '')}".strip()
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
