@@ -43,6 +43,7 @@ import pytest
 from xdist.scheduler import EachScheduling
 
 from . import plugin
+from .progress import BatchProgress
 
 WORKER_KEY = "ckesc_bench"
 _SETUP_ERROR = pytest.StashKey[str]()
@@ -141,6 +142,7 @@ class Controller:
         self.started = time.time()
         self.interrupted = False
         self._previous: dict[int, Any] = {}
+        self.progress = BatchProgress(lambda line: print(line, flush=True))
 
     # xdist hooks
     @pytest.hookimpl
@@ -162,6 +164,19 @@ class Controller:
             pass
         if self.interrupted:
             self._signal(node.gateway.id)
+
+    @pytest.hookimpl
+    def pytest_xdist_node_collection_finished(self, node, ids) -> None:
+        bench = self.nodes.get(node.gateway.id)
+        if bench is not None and ids:
+            self.progress.collected(bench["name"], list(ids))
+
+    @pytest.hookimpl
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        node = getattr(report, "node", None)  # the worker that ran it (xdist's report of a worker's test)
+        bench = self.nodes.get(node.gateway.id) if node is not None else None
+        if bench is not None and report.when == "teardown":
+            self.progress.test_ended(bench["name"], report.nodeid)
 
     @pytest.hookimpl
     def pytest_testnodedown(self, node, error) -> None:

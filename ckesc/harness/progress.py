@@ -18,6 +18,7 @@ updates is the one that says it. ``RunClock`` is plain: times in, text out.
 from __future__ import annotations
 
 import json
+import re
 import statistics
 import time
 from dataclasses import dataclass, field
@@ -25,6 +26,8 @@ from pathlib import Path
 from typing import Callable
 
 import pytest
+
+from ..protocol.requirements import SECTION_TITLES
 
 #: the suite's own table of expected lane seconds per test id (``python -m ckesc.harness.progress``)
 TABLE = Path(__file__).resolve().parents[2] / "conformance" / "durations.json"
@@ -109,8 +112,58 @@ class RunClock:
                 f"{_clock(self.wall_spent)} elapsed, ~{_clock(self.wall_left)} left "
                 f"({len(self.done)} of {len(self.expected)} tests)")
 
+    def wall_line(self, where: str = "") -> str:
+        """What a batch's controller can say of a bench: it sees tests end, not the bench's lane clock."""
+        head = f"[{where}] " if where else ""
+        return f"{head}{len(self.done)} of {len(self.expected)} tests, {_clock(self.wall_spent)} elapsed, ~{_clock(self.wall_left)} left"
+
     def suffix(self) -> str:
         return f" ~{_clock(self.wall_left)} left" if self.done else ""
+
+
+def expected_for(ids: list[str], durations: str | Path | None = None) -> dict[str, float]:
+    """Expected lane seconds of each of ``ids``: an earlier run's (``durations``, a results.json) first, then the
+    suite's table; a test in neither counts as the table's median."""
+    table = {**read_table(), **(read_table(durations) if durations else {})}
+    known = [v for v in table.values() if v > 0]
+    default = statistics.median(known) if known else 1.0
+    return {i: table.get(i, default) for i in ids}
+
+
+_SECTION_OF_ID = re.compile(r"test_s(\d+(?:_\d+)*)_|test_(attachment)_")
+
+
+def section_of_id(nodeid: str) -> str:
+    """``conformance/test_s4_4_22_set_freq.py::...`` -> ``4.4.22 Set/Get Freq`` (a batch's controller has ids only)."""
+    m = _SECTION_OF_ID.search(str(nodeid))
+    section = (m.group(1).replace("_", ".") if m.group(1) else m.group(2)) if m else ""
+    return f"{section} {SECTION_TITLES.get(section, '')}".strip()
+
+
+class BatchProgress:
+    """Each bench's time left in a batch (``ckesc run --rig``), said by the controlling process as the bench enters a
+    section: the controller hears each bench's tests end (pytest-xdist's reports), so the pace is in wall time."""
+
+    def __init__(self, say: Callable[[str], None]) -> None:
+        self.say = say
+        self.clocks: dict[str, RunClock] = {}
+        self.current: dict[str, str] = {}
+
+    def collected(self, bench: str, ids: list[str]) -> None:
+        now = time.monotonic()
+        self.clocks[bench] = clock = RunClock(expected_for(ids))
+        clock.start(now, now)
+
+    def test_ended(self, bench: str, nodeid: str) -> None:
+        clock = self.clocks.get(bench)
+        if clock is None:
+            return
+        now = time.monotonic()
+        clock.finished(str(nodeid), now, now)
+        section = section_of_id(nodeid)
+        if section != self.current.get(bench):
+            self.current[bench] = section
+            self.say(f"time: {bench}: {clock.wall_line(section)}")
 
 
 class ProgressReporter:
@@ -139,12 +192,7 @@ class ProgressReporter:
         items = [it for it in session.items if self._is_conformance(it)]
         if not items:
             return
-        table = read_table(self.config.getoption("ckesc_durations"))
-        if self.config.getoption("ckesc_durations"):  # an earlier run first, the suite's table for what it lacks
-            table = {**read_table(), **table}
-        known = [v for v in table.values() if v > 0]
-        default = statistics.median(known) if known else 1.0
-        self.clock = RunClock({it.nodeid: table.get(it.nodeid, default) for it in items})
+        self.clock = RunClock(expected_for([it.nodeid for it in items], self.config.getoption("ckesc_durations")))
         self._sections = {it.nodeid: self._section_of(it) for it in items}
         tr = self.config.pluginmanager.get_plugin("terminalreporter")
         if tr is not None and getattr(tr, "isatty", False) and hasattr(tr, "_get_progress_information_message"):

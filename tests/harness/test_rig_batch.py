@@ -93,7 +93,12 @@ def test_a_batch_of_emulated_benches_reports_each_whole_and_one_absent_dut_never
         done = _batch(tmp_path, rig, *SECTIONS)
     out = done.stdout
     assert done.returncode == 3, out[-3000:] + done.stderr[-3000:]
-    assert len(out.splitlines()) == 8 and not done.stderr, out + done.stderr  # no retry warnings of python-can
+    said = [line for line in out.splitlines() if not line.startswith("time: ")]
+    assert len(said) == 8 and not done.stderr, out + done.stderr  # no retry warnings of python-can
+    # each bench that runs says its time left as it enters a section (issue #21)
+    timed = {line.split(":")[1].strip() for line in out.splitlines() if line.startswith("time: ")}
+    assert timed == {"sim-a", "sim-b", "live"}, out
+    assert any(line.startswith("time: live: [4.4.28 ") and " left" in line for line in out.splitlines()), out
     batch = _batch_dir(tmp_path)
     # one line per bench finished, each with its status
     lines = [line for line in out.splitlines() if line.startswith("bench ")]
