@@ -347,44 +347,84 @@ def pytest_runtestloop(session: pytest.Session) -> bool | None:
     pytest's loop runs instead with ``--ckesc-order collection``, under pytest-xdist, with nothing to
     overlap, and where the lane has no power control (no window test can run then)."""
     config = session.config
-    if (config.getoption("ckesc_order") != "overlap" or config.option.collectonly or session.testsfailed
-            or hasattr(config, "workerinput") or config.getoption("power", None) == "none"):
+    if hasattr(config, "workerinput") or not overlaps(session):
+        return None  # (a batch's worker runs the plan through xdist's own loop: batch.py)
+    runner = overlap_plan(session)
+    if runner is None:
         return None
-    plan = Plan(list(session.items), kind=_kind, key=_function_key, touches=_touches)
-    if not plan.useful:
-        return None
-    st = state(config)
-    st.info["order"] = "overlap"
-    st.info["epochs"] = []
-    item = plan.first()
+    item = runner.first()
     while item is not None:
-        lane = st.lane
-        if (group := plan.group_of(item)) is not None:
-            _stage(st, group)
-        start = lane.now() if lane is not None else None
-        if start is not None:
-            hint = plan.hint(item, start + plan.estimates.get(_function_key(item)), _moment(st, plan))
-        else:
-            hint = plan.hint(item, None, None)
-        epoch = lane.epoch if lane is not None else None
+        hint = runner.before(item)
         item.config.hook.pytest_runtest_protocol(item=item, nextitem=hint)
         if session.shouldfail:
             raise session.Failed(session.shouldfail)
         if session.shouldstop:
             raise session.Interrupted(session.shouldstop)
+        item = runner.after(item)
+    return True
+
+
+def overlaps(session: pytest.Session) -> bool:
+    """Whether the run takes the plan's order: not with ``--ckesc-order collection``, nothing to overlap (no power
+    control: no window test can run), a collection only, or a collection that failed."""
+    config = session.config
+    return not (config.getoption("ckesc_order") != "overlap" or config.option.collectonly or session.testsfailed
+                or config.getoption("power", None) == "none")
+
+
+def overlap_plan(session: pytest.Session) -> PlanRunner | None:
+    """The run order of :mod:`schedule` for ``session``'s tests, or None where it saves nothing."""
+    plan = Plan(list(session.items), kind=_kind, key=_function_key, touches=_touches)
+    if not plan.useful:
+        return None
+    st = state(session.config)
+    st.info["order"] = "overlap"
+    st.info["epochs"] = []
+    return PlanRunner(st, plan)
+
+
+class PlanRunner:
+    """Runs the plan one test at a time, for pytest's loop (the plugin's) or anyone else's (a batch's xdist
+    worker, ``batch.py``): :meth:`before` a test (stages a shared cold boot; returns what pytest is to be told
+    comes next), then the test's protocol, then :meth:`after` (learns its time, chooses the next test, opens a
+    window when one is due)."""
+
+    def __init__(self, st: _State, plan: Plan) -> None:
+        self.st, self.plan = st, plan
+        self.start: float | None = None
+        self.hint: pytest.Item | None = None
+        self.epoch: PowerEpoch | None = None
+
+    def first(self) -> pytest.Item | None:
+        return self.plan.first()
+
+    def before(self, item: pytest.Item) -> pytest.Item | None:
+        st, plan = self.st, self.plan
+        lane = st.lane
+        if (group := plan.group_of(item)) is not None:
+            _stage(st, group)
+        self.start = lane.now() if lane is not None else None
+        if self.start is not None:
+            self.hint = plan.hint(item, self.start + plan.estimates.get(_function_key(item)), _moment(st, plan))
+        else:
+            self.hint = plan.hint(item, None, None)
+        self.epoch = lane.epoch if lane is not None else None
+        return self.hint
+
+    def after(self, item: pytest.Item) -> pytest.Item | None:
+        st, plan, hint = self.st, self.plan, self.hint
         lane = st.lane
         if lane is None or hint is None:
-            item = plan.choose(0.0, lambda w, now: float("inf"), _shares(item, hint)) if hint is not None else None
-            continue
+            return plan.choose(0.0, lambda w, now: float("inf"), _shares(item, hint)) if hint is not None else None
         now = lane.now()
-        if start is not None:
-            plan.learn(item, now - start)
-        if lane.epoch is not None and lane.epoch is not epoch and not lane.epoch.opened_by:
+        if self.start is not None:
+            plan.learn(item, now - self.start)
+        if lane.epoch is not None and lane.epoch is not self.epoch and not lane.epoch.opened_by:
             lane.epoch.opened_by = item.nodeid
-        item = plan.choose(now, _moment(st, plan), _shares(item, hint))
-        if item is not None and plan.needs_epoch_before(item):
+        nxt = plan.choose(now, _moment(st, plan), _shares(item, hint))
+        if nxt is not None and plan.needs_epoch_before(nxt):
             _open_epoch(st, plan)
-    return True
+        return nxt
 
 
 def _shares(ended: pytest.Item, hint: pytest.Item | None):
