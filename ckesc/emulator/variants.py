@@ -88,6 +88,20 @@ _FREEDOMS = (
             "when reporting comes back (a resume, leaving CAN Test): restart (the first report at once, the next ones "
             "an interval apart) or grid (one report at once, then the old grid goes on)",
             choices=("restart", "grid")),
+    # comm loss (R8): the flag is set no earlier than 200 ms after the last command, and shows in MSG1 no later
+    # than one MSG1 interval after that; where in between the ESC raises it is its own
+    Freedom("comm_loss_check", ("R8", "4.4.4-3"),
+            "when the comm-loss flag is raised: timer (an exact 200 ms timer from the last command), msg1 (checked "
+            "only when an MSG1 is due: the first one 200 ms or more after the last command carries it) or tick (a "
+            "periodic check on the report timer's 2 ms tick, MSG1's grid: the first tick 200 ms or more after it)",
+            choices=("timer", "msg1", "tick")),
+    # answer slots (R2): node n's slot is [n x 2 ms, n x 2 ms + 2 ms] after the request (n = node_id % 32), the 32
+    # slots tiling the 64 ms; the answer frame starts no earlier than its slot and ends inside it
+    Freedom("answer_place", ("R2", "4.4.2-4", "4.4.3-4"),
+            "where in its 2 ms slot an answer to MSG Control / GET_ESC_ID goes: start (at the slot's start), inside "
+            "(a random place, the frame ending inside the slot) or late (as late as leaves room for one frame on "
+            "the bus ahead of it, the answer still ending inside the slot)",
+            choices=("start", "inside", "late")),
 )
 
 FREEDOMS: Mapping[str, Freedom] = MappingProxyType({f.name: f for f in _FREEDOMS})
