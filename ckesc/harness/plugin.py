@@ -138,7 +138,7 @@ def pytest_configure(config: pytest.Config) -> None:
     config.stash[_STATE] = _State()
     _print_ids_as_reported(config)
     st = config.stash[_STATE]
-    config.pluginmanager.register(ProgressReporter(config, lambda: st.lane.now() if st.lane is not None else None,
+    config.pluginmanager.register(ProgressReporter(config, lambda: st.lane.peek_now() if st.lane is not None else None,
                                                    _section_title, _is_conformance), "ckesc-progress")
 
 
