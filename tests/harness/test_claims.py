@@ -118,6 +118,30 @@ def test_the_same_emulator_fails_when_the_functions_are_claimed(tmp_path):
     assert doc["info"]["not_claimed"] == "" and "claim: every function" in summary
 
 
+@pytest.mark.parametrize("fault, failing", [
+    ("", set()),
+    ("tail_toggle_set", {"test_tail_byte_marks_a_single_frame_transfer[provoked]",
+                         "test_tail_byte_marks_a_single_frame_transfer[run]"}),
+])
+def test_the_core_framing_and_frame_table_tests_judge_whatever_the_claim_leaves_out(tmp_path, fault, failing):
+    """R9b: a core test that also sends an absent function's frames (the provoked traffic: MSG_EXP mode, CAN
+    Test, Get Rec) leaves them out and judges the rest: no 4.1 or 4.3 test is SKIPPED for a claim, and a
+    framing fault still fails them against an emulator lacking every optional function but CAN Test."""
+    profile = emulator_profile(tmp_path, "bare.toml", f"\n[functions]\nabsent = {json.dumps(list(OPTIONAL))}\n")
+    reports = tmp_path / "reports"
+    faults = ",".join(filter(None, (LACKING, fault)))
+    done = run(tmp_path, "4.1", "4.3", "--profile", str(profile), "--emulator-faults", faults, "--reports", str(reports))
+    assert done.returncode == (1 if failing else 0), done.stdout[-3000:] + done.stderr
+    doc, *_ = latest(reports)
+    by = {r["nodeid"].split("::", 1)[1]: r for r in doc["results"]}
+    assert len(by) == 27 and all(r["section"] in ("4.1", "4.3") for r in by.values())
+    skipped = {n: r["message"] for n, r in by.items() if r["outcome"] == "SKIPPED"}
+    assert not skipped, skipped
+    assert {n for n, r in by.items() if r["outcome"] not in ("PASS", "OBSERVED")} >= failing
+    for n in failing:
+        assert by[n]["outcome"] == "FAIL" and "toggle = 1" in by[n]["message"], by[n]
+
+
 # ----------------------------------------------------------------------------------------- selection
 def _modules(doc: dict) -> set[str]:
     return {r["nodeid"].split("::")[0] for r in doc["results"]}
