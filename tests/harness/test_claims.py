@@ -142,6 +142,34 @@ def test_the_core_framing_and_frame_table_tests_judge_whatever_the_claim_leaves_
         assert by[n]["outcome"] == "FAIL" and "toggle = 1" in by[n]["message"], by[n]
 
 
+def test_a_bus_rule_broken_during_an_unclaimed_test_fails_the_run_against_the_rule_not_the_test(tmp_path):
+    """R9b: a live bus rule broken while a test of an unclaimed function ran (it suspends reporting, then
+    finds Expand Set Part absent: SKIPPED) is the rule's failure: the test stays SKIPPED, the rule is in
+    results.json's ``rule_failures``, the causes grouping, summary.txt, JUnit and report.html, and the run
+    exits 1 (never a silent pass)."""
+    profile = emulator_profile(tmp_path, "lacking.toml", '\n[functions]\nabsent = ["get_rec", "expand_set_part"]\n')
+    reports = tmp_path / "reports"
+    done = run(tmp_path, "4.4.25", "--profile", str(profile), "--emulator-faults", "report_interval_wrong",
+               "--reports", str(reports))
+    assert done.returncode == 1, done.stdout[-3000:] + done.stderr
+    doc, junit, summary, page = latest(reports)
+    assert {r["outcome"] for r in doc["results"]} == {"SKIPPED"}
+    name = "conformance/test_s4_4_25_expand_set_part.py::test_not_applied_while_reporting_is_suspended"
+    seen = {r["nodeid"]: r for r in doc["results"]}[name]
+    assert seen["message"].startswith("not claimed: expand_set_part (R9b)") and "R9" in seen["bus_rules"]
+    [failure] = doc["rule_failures"]
+    assert failure["test"] == name and failure["outcome"] == "SKIPPED" and "R9" in failure["rules"]
+    assert "MSG1 of node 1 every 30 ms, not 20 ms" in {c["what"] for c in failure["causes"]}
+    assert "bus rules broken while 1 test(s) without a FAIL of their own ran (R9" in summary
+    assert re.search(r"\[FAIL SHALL\] R9 .*MSG1 of node 1 every 30 ms, not 20 ms - in 1 test", summary)
+    assert "test_not_applied_while_reporting_is_suspended (SKIPPED: seen while it ran)" in summary
+    assert "(SKIPPED: seen while it ran)" in page
+    rule_cases = [c for c in junit.iter("testcase") if c.get("classname") == "ckesc.bus_rules"]
+    assert len(rule_cases) == 1 and rule_cases[0].find("failure") is not None
+    closing = done.stdout.splitlines()[-1]  # pytest's count: the test's verdict, not the rule's
+    assert "skipped" in closing and "failed" not in closing, closing
+
+
 # ----------------------------------------------------------------------------------------- selection
 def _modules(doc: dict) -> set[str]:
     return {r["nodeid"].split("::")[0] for r in doc["results"]}
