@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 from ckesc.evidence import BusRules
+from ckesc.harness.batch_report import bench_status
 from ckesc.harness.profile import DutProfile, ProfileError
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import encode
@@ -168,6 +169,7 @@ def test_a_bus_rule_broken_during_an_unclaimed_test_fails_the_run_against_the_ru
     assert len(rule_cases) == 1 and rule_cases[0].find("failure") is not None
     closing = done.stdout.splitlines()[-1]  # pytest's count: the test's verdict, not the rule's
     assert "skipped" in closing and "failed" not in closing, closing
+    assert bench_status(doc) == ("FAIL", "bus rules broken while 1 SKIPPED test(s) ran")  # the bench of a batch too
 
 
 # ----------------------------------------------------------------------------------------- selection
