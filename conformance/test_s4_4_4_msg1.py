@@ -12,6 +12,7 @@ from ckesc.protocol.catalogue import Status
 from ckesc.protocol.frame import frame_bits
 
 from .reports import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
+from .settings import changes, listed
 from .throttle import FORMAT_CHANNELS, STREAM_PERIOD_S, can_throttle, command_for
 
 SECTION = "4.4.4"
@@ -90,7 +91,7 @@ def test_direction_bit_follows_the_rotation(dut):
         answer = dut.ask("set_rotation", {"rotation": rotation})
         t = dut.now()
         if dut.settings()["rotation"] != rotation:
-            raise Inconclusive(f"Set Rotation {rotation} did not take effect (answer {answer}): cannot compare")
+            raise Inconclusive(f"Set Rotation {rotation} did not take effect (answered {listed(answer)}): cannot compare")
         dut.wait(3 * interval_s(s, "msg1"))
         _check_direction(dut, _msg1_after(dut, t + REACT_S), rotation, f"after Set Rotation {rotation}", t)
 
@@ -114,9 +115,8 @@ def test_direction_reported_at_power_up_is_the_saved_one(dut):
 
 def _require(dut, settings: dict) -> None:
     """Precondition: the settings a test made are in force (242), else INCONCLUSIVE."""
-    now = dut.settings()
-    if any(now[k] != v for k, v in settings.items()):
-        raise Inconclusive(f"the DUT did not take {settings} (now {now}): the case cannot be set up")
+    if missed := changes(settings, dut.settings(), settings):
+        raise Inconclusive(f"the DUT did not take the settings of the case (set -> 242: {missed}): the case cannot be set up")
 
 
 def _pwm_input(dut):

@@ -25,6 +25,7 @@ from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, requirement, strongest
 from . import preflight
 from . import report as _report
+from .causes import broken_outside_a_fail
 from .dut import Dut, DutError, DutUnreachable, echo_probe
 from .epochs import PowerEpoch, unusable
 from .lanes import (
@@ -998,7 +999,9 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 
 
 def _bus_rules_verdict(item: pytest.Item, rep: pytest.TestReport) -> None:
-    """A test during which the bus broke a rule fails, whatever its own verdict, with the frames quoted."""
+    """A test during which the bus broke a rule fails, whatever its own verdict, with the frames quoted; but
+    a test SKIPPED (not claimed, R9b; a capability the profile lacks) is not run, so not judged: it stays
+    SKIPPED and keeps the rules it saw, which are the rules' failure (causes.rule_failures), and fail the run."""
     if rep.when not in ("call", "teardown"):
         return
     found, count = [], 0
@@ -1017,12 +1020,21 @@ def _bus_rules_verdict(item: pytest.Item, rep: pytest.TestReport) -> None:
         else:
             known[c["key"]] = c
     item.stash[_BUS_CAUSES] = list(known.values())
-    if rep.failed:
+    if rep.failed or _skipped(item, rep):
         rep.sections.append(("bus rules", text))
         return
     rep.outcome, rep.longrepr = "failed", text
     if rep.when == "teardown":
         item.stash[_BUS_TEARDOWN] = True
+
+
+def _skipped(item: pytest.Item, rep: pytest.TestReport) -> bool:
+    """Whether the test's own verdict is SKIPPED (not INCONCLUSIVE): as this phase's report says, or (at
+    teardown) as an earlier phase decided."""
+    if rep.when == "call":
+        return rep.skipped and "INCONCLUSIVE" not in _longrepr_text(rep)
+    res = state(item.config).results.get(item.nodeid)
+    return res is not None and res.outcome == "SKIPPED"
 
 
 # ----------------------------------------------------------------------------------------- verdicts
@@ -1271,6 +1283,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     st.info["not_run"] = len(not_run)
     if reason is not None and reason.startswith("aborted"):
         session.exitstatus = EXIT_ABORTED
+    elif session.exitstatus == pytest.ExitCode.OK and any(map(broken_outside_a_fail, st.results.values())):
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED  # a bus rule broken while a SKIPPED test ran
     out = report_dir(session.config)
     if out is not None:
         _report.write_reports(out, list(st.results.values()), st.info, not_run=not_run,
