@@ -602,7 +602,8 @@ class RealtimeEmulatorLane(BusLane):
         host, port = ports["socketcand"]
         self.control = ports["control"]
         power = ControlPower(*self.control)
-        super().__init__({"interface": "socketcand", "host": host, "port": port, "channel": "can0",
+        # tcp_tune: python-can's client otherwise lets Nagle's algorithm hold a small frame back behind the one before
+        super().__init__({"interface": "socketcand", "host": host, "port": port, "channel": "can0", "tcp_tune": True,
                           "ignore_config": True}, power, timing_error=timing_error)
 
     def _io_failed(self, exc: BaseException | None = None) -> None:
