@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import can
 
@@ -18,7 +18,7 @@ from ..protocol import functions
 from ..protocol.errors import TailError
 from ..protocol.frame import Frame, WireFrame, classify, frame_bits
 from ..protocol.host import Garbled, HostProtocol, Pending, Response
-from ..protocol.ids import Kind
+from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind
 from ..protocol.transfer import TRANSFER_ID_MODULO
 from .epochs import INSIDE, WINDOW_MARGIN_S, WINDOW_REQUESTS, PowerEpoch, unusable
 from .lanes import Lane, OwnFrame
@@ -317,8 +317,13 @@ class Dut:
     # ------------------------------------------------------------------ discovery and state
     def discover(self) -> int:
         """Find the DUT's node id with GET_ESC_ID (R1), asking again until the profile's boot time
-        (plus a second) has passed: an ESC that is still booting hears nothing."""
+        (plus a second) has passed: an ESC that is still booting hears nothing. ``discovered``: every ESC
+        that answered. ESCs on one supply do not boot at one instant (the real-time emulator staggers
+        them as a bench does): an ESC heard reporting after a query that it did not answer was still
+        booting when the query came, so the query is sent again (until every ESC heard reporting has
+        answered, or the boot time has passed)."""
         give_up = self.now() + self.profile.boot_s + 1.0
+        found: dict[int, None] = {}  # every ESC that answered, in the order of the answers
         while True:
             sent = self.broadcast("get_esc_id", {"option": 0}, layout="query")
             self.wait(cat.ANSWER_DELAY_MAX_S * 2)  # every ESC answers within 64 ms (R2); read them all
@@ -328,9 +333,13 @@ class Dut:
             # payload should be is section 4.4.3's verdict (R1), not a reason to stop every test
             replies += [g.msg.arbitration_id & 0x7F for g in self.undecoded("get_esc_id", since=sent.host_time, kind=Kind.MESSAGE)
                         if g.msg.arbitration_id & 0x7F != self.host_node]
-            if replies:
-                self.discovered = sorted(set(replies))
-                return replies[0]
+            found.update(dict.fromkeys(replies))
+            # reporting from an id that answers GET_ESC_ID (not the host's, 0x7D or the reserved ones), not answered
+            booting = {src for src, _, _ in self._reports(sent.host_time, None)
+                       if src != self.host_node and 0 < src < DEFAULT_ESC_NODE_ID} - set(found)
+            if found and (not booting or self.now() >= give_up):
+                self.discovered = sorted(found)
+                return next(iter(found))
             if self.now() >= give_up:
                 raise DutUnreachable(f"no ESC answered GET_ESC_ID for {self.profile.boot_s + 1.0:.1f} s: is it powered, at "
                                f"{self.lane.bitrate} bit/s, and not at node id 0x7D (which answers nothing)? "
@@ -456,8 +465,14 @@ class Dut:
         """Power off, wait, on, and wait for the boot (default: the profile's off and boot times): until the
         DUT reports again (:meth:`await_reports`), at most :meth:`ready_bound_s`, so that nothing is asked
         of a DUT still booting. Without proof: :meth:`power_cycle` proves it; this alone only puts things
-        back, where the state is verified afterwards. Returns the lane time of power-on."""
+        back, where the state is verified afterwards. Returns the lane time of power-on. On a bench of several
+        ESCs (``nodes``) it waits for each of them that was reporting before the power went off: they do not
+        boot at one instant, and one still booting would miss what is asked next (a GET_ESC_ID broadcast)."""
         self.stop_throttle()
+        others = set(self.nodes) - {self.node_id} if len(self.nodes) > 1 else set()
+        if others:
+            longest = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
+            others &= {src for src, _, _ in self._reports(self.now() - longest, None)}
         self.lane.epoch = None  # no window stands until the DUT is up again
         self.lane.power.off()
         self._power_switched()
@@ -466,7 +481,7 @@ class Dut:
         self.lane.power.on()
         on = self.now()
         self._power_switched()
-        heard = self.await_reports(on, on + self.ready_bound_s(boot_wait))
+        heard = self.await_reports(on, on + self.ready_bound_s(boot_wait), others)
         first = min((t for t in heard.values()), default=None)
         self.lane.epoch = PowerEpoch(earliest, first if first is not None else self.now(), self.node_id, self.lane.bitrate)
         self.record.observe("after power-up", f"first report {(first - on) * 1000:.1f} ms after power-on" if first is not None
@@ -486,26 +501,36 @@ class Dut:
         longest = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
         return (self.profile.boot_s if boot is None else boot) + longest + self.lane.timing_error
 
-    def _reports_since(self, since: float) -> dict[str, float]:
-        """{report name: first start time} of the DUT's reports since ``since``, decoded or not (what its payload
-        is is another test's verdict: that it came is what counts here)."""
-        out: dict[str, float] = {}
+    def _reports(self, since: float, source: int | None) -> list[tuple[int, str, float]]:
+        """(source, report name, start time) of the reports since ``since`` from ``source`` (None: from any
+        node), decoded or not (what its payload is is another test's verdict: that it came is what counts here)."""
         names = set(self.READY_REPORTS) | self.OTHER_MODE_REPORTS
-        for f in self.frames(since=since, source=self.node_id, kind=Kind.MESSAGE):
-            if f.name in names:
-                out.setdefault(f.name, f.timestamp or since)
-        for g in self.undecoded(since=since, source=self.node_id, kind=Kind.MESSAGE):
+        out = [(f.source, f.name, f.timestamp or since) for f in self.frames(since=since, source=source, kind=Kind.MESSAGE)
+               if f.name in names]
+        for g in self.undecoded(since=since, source=source, kind=Kind.MESSAGE):
             spec = classify(g.msg.arbitration_id)[4]
             if spec is not None and spec.name in names:
-                out.setdefault(spec.name, g.msg.timestamp or since)
+                out.append((g.msg.arbitration_id & 0x7F, spec.name, g.msg.timestamp or since))
         return out
 
-    def await_reports(self, since: float, until: float) -> dict[str, float]:
+    def _reports_since(self, since: float, source: int | None = None) -> dict[str, float]:
+        """{report name: first start time} of the DUT's reports (or ``source``'s) since ``since``."""
+        out: dict[str, float] = {}
+        for _, name, t in self._reports(since, self.node_id if source is None else source):
+            out.setdefault(name, t)
+        return out
+
+    def _ready(self, heard: dict[str, float]) -> bool:
+        """Whether ``heard`` (:meth:`_reports_since`) shows a node reporting: each of MSG1..MSG3, or another mode's report."""
+        return set(self.READY_REPORTS) <= heard.keys() or bool(heard.keys() & self.OTHER_MODE_REPORTS)
+
+    def await_reports(self, since: float, until: float, others: Iterable[int] = ()) -> dict[str, float]:
         """Read until the DUT has sent each of MSG1..MSG3 since ``since`` (or one frame of another reporting
-        mode), or until lane time ``until``: {report name: first time} of what came ({} when nothing did)."""
+        mode), and so has each node of ``others``, or until lane time ``until``: {report name: first time} of
+        what the DUT sent ({} when nothing came)."""
         while True:
             heard = self._reports_since(since)
-            if set(self.READY_REPORTS) <= heard.keys() or heard.keys() & self.OTHER_MODE_REPORTS or self.now() >= until:
+            if (self._ready(heard) and all(self._ready(self._reports_since(since, n)) for n in others)) or self.now() >= until:
                 return heard
             self.read_until(min(until, self.now() + 0.01))
 

@@ -20,6 +20,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import can
@@ -32,7 +33,10 @@ from ckesc.emulator.control import control_request
 from ckesc.emulator.flash import FlashStore
 from ckesc.emulator.realtime import Histogram, RealtimeEmulator
 from ckesc.emulator.socketcand import _parse_send, fmt_frame
+from ckesc.harness.dut import echo_probe
+from ckesc.harness.lanes import BusLane, NoPower
 from ckesc.protocol import Decoder, Frame, Kind, WireFrame, decode, encode
+from ckesc.protocol import catalogue as cat
 
 MSG1_PERIOD = 0.020  # default MSG1 interval: 10 x 2 ms (R9)
 INTERVAL_TOL = 0.001  # |interval - 20 ms| from due-time stamps (exact to ~1 µs; 1 ms allows for --stamp send)
@@ -256,6 +260,51 @@ def test_process_power_cycle_counts_and_sigterm_saves_flash(emulator):
     assert "Traceback" not in err and "flash saved" in err
     slots = FlashStore(emu.flash).load()
     assert {s["node_id"]: s["power_ups"] for s in slots.values()} == {1: 2, 5: 2}
+
+
+ALIGNED = (1, 33, 65, 97)  # node % 32 == 1: all answer GET_ESC_ID in the same 2 ms slot (R2)
+ALIGNED_ROUNDS = 200
+EDGE_S = 0.05  # seconds at each end of a recording where a batch of frames due together may be cut
+ROUND_TIMEOUT = 0.1  # lane seconds a round waits for its replies (due 2 ms after the query): bounds a lossy run
+
+
+@pytest.mark.parametrize("echo", [True, False], ids=["echo", "no-echo"])
+def test_frames_due_at_one_instant_all_arrive(emulator, echo):
+    """Issue #21: four ESCs answer GET_ESC_ID in one slot and report in lockstep (--boot-spread 0), so every
+    wake-up of the emulator has several frames due at one instant. Over 200 queries, through a real ``ckesc
+    emulate``, socketcand, python-can's stock client (tcp_tune) and the lane's receive path (with the
+    host's own frames echoed by the hub, or handed out by the lane itself), every reply arrives exactly once
+    and no report is missing: each node's MSG1..MSG3 keep their interval throughout."""
+    emu = emulator("--nodes", ",".join(map(str, ALIGNED)), "--boot-spread", "0", *(() if echo else ("--no-echo-own",)))
+    lane = BusLane({"interface": "socketcand", "host": "127.0.0.1", "port": emu.port, "channel": "can0", "tcp_tune": True,
+                    "ignore_config": True}, NoPower(), timing_error=0.002)
+    try:
+        assert lane.find_echo(echo_probe()) is echo, lane.echo_note
+        bus = Recorder(lane)  # every frame the lane's recv() hands out
+        wait_reporting(bus, ALIGNED)
+        start = len(bus.frames)
+        for r in range(ALIGNED_ROUNDS):
+            lane.bus.send(msg_of(encode("get_esc_id", {"option": 0}, source=0, transfer_id=r % 32)))
+            collect(bus, ROUND_TIMEOUT, lambda fs: sum(f.name == "get_esc_id" and f.source != 0 for f in decoded(fs)) >= len(ALIGNED))
+        span = bus.frames[-1].timestamp - bus.frames[start].timestamp  # at least one MSG3 interval away from the ends:
+        collect(bus, max(0.1, 0.5 + 3 * EDGE_S - span))  # and a late reply still counts (a lost one never comes)
+        heard = bus.frames[start:]
+        frames = decoded(heard)
+        replies = Counter(f.source for f in frames if f.name == "get_esc_id")
+        assert replies == {0: ALIGNED_ROUNDS, **{n: ALIGNED_ROUNDS for n in ALIGNED}}, replies  # 0: the host's own
+        # the reports: all four nodes due at the same instants; away from the ends of the recording (where a
+        # batch may be cut), each instant has a report from every node, and the instants are an interval apart
+        lo, hi = heard[0].timestamp + EDGE_S, heard[-1].timestamp - EDGE_S
+        for name in ("msg1", "msg2", "msg3"):
+            interval = cat.DEFAULT_REPORT_INTERVALS[f"{name}_interval"] * cat.INTERVAL_UNIT_S
+            stamps = {n: {round(m.timestamp, 4) for m, f in zip(heard, frames) if f.name == name and f.source == n
+                          and lo <= m.timestamp <= hi} for n in ALIGNED}
+            instants = sorted(set().union(*stamps.values()))
+            assert instants and all(stamps[n] == set(instants) for n in ALIGNED), (name, stamps)
+            gaps = [b - a for a, b in zip(instants, instants[1:])]
+            assert all(abs(g - interval) <= INTERVAL_TOL for g in gaps), (name, gaps)
+    finally:
+        lane.close()
 
 
 def test_control_command_line(emulator, capsys):
