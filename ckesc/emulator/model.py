@@ -238,6 +238,7 @@ class EscModel:
         # and the earliest a jittered report may go out (not before the event that set its timer)
         self._offset: dict[str, float] = {k: self._jitter() for k in _REPORT_NAMES} if self.config.report_jitter_s else {}
         self._report_floor = now
+        self._last_jittered: dict[str, float] = {}  # each report's last jittered time: the next never goes before it
         self._reports_were_active = True
         self._next_can_test = 0.0
 
@@ -496,6 +497,9 @@ class EscModel:
         grid = self._next_report["msg1"]
         if period <= 0:
             return deadline
+        if check == "msg1" and self._offset:  # checked when the jittered MSG1 goes out (exactly then: no rounding)
+            grid = self._jittered("msg1")
+            return grid + max(0, math.ceil(round((deadline - grid) / period, 9))) * period
         return round(grid + math.ceil(round((deadline - grid) / period, 9)) * period, 9)
 
     def _comm_loss_due(self, now: float) -> bool:
@@ -549,6 +553,12 @@ class EscModel:
             return due
         return round(due + math.ceil(round((now - due) / period, 9)) * period, 9)
 
+    def _jittered(self, which: str) -> float:
+        """When ``which`` goes out next with jitter: its grid point plus its offset, never before the event that set
+        its timer nor before its own previous report (a report the old grid brings close behind one sent at once)."""
+        return max(self._next_report[which] + self._offset[which], self._report_floor,
+                   self._last_jittered.get(which, -math.inf))
+
     def _jitter(self) -> float:
         """A report's offset from its grid point (report_jitter_s: within +- half of it)."""
         half = self.config.report_jitter_s / 2
@@ -556,8 +566,7 @@ class EscModel:
 
     def _next_report_times(self) -> list[float]:
         if self._offset:
-            floor = self._report_floor
-            return [max(t + self._offset[k], floor) for k, t in self._next_report.items()]
+            return [self._jittered(k) for k in self._next_report]
         return list(self._next_report.values())
 
     def _schedule_reports(self, now: float) -> None:
@@ -576,8 +585,9 @@ class EscModel:
         offset = self._offset
         for which in _REPORT_NAMES:
             while (grid := self._next_report[which]) + (offset[which] if offset else 0.0) <= now:
-                if offset:  # jitter: off the grid point by its offset, never before the event that set the timer
-                    self._emit_report(which, max(grid + offset[which], self._report_floor))
+                if offset:  # jitter: off the grid point by its offset (see _jittered)
+                    self._emit_report(which, due := self._jittered(which))
+                    self._last_jittered[which] = due
                     offset[which] = self._jitter()
                 else:
                     self._emit_report(which, grid)

@@ -159,3 +159,34 @@ def test_report_jitter_never_sends_before_the_event():
 def test_the_emulated_dut_declares_its_jitter():
     assert variants.declared({"report_jitter_s": 0.002, "report_timer": "grid"}) == {"jitter_s": 0.002}
     assert variants.FREEDOMS["report_jitter_s"].span[1] <= 0.003
+
+
+def test_jittered_reports_keep_their_order_behind_one_sent_at_once():
+    """report_timer grid with jitter: the old grid's point just after the report sent at once never goes before it
+    (the transfer ids stay in order, F3)."""
+    for seed in range(20):
+        model = EscModel(EscConfig(node_id=1, report_timer="grid", report_jitter_s=0.003, seed=seed))
+        model.power_on(0.0)
+        send(model, "msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND}, 0.3)
+        send(model, "msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME}, 0.4095)  # 0.5 ms before a point
+        got = dues(run(model, 0.6), "msg1", 0.4095, 8)
+        assert got == sorted(got) and got[0] >= 0, (seed, got)
+
+
+@pytest.mark.parametrize("check", ["msg1", "tick", "timer"])
+def test_with_jitter_the_comm_loss_flag_shows_on_the_first_msg1_due_after_200ms(check):
+    """R8 with report jitter: checked when the (jittered) MSG1 goes out, the flag is on the first MSG1 at or after
+    200 ms from the last command, never one interval later."""
+    for seed in range(10):
+        model = EscModel(EscConfig(node_id=1, report_jitter_s=0.003, comm_loss_check=check, seed=seed))
+        model.power_on(0.0)
+        run(model, 0.5)
+        last = 0.5001
+        model.receive(encode("raw_command_14b", {"channels": [0, 0, 0, 0]}, source=0, transfer_id=0), last)
+        out = []
+        while (due := model.next_deadline()) is not None and due <= last + 0.3:
+            out += [(w.timestamp, w.data) for w in model.poll(due) if classify(w.arbitration_id)[4].name == "msg1"]
+        flags = [(t, bool(d[5] & 0x20)) for t, d in out]
+        after = [(t, flag) for t, flag in flags if t >= last + 0.2]
+        assert after[0][1], (seed, after[:2])
+        assert not [t for t, flag in flags if flag and t < last + 0.2]
