@@ -87,6 +87,50 @@ _FREEDOMS = (
             "when reporting comes back (a resume, leaving CAN Test): restart (the first report at once, the next ones "
             "an interval apart) or grid (one report at once, then the old grid goes on)",
             choices=("restart", "grid")),
+    # power-up order of the reports (R9a: each report's first within one interval of power-up; their phase is free)
+    Freedom("report_phase", ("R9a", "R9a-gaps"),
+            "the first MSG1, MSG2 and MSG3 after power-up: together, or staggered (MSG2 7 ms, MSG3 13 ms after MSG1)",
+            choices=("together", "staggered")),
+    # framing (F3: +1 per transfer, modulo 32; the first value after power-up is not written)
+    Freedom("transfer_id_start", ("F3",), "each message transfer-id counter's first value after power-up: 0, "
+            "or a random one (then +1 per transfer)", choices=("zero", "random")),
+    # priorities (F5-unlisted: 240/241/242 have none in 4.3.2's table)
+    Freedom("unlisted_priority", ("F5-unlisted",), "the priority of 240/241/242 answers: the request's, or a fixed one",
+            choices=("request", "medium", "low", "lowest")),
+    # host node (F6: a non-zero host node is OBSERVE)
+    Freedom("foreign_host", ("F6",), "commands and requests from a host node other than 0: obeyed, or ignored",
+            choices=("accept", "ignore")),
+    # service answers (4.4.2-4's 64 ms bound is the longest delay the document names; services name none)
+    Freedom("service_delay", ("4.4.2-4",), "request to answer for services (Set ID .. 242)", span=(0.0002, 0.064)),
+    # illegal or refused requests (R10: answered or not, and with what, is OBSERVE; R11/R12 refuse without saying
+    # what is answered)
+    Freedom("rejected_answer", ("R10", "R11", "R12"),
+            "a request with an illegal value, or refused (outside the 120 s window, while suspended, motor running): "
+            "answered with the current values, not answered, or answered with the request's values echoed "
+            "while nothing is applied", choices=("current", "none", "echo")),
+    # throttle above its maximum (R6)
+    Freedom("over_max_throttle", ("R6",), "a throttle value above 2000 (14/12-bit) or 1000 (10-bit): clamped to the "
+            "maximum, the frame's value ignored (the throttle held), or taken as zero",
+            choices=("clamp", "hold", "zero")),
+    # MSG_EXP mode (R9-exp: which MSG_EXP frames come and how often is OBSERVE)
+    Freedom("exp_frames", ("R9-exp",), "in MSG_EXP mode: EXP1 at MSG1's interval and EXP7..11 at MSG3's (msg3), "
+            "EXP7..11 at MSG2's (msg2), EXP1 only, or EXP7..11 only", choices=("msg3", "msg2", "exp1_only", "no_exp1")),
+    # rounding where the document names a unit but no rounding (4.4.5-T .. 4.4.11-T, 4.4.27)
+    Freedom("value_rounding", ("4.4.5-T", "4.4.6-T", "4.4.27-T"),
+            "temperatures, run times, voltage and current to their units: temperatures and run times truncated, "
+            "voltage and current rounded (mixed), all rounded, or all truncated", choices=("mixed", "round", "truncate")),
+    # CAN Test (R16: the count grows by one per frame; where it starts is not written)
+    Freedom("can_test_count", ("R16",), "CAN Test's count: from 0 at power-up and on across CAN Test sessions, from "
+            "a random value, or from 0 at each CAN Test on", choices=("from_zero", "from_random", "zero_each_session")),
+    # Set LED blink codes other than 0/1/2/5 (4.4.20: "No operation is performed, no blinking")
+    Freedom("led_blink_other", ("4.4.20-4", "4.4.20-T"), "a Set LED blink code other than 0/1/2/5: the colour set "
+            "and no blinking, or no operation at all", choices=("no_blink", "no_operation")),
+    # Get Major Configuration's other options (4.4.28-2: "Option Indicates the ESC type", against "Fixed to 0")
+    Freedom("major_config_option", ("4.4.28-2",), "242 with an option other than 0: answered as option 0, or not",
+            choices=("answer", "ignore")),
+    # Get Rec / Clear Rec (R15-payload: whether they are answered is OBSERVE)
+    Freedom("rec_answer", ("R15-payload",), "Get Rec / Clear Rec requests: no answer (the records come as MSG_EXP12), "
+            "or also a service answer echoing the request", choices=("none", "echo")),
 )
 
 FREEDOMS: Mapping[str, Freedom] = MappingProxyType({f.name: f for f in _FREEDOMS})

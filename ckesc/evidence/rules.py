@@ -87,6 +87,7 @@ RESPONSE_WINDOW_S = 5.0
 _SET_FREQ = cat.spec("set_freq")
 _SET_FREQ_OPTION = _SET_FREQ.request.field("option")  # type: ignore[union-attr]
 _SET_FREQ_WRITE = next(k for k, v in (_SET_FREQ_OPTION.codes or {}).items() if v == "write")
+_SET_ID_NODE = cat.spec("set_id").request.field("node_id")  # type: ignore[union-attr]
 _PSEUDO_BROADCAST = frozenset({cat.spec("set_id").type_id})  # R11: answered by every ESC, from its (new) node id
 _MSG1 = cat.spec("msg1")
 _STATUS = _MSG1.layouts[0].field("status")
@@ -238,7 +239,7 @@ class Intervals:
 class _Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
                  "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
-                 "event_reset", "event_ts", "event_what", "grace_chain")
+                 "event_reset", "event_ts", "event_what", "grace_chain", "unsure_until")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -259,6 +260,9 @@ class _Node:
         self.from_read = False  # the periods come from a read answer (4.4.22-2 says it tells the settings)
         self.before_silence = False  # ... stated before a silence that may have been a power cycle (R13 keeps them)
         self.shared = False  # two ESCs answered one broadcast from this node id: its frames are two ESCs' (4.4.18-2)
+        #: a Set ID to this node id was sent and its answers may still come: until then (the longest answer delay
+        #: and a service's), whether two ESCs now share it is not known and its frames are not compared
+        self.unsure_until = -math.inf
         self.floor = True  # judge reports against the shortest legal interval while the periods are unknown
         self.comm_fault: bool | None = None
         self.comm_events: list[dict[str, Any]] = []
@@ -569,7 +573,7 @@ class BusRules:
     # ------------------------------------------------------------------------------------- F3 and R9
     def _stream(self, out, st: _Stream, info: _Id, node: _Node, data, ts: float, start: float, busy_from: float, tid: int):
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
-        if st.ts is not None and st.chain == node.chain and not node.shared:
+        if st.ts is not None and st.chain == node.chain and not node.shared and ts > node.unsure_until:
             gap = start - st.start
             advance = (tid - st.tid) % TRANSFER_ID_MODULO
             period = None
@@ -739,11 +743,14 @@ class BusRules:
                 node.periods = [None] * len(_INTERVAL_FIELDS)
                 node.reset += 1
                 node.shared = False  # ... nor whether two of them share an id
+            if len(data) > _SET_ID_NODE.offset + _SET_ID_NODE.size:  # every ESC may take the new id at once, answer later
+                self._node(_field(data, _SET_ID_NODE)).unsure_until = ts + 2 * cat.ANSWER_DELAY_MAX_S
         else:
             key = (info.source, info.dest, type_id)
             if type_id == _SET_FREQ.type_id and _field(data, _SET_FREQ_OPTION) == _SET_FREQ_WRITE:
                 dest = self._node(info.dest)  # type: ignore[arg-type]
                 self._event(dest, ts, "a Set Freq write")  # the new intervals count from the write (its answer tells them)
+                dest.periods = [None] * len(_INTERVAL_FIELDS)  # unknown until that answer: it may come after reports
         q = self._requests.get(key)
         if q is None:
             if len(self._requests) > 4096:
