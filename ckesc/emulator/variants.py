@@ -169,6 +169,29 @@ def draw(seed: int, names: Iterable[str] | None = None) -> dict[str, Any]:
     return {name: FREEDOMS[name].draw(rng) for name in chosen}
 
 
+def alternatives(f: Freedom) -> list[Any]:
+    """Every value of a freedom other than the emulator's default: its other choices, or a span's two ends."""
+    if f.span is not None:
+        from .model import EscConfig  # (model imports this module)
+
+        default = getattr(EscConfig(), f.name)
+        return [v for v in f.span if v != default]
+    return list(f.choices[1:])
+
+
+def each() -> list[dict[str, Any]]:
+    """One variant per alternative of every freedom, the others at their defaults: what a FAIL is pinned to."""
+    return [{f.name: value} for f in FREEDOMS.values() for value in alternatives(f)]
+
+
+def covering() -> list[dict[str, Any]]:
+    """The fewest combinations that play every alternative of every freedom at least once (combination i takes
+    each freedom's alternative i, cycling): a cheap run of them all, e.g. in every CI run."""
+    alts = {f.name: alternatives(f) for f in FREEDOMS.values()}
+    n = max((len(a) for a in alts.values()), default=0)
+    return [{name: a[i % len(a)] for name, a in alts.items() if a} for i in range(n)]
+
+
 def combination(options: Iterable[str] = (), seed: int | None = None) -> dict[str, Any]:
     """What a run plays: the combination drawn from ``seed`` (none: the defaults), with ``options``
     (``NAME=VALUE``) on top."""
