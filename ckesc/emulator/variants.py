@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import difflib
 import random
+import textwrap
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, Iterable, Mapping
@@ -216,5 +217,8 @@ def describe(values: Mapping[str, Any]) -> str:
 def table() -> str:
     """The freedoms as a text table (``ckesc emulate --list-variants``, the README)."""
     rows = [(f.name, f.values_text(), ", ".join(f.allowed_by), f.description) for f in FREEDOMS.values()]
-    w = [max(len(r[i]) for r in rows) for i in range(3)]
-    return "\n".join(f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {d}" for a, b, c, d in rows)
+    w = [max(len(r[i]) for r in rows) for i in range(2)]
+    # name, values and the ids on one line; the description wrapped under it (a 100-column terminal)
+    return "\n".join(f"{a:<{w[0]}}  {b:<{w[1]}}  ({c})\n" + textwrap.fill(d, 100, initial_indent="    ",
+                                                                           subsequent_indent="    ")
+                     for a, b, c, d in rows)

@@ -224,3 +224,21 @@ def test_rec_answer(choice):
     assert len([f for f in frames if f.name == "msg_exp12"]) == 4  # the records come either way
     assert len(esc.answers(frames, "get_rec")) == (choice == "echo")
     assert len(esc.answers(esc.send("clear_rec", {"payload": b"\x00"}), "clear_rec")) == (choice == "echo")
+
+
+def test_the_slowest_conforming_boot_still_reports_within_the_emulator_profiles_boot_s():
+    """boot_time and report_delay at their ends, the first reports staggered and ``ckesc emulate
+    --boot-spread``'s 20 ms: the last first report still comes within the emulator profile's boot_s."""
+    import tomllib
+    from importlib import resources
+
+    profile = tomllib.loads(resources.files("ckesc.harness").joinpath("profiles/emulator.toml").read_text())
+    boot_s = profile["timing"]["boot_s"]
+    m = EscModel(EscConfig(node_id=NODE, boot_time=variants.FREEDOMS["boot_time"].span[1],  # type: ignore[index]
+                           report_delay=variants.FREEDOMS["report_delay"].span[1],  # type: ignore[index]
+                           report_phase="staggered"))
+    m.power_on(0.0)
+    firsts: dict[str, float] = {}
+    for w in m.poll(1.0):
+        firsts.setdefault(Decoder().decode(w).name, w.timestamp)
+    assert max(firsts[k] for k in ("msg1", "msg2", "msg3")) + 0.020 <= boot_s
