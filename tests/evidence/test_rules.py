@@ -241,6 +241,21 @@ def test_set_id_makes_every_interval_unknown():
     assert stream(rules, 1, [t + 0.001, t + 0.021, t + 0.041]) == []  # 20 ms is legal; 30 ms was only said before
 
 
+def test_reports_between_a_set_freq_write_and_its_late_answer_are_not_judged_on_the_old_interval():
+    """A service answer may come up to 64 ms after the request (a conforming variant, service_delay): an ESC that
+    applies the write on receipt reports on the new interval before its answer says what it is."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0, {**INTERVALS, "msg1_interval": 25})  # 50 ms
+    stream(rules, 1, [t, t + 0.05])
+    write = {"option": 1, **INTERVALS}  # to 20 ms
+    feed(rules, encode("set_freq", write, source=0, destination=1, transfer_id=1), t + 0.06)
+    assert stream(rules, 1, [t + 0.061, t + 0.081, t + 0.101, t + 0.121], start_tid=2) == []
+    feed(rules, encode("set_freq", write, kind="response", source=1, destination=0, transfer_id=1), t + 0.124)
+    assert stream(rules, 1, [t + 0.141, t + 0.161], start_tid=6) == []
+    (v,) = stream(rules, 1, [t + 0.191], start_tid=8)  # 30 ms where the answer said 20: still caught
+    assert "20.000 ms" in v.message
+
+
 def test_an_illegal_interval_in_an_answer_stops_the_floor():
     """An answer to an illegal write may say anything (R10-answer, OBSERVE): nothing is judged on it."""
     rules = BusRules(bitrate=BITRATE)
