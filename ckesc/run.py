@@ -11,8 +11,9 @@
 
 Runs pytest in this process over the installed ``conformance`` package with the ckesc plugin's
 options, shows one progress line per test, writes ``reports/<timestamp>/`` (JUnit, JSON, summary)
-with ``reports/latest`` pointing at it, and exits 0 only when no test FAILed or ERRORed
-(INCONCLUSIVE and SKIPPED are reported, and ``--strict`` makes INCONCLUSIVE fail the run too).
+with ``reports/latest`` pointing at it, and exits 0 only when no test FAILed or ERRORed and no bus rule
+was broken while a SKIPPED test ran (INCONCLUSIVE and SKIPPED are reported, and ``--strict`` makes
+INCONCLUSIVE fail the run too).
 
 With ``--rig``, the same on every bench of a rig file at once (:func:`run_batch`): pytest-xdist, one worker
 per bench (:mod:`ckesc.harness.batch`), each bench's report in ``reports/<timestamp>/<bench>/`` and the
@@ -155,6 +156,8 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
 def run_command(args: argparse.Namespace) -> int:
     import pytest
 
+    from .harness.causes import broken_outside_a_fail
+
     if getattr(args, "rig", None):
         return run_batch(args)
     if getattr(args, "benches", None):
@@ -182,7 +185,7 @@ def run_command(args: argparse.Namespace) -> int:
     if not results:
         print("ckesc run: no conformance test ran", file=sys.stderr)
         return EXIT_FAILED
-    failed = [r for r in results if r.outcome in ("FAIL", "ERROR")]
+    failed = [r for r in results if r.outcome in ("FAIL", "ERROR") or broken_outside_a_fail(r)]
     inconclusive = [r for r in results if r.outcome == "INCONCLUSIVE"]
     if failed or (args.strict and inconclusive):
         return EXIT_FAILED

@@ -32,6 +32,7 @@ from typing import Any
 
 from .emulator import variants
 from .emulator.faults import FAULTS
+from .harness.causes import broken_outside_a_fail
 from .protocol.requirements import requirement
 
 RUN_TIMEOUT_S = 600  # one suite run takes seconds in the simulated lane; this only stops a hang
@@ -119,6 +120,10 @@ def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full
                 run.bus_rules = list(dict.fromkeys(run.bus_rules + r["bus_rules"]))
         elif r["outcome"] == "ERROR":
             run.errors.append(f"{r['nodeid']}: {r['message'][:200]}")
+        elif broken_outside_a_fail(r):  # a bus rule broken while a SKIPPED test ran: the rule's failure
+            run.failing.append((r["nodeid"], list(r["bus_rules"])))
+            run.bus_failed.append(r["nodeid"])
+            run.bus_rules = list(dict.fromkeys(run.bus_rules + r["bus_rules"]))
     if fault is None:
         if run.failing or run.errors:
             run.problem = f"{len(run.failing)} failed and {len(run.errors)} errored against the faultless emulator"

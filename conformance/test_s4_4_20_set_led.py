@@ -12,6 +12,8 @@ from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
+from .settings import changes, listed
+
 SECTION = "4.4.20"
 SPEC = cat.spec("set_led")
 COLOR = SPEC.request.field("color")
@@ -34,6 +36,11 @@ def _led(dut):
     return s["led_color"], s["led_blink"]
 
 
+def _differs(want, shown) -> str:
+    """Where 242's LED ``shown`` differs from (colour, blink) ``want``: ``led_color 5 -> 3``; "" if nowhere."""
+    return changes(dict(zip(("led_color", "led_blink"), want)), dict(zip(("led_color", "led_blink"), shown)))
+
+
 def _other_colour(colour):
     return COLOURS[(colour - COLOURS[0] + 3) % len(COLOURS)]
 
@@ -50,16 +57,17 @@ def _check_echo(ex, option, colour, blink):
     assert ex.response is not None, "no answer to Set Led"
     got = ex.response.fields
     assert (got["option"], got["color"] & COLOUR_MASK, got["blink"]) == (option, colour, blink), (
-        f"Set Led ({option}, {colour}, {blink}) answered {got} (4.4.20-T: the answer carries Option, Color, Blink)")
+        f"Set Led option {option}, color {colour}, blink {blink} answered {listed(got)} "
+        "(4.4.20-T: the answer carries Option, Color, Blink)")
 
 
 def _ensure(dut, option, colour, blink):
     """Setup: the LED at (colour, blink) (Inconclusive if Set Led cannot get it there: that is what
     test_colour_is_set / test_blink_is_set judge)."""
     _set(dut, option, colour, blink)
-    if _led(dut) != (colour, blink):
-        raise Inconclusive(f"Set Led ({option}, {colour}, {blink}) did not take with reporting on: 242 shows "
-                           f"{_led(dut)}; this test cannot be judged")
+    if d := _differs((colour, blink), _led(dut)):
+        raise Inconclusive(f"Set Led ({option}, {colour}, {blink}) did not take with reporting on: 242 "
+                           f"{d} (set -> 242); this test cannot be judged")
 
 
 # ------------------------------------------------------------------------------------------ tests
@@ -71,7 +79,7 @@ def test_colour_is_set(dut, colour):
     _set(dut, NO_SAVE, _other_colour(colour), blink)
     ex = _set(dut, SAVE, colour, blink)
     _check_echo(ex, SAVE, colour, blink)
-    assert _led(dut) == (colour, blink), f"242 shows {_led(dut)} after Set Led colour {colour}"
+    assert not (d := _differs((colour, blink), _led(dut))), f"after Set Led colour {colour} 242 differs from what was set: {d} (set -> 242)"
 
 
 @pytest.mark.requirement("4.4.20-1", "4.4.20-T", "4.4.28-1")
@@ -82,7 +90,7 @@ def test_blink_is_set(dut, blink):
     _set(dut, NO_SAVE, colour, _other_blink(blink))
     ex = _set(dut, SAVE, colour, blink)
     _check_echo(ex, SAVE, colour, blink)
-    assert _led(dut) == (colour, blink), f"242 shows {_led(dut)} after Set Led blink {blink}"
+    assert not (d := _differs((colour, blink), _led(dut))), f"after Set Led blink {blink} 242 differs from what was set: {d} (set -> 242)"
 
 
 @pytest.mark.requirement("4.4.20-3", "4.4.20-T", "4.4.28-1")
@@ -95,7 +103,8 @@ def test_only_the_low_three_bits_of_colour_count(dut, value):
     ex = _set(dut, NO_SAVE, value, blink)
     dut.record.observe("colour answered", ex.response.fields["color"] if ex.response else "none")
     _check_echo(ex, NO_SAVE, want, blink)
-    assert _led(dut) == (want, blink), f"242 shows {_led(dut)} after colour {value:#04x} (low bits {want})"
+    assert not (d := _differs((want, blink), _led(dut))), (
+        f"after colour {value:#04x}, low bits {want}, 242 differs from what was set: {d} (set -> 242)")
 
 
 def _write_unsaved(dut):
@@ -103,7 +112,7 @@ def _write_unsaved(dut):
     _ensure(dut, SAVE, *saved)  # what the power cycle must bring back is saved
     colour, blink = _other_colour(saved[0]), _other_blink(saved[1])
     _set(dut, NO_SAVE, colour, blink)
-    assert _led(dut) == (colour, blink), f"option 0 did not update the LED at once: 242 shows {_led(dut)}"
+    assert not (d := _differs((colour, blink), _led(dut))), f"option 0 did not update the LED at once: 242 differs from what was set: {d} (set -> 242)"
     return saved
 
 
@@ -113,14 +122,14 @@ def _write_unsaved(dut):
 def test_unsaved_setting_is_lost_at_power_off(dut, cold_boot):
     """Option 0: the LED changes at once, and after a power cycle the saved setting is back."""
     saved = cold_boot()
-    assert _led(dut) == saved, f"after a power cycle 242 shows {_led(dut)}, the saved setting is {saved}"
+    assert not (d := _differs(saved, _led(dut))), f"after a power cycle 242 is not the saved setting: {d} (saved -> 242)"
 
 
 def _write_saved(dut):
     before = _led(dut)
     colour, blink = _other_colour(before[0]), _other_blink(before[1])
     _set(dut, SAVE, colour, blink)
-    assert _led(dut) == (colour, blink), f"option 1 did not update the LED at once: 242 shows {_led(dut)}"
+    assert not (d := _differs((colour, blink), _led(dut))), f"option 1 did not update the LED at once: 242 differs from what was set: {d} (set -> 242)"
     return colour, blink
 
 
@@ -130,7 +139,7 @@ def _write_saved(dut):
 def test_saved_setting_survives_power_off(dut, cold_boot):
     """Option 1: the LED changes at once and is still so after a power cycle."""
     colour, blink = cold_boot()
-    assert _led(dut) == (colour, blink), f"after a power cycle 242 shows {_led(dut)}, saved was {(colour, blink)}"
+    assert not (d := _differs((colour, blink), _led(dut))), f"after a power cycle 242 is not the saved setting: {d} (saved -> 242)"
 
 
 @pytest.mark.requirement("4.4.20-6", "4.4.2-3", "R12", "4.4.28-1")
@@ -148,7 +157,7 @@ def test_not_set_while_reporting_is_suspended(dut, option):
         dut.record.observe("answer while suspended", ex.response.fields if ex.response else "none")
     finally:
         dut.resume_reporting()
-    assert _led(dut) == before, f"Set Led while suspended took effect: 242 shows {_led(dut)}, was {before}"
+    assert not (d := _differs(before, _led(dut))), f"Set Led while suspended took effect: 242 {d}"
 
 
 @pytest.mark.requirement("4.4.20-4")

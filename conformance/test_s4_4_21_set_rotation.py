@@ -13,6 +13,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from . import throttle
+from .settings import change, changes, listed
 
 SECTION = "4.4.21"
 SPEC = cat.spec("set_rotation")
@@ -40,11 +41,17 @@ def _direction(dut):
     return dut.settings()["rotation"]
 
 
+def _shown_changes(dut, want):
+    """Where the query and 242 show another direction than ``want``: ``242 rotation 0 -> 1``; "" if nowhere."""
+    shown = {"query": _query(dut), "242 rotation": _direction(dut)}
+    return changes(dict.fromkeys(shown, want), shown)
+
+
 def _set(dut, direction):
     """Set ``direction`` and check the answer, the query and 242 show it."""
     ex = dut.request("set_rotation", {"rotation": direction})
     assert ex.response is not None, f"no answer to Set Rotation {direction}"
-    assert ex.response.fields["rotation"] == direction, f"Set Rotation {direction} answered {ex.response.fields}"
+    assert ex.response.fields["rotation"] == direction, f"Set Rotation {direction} answered {listed(ex.response.fields)}"
     assert _query(dut) == direction, f"after Set Rotation {direction} the query answers {_query(dut)}"
     assert _direction(dut) == direction, f"after Set Rotation {direction} 242 shows {_direction(dut)}"
 
@@ -74,8 +81,10 @@ def test_query_answers_the_direction_and_changes_nothing(dut, direction):
     """0xFF 'queries the current direction of rotation': answered with it, twice, nothing changed."""
     _set(dut, _other(direction))
     _set(dut, direction)
-    assert [_query(dut), _query(dut)] == [direction, direction]
-    assert _direction(dut) == direction, f"the query changed the direction: 242 shows {_direction(dut)}"
+    answers = [_query(dut), _query(dut)]
+    assert answers == [direction, direction], f"the query answered {answers[0]} then {answers[1]}, the direction set is {direction}"
+    now = _direction(dut)
+    assert now == direction, f"the query changed the direction: 242 {change('rotation', direction, now)}"
 
 
 @pytest.mark.requirement("R10", "R10-answer", "4.4.21-T", "4.4.28-1")
@@ -86,8 +95,7 @@ def test_illegal_value_changes_nothing(dut, case, start):
     _ensure(dut, start)
     ex = dut.request("set_rotation", {"rotation": case.value})
     dut.record.observe("answer to the illegal value (R10-answer)", ex.response.fields if ex.response else "none")
-    assert (_query(dut), _direction(dut)) == (start, start), (
-        f"Set Rotation {case.value:#04x} changed the direction from {start}: query {_query(dut)}, 242 {_direction(dut)}")
+    assert not (d := _shown_changes(dut, start)), f"Set Rotation {case.value:#04x} changed the direction: {d}"
 
 
 def _write_illegal(dut, case):
@@ -104,7 +112,7 @@ def _write_illegal(dut, case):
 def test_illegal_value_changes_nothing_after_power_cycle(dut, cold_boot, case):
     """Nothing of an illegal value surfaces after a power cycle either."""
     start = cold_boot()
-    assert (_query(dut), _direction(dut)) == (start, start), f"after {case.value:#04x} and a power cycle: {_direction(dut)}"
+    assert not (d := _shown_changes(dut, start)), f"after {case.value:#04x} and a power cycle the direction changed: {d}"
 
 
 @pytest.mark.requirement("4.4.21-2", "4.4.2-3", "R12", "4.4.28-1")
@@ -121,7 +129,8 @@ def test_not_set_while_reporting_is_suspended(dut):
         dut.record.observe("answer while suspended", ex.response.fields if ex.response else "none")
     finally:
         dut.resume_reporting()
-    assert _direction(dut) == before, f"Set Rotation while suspended took effect: 242 shows {_direction(dut)}"
+    now = _direction(dut)
+    assert now == before, f"Set Rotation while suspended took effect: 242 {change('rotation', before, now)}"
 
 
 @pytest.mark.requirement("4.4.21-2", "R12", "4.4.28-1")
@@ -136,11 +145,12 @@ def test_not_set_while_the_motor_runs(dut):
     try:
         ex = dut.request("set_rotation", {"rotation": _other(before)})
         dut.record.observe("answer while running", ex.response.fields if ex.response else "none")
-        running = (_query(dut), _direction(dut))
+        running = _shown_changes(dut, before)
     finally:
         dut.stop_motor()
-    assert running == (before, before), f"Set Rotation while the motor ran took effect: query, 242 = {running}"
-    assert _direction(dut) == before, f"Set Rotation sent while running took effect later: 242 shows {_direction(dut)}"
+    assert not running, f"Set Rotation while the motor ran took effect: {running}"
+    now = _direction(dut)
+    assert now == before, f"Set Rotation sent while running took effect later: 242 {change('rotation', before, now)}"
 
 
 def _write_other_direction(dut):
@@ -155,7 +165,7 @@ def _write_other_direction(dut):
 def test_direction_persists_across_power_cycle(dut, cold_boot):
     """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""
     direction = cold_boot()
-    assert (_query(dut), _direction(dut)) == (direction, direction), f"after a power cycle: 242 {_direction(dut)}"
+    assert not (d := _shown_changes(dut, direction)), f"a power cycle changed the direction saved: {d}"
 
 
 @pytest.mark.requirement("4.4.21-3")

@@ -16,6 +16,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from . import throttle
+from .settings import change, listed
 
 SECTION = "4.4.23"
 SPEC = cat.spec("throttle_select")
@@ -41,7 +42,7 @@ def _select(dut, source):
     """Select ``source`` and check the answer and 242 show it."""
     ex = dut.request("throttle_select", {"source": source})
     assert ex.response is not None, f"no answer to Throttle Select {source}"
-    assert ex.response.fields["source"] == source, f"Throttle Select {source} answered {ex.response.fields}"
+    assert ex.response.fields["source"] == source, f"Throttle Select {source} answered {listed(ex.response.fields)}"
     assert _source(dut) == source, f"after Throttle Select {source} 242 shows {_source(dut)}"
 
 
@@ -96,8 +97,9 @@ def test_not_selected_while_the_throttle_is_not_zero(dut):
         during = _source(dut)
     finally:
         dut.stop_motor()
-    assert during == before, f"Throttle Select at non-zero throttle took effect: 242 shows {during}"
-    assert _source(dut) == before, f"Throttle Select sent at non-zero throttle took effect later: 242 {_source(dut)}"
+    assert during == before, f"Throttle Select at non-zero throttle took effect: 242 {change('throttle_source', before, during)}"
+    now = _source(dut)
+    assert now == before, f"Throttle Select sent at non-zero throttle took effect later: 242 {change('throttle_source', before, now)}"
 
 
 @pytest.mark.requirement("R12", "4.4.2-3", "4.4.28-1")
@@ -113,7 +115,8 @@ def test_not_selected_while_reporting_is_suspended(dut):
         dut.record.observe("answer while suspended", ex.response.fields if ex.response else "none")
     finally:
         dut.resume_reporting()
-    assert _source(dut) == before, f"Throttle Select while suspended took effect: 242 shows {_source(dut)}"
+    now = _source(dut)
+    assert now == before, f"Throttle Select while suspended took effect: 242 {change('throttle_source', before, now)}"
 
 
 @pytest.mark.requirement("R10", "R10-answer", "4.4.23-1", "4.4.28-1")
@@ -125,7 +128,8 @@ def test_illegal_source_changes_nothing(dut, case, start):
     try:
         ex = dut.request("throttle_select", {"source": case.value})
         dut.record.observe("answer to the illegal source (R10-answer)", ex.response.fields if ex.response else "none")
-        assert _source(dut) == start, f"Throttle Select {case.value:#04x} changed the source from {start}: {_source(dut)}"
+        now = _source(dut)
+        assert now == start, f"Throttle Select {case.value:#04x} changed the source: 242 {change('throttle_source', start, now)}"
     finally:
         dut.request("throttle_select", {"source": start})  # whatever the DUT stored, a legal value again
 
@@ -146,7 +150,8 @@ def test_illegal_source_changes_nothing_after_power_cycle(dut, cold_boot, case):
     value's low bit does not name, so a device that keeps only bit 0 shows)."""
     try:
         start = cold_boot()
-        assert _source(dut) == start, f"after {case.value:#04x} and a power cycle 242 shows {_source(dut)}"
+        now = _source(dut)
+        assert now == start, f"after {case.value:#04x} and a power cycle the source changed: 242 {change('throttle_source', start, now)}"
     finally:
         dut.request("throttle_select", {"source": _other(case.value & 1)})  # whatever the DUT stored, a legal value
 
@@ -163,7 +168,8 @@ def _write_other_source(dut):
 def test_source_persists_across_power_cycle(dut, cold_boot):
     """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""
     source = cold_boot()
-    assert _source(dut) == source, f"after a power cycle 242 shows {_source(dut)}, selected was {source}"
+    now = _source(dut)
+    assert now == source, f"a power cycle changed the source selected: 242 {change('throttle_source', source, now)}"
 
 
 @pytest.mark.requirement("4.4.23-6", "4.4.23-1", "4.4.4-T", "4.4.28-1")

@@ -18,6 +18,7 @@ from ckesc.protocol.ids import Kind
 from ckesc.protocol.legality import illegal_cases
 
 from . import throttle
+from .settings import change, changes
 
 SECTION = "4.4.25"
 SPEC = cat.spec("expand_set_part")
@@ -127,10 +128,9 @@ def _put_back(dut, exp7):
     """Put the MSG_EXP7-only settings back as ``exp7`` showed them."""
     for name in EXP7_ONLY:
         _send(dut, CMD[name].code, exp7[EXP7_FIELD[name]])
-    now = _exp7(dut)
-    changed = {n: now[EXP7_FIELD[n]] for n in EXP7_ONLY if now[EXP7_FIELD[n]] != exp7[EXP7_FIELD[n]]}
+    changed = changes(exp7, _exp7(dut), [EXP7_FIELD[n] for n in EXP7_ONLY])
     if changed:
-        raise RuntimeError(f"could not put back the Expand Set Part settings {changed} (were {exp7})")
+        raise RuntimeError(f"could not put back the Expand Set Part settings (as found -> now): {changed}")
 
 
 @pytest.fixture
@@ -211,8 +211,8 @@ def test_setting_shows_in_the_general_settings(dut, exp7_restored, name, part):
     for p in (_other_part(name, part), part):
         _send(dut, CMD[name].code, p)
         shown = _shown(dut, name)
-        want = {k: v for k, v in _expected(name, p).items() if k in shown}
-        assert shown == want, f"222 {name} part {p} ({CMD[name].parts[p]}): shown {shown}, expected {want}"
+        wrong = changes(_expected(name, p), shown, shown)
+        assert not wrong, f"222 {name} part {p} ({CMD[name].parts[p]}, expected -> shown): {wrong}"
 
 
 @pytest.mark.requirement("R13", "4.4.25-2", "4.4.9-T", "4.4.28-1")
@@ -230,7 +230,8 @@ def test_setting_persists_across_power_cycle(dut, exp7_restored, name):
         raise Inconclusive(f"222 {name} part {part} did not take (see test_setting_shows_in_the_general_settings)")
     dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
     shown = _shown(dut, name)
-    assert shown == {k: want[k] for k in shown}, f"after a power cycle {name} shows {shown}, set was {want} ({field.name})"
+    lost = changes(want, shown, shown)
+    assert not lost, f"a power cycle changed {name} (as set -> after; MSG_EXP7 {field.name}): {lost}"
 
 
 @pytest.mark.requirement("4.4.25-1", "R12", "4.4.28-1")
@@ -248,8 +249,9 @@ def test_not_applied_while_the_motor_runs(dut, put_back):
         during = dut.settings()["rotation"]
     finally:
         dut.stop_motor()
-    assert during == before, f"222 direction while the motor ran took effect: 242 shows {during}"
-    assert dut.settings()["rotation"] == before, "222 direction sent while running took effect later"
+    assert during == before, f"222 direction while the motor ran took effect: 242 {change('rotation', before, during)}"
+    after = dut.settings()["rotation"]
+    assert after == before, f"222 direction sent while running took effect later: 242 {change('rotation', before, after)}"
 
 
 @pytest.mark.requirement("R12", "4.4.2-3", "4.4.28-1")
@@ -265,7 +267,8 @@ def test_not_applied_while_reporting_is_suspended(dut, put_back):
         _send(dut, CMD["direction"].code, _direction_part(other))
     finally:
         dut.resume_reporting()
-    assert dut.settings()["rotation"] == before, f"222 direction while suspended took effect: {dut.settings()['rotation']}"
+    after = dut.settings()["rotation"]
+    assert after == before, f"222 direction while suspended took effect: 242 {change('rotation', before, after)}"
 
 
 @pytest.mark.requirement("4.4.25-T", "R14")
@@ -274,15 +277,19 @@ def test_what_the_table_does_not_define_changes_nothing(dut, exp7_restored, kind
     """A Set_cmd the table does not list (byte-swapped ones included, R14), a Part it does not list
     for its Set_cmd, or a '(reserved)' function changes none of the settings 242 and MSG_EXP7 show
     (a reserved function may move MSG_EXP7's reserved nibbles: recorded)."""
-    before = {"242": dut.settings(), "MSG_EXP7": exp7_restored}
+    before = _everywhere(dut.settings(), exp7_restored)
     _send(dut, code, part)
-    after = {"242": dut.settings(), "MSG_EXP7": _exp7(dut)}
-    changed = {f"{where}.{k}": (before[where][k], v) for where in after for k, v in after[where].items()
-               if before[where][k] != v}
-    dut.record.observe(f"222 ({code:#06x}, {part}) changed", changed or "nothing")
+    after = _everywhere(dut.settings(), _exp7(dut))
+    changed = [k for k in after if before[k] != after[k]]
+    dut.record.observe(f"222 ({code:#06x}, {part}) changed", changes(before, after) or "nothing")
     if kind == "reserved":
-        changed = {k: v for k, v in changed.items() if not k.startswith("MSG_EXP7.") or k[9:] in EXP7_FIELD.values()}
-    assert not changed, f"222 ({code:#06x}, {part}) ({kind}) changed {changed}"
+        changed = [k for k in changed if not k.startswith("MSG_EXP7.") or k[9:] in EXP7_FIELD.values()]
+    assert not changed, f"222 ({code:#06x}, {part}) ({kind}) changed {changes(before, after, changed)}"
+
+
+def _everywhere(settings, exp7):
+    """The settings 242 and MSG_EXP7 show, as ``242.<name>`` / ``MSG_EXP7.<field>``."""
+    return {f"{where}.{k}": v for where, shown in (("242", settings), ("MSG_EXP7", exp7)) for k, v in shown.items()}
 
 
 @pytest.mark.requirement("4.4.25-T", "R14", "R15")

@@ -38,6 +38,7 @@ from .reports import (
     reported,
     resume,
 )
+from .settings import changes, listed
 
 SECTION = "4.4.2"
 
@@ -181,14 +182,13 @@ def test_settings_do_not_change_while_suspended(dut, name):
     finally:
         resume(dut)
     after = dut.settings()
-    for key in expected:
-        assert during[key] == before[key], f"{name} {fields} took effect while suspended: {key} {before[key]} -> {during[key]}"
-        assert after[key] == before[key], f"{name} {fields} sent while suspended took effect on resume: {key} {before[key]} -> {after[key]}"
+    assert not (d := changes(before, during, expected)), f"{name} {listed(fields)} took effect while suspended: {d}"
+    assert not (d := changes(before, after, expected)), f"{name} {listed(fields)} sent while suspended took effect on resume: {d}"
     dut.ask(name, fields)
     control = dut.settings()
-    if any(control[k] != v for k, v in expected.items()):
-        raise Inconclusive(f"{name} {fields} does not take effect with reporting on either ({control}): "
-                           "that it is ignored while suspended shows nothing")
+    if missed := changes(expected, control, expected):
+        raise Inconclusive(f"{name} {listed(fields)} does not take effect with reporting on either (wanted -> 242: "
+                           f"{missed}): that it is ignored while suspended shows nothing")
 
 
 @pytest.mark.requirement("4.4.2-T", "R9")

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from ckesc.harness.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import Status
+from ckesc.protocol.frame import frame_bits
 
 from .reports import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
+from .settings import changes, listed
 from .throttle import FORMAT_CHANNELS, STREAM_PERIOD_S, can_throttle, command_for
 
 SECTION = "4.4.4"
@@ -28,6 +32,22 @@ def _stream_pause_s(dut, name: str, since: float, until: float) -> float:
     stream is the harness's: a host starved of CPU may pause it."""
     stamps = [since, *(f.timestamp for f in dut.frames(name, since=since, until=until, source=dut.host_node)), until]
     return max(b - a for a, b in zip(stamps, stamps[1:]))
+
+
+def _mid_interval_send(dut, msg1: list, interval: float, after: float = 0.0) -> float:
+    """When to send a command so that ``after`` seconds from when the DUT hears it (the frame's end) lies half
+    an MSG1 interval before an MSG1 of the DUT's own grid: the first such time from :data:`REACT_S` on,
+    predicted from ``msg1`` (the MSG1s heard: the mean of their gaps, from the last one's start). For a
+    comm-loss test's last command ``after`` is the 200 ms of R8: a flag raised on time then shows half an
+    interval after 200 ms, one raised an interval early or late an interval from there, each decisively
+    judged on a bench whose error is below a quarter interval."""
+    starts = [frame_start(dut, f) for f in msg1]
+    if len(starts) >= 2:
+        interval = (starts[-1] - starts[0]) / (len(starts) - 1)
+    heard = frame_bits(8) / dut.lane.bitrate  # every RawCommand is 8 data bytes
+    mark = starts[-1] - interval / 2 - after - heard  # one such time; the others are an interval apart
+    earliest = dut.now() + REACT_S
+    return mark + math.ceil(max(earliest - mark, 0.0) / interval) * interval
 
 
 def _comm_fault(f) -> bool:
@@ -71,7 +91,7 @@ def test_direction_bit_follows_the_rotation(dut):
         answer = dut.ask("set_rotation", {"rotation": rotation})
         t = dut.now()
         if dut.settings()["rotation"] != rotation:
-            raise Inconclusive(f"Set Rotation {rotation} did not take effect (answer {answer}): cannot compare")
+            raise Inconclusive(f"Set Rotation {rotation} did not take effect (answered {listed(answer)}): cannot compare")
         dut.wait(3 * interval_s(s, "msg1"))
         _check_direction(dut, _msg1_after(dut, t + REACT_S), rotation, f"after Set Rotation {rotation}", t)
 
@@ -95,9 +115,8 @@ def test_direction_reported_at_power_up_is_the_saved_one(dut):
 
 def _require(dut, settings: dict) -> None:
     """Precondition: the settings a test made are in force (242), else INCONCLUSIVE."""
-    now = dut.settings()
-    if any(now[k] != v for k, v in settings.items()):
-        raise Inconclusive(f"the DUT did not take {settings} (now {now}): the case cannot be set up")
+    if missed := changes(settings, dut.settings(), settings):
+        raise Inconclusive(f"the DUT did not take the settings of the case (set -> 242: {missed}): the case cannot be set up")
 
 
 def _pwm_input(dut):
@@ -166,18 +185,27 @@ def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
     # four intervals, plus the lane's stated error: a DUT (or an emulator in a slow VM) that sends late
     # still shows two MSG1 under the stream
     dut.wait(4 * interval_s(s, "msg1") + dut.lane.timing_error)
-    dut.stop_throttle()
     under = need_decoded(dut, "msg1", _msg1_after(dut, t1), t1, "the comm fault bit")
     assert len(under) >= 2, f"only {len(under)} MSG1 in {ms(dut.now() - t1)} ms"
+    # the last command goes at a phase of the DUT's own MSG1 grid (learned from the MSG1s just heard), so that
+    # its 200 ms mark lies half an interval before an MSG1: a flag raised on time shows half an interval after
+    # 200 ms, decisively inside R8's window on a bench whose error is less than a quarter interval
+    dut.stop_throttle()
+    planned = _mid_interval_send(dut, under, interval_s(s, "msg1"), cat.COMM_LOSS_TIMEOUT_S)
+    dut.read_until(planned)
+    dut.broadcast(name, fields)
     flagged = [f for f in under if _comm_fault(f)]
     if flagged and (pause := _stream_pause_s(dut, name, t0, flagged[0].timestamp)) >= cat.COMM_LOSS_TIMEOUT_S - dut.lane.own_error:
         raise Inconclusive(f"bit13 (comm fault) set in MSG1 after the host's {STREAM_PERIOD_S * 1000} ms command stream "
                            f"paused {ms(pause)} ms (within the lane's error of the timeout, or longer): the flag may be right")
     assert not flagged, f"bit13 (comm fault) set in MSG1 under a {STREAM_PERIOD_S * 1000} ms command stream"
-    dut.wait(REACT_S)  # the stream's last frame comes back from the bus (or, without an echo, from the lane)
+    dut.wait(REACT_S)  # the last command comes back from the bus (or, without an echo, from the lane)
     sent = dut.frames(name, since=t0, source=dut.host_node)
     assert sent, "harness: the throttle stream sent nothing"
     last = sent[-1].timestamp
+    dut.record.observe("last command placed", "so that its 200 ms mark (R8) lies half an MSG1 interval before an MSG1 of "
+                       f"the DUT's grid: heard {ms(last - planned):g} ms after its planned send (planned: "
+                       f"{ms(frame_bits(8) / dut.lane.bitrate):g} ms, its time on the bus)")
     # "one MSG1 interval" (R8) is the DUT's own: the configured one, or the gap it actually leaves
     gaps = [frame_start(dut, b) - frame_start(dut, a) for a, b in zip(under, under[1:])]
     interval = max([interval_s(s, "msg1")] + gaps)
@@ -187,13 +215,20 @@ def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
     before = [f for f in _msg1_after(dut, last) if f.timestamp < first.timestamp]
     if before:
         interval = max(interval, frame_start(dut, first) - frame_start(dut, before[-1]))
+    # the flag was raised after the last MSG1 without it and no later than the first with it: the first with it
+    # must not come before 200 ms (R8: set no earlier) nor after 200 ms + one MSG1 interval (its latest)
     onset = frame_start(dut, first) - last
+    if before:
+        dut.record.observe("comm fault flag raised between", f"{ms(frame_start(dut, before[-1]) - last):g} and {ms(onset):g} ms "
+                           "after the last command (the last MSG1 without bit13, the first with it)")
     dut.record.measure("comm fault flag: first MSG1 with bit13 after the last command", ms(onset),
                        limit=ms(cat.COMM_LOSS_TIMEOUT_S), op=">=", unit="ms", clock=own_clock, error=own_err,
                        requirement="R8", strength="READING")
     dut.record.measure("comm fault flag: first MSG1 with bit13 after the last command", ms(onset),
                        limit=ms(cat.COMM_LOSS_TIMEOUT_S + interval), unit="ms", clock=own_clock, error=own_err,
                        requirement="R8", strength="READING")
+    # the new command too goes half an interval before an MSG1, which then shows the flag clear
+    dut.read_until(_mid_interval_send(dut, [*before[-1:], first], interval))
     again = dut.broadcast(name, fields)
     cleared = dut.wait_for("msg1", 3 * interval, where=lambda f: not _comm_fault(f))
     assert cleared is not None, f"bit13 still set {ms(dut.now() - again.time)} ms after a new command (4.4.4-3: cleared)"

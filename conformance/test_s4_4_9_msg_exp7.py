@@ -40,7 +40,8 @@ def _in_force(what: str, requested: int | None, *witnesses: int | None) -> int:
         return witnesses[-1]
     if requested in witnesses:
         return requested
-    raise Inconclusive(f"{what} {requested} requested, but neither its answer nor 242 confirms it ({witnesses})")
+    raise Inconclusive(f"{what} {requested} requested, but neither its answer nor 242 confirms it "
+                       f"(they say {' and '.join(map(str, witnesses))})")
 
 
 @pytest.mark.requirement("4.4.9-T")

@@ -201,7 +201,10 @@ def _window(d: Recorder, seconds: float) -> tuple[float, float]:
 
 
 def provoke(d: Recorder) -> Traffic:
-    """Make the DUT send every kind of frame it has, and keep all it sent meanwhile."""
+    """Make the DUT send every kind of frame it has, and keep all it sent meanwhile. The frames of a
+    function the profile declares absent (MSG_EXP mode, CAN Test, Get Rec) are not provoked: the
+    framing and frame-table checks judge the rest (R9b), never skipped whole."""
+    claims = d.profile.claims
     asked: dict[str, Asked] = {}
     for label, name, fields in QUERIES:
         ex = d.request(name, fields)
@@ -212,20 +215,23 @@ def provoke(d: Recorder) -> Traffic:
     windows["get_esc_id"] = _window(d, answer_window)
     d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
     windows["msg_control"] = _window(d, answer_window)
-    try:  # MSG_EXP mode: the MSG_EXP frames (which ones come is OBSERVE, R9-exp)
-        d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME_EXP})
-        d.wait(LONGEST_S + BROADCAST_WINDOW_S)
-    finally:
-        d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+    if claims("msg_exp_mode"):
+        try:  # MSG_EXP mode: the MSG_EXP frames (which ones come is OBSERVE, R9-exp)
+            d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME_EXP})
+            d.wait(LONGEST_S + BROADCAST_WINDOW_S)
+        finally:
+            d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+            d.wait(BROADCAST_WINDOW_S)
+    if claims("can_test"):
+        try:  # CAN Test mode: the CAN Test frames (R16)
+            d.broadcast("can_test", {"option": cat.CAN_TEST_ON, "count": 0})
+            d.wait(BROADCAST_WINDOW_S)
+        finally:
+            d.broadcast("can_test", {"option": cat.CAN_TEST_OFF, "count": 0})
+            d.wait(BROADCAST_WINDOW_S)
+    if claims("get_rec"):
+        d.request("get_rec", {"payload": []})  # the temperature records, MSG_EXP12 (R15)
         d.wait(BROADCAST_WINDOW_S)
-    try:  # CAN Test mode: the CAN Test frames (R16)
-        d.broadcast("can_test", {"option": cat.CAN_TEST_ON, "count": 0})
-        d.wait(BROADCAST_WINDOW_S)
-    finally:
-        d.broadcast("can_test", {"option": cat.CAN_TEST_OFF, "count": 0})
-        d.wait(BROADCAST_WINDOW_S)
-    d.request("get_rec", {"payload": []})  # the temperature records, MSG_EXP12 (R15)
-    d.wait(BROADCAST_WINDOW_S)
     probe_id = service_id(FALLBACK_PRIORITY, DRONECAN_GET_NODE_INFO, True, d.node_id, d.host_node)
     d.send_wire(WireFrame(probe_id, bytes((tail_byte(0),))))  # GetNodeInfo has no payload: the tail byte only
     d.wait(BROADCAST_WINDOW_S + 2 * LONGEST_S)  # then normal reporting: every report at least once, MSG1 over 32 times

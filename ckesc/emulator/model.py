@@ -41,7 +41,7 @@ from ..protocol.catalogue import (
 )
 from ..protocol.codecs import TAIL_BITS_10B, codec_for, unpack_throttle12
 from ..protocol.errors import DecodeError, UnknownTypeError
-from ..protocol.frame import Decoder, Frame, WireFrame, encode
+from ..protocol.frame import Decoder, Frame, WireFrame, encode, frame_bits
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, Priority, message_id, service_id
 from ..protocol.transfer import TransferIdCounter, tail_byte
 from . import faults as _faults
@@ -100,6 +100,15 @@ class EscConfig:
     #: "restart" (the first report at once, the next ones one interval apart) or "grid" (one report at once,
     #: "immediately", then the old grid goes on, as if the timer had never stopped)
     report_timer: str = "restart"
+    #: when the comm-loss flag is raised (R8 leaves it open inside its window): "timer" (an exact 200 ms timer
+    #: from the last command), "msg1" (checked when an MSG1 is due: the first one 200 ms or more after the last
+    #: command carries it; an exact timer while nothing is reported) or "tick" (a periodic check on the report
+    #: timer's 2 ms tick, which MSG1's grid is on)
+    comm_loss_check: str = "timer"
+    #: where in its 2 ms slot (R2) an answer to MSG Control / GET_ESC_ID goes: "start", "inside" (a random
+    #: place, the frame ending inside the slot) or "late" (as late as leaves room for one longest frame on the
+    #: bus ahead of it)
+    answer_place: str = "start"
     service_delay: float = 0.0005  # request to response for services
     # the other freedoms the document leaves (ckesc/emulator/variants.py says what each value does)
     report_phase: str = "together"  # the first MSG1..3 after power-up together, or staggered
@@ -402,7 +411,15 @@ class EscModel:
             return 0.010
         if "answer_at_once" in self.faults:
             return 0.001
-        return (self.node_id % 32) * ANSWER_SLOT_S  # R2
+        start = (self.node_id % 32) * ANSWER_SLOT_S  # R2
+        if self.config.answer_place == "start":
+            return start
+        # the latest start that still ends inside the slot with one longest frame on the bus ahead of it (the
+        # answer frames are shorter than 8 data bytes); at a slow bit rate that may be the slot's start
+        room = max(ANSWER_SLOT_S - 2 * frame_bits(8) / self.bitrate, 0.0)
+        if self.config.answer_place == "late":
+            return start + room
+        return start + self._rng.uniform(0.0, room)
 
     # ------------------------------------------------------------------------------------------
     # physics and timers
@@ -480,7 +497,17 @@ class EscModel:
         if timeout is None:
             return None
         since = self.last_command if self.last_command is not None else self.ready_at
-        return since + timeout
+        deadline = since + timeout
+        check = self.config.comm_loss_check
+        if check == "timer" or not self._reports_active() or "msg1" not in self._next_report:
+            return deadline
+        # checked on MSG1's grid (each MSG1 due) or on the report timer's 2 ms tick through it: the first
+        # point of it at or after the deadline
+        period = self._interval("msg1") if check == "msg1" else INTERVAL_UNIT_S
+        grid = self._next_report["msg1"]
+        if period <= 0:
+            return deadline
+        return round(grid + math.ceil(round((deadline - grid) / period, 9)) * period, 9)
 
     def _comm_loss_due(self, now: float) -> bool:
         deadline = self._comm_loss_deadline()

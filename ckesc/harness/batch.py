@@ -43,6 +43,7 @@ import pytest
 from xdist.scheduler import EachScheduling
 
 from . import plugin
+from .progress import BatchProgress
 
 WORKER_KEY = "ckesc_bench"
 _SETUP_ERROR = pytest.StashKey[str]()
@@ -95,6 +96,52 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         items[:] = []  # nothing of this bench can run: its worker ends at once, the others go on
 
 
+# The bench's run order (issue #21): the same plan, shared windows and cold boots as the bench alone (plugin.py's
+# PlanRunner), run through xdist's own worker loop. With ``--dist each`` the worker is told to run every test, and
+# it takes each test from ``session.items`` by position when it gets to it (the test after it too, as pytest's
+# ``nextitem``). So the plan's choice is put at the next position between two tests, and what pytest is to be told
+# comes after it at the position after that: the worker runs the plan's order, every test once, each report sent
+# for the test at its own position. Nothing of xdist is replaced or reached into.
+_RUNNER = pytest.StashKey[plugin.PlanRunner]()
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtestloop(session: pytest.Session) -> None:
+    """Before xdist's worker loop: the plan's first test (and its hint) at the first positions."""
+    config = session.config
+    if _bench_of(config) is None or _SETUP_ERROR in config.stash or not plugin.overlaps(session):
+        return None
+    runner = plugin.overlap_plan(session)
+    first = runner.first() if runner is not None else None
+    if first is None:
+        return None
+    config.stash[_RUNNER] = runner
+    _place(session.items, 0, first, runner.before(first))
+    return None  # xdist's loop runs the tests
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
+    """After each test (outside its own timeout): the plan chooses the next one, which goes to the next position."""
+    yield
+    runner = item.config.stash.get(_RUNNER, None)
+    if runner is None:
+        return
+    items = item.session.items
+    nxt = runner.after(item)
+    if nxt is not None:
+        _place(items, items.index(item) + 1, nxt, runner.before(nxt))
+
+
+def _place(items: list[pytest.Item], at: int, item: pytest.Item, then: pytest.Item | None) -> None:
+    """``item`` to position ``at`` and ``then`` after it (both not run yet, so both at or after ``at``)."""
+    for pos, it in ((at, item), (at + 1, then)):
+        if it is None or pos >= len(items):
+            continue
+        j = items.index(it, at)
+        items[pos], items[j] = items[j], items[pos]
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_sessionfinish(session: pytest.Session) -> None:
     config = session.config
@@ -141,6 +188,7 @@ class Controller:
         self.started = time.time()
         self.interrupted = False
         self._previous: dict[int, Any] = {}
+        self.progress = BatchProgress(lambda line: print(line, flush=True))
 
     # xdist hooks
     @pytest.hookimpl
@@ -162,6 +210,19 @@ class Controller:
             pass
         if self.interrupted:
             self._signal(node.gateway.id)
+
+    @pytest.hookimpl
+    def pytest_xdist_node_collection_finished(self, node, ids) -> None:
+        bench = self.nodes.get(node.gateway.id)
+        if bench is not None and ids:
+            self.progress.collected(bench["name"], list(ids))
+
+    @pytest.hookimpl
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        node = getattr(report, "node", None)  # the worker that ran it (xdist's report of a worker's test)
+        bench = self.nodes.get(node.gateway.id) if node is not None else None
+        if bench is not None and report.when == "teardown":
+            self.progress.test_ended(bench["name"], report.nodeid)
 
     @pytest.hookimpl
     def pytest_testnodedown(self, node, error) -> None:

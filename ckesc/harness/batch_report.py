@@ -14,7 +14,7 @@ A bench's status:
 | status | meaning |
 |---|---|
 | PASS | its run ended with no FAIL or ERROR (with ``--strict``: nor INCONCLUSIVE) |
-| FAIL | a test FAILed or ERRORed |
+| FAIL | a test FAILed or ERRORed, or a bus rule was broken while a SKIPPED test ran |
 | ABSENT | its bench could not be used (the bus did not open, a labgrid place was not had) or its DUT did not answer before any test ran |
 | ABORTED | its DUT stopped answering or its bench went away mid-run: the tests that ran have verdicts |
 | BROKEN | its run ended without a report (the worker process died) |
@@ -30,6 +30,7 @@ from typing import Any
 
 from ..protocol.requirements import SECTION_TITLES, VERDICTS, section_key
 from . import compare
+from .causes import broken_outside_a_fail
 from .html_report import _CSS, _badge, _e, _requirement_result
 from .report import classname
 
@@ -54,6 +55,8 @@ def bench_status(doc: dict[str, Any] | None, *, setup_error: str | None = None, 
     if bad:
         return "FAIL", f"{len(bad)} of {len(results)} tests " + ("FAILed, ERRORed or were INCONCLUSIVE" if strict else
                                                                   "FAILed or ERRORed")
+    if rules := [r for r in results if broken_outside_a_fail(r)]:
+        return "FAIL", f"bus rules broken while {len(rules)} SKIPPED test(s) ran"
     if not results:
         return "BROKEN", crash or why or "no test ran"
     return "PASS", why if why.startswith("subset") else ""

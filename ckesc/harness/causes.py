@@ -7,6 +7,10 @@ test's own failure by its message's first line with the measured values made ``#
 it showed in and its first occurrence (message, frames, traces). Groups of FAIL come before ERROR (the
 suite's problems), SHALL before READING, then the most widespread first.
 
+A bus rule broken while a test ran whose own verdict is not a FAIL (a test SKIPPED "not claimed", R9b,
+or ERRORed) is the rule's failure, not that test's: it is grouped here like any other, the test named
+as where it was seen (:func:`rule_failures`), and it fails the run.
+
 Built from ``results.json``'s records (or the plugin's results), so ``ckesc report DIR`` rebuilds it.
 """
 
@@ -40,6 +44,8 @@ class Group:
     traces: dict[str, str] = field(default_factory=dict)
     tests: list[str] = field(default_factory=list)
     occurrences: int = 0
+    #: tests in ``tests`` whose own verdict is not this FAIL (SKIPPED, ERROR): a bus rule seen while they ran
+    unjudged: dict[str, str] = field(default_factory=dict)
 
     @property
     def title(self) -> str:
@@ -53,6 +59,21 @@ class Group:
 
 def _record(r: Any) -> dict[str, Any]:
     return r if isinstance(r, dict) else r.__dict__
+
+
+def broken_outside_a_fail(r: Any) -> bool:
+    """Whether the bus broke a rule while test record ``r`` ran and the test's own verdict is not that FAIL
+    (it was SKIPPED: not claimed, R9b, or lacking a capability; or it ERRORed). Such a rule's failure is
+    not the test's, and it still fails the run."""
+    r = _record(r)
+    return bool(r.get("bus_rules")) and r.get("outcome") != "FAIL"
+
+
+def rule_failures(results: list) -> list[dict[str, Any]]:
+    """The bus rules broken outside a FAIL (:func:`broken_outside_a_fail`), one entry per test they were
+    seen in: results.json's ``rule_failures``, JUnit's "bus rules" testsuite."""
+    return [{"test": r["nodeid"], "outcome": r["outcome"], "rules": list(r["bus_rules"]),
+             "causes": list(r.get("bus_causes") or [])} for r in map(_record, results) if broken_outside_a_fail(r)]
 
 
 def _own_cause(r: dict[str, Any]) -> tuple[str, str, str, list[str]] | None:
@@ -87,26 +108,30 @@ def _bus_causes(r: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def groups(results: list) -> list[Group]:
-    """The run's FAILs and ERRORs grouped by cause, the first to read first."""
+    """The run's FAILs and ERRORs, and the bus rules broken while any test ran, grouped by cause, the first to
+    read first."""
     found: dict[str, Group] = {}
     for r in map(_record, results):
-        if r.get("outcome") not in _OUTCOMES:
+        failed = r.get("outcome") in _OUTCOMES
+        if not failed and not r.get("bus_rules"):
             continue
         traces = r.get("traces") or {}
-        own = _own_cause(r)
+        own = _own_cause(r) if failed else None
         if own is not None:
             key, what, strength, rules = own
             g = found.setdefault(key, Group(key, r["outcome"], strength, rules, what, r.get("message", ""),
                                             r["nodeid"], traces))
             g.tests.append(r["nodeid"])
             g.occurrences += 1
-        for c in _bus_causes(r) if r["outcome"] == "FAIL" else []:
+        for c in _bus_causes(r) if r["outcome"] == "FAIL" else r.get("bus_causes") or []:
             key = "bus|" + c["key"]
             g = found.setdefault(key, Group(key, "FAIL", c["strength"], list(c["rules"]), c["what"], c["first"],
                                             r["nodeid"], traces))
             g.rules = list(dict.fromkeys(g.rules + list(c["rules"])))
             if r["nodeid"] not in g.tests:
                 g.tests.append(r["nodeid"])
+                if r["outcome"] != "FAIL":
+                    g.unjudged[r["nodeid"]] = r["outcome"]
             g.occurrences += c.get("count", 1)
     order = list(found)
     return sorted(found.values(), key=lambda g: (_OUTCOMES.index(g.outcome),
@@ -126,7 +151,9 @@ def summary_lines(results: list, *, shown: int = 20, names: int = 3) -> list[str
         trace = next(iter(g.traces.values()), None)
         lines.append(f"       first: {g.first_test}" + (f" (trace {trace})" if trace else ""))
         more = len(g.tests) - names
-        lines.append("       tests: " + ", ".join(t.split("::", 1)[-1] for t in g.tests[:names])
+        lines.append("       tests: " + ", ".join(t.split("::", 1)[-1] + (f" ({g.unjudged[t]}: seen while it ran)"
+                                                                          if t in g.unjudged else "")
+                                                 for t in g.tests[:names])
                      + (f" ... and {more} more" if more > 0 else ""))
     if len(gs) > shown:
         lines.append(f"  ... {len(gs) - shown} more causes: see report.html")

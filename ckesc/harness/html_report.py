@@ -177,7 +177,9 @@ def _causes(results: list[dict[str, Any]]) -> str:
     for n, g in enumerate(gs, start=1):
         traces = " ".join(f'<a href="{_e(p)}">{_e(lane or "DUT")}: {_e(Path(p).name)}</a>' for lane, p in g.traces.items())
         reqs = ", ".join(f'<a href="#req-{_e(i)}">{_e(i)}</a>' for i in g.rules)
-        tests = "".join(f'<li><a href="#t-{_anchor(t)}">{_e(t)}</a></li>' for t in g.tests)
+        tests = "".join(f'<li><a href="#t-{_anchor(t)}">{_e(t)}</a>'
+                        + (f" ({_e(g.unjudged[t])}: seen while it ran)" if t in g.unjudged else "") + "</li>"
+                        for t in g.tests)
         items.append(
             f'<article class="cause" id="cause-{n}" data-tests="{len(g.tests)}" data-strength="{_e(g.strength)}">'
             f'<h3>{_badge(g.outcome)} {_e(g.strength)} {_e(g.title)} <span class=count>&ndash; in {len(g.tests)} '

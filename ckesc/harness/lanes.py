@@ -93,6 +93,11 @@ class Lane(ABC):
     def wait_power(self, seconds: float) -> None:
         """Let ``seconds`` pass while the DUT is unpowered (no frames to read)."""
 
+    def peek_now(self) -> float:
+        """Lane time for an onlooker (the run's progress): :meth:`now` without its effects on what a test reads
+        (a real-time lane's :meth:`now` may read the bus to hold its clock at a frame not read yet)."""
+        return self.now()
+
     @property
     def host_clock(self) -> tuple[str, float]:
         """The clock that times what the host does when no echo says when it reached the bus (a send),
@@ -517,6 +522,9 @@ class BusLane(Lane):
             self._pending.append(msg)
         stamp = self._pending[0].timestamp
         return min(wall, max(hold, stamp)) if stamp else wall
+
+    def peek_now(self) -> float:
+        return time.time()
 
     def recv(self, timeout: float) -> can.Message | None:
         self._check_fault()

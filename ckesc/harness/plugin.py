@@ -22,9 +22,10 @@ from ..emulator import variants
 from ..evidence.live import LaneRules, causes, failure_text
 from ..protocol import catalogue as cat
 from ..protocol import functions
-from ..protocol.requirements import REQUIREMENTS, requirement, strongest
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, requirement, strongest
 from . import preflight
 from . import report as _report
+from .causes import broken_outside_a_fail
 from .dut import Dut, DutError, DutUnreachable, echo_probe
 from .epochs import PowerEpoch, unusable
 from .lanes import (
@@ -41,6 +42,7 @@ from .lanes import (
     SimLane,
 )
 from .profile import DutProfile
+from .progress import ProgressReporter
 from .schedule import LEAD_S, Plan
 from .traces import TRACE_FORMATS, TestTraces
 from .verdict import Inconclusive, NotClaimed
@@ -111,6 +113,12 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     g.addoption("--ckesc-trace-format", choices=TRACE_FORMATS, default="blf",
                 help="with --ckesc-reports: each test's CAN traffic in <run>/traces/, written by python-can: blf "
                      "(default; Vector BLF), asc (Vector ASCII), log (candump -L, `ckesc decode` reads it), none")
+    g.addoption("--ckesc-durations", default=None, metavar="RESULTS_JSON",
+                help="time left: expect each test to take the lane time it took in this earlier run (its results.json; "
+                     "default: the suite's own table of a faultless simulated run, conformance/durations.json)")
+    g.addoption("--ckesc-progress", choices=("on", "off"), default="on",
+                help="a line per section with the protocol time planned, elapsed and an estimate of what is left "
+                     "(on a terminal also after pytest's counter); off: none")
     g.addoption("--ckesc-order", choices=("overlap", "collection"), default="overlap",
                 help="overlap (default): tests that neither power-cycle nor reconfigure the DUT run while a 120 s "
                      "Set ID / Set Baud window elapses, and each window test runs at its moment; collection: "
@@ -129,6 +137,22 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "window(kind): acts at a moment of the 120 s Set ID / Set Baud window "
                             "(kind 'inside' or 'after'; the run order overlaps the window with other tests)")
     config.stash[_STATE] = _State()
+    _print_ids_as_reported(config)
+    st = config.stash[_STATE]
+    config.pluginmanager.register(ProgressReporter(config, lambda: st.lane.peek_now() if st.lane is not None else None,
+                                                   _section_title, _is_conformance), "ckesc-progress")
+
+
+def _print_ids_as_reported(config: pytest.Config) -> None:
+    """The console names a conformance test by its id as the reports write it (``conformance/test_...``), from
+    any directory and any install: pytest would print it relative to the directory it was started in
+    (``../../site-packages/conformance/...`` from elsewhere, or against an editable install)."""
+    relative = config.cwd_relative_nodeid
+
+    def as_reported(nodeid):
+        return nodeid if str(nodeid).startswith("conformance/") else relative(nodeid)  # a str, or pytest 9.2+'s NodeId
+
+    config.cwd_relative_nodeid = as_reported  # type: ignore[method-assign]
 
 
 @dataclass
@@ -324,44 +348,84 @@ def pytest_runtestloop(session: pytest.Session) -> bool | None:
     pytest's loop runs instead with ``--ckesc-order collection``, under pytest-xdist, with nothing to
     overlap, and where the lane has no power control (no window test can run then)."""
     config = session.config
-    if (config.getoption("ckesc_order") != "overlap" or config.option.collectonly or session.testsfailed
-            or hasattr(config, "workerinput") or config.getoption("power", None) == "none"):
+    if hasattr(config, "workerinput") or not overlaps(session):
+        return None  # (a batch's worker runs the plan through xdist's own loop: batch.py)
+    runner = overlap_plan(session)
+    if runner is None:
         return None
-    plan = Plan(list(session.items), kind=_kind, key=_function_key, touches=_touches)
-    if not plan.useful:
-        return None
-    st = state(config)
-    st.info["order"] = "overlap"
-    st.info["epochs"] = []
-    item = plan.first()
+    item = runner.first()
     while item is not None:
-        lane = st.lane
-        if (group := plan.group_of(item)) is not None:
-            _stage(st, group)
-        start = lane.now() if lane is not None else None
-        if start is not None:
-            hint = plan.hint(item, start + plan.estimates.get(_function_key(item)), _moment(st, plan))
-        else:
-            hint = plan.hint(item, None, None)
-        epoch = lane.epoch if lane is not None else None
+        hint = runner.before(item)
         item.config.hook.pytest_runtest_protocol(item=item, nextitem=hint)
         if session.shouldfail:
             raise session.Failed(session.shouldfail)
         if session.shouldstop:
             raise session.Interrupted(session.shouldstop)
+        item = runner.after(item)
+    return True
+
+
+def overlaps(session: pytest.Session) -> bool:
+    """Whether the run takes the plan's order: not with ``--ckesc-order collection``, nothing to overlap (no power
+    control: no window test can run), a collection only, or a collection that failed."""
+    config = session.config
+    return not (config.getoption("ckesc_order") != "overlap" or config.option.collectonly or session.testsfailed
+                or config.getoption("power", None) == "none")
+
+
+def overlap_plan(session: pytest.Session) -> PlanRunner | None:
+    """The run order of :mod:`schedule` for ``session``'s tests, or None where it saves nothing."""
+    plan = Plan(list(session.items), kind=_kind, key=_function_key, touches=_touches)
+    if not plan.useful:
+        return None
+    st = state(session.config)
+    st.info["order"] = "overlap"
+    st.info["epochs"] = []
+    return PlanRunner(st, plan)
+
+
+class PlanRunner:
+    """Runs the plan one test at a time, for pytest's loop (the plugin's) or anyone else's (a batch's xdist
+    worker, ``batch.py``): :meth:`before` a test (stages a shared cold boot; returns what pytest is to be told
+    comes next), then the test's protocol, then :meth:`after` (learns its time, chooses the next test, opens a
+    window when one is due)."""
+
+    def __init__(self, st: _State, plan: Plan) -> None:
+        self.st, self.plan = st, plan
+        self.start: float | None = None
+        self.hint: pytest.Item | None = None
+        self.epoch: PowerEpoch | None = None
+
+    def first(self) -> pytest.Item | None:
+        return self.plan.first()
+
+    def before(self, item: pytest.Item) -> pytest.Item | None:
+        st, plan = self.st, self.plan
+        lane = st.lane
+        if (group := plan.group_of(item)) is not None:
+            _stage(st, group)
+        self.start = lane.now() if lane is not None else None
+        if self.start is not None:
+            self.hint = plan.hint(item, self.start + plan.estimates.get(_function_key(item)), _moment(st, plan))
+        else:
+            self.hint = plan.hint(item, None, None)
+        self.epoch = lane.epoch if lane is not None else None
+        return self.hint
+
+    def after(self, item: pytest.Item) -> pytest.Item | None:
+        st, plan, hint = self.st, self.plan, self.hint
         lane = st.lane
         if lane is None or hint is None:
-            item = plan.choose(0.0, lambda w, now: float("inf"), _shares(item, hint)) if hint is not None else None
-            continue
+            return plan.choose(0.0, lambda w, now: float("inf"), _shares(item, hint)) if hint is not None else None
         now = lane.now()
-        if start is not None:
-            plan.learn(item, now - start)
-        if lane.epoch is not None and lane.epoch is not epoch and not lane.epoch.opened_by:
+        if self.start is not None:
+            plan.learn(item, now - self.start)
+        if lane.epoch is not None and lane.epoch is not self.epoch and not lane.epoch.opened_by:
             lane.epoch.opened_by = item.nodeid
-        item = plan.choose(now, _moment(st, plan), _shares(item, hint))
-        if item is not None and plan.needs_epoch_before(item):
+        nxt = plan.choose(now, _moment(st, plan), _shares(item, hint))
+        if nxt is not None and plan.needs_epoch_before(nxt):
             _open_epoch(st, plan)
-    return True
+        return nxt
 
 
 def _shares(ended: pytest.Item, hint: pytest.Item | None):
@@ -935,7 +999,9 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 
 
 def _bus_rules_verdict(item: pytest.Item, rep: pytest.TestReport) -> None:
-    """A test during which the bus broke a rule fails, whatever its own verdict, with the frames quoted."""
+    """A test during which the bus broke a rule fails, whatever its own verdict, with the frames quoted; but
+    a test SKIPPED (not claimed, R9b; a capability the profile lacks) is not run, so not judged: it stays
+    SKIPPED and keeps the rules it saw, which are the rules' failure (causes.rule_failures), and fail the run."""
     if rep.when not in ("call", "teardown"):
         return
     found, count = [], 0
@@ -954,12 +1020,21 @@ def _bus_rules_verdict(item: pytest.Item, rep: pytest.TestReport) -> None:
         else:
             known[c["key"]] = c
     item.stash[_BUS_CAUSES] = list(known.values())
-    if rep.failed:
+    if rep.failed or _skipped(item, rep):
         rep.sections.append(("bus rules", text))
         return
     rep.outcome, rep.longrepr = "failed", text
     if rep.when == "teardown":
         item.stash[_BUS_TEARDOWN] = True
+
+
+def _skipped(item: pytest.Item, rep: pytest.TestReport) -> bool:
+    """Whether the test's own verdict is SKIPPED (not INCONCLUSIVE): as this phase's report says, or (at
+    teardown) as an earlier phase decided."""
+    if rep.when == "call":
+        return rep.skipped and "INCONCLUSIVE" not in _longrepr_text(rep)
+    res = state(item.config).results.get(item.nodeid)
+    return res is not None and res.outcome == "SKIPPED"
 
 
 # ----------------------------------------------------------------------------------------- verdicts
@@ -1191,6 +1266,11 @@ def _section_of(item: pytest.Item) -> str:
     return getattr(getattr(item, "module", None), "SECTION", None) or (requirement(ids[0]).section if ids else "")
 
 
+def _section_title(item: pytest.Item) -> str:
+    section = _section_of(item)
+    return f"{section} {SECTION_TITLES.get(section, '')}".strip()
+
+
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     st = state(session.config)
     if st.traces is not None:
@@ -1203,6 +1283,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     st.info["not_run"] = len(not_run)
     if reason is not None and reason.startswith("aborted"):
         session.exitstatus = EXIT_ABORTED
+    elif session.exitstatus == pytest.ExitCode.OK and any(map(broken_outside_a_fail, st.results.values())):
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED  # a bus rule broken while a SKIPPED test ran
     out = report_dir(session.config)
     if out is not None:
         _report.write_reports(out, list(st.results.values()), st.info, not_run=not_run,

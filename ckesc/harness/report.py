@@ -130,6 +130,17 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
         cases += skipped_cases.get(section, [])
         cases_props += [{"verdict": "NOT RUN"}] * len(skipped_cases.get(section, []))
         suites.append(TestSuite(f"{section} {SECTION_TITLES.get(section, '')}".strip(), cases, properties=suite_props))
+    if unjudged := causes.rule_failures(results):  # the rules' failures, each where it was seen
+        cases = []
+        for u in unjudged:
+            text = "\n".join(c["first"] for c in u["causes"]) or " ".join(u["rules"])
+            tc = TestCase(f"{' '.join(u['rules'])} while {u['test'].split('::', 1)[-1]} ran ({u['outcome']})",
+                          classname="ckesc.bus_rules", status="FAIL")
+            tc.add_failure_info(message=f"[bus rules {' '.join(u['rules'])}] broken while {u['test']} ran; its own "
+                                        f"verdict: {u['outcome']}"[:500], output=text, failure_type="bus rule")
+            cases.append(tc)
+            cases_props.append({"requirements": " ".join(u["rules"]), "verdict": "FAIL", "seen_in": u["test"]})
+        suites.append(TestSuite("bus rules broken outside a test's FAIL", cases, properties=suite_props))
     text = to_xml_report_string(suites, prettyprint=False)
     root = ET.fromstring(text)
     for case, props in zip(root.iter("testcase"), cases_props):
@@ -195,6 +206,10 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
     if banner := incomplete_banner(info):
         lines.insert(0, banner)
         lines.append(banner)
+    if unjudged := causes.rule_failures(results):
+        rules = " ".join(dict.fromkeys(i for u in unjudged for i in u["rules"]))
+        lines.append(f"bus rules broken while {len(unjudged)} test(s) without a FAIL of their own ran ({rules}): "
+                     "the rules' failures (below), not those tests'; the run fails")
     lines += causes.summary_lines(results)
     return "\n".join(lines)
 
@@ -308,7 +323,8 @@ def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: li
     info.setdefault("git_revision", git_revision())
     (out / "junit.xml").write_text(junit_xml(results, info, out, not_run), encoding="utf-8")
     (out / "results.json").write_text(json.dumps({"info": info, "coverage": coverage(results),
-                                                  "results": [r.__dict__ for r in results], "not_run": list(not_run)},
+                                                  "results": [r.__dict__ for r in results], "not_run": list(not_run),
+                                                  "rule_failures": causes.rule_failures(results)},
                                                  indent=1, default=str),
                                       encoding="utf-8")
     (out / "summary.txt").write_text(summary_text(results, info) + "\n", encoding="utf-8")

@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 from ckesc.evidence import BusRules
+from ckesc.harness.batch_report import bench_status
 from ckesc.harness.profile import DutProfile, ProfileError
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import encode
@@ -116,6 +117,59 @@ def test_the_same_emulator_fails_when_the_functions_are_claimed(tmp_path):
     assert {"test_get_rec_sends_each_record_once", "test_set_cmd_is_little_endian",
             "test_exp_mode_replaces_msg1_to_msg3"} <= failed
     assert doc["info"]["not_claimed"] == "" and "claim: every function" in summary
+
+
+@pytest.mark.parametrize("fault, failing", [
+    ("", set()),
+    ("tail_toggle_set", {"test_tail_byte_marks_a_single_frame_transfer[provoked]",
+                         "test_tail_byte_marks_a_single_frame_transfer[run]"}),
+])
+def test_the_core_framing_and_frame_table_tests_judge_whatever_the_claim_leaves_out(tmp_path, fault, failing):
+    """R9b: a core test that also sends an absent function's frames (the provoked traffic: MSG_EXP mode, CAN
+    Test, Get Rec) leaves them out and judges the rest: no 4.1 or 4.3 test is SKIPPED for a claim, and a
+    framing fault still fails them against an emulator lacking every optional function but CAN Test."""
+    profile = emulator_profile(tmp_path, "bare.toml", f"\n[functions]\nabsent = {json.dumps(list(OPTIONAL))}\n")
+    reports = tmp_path / "reports"
+    faults = ",".join(filter(None, (LACKING, fault)))
+    done = run(tmp_path, "4.1", "4.3", "--profile", str(profile), "--emulator-faults", faults, "--reports", str(reports))
+    assert done.returncode == (1 if failing else 0), done.stdout[-3000:] + done.stderr
+    doc, *_ = latest(reports)
+    by = {r["nodeid"].split("::", 1)[1]: r for r in doc["results"]}
+    assert len(by) == 27 and all(r["section"] in ("4.1", "4.3") for r in by.values())
+    skipped = {n: r["message"] for n, r in by.items() if r["outcome"] == "SKIPPED"}
+    assert not skipped, skipped
+    assert {n for n, r in by.items() if r["outcome"] not in ("PASS", "OBSERVED")} >= failing
+    for n in failing:
+        assert by[n]["outcome"] == "FAIL" and "toggle = 1" in by[n]["message"], by[n]
+
+
+def test_a_bus_rule_broken_during_an_unclaimed_test_fails_the_run_against_the_rule_not_the_test(tmp_path):
+    """R9b: a live bus rule broken while a test of an unclaimed function ran (it suspends reporting, then
+    finds Expand Set Part absent: SKIPPED) is the rule's failure: the test stays SKIPPED, the rule is in
+    results.json's ``rule_failures``, the causes grouping, summary.txt, JUnit and report.html, and the run
+    exits 1 (never a silent pass)."""
+    profile = emulator_profile(tmp_path, "lacking.toml", '\n[functions]\nabsent = ["get_rec", "expand_set_part"]\n')
+    reports = tmp_path / "reports"
+    done = run(tmp_path, "4.4.25", "--profile", str(profile), "--emulator-faults", "report_interval_wrong",
+               "--reports", str(reports))
+    assert done.returncode == 1, done.stdout[-3000:] + done.stderr
+    doc, junit, summary, page = latest(reports)
+    assert {r["outcome"] for r in doc["results"]} == {"SKIPPED"}
+    name = "conformance/test_s4_4_25_expand_set_part.py::test_not_applied_while_reporting_is_suspended"
+    seen = {r["nodeid"]: r for r in doc["results"]}[name]
+    assert seen["message"].startswith("not claimed: expand_set_part (R9b)") and "R9" in seen["bus_rules"]
+    [failure] = doc["rule_failures"]
+    assert failure["test"] == name and failure["outcome"] == "SKIPPED" and "R9" in failure["rules"]
+    assert "MSG1 of node 1 every 30 ms, not 20 ms" in {c["what"] for c in failure["causes"]}
+    assert "bus rules broken while 1 test(s) without a FAIL of their own ran (R9" in summary
+    assert re.search(r"\[FAIL SHALL\] R9 .*MSG1 of node 1 every 30 ms, not 20 ms - in 1 test", summary)
+    assert "test_not_applied_while_reporting_is_suspended (SKIPPED: seen while it ran)" in summary
+    assert "(SKIPPED: seen while it ran)" in page
+    rule_cases = [c for c in junit.iter("testcase") if c.get("classname") == "ckesc.bus_rules"]
+    assert len(rule_cases) == 1 and rule_cases[0].find("failure") is not None
+    closing = done.stdout.splitlines()[-1]  # pytest's count: the test's verdict, not the rule's
+    assert "skipped" in closing and "failed" not in closing, closing
+    assert bench_status(doc) == ("FAIL", "bus rules broken while 1 SKIPPED test(s) ran")  # the bench of a batch too
 
 
 # ----------------------------------------------------------------------------------------- selection

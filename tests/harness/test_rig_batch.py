@@ -93,7 +93,12 @@ def test_a_batch_of_emulated_benches_reports_each_whole_and_one_absent_dut_never
         done = _batch(tmp_path, rig, *SECTIONS)
     out = done.stdout
     assert done.returncode == 3, out[-3000:] + done.stderr[-3000:]
-    assert len(out.splitlines()) == 8 and not done.stderr, out + done.stderr  # no retry warnings of python-can
+    said = [line for line in out.splitlines() if not line.startswith("time: ")]
+    assert len(said) == 8 and not done.stderr, out + done.stderr  # no retry warnings of python-can
+    # each bench that runs says its time left as it enters a section (issue #21)
+    timed = {line.split(":")[1].strip() for line in out.splitlines() if line.startswith("time: ")}
+    assert timed == {"sim-a", "sim-b", "live"}, out
+    assert any(line.startswith("time: live: [4.4.28 ") and " left" in line for line in out.splitlines()), out
     batch = _batch_dir(tmp_path)
     # one line per bench finished, each with its status
     lines = [line for line in out.splitlines() if line.startswith("bench ")]
@@ -259,3 +264,29 @@ def test_a_bench_whose_dut_goes_dark_or_whose_worker_dies_is_reported_and_the_ot
     assert not sim["not_run"] and {r["section"] for r in sim["results"]} == {"4.4.22", "4.4.4", "4.4.27"}
     assert any(line.startswith("bench rt: BROKEN") for line in out.splitlines()), out
     assert (batch / "batch.html").is_file()
+
+
+#: sections with a Set ID / Set Baud window to overlap (4.4.18, 4.4.19) and persistence tests whose cold boots a
+#: group shares (4.4.21, 4.4.22)
+PLANNED = ("4.4.18", "4.4.19", "4.4.21", "4.4.22")
+
+
+def test_a_bench_in_a_batch_runs_its_plan_as_it_does_alone(tmp_path):
+    """Issue #21: each bench of a batch runs in the same order, with the same shared windows and cold boots, as the
+    bench alone (the run-order plan in every xdist worker), so its protocol time is the same to the millisecond."""
+    alone = subprocess.run([*CKESC, "run", "-q", "--reports", str(tmp_path / "alone"), "--emulator-seed", "7", *PLANNED],
+                           cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=300)
+    assert alone.returncode == 0, alone.stdout[-3000:] + alone.stderr[-3000:]
+    done = _batch(tmp_path, "[bench.one]\nemulator = { seed = 7 }\n\n[bench.two]\nemulator = { seed = 7 }\n", *PLANNED)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    solo = json.loads((tmp_path / "alone" / "latest" / "results.json").read_text())
+    assert solo["info"]["order"] == "overlap" and solo["info"]["epochs"] and solo["info"]["cold_boots"]
+    for name in ("one", "two"):
+        run = json.loads((_batch_dir(tmp_path) / name / "results.json").read_text())
+        assert run["info"]["order"] == "overlap"
+        assert [r["nodeid"] for r in run["results"]] == [r["nodeid"] for r in solo["results"]]  # the same order
+        assert [(r["nodeid"], r["outcome"]) for r in run["results"]] == [(r["nodeid"], r["outcome"]) for r in solo["results"]]
+        assert run["info"]["lane_seconds"] == solo["info"]["lane_seconds"]
+        for key in ("epochs", "cold_boots"):
+            assert [{k: e.get(k) for k in ("name", "for", "at")} for e in run["info"][key]] == \
+                   [{k: e.get(k) for k in ("name", "for", "at")} for e in solo["info"][key]], key

@@ -124,3 +124,38 @@ def test_a_set_baud_that_takes_effect_at_once_says_so(tmp_path):
     (r,) = res.values()
     assert r["outcome"] == "FAIL"
     assert "answered at 250000 bit/s at once; the new rate is due after the next power-up" in r["message"]
+
+
+def _no_repr(res: dict[str, dict]) -> None:
+    """No verdict message shows pytest's explanation of a comparison or a dict's repr."""
+    for r in res.values():
+        for bad in ("...", "assert {", "{'", "':"):
+            assert bad not in r["message"], (bad, r["nodeid"], r["message"])
+
+
+def test_a_partly_applied_illegal_write_names_each_changed_setting_from_what_to_what(tmp_path):
+    """Issue #20 item 5: "illegal msg2_interval=9 changed {'msg1_interval':, ...}" lost the values in the
+    causes grouping and the power-cycle test said "assert {'msg1_interv...nterval': 200} == ...": every
+    changed setting is named with its old and new value, the illegal one first, in the record and the summary."""
+    res = _run(tmp_path, "set_freq_partial", "test_illegal_write_changes_nothing")
+    assert res and {r["outcome"] for r in res.values()} == {"FAIL"}
+    _no_repr(res)
+    by = {r["name"]: r["message"] for r in res.values()}
+    assert ("illegal msg2_interval=9 changed msg1_interval 10 -> 20, msg3_interval 250 -> 200 "
+            "(R10: ignored, never partly applied)") in by["test_illegal_write_changes_nothing[msg2_interval=9(min-1)]"]
+    assert ("after the illegal write msg1_interval 20, msg2_interval 9, msg3_interval 200 and a power cycle: "
+            "msg1_interval 10 -> 20, msg3_interval 250 -> 200") in by["test_illegal_write_changes_nothing_after_power_cycle"]
+    summary = (next(p for p in tmp_path.iterdir() if p.is_dir() and not p.is_symlink()) / "summary.txt").read_text()
+    assert "changed msg1_interval 10 -> 20, msg3_interval 250 -> 200 - in 3 tests" in summary, summary
+
+
+def test_a_setting_taken_while_suspended_names_its_old_and_new_value(tmp_path):
+    res = _run(tmp_path, "settings_while_suspended", "suspended")
+    failed = {r["name"]: r["message"] for r in res.values() if r["outcome"] == "FAIL"}
+    _no_repr(res)
+    assert "Set Led while suspended took effect: 242 led_color 2 -> 5, led_blink 0 -> 1" in failed[
+        "test_not_set_while_reporting_is_suspended[save]"]
+    assert "Throttle Select while suspended took effect: 242 throttle_source 0 -> 1" in failed[
+        "test_not_selected_while_reporting_is_suspended"]
+    assert "set_freq option 1, msg1_interval 15, msg2_interval 50, msg3_interval 250 took effect while suspended: " \
+           "msg1_interval 10 -> 15" in failed["test_settings_do_not_change_while_suspended[set_freq]"]
