@@ -625,14 +625,14 @@ class EscModel:
 
     def _emit_exp(self, which: str, due: float) -> None:
         """MSG_EXP mode (R9: which frames and how often is OBSERVE): EXP1 at MSG1's interval,
-        EXP7..EXP11 at MSG3's (or MSG2's, or one of the two only: exp_frames)."""
+        EXP7..EXP11 at MSG3's (or all at MSG2's, or one of the two only: exp_frames)."""
         plays = self.config.exp_frames
-        if which == "msg1" and plays != "no_exp1":
+        if which == ("msg2" if plays == "msg2" else "msg1") and plays != "no_exp1":
             volts, amps = self._electrical()
             scale = 10 if "exp1_scale_tenths" in self.faults else 100
             self._emit(due, "msg_exp1", {"speed": int(self.rpm), "voltage": self._fine(volts * scale),
                                          "current": self._fine(amps * scale)})
-        elif which == ("msg2" if plays == "msg2" else "msg3") and plays != "exp1_only":
+        if which == ("msg2" if plays == "msg2" else "msg3") and plays != "exp1_only":
             for name, fields in self.exp_frames():
                 self._emit(due, name, fields)
             if "debug_frames_reserved_source" in self.faults:  # F7: a debug frame from a hard-coded node id

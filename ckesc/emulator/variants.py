@@ -130,7 +130,7 @@ _FREEDOMS = (
             choices=("clamp", "hold", "zero")),
     # MSG_EXP mode (R9-exp: which MSG_EXP frames come and how often is OBSERVE)
     Freedom("exp_frames", ("R9-exp",), "in MSG_EXP mode: EXP1 at MSG1's interval and EXP7..11 at MSG3's (msg3), "
-            "EXP7..11 at MSG2's (msg2), EXP1 only, or EXP7..11 only", choices=("msg3", "msg2", "exp1_only", "no_exp1")),
+            "all of them at MSG2's (msg2), EXP1 only, or EXP7..11 only", choices=("msg3", "msg2", "exp1_only", "no_exp1")),
     # rounding where the document names a unit but no rounding (4.4.5-T .. 4.4.11-T, 4.4.27)
     Freedom("value_rounding", ("4.4.5-T", "4.4.6-T", "4.4.27-T"),
             "temperatures, run times, voltage and current to their units: temperatures and run times truncated, "

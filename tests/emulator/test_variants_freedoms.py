@@ -154,21 +154,22 @@ def test_over_max_throttle(choice, throttle):
     assert esc.model.can_throttle == {"clamp": 2000, "hold": 500, "zero": 0}[choice]
 
 
-@pytest.mark.parametrize("choice, names, exp7_gap", [
-    ("msg3", {"msg_exp1", "msg_exp7", "msg_exp8", "msg_exp9", "msg_exp10", "msg_exp11"}, 0.5),
-    ("msg2", {"msg_exp1", "msg_exp7", "msg_exp8", "msg_exp9", "msg_exp10", "msg_exp11"}, 0.1),
-    ("exp1_only", {"msg_exp1"}, None),
-    ("no_exp1", {"msg_exp7", "msg_exp8", "msg_exp9", "msg_exp10", "msg_exp11"}, 0.5),
+@pytest.mark.parametrize("choice, names, exp1_gap, exp7_gap", [
+    ("msg3", {"msg_exp1", "msg_exp7", "msg_exp8", "msg_exp9", "msg_exp10", "msg_exp11"}, 0.02, 0.5),
+    ("msg2", {"msg_exp1", "msg_exp7", "msg_exp8", "msg_exp9", "msg_exp10", "msg_exp11"}, 0.1, 0.1),
+    ("exp1_only", {"msg_exp1"}, 0.02, None),
+    ("no_exp1", {"msg_exp7", "msg_exp8", "msg_exp9", "msg_exp10", "msg_exp11"}, None, 0.5),
 ])
-def test_exp_frames_chooses_which_msg_exp_frames_come_and_how_often(choice, names, exp7_gap):
+def test_exp_frames_chooses_which_msg_exp_frames_come_and_how_often(choice, names, exp1_gap, exp7_gap):
     esc = Esc(exp_frames=choice)
     esc.send("msg_control", {"option": 0, "command": MSG_CONTROL_RESUME_EXP}, service=False)
     frames = esc.run(esc.now + 1.2)
     assert {f.name for f in frames if f.name.startswith("msg_exp")} == names
     assert not {"msg1", "msg2", "msg3"} & {f.name for f in frames}
-    exp7 = [f.timestamp for f in frames if f.name == "msg_exp7"]
-    if exp7_gap:
-        assert exp7[-1] - exp7[-2] == pytest.approx(exp7_gap)
+    for name, gap in (("msg_exp1", exp1_gap), ("msg_exp7", exp7_gap)):
+        times = [f.timestamp for f in frames if f.name == name]
+        if gap:
+            assert times[-1] - times[-2] == pytest.approx(gap)
 
 
 @pytest.mark.parametrize("choice, temperature, voltage", [("mixed", 25, 5057), ("round", 26, 5057),
