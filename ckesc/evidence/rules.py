@@ -78,7 +78,6 @@ from ..protocol.transfer import SINGLE_FRAME, TRANSFER_ID_MODULO, parse_tail
 _INTERVAL_FIELDS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
 REPORT_INTERVAL = {cat.BY_NAME[k.removesuffix("_interval")].type_id: i for i, k in enumerate(_INTERVAL_FIELDS)}
 SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
-LONGEST_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
 #: A node silent for longer than this may have been power cycled: its frames before and after are not compared.
 RESTART_SILENCE_S = 2 * SHORTEST_S
 #: How long after a request its response may still come (the document sets no bound for services; 64 ms for
@@ -240,7 +239,7 @@ class Intervals:
 class _Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
                  "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
-                 "event_reset", "event_ts", "event_what", "grace_chain")
+                 "event_reset", "event_ts", "event_what", "grace_chain", "unsure_until")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -261,6 +260,9 @@ class _Node:
         self.from_read = False  # the periods come from a read answer (4.4.22-2 says it tells the settings)
         self.before_silence = False  # ... stated before a silence that may have been a power cycle (R13 keeps them)
         self.shared = False  # two ESCs answered one broadcast from this node id: its frames are two ESCs' (4.4.18-2)
+        #: a Set ID to this node id was sent and its answers may still come: until then (the longest answer delay
+        #: and a service's), whether two ESCs now share it is not known and its frames are not compared
+        self.unsure_until = -math.inf
         self.floor = True  # judge reports against the shortest legal interval while the periods are unknown
         self.comm_fault: bool | None = None
         self.comm_events: list[dict[str, Any]] = []
@@ -571,7 +573,7 @@ class BusRules:
     # ------------------------------------------------------------------------------------- F3 and R9
     def _stream(self, out, st: _Stream, info: _Id, node: _Node, data, ts: float, start: float, busy_from: float, tid: int):
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
-        if st.ts is not None and st.chain == node.chain and not node.shared:
+        if st.ts is not None and st.chain == node.chain and not node.shared and ts > node.unsure_until:
             gap = start - st.start
             advance = (tid - st.tid) % TRANSFER_ID_MODULO
             period = None
@@ -741,7 +743,8 @@ class BusRules:
                 node.periods = [None] * len(_INTERVAL_FIELDS)
                 node.reset += 1
                 node.shared = False  # ... nor whether two of them share an id
-            self._set_id_shared(data, ts)
+            if len(data) > _SET_ID_NODE.offset + _SET_ID_NODE.size:  # every ESC may take the new id at once, answer later
+                self._node(_field(data, _SET_ID_NODE)).unsure_until = ts + 2 * cat.ANSWER_DELAY_MAX_S
         else:
             key = (info.source, info.dest, type_id)
             if type_id == _SET_FREQ.type_id and _field(data, _SET_FREQ_OPTION) == _SET_FREQ_WRITE:
@@ -781,18 +784,6 @@ class BusRules:
                                    frames)
         self._observe(("F4",), ts, node.id, "response-unmatched", text + " (the capture may have missed it)", frames)
         return out or _NONE
-
-    def _set_id_shared(self, data, ts: float) -> None:
-        """Set ID while more than one ESC reports: any of them may take the id (R11: it ignores the destination), and
-        their answers from it, alike and in the same slot, may reach the bus as one frame; so the id is taken as
-        shared (4.4.18-2): its reports are not compared with one another."""
-        escs = sum(1 for n in self._nodes.values() if n.esc and ts - n.last_ts <= LONGEST_S + RESTART_SILENCE_S)
-        if escs > 1 and len(data) > _SET_ID_NODE.offset + _SET_ID_NODE.size:
-            node = self._node(_field(data, _SET_ID_NODE))
-            node.shared = True
-            self._observe(("4.4.18-2",), ts, node.id, "shared-node-id",
-                          f"Set ID {node.id} while {escs} ESCs report: any of them may take it, their reports from it are "
-                          "not compared with one another")
 
     def _answer(self, node: _Node, ts: float) -> None:
         """An answer to a broadcast every ESC answers once (Set ID, GET_ESC_ID): a second one from the same

@@ -256,6 +256,15 @@ def test_reports_between_a_set_freq_write_and_its_late_answer_are_not_judged_on_
     assert "20.000 ms" in v.message
 
 
+def test_two_escs_taking_one_id_before_their_late_answers_are_not_compared():
+    """Set ID is a pseudo-broadcast (R11): every ESC may take the new id at once and answer up to 64 ms later,
+    so two ESCs' reports from it come before the answers show the id is shared."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    feed(rules, encode("set_id", {"node_id": 34, "throttle_channel": 1}, source=0, destination=1, transfer_id=0), 1.0)
+    assert stream(rules, 34, [1.001, 1.0013, 1.021, 1.0213], tids=[0, 0, 1, 1]) == []  # two ESCs, one id
+    assert stream(rules, 34, [1.2, 1.21], tids=[5, 7])  # later, a single ESC's frames are compared again
+
+
 def test_an_illegal_interval_in_an_answer_stops_the_floor():
     """An answer to an illegal write may say anything (R10-answer, OBSERVE): nothing is judged on it."""
     rules = BusRules(bitrate=BITRATE)
