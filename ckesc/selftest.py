@@ -1,10 +1,16 @@
-"""``ckesc selftest``: the suite tests itself against the emulator's faults.
+"""``ckesc selftest``: the suite tests itself against the emulator's faults and its conforming variants.
 
 Against the faultless emulator every conformance test must pass. For every fault switch, the
 suite run against it must fail, and every failing test must cite one of the requirement ids the
 fault names (``ckesc/emulator/faults.py``): a fault that fails nothing means a rule the suite does
 not really check (except a fault that breaks only OBSERVE rules, which must fail nothing); a failing test that does not cite the broken rule means a test that fails for
 the wrong reason, or cites the wrong clause. The result is the table fault -> failing tests.
+
+It must also have no false teeth: against every conforming variant (``ckesc/emulator/variants.py``: a
+behaviour the document, or a stated READING, allows) no test may FAIL or ERROR; one that does is the
+suite's bug, a reading stricter than the document. ``--variants each`` runs every alternative of every
+freedom alone (so a FAIL is pinned to it), ``covering`` the few combinations that play them all,
+``drawn`` the combinations ``--seeds`` draw. INCONCLUSIVE is allowed there (counted, with its reasons).
 
 Each run is a separate ``pytest`` process (the simulated lane is deterministic), ``--jobs`` at a time.
 """
@@ -15,13 +21,16 @@ import ast
 import functools
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
+from .emulator import variants
 from .emulator.faults import FAULTS
 from .harness.causes import broken_outside_a_fail
 from .protocol.requirements import requirement
@@ -78,27 +87,29 @@ def scope_targets(fault: str | None, scope: str) -> list[str]:
     return sorted(modules) or ["conformance"]
 
 
-def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full") -> FaultRun:
-    rules = FAULTS[fault].rules if fault else ()
-    run = FaultRun(fault, rules)
+def _suite(targets: list[str], args: list[str]) -> tuple[list[dict[str, Any]] | None, str]:
+    """One suite run in its own pytest process: its results.json results, or None and why there are none."""
     with tempfile.TemporaryDirectory(prefix="ckesc-selftest-") as tmp:
-        cmd = [sys.executable, "-m", "pytest", "--pyargs", *scope_targets(fault, scope), "-q", "-p", "no:cacheprovider",
+        cmd = [sys.executable, "-m", "pytest", "--pyargs", *targets, "-q", "-p", "no:cacheprovider",
                # deterministic, as ckesc run: the plugin's run order (pytest-randomly off), labgrid only a library
-               "-p", "no:randomly", "-p", "no:labgrid", "--ckesc-reports", tmp, "--ckesc-trace-format", "none", "--ckesc-no-html", *pytest_args]  # results.json is read
-        if fault:
-            cmd += ["--emulator-faults", fault]
+               "-p", "no:randomly", "-p", "no:labgrid", "--ckesc-reports", tmp, "--ckesc-trace-format", "none", "--ckesc-no-html", *args]  # results.json is read
         try:
             done = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONHASHSEED": "0"},
                                   timeout=RUN_TIMEOUT_S)
         except subprocess.TimeoutExpired:
-            run.problem = f"the suite run did not finish in {RUN_TIMEOUT_S} s (a hang in the emulator or the suite)"
-            return run
+            return None, f"the suite run did not finish in {RUN_TIMEOUT_S} s (a hang in the emulator or the suite)"
         reports = sorted(Path(tmp).glob("*/results.json"))
         if not reports:
-            run.problem = f"no report (pytest exit {done.returncode}): {done.stdout[-800:]}{done.stderr[-800:]}"
-            return run
-        doc = json.loads(reports[-1].read_text())
-    results = doc["results"]
+            return None, f"no report (pytest exit {done.returncode}): {done.stdout[-800:]}{done.stderr[-800:]}"
+        return json.loads(reports[-1].read_text())["results"], ""
+
+
+def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full") -> FaultRun:
+    rules = FAULTS[fault].rules if fault else ()
+    run = FaultRun(fault, rules)
+    results, run.problem = _suite(scope_targets(fault, scope), [*pytest_args, *(["--emulator-faults", fault] if fault else [])])
+    if results is None:
+        return run
     run.ran = len(results)
     for r in results:
         if r["outcome"] == "FAIL":
@@ -151,6 +162,107 @@ def selftest(faults: list[str] | None = None, jobs: int | None = None, pytest_ar
             if progress:
                 progress(run, len(out), len(names))
     return out
+
+
+@dataclass
+class VariantRun:
+    """The whole suite against one conforming variant: nothing may FAIL or ERROR."""
+
+    label: str  # "exp_frames=msg2", "covering 2/3", "drawn 7"
+    options: dict[str, Any]
+    failing: list[str] = field(default_factory=list)  # "test: message"
+    errors: list[str] = field(default_factory=list)
+    inconclusive: list[str] = field(default_factory=list)  # "test: reason"
+    ran: int = 0
+    problem: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not self.problem
+
+    @property
+    def allowed_by(self) -> list[str]:
+        return list(dict.fromkeys(i for name in self.options for i in variants.FREEDOMS[name].allowed_by))
+
+    def what(self) -> str:
+        text = variants.describe(self.options)
+        return text if self.label == text else f"{self.label} ({text})"
+
+
+VARIANT_SETS = ("each", "covering", "drawn", "all")
+_VERDICT_PREFIX = re.compile(r"^([\w.]+(Error|Exception|Inconclusive): )?(INCONCLUSIVE: )?")
+
+
+def variant_matrix(which: str = "all", seeds: list[int] = ()) -> list[tuple[str, dict[str, Any]]]:
+    """(label, EscConfig options) per run: ``each`` alternative alone, the ``covering`` combinations, the
+    combinations ``seeds`` draw (``drawn``), or ``all`` of them."""
+    out: list[tuple[str, dict[str, Any]]] = []
+    if which in ("each", "all"):
+        out += [(variants.describe(v), v) for v in variants.each()]
+    if which in ("covering", "all"):
+        cover = variants.covering()
+        out += [(f"covering {i}/{len(cover)}", v) for i, v in enumerate(cover, 1)]
+    if which in ("drawn", "all"):
+        out += [(f"drawn {seed}", variants.draw(seed)) for seed in seeds]
+    return out
+
+
+def run_variant(label: str, options: dict[str, Any], pytest_args: list[str] = ()) -> VariantRun:
+    run = VariantRun(label, options)
+    args = [a for k, v in options.items() for a in ("--emulator-option", f"{k}={v}")]
+    results, run.problem = _suite(["conformance"], [*pytest_args, *args])
+    if results is None:
+        return run
+    run.ran = len(results)
+    for r in results:
+        bucket = {"FAIL": run.failing, "ERROR": run.errors, "INCONCLUSIVE": run.inconclusive}.get(r["outcome"])
+        if bucket is not None:
+            message = _VERDICT_PREFIX.sub("", (r.get("message") or "").strip()).splitlines()
+            bucket.append(f"{r['nodeid']}: {message[0][:160] if message else ''}")
+    if run.failing or run.errors:
+        first = (run.failing or run.errors)[0].split(": ", 1)[0]
+        verb = "FAILed" if run.failing else "ERRORed"
+        more = len(run.failing) + len(run.errors) - 1
+        run.problem = (f"the suite's bug: {first} {verb} on conforming variant {run.what()} (allowed by "
+                       f"{', '.join(run.allowed_by)})" + (f"; and {more} more" if more else ""))
+    return run
+
+
+def variant_selftest(matrix: list[tuple[str, dict[str, Any]]], jobs: int | None = None, pytest_args: list[str] = (),
+                     progress=None) -> list[VariantRun]:
+    jobs = jobs or max(os.cpu_count() or 1, 1)
+    out: list[VariantRun] = []
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        for run in pool.map(lambda lv: run_variant(lv[0], lv[1], list(pytest_args)), matrix):
+            out.append(run)
+            if progress:
+                progress(run, len(out), len(matrix))
+    return out
+
+
+def headline(faults: list[FaultRun], variant_runs: list[VariantRun]) -> str:
+    """The self-test in one line: ``every fault caught, no variant failed``, or what did not hold."""
+    bad_faults = [r for r in faults[1:] if not r.ok]
+    bad_variants = [r for r in variant_runs if not r.ok]
+    parts = []
+    if faults and faults[0].fault is None:
+        parts.append("the faultless emulator passes" if faults[0].ok else "the faultless emulator does NOT pass")
+    if len(faults) > 1:
+        parts.append("every fault caught" if not bad_faults else f"{len(bad_faults)} of {len(faults) - 1} faults NOT caught cleanly")
+    if variant_runs:
+        parts.append(f"no variant failed ({len(variant_runs)} runs)" if not bad_variants
+                     else f"{len(bad_variants)} of {len(variant_runs)} variant runs FAILED or ERRORED (the suite's bugs)")
+    return ", ".join(p for p in parts if p)
+
+
+def variant_table(runs: list[VariantRun]) -> str:
+    lines = ["| conforming variant | allowed by | tests | inconclusive | verdict |", "|---|---|---|---|---|"]
+    for r in runs:
+        reasons = sorted({i.split(": ", 1)[-1][:100] for i in r.inconclusive})  # the same reason once
+        inc = f"{len(r.inconclusive)}" + (f" ({'; '.join(reasons[:2])}{'; ...' if len(reasons) > 2 else ''})" if reasons else "")
+        lines.append(f"| {r.what()} | {' '.join(r.allowed_by)} | {r.ran} | {inc} | "
+                     f"{'ok' if r.ok else 'PROBLEM: ' + r.problem} |")
+    return "\n".join(lines)
 
 
 def table(runs: list[FaultRun]) -> str:

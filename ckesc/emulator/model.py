@@ -123,6 +123,19 @@ class EscConfig:
     #: bus ahead of it)
     answer_place: str = "start"
     service_delay: float = 0.0005  # request to response for services
+    # the other freedoms the document leaves (ckesc/emulator/variants.py says what each value does)
+    report_phase: str = "together"  # the first MSG1..3 after power-up together, or staggered
+    transfer_id_start: str = "zero"  # message transfer-id counters' first value (F3)
+    unlisted_priority: str = "request"  # 240/241/242 answers' priority (F5-unlisted)
+    foreign_host: str = "accept"  # frames from a host node other than 0 (F6)
+    rejected_answer: str = "current"  # the answer to an illegal or refused request (R10)
+    over_max_throttle: str = "clamp"  # throttle above its maximum (R6)
+    exp_frames: str = "msg3"  # which MSG_EXP frames, how often (R9-exp)
+    value_rounding: str = "mixed"  # temperatures, run times, voltage, current to their units
+    can_test_count: str = "from_zero"  # CAN Test's count's start (R16)
+    led_blink_other: str = "no_blink"  # Set LED blink codes other than 0/1/2/5 (4.4.20)
+    major_config_option: str = "answer"  # 242 with option != 0 (4.4.28-2)
+    rec_answer: str = "none"  # Get Rec / Clear Rec answered (R15-payload)
     max_rpm: int = 9000
     motor_tau: float = 0.15  # rpm first-order lag
     supply_voltage: float = 50.4  # 12S full
@@ -193,6 +206,10 @@ class EscModel:
             self.nvm.setdefault(key, value)
         self.nvm_dirty = nvm is None
         self._rng = random.Random(self.config.seed * 1_000_003 + self.config.slot)
+        rounding = self.config.value_rounding
+        #: temperatures and run times to whole units, voltage and current to 0.01 / 0.1 (value_rounding)
+        self._whole = round if rounding == "round" else int
+        self._fine = int if rounding == "truncate" else round
         self._decoder = Decoder()
         self.counters = {"rx": 0, "rx_ignored": 0, "rx_malformed": 0, "rx_foreign": 0, "tx": 0}
         self.pwm_input: int | None = None  # PWM throttle 0..2000 on the analog input; None: no signal
@@ -210,7 +227,7 @@ class EscModel:
         self.reporting = REPORTING
         self.can_test = False
         self.can_test_prev = REPORTING
-        self.can_test_count = 0
+        self.can_test_count = self._rng.randrange(1 << 31) if self.config.can_test_count == "from_random" else 0
         self.led_color = self.nvm["led_color"]
         self.led_blink = self.nvm["led_blink"]
         self.throttle = 0  # 0..2000 in use
@@ -229,7 +246,8 @@ class EscModel:
         self.test_mode = False
         self._outbox: list[tuple[float, int, WireFrame]] = []
         self._seq = 0
-        self._tids = TransferIdCounter()
+        self._tids = TransferIdCounter(
+            (lambda: self._rng.randrange(32)) if self.config.transfer_id_start == "random" else None)
         self._last_update = now
         self._last_thermal = now
         self._next_report: dict[str, float] = {}
@@ -256,7 +274,8 @@ class EscModel:
             self.nvm["power_ups"] = (self.nvm["power_ups"] + 1) & 0xFFFF
         self.nvm_dirty = True
         start = self.ready_at + self.config.report_delay
-        self._next_report = {"msg1": start, "msg2": start, "msg3": start}
+        stagger = (0.0, 0.007, 0.013) if self.config.report_phase == "staggered" else (0.0, 0.0, 0.0)
+        self._next_report = {k: start + d for k, d in zip(("msg1", "msg2", "msg3"), stagger)}
         self._report_floor = start
         self._next_can_test = start
 
@@ -322,7 +341,7 @@ class EscModel:
             self.counters["rx_foreign"] += 1
             return False
         handler = _HANDLERS.get((frame.kind, frame.name))
-        if handler is None:
+        if handler is None or (frame.source and self.config.foreign_host == "ignore"):
             self.counters["rx_ignored"] += 1
             return False
         if handler is not EscModel._on_throttle:
@@ -383,7 +402,8 @@ class EscModel:
     def _respond(self, req: Frame, now: float, fields: dict, *, layout: str | None = None) -> None:
         spec = req.spec
         assert spec is not None
-        priority = spec.priority if spec.priority is not None else req.priority  # F5: 240..242 list none
+        priority = spec.priority if spec.priority is not None else _UNLISTED_PRIORITY.get(
+            self.config.unlisted_priority, req.priority)  # F5: 240..242 list none
         if "response_wrong_priority" in self.faults:
             priority = Priority.LOWEST if priority != Priority.LOWEST else Priority.MEDIUM
         tid = req.transfer_id or 0
@@ -393,6 +413,15 @@ class EscModel:
         request_bit = 0x8000 if "response_as_request" in self.faults else 0
         self._emit(now + self.config.service_delay, spec.name, fields, kind=Kind.RESPONSE, destination=destination,
                    transfer_id=tid, priority=priority, layout=layout, id_or=request_bit)
+
+    def _respond_rejected(self, req: Frame, now: float, current: dict) -> None:
+        """The answer to a request that changed nothing (an illegal value, or refused: R10-R12 leave open
+        whether, and with what, it is answered): the current values, none, or the request's values echoed."""
+        how = self.config.rejected_answer
+        if how == "current":
+            self._respond(req, now, current)
+        elif how == "echo":
+            self._respond(req, now, {k: req.fields.get(k, v) for k, v in current.items()})
 
     def _answer_delay(self) -> float:
         if "answer_late" in self.faults:
@@ -449,10 +478,10 @@ class EscModel:
 
     def _record_temperatures(self) -> None:
         for sensor in _RECORD_SENSORS:
-            t = int(self.temps[sensor])
+            t = self._whole(self.temps[sensor])
             rec = self.nvm["records"][sensor]
             if t > rec["t_max"]:
-                rec.update(t_max=min(t, 255), times=self.nvm["starts"], time=int(self.nvm["total_run_time"]))
+                rec.update(t_max=min(t, 255), times=self.nvm["starts"], time=self._whole(self.nvm["total_run_time"]))
                 self.nvm_dirty = True
 
     def _active_source_is_pwm(self) -> bool:
@@ -620,7 +649,8 @@ class EscModel:
         elif which == "msg2":
             volts, amps = self._electrical()
             scale = 10 if "msg2_scale_tenths" in self.faults else 100
-            fields = {"voltage": round(volts * scale), "current": round(amps * scale), "temperature": int(self.temps["mos"])}
+            fine, whole = self._fine, self._whole
+            fields = {"voltage": fine(volts * scale), "current": fine(amps * scale), "temperature": whole(self.temps["mos"])}
         if which in ("msg1", "msg2"):
             if "reports_padded" in self.faults:  # the payload zero-padded to 7 bytes: a full 8-byte frame
                 spec = cat.BY_NAME[which]
@@ -628,9 +658,10 @@ class EscModel:
             else:
                 self._emit(due, which, fields, priority=prio)
         else:
-            fields = {"mos_t": int(self.temps["mos"]), "cap_t": int(self.temps["cap"]),
-                      "motor_t": int(self.temps["motor"]) if self.config.has_motor_sensor else 0,
-                      "mcu_t": int(self.temps["mcu"])}
+            whole = self._whole
+            fields = {"mos_t": whole(self.temps["mos"]), "cap_t": whole(self.temps["cap"]),
+                      "motor_t": whole(self.temps["motor"]) if self.config.has_motor_sensor else 0,
+                      "mcu_t": whole(self.temps["mcu"])}
             if "msg3_short" in self.faults:
                 self._emit_raw(due, 20052, bytes([fields["mos_t"], fields["cap_t"], fields["motor_t"]]), prio or Priority.LOWEST)
                 return
@@ -648,12 +679,14 @@ class EscModel:
 
     def _emit_exp(self, which: str, due: float) -> None:
         """MSG_EXP mode (R9: which frames and how often is OBSERVE): EXP1 at MSG1's interval,
-        EXP7..EXP11 at MSG3's."""
-        if which == "msg1":
+        EXP7..EXP11 at MSG3's (or all at MSG2's, or one of the two only: exp_frames)."""
+        plays = self.config.exp_frames
+        if which == ("msg2" if plays == "msg2" else "msg1") and plays != "no_exp1":
             volts, amps = self._electrical()
             scale = 10 if "exp1_scale_tenths" in self.faults else 100
-            self._emit(due, "msg_exp1", {"speed": int(self.rpm), "voltage": round(volts * scale), "current": round(amps * scale)})
-        elif which == "msg3":
+            self._emit(due, "msg_exp1", {"speed": int(self.rpm), "voltage": self._fine(volts * scale),
+                                         "current": self._fine(amps * scale)})
+        if which == ("msg2" if plays == "msg2" else "msg3") and plays != "exp1_only":
             for name, fields in self.exp_frames():
                 self._emit(due, name, fields)
             if "debug_frames_reserved_source" in self.faults:  # F7: a debug frame from a hard-coded node id
@@ -667,7 +700,8 @@ class EscModel:
         direction = (2 if n["rotation"] else 1) - ("exp7_direction_zero_based" in self.faults)
         power_ups = (n["power_ups"] - ("exp8_power_ups_from_zero" in self.faults)) & 0xFFFF
         unit = 1000 if "exp_run_times_ms" in self.faults else 1  # seconds, or milliseconds
-        temps = {k: int(v) for k, v in self.temps.items()}
+        whole = self._whole
+        temps = {k: whole(v) for k, v in self.temps.items()}
         if not self.config.has_motor_sensor:
             temps["motor"] = 0
         exp11 = (temps["mos"], temps["mcu"], temps["cap"], temps["motor"])
@@ -679,8 +713,9 @@ class EscModel:
                           "prop_lock": n["prop_lock"], "startup_acceleration": n["startup_acceleration"],
                           "lost_signal_protection": n["lost_signal_reduction"]}),
             ("msg_exp8", {"power_ups": power_ups, "starts": n["starts"], "stops": n["stops"]}),
-            ("msg_exp9", {"total_run_time": int(n["total_run_time"] * unit) & 0xFFFFFFFF, "fault_code_1": self.self_test_fault}),
-            ("msg_exp10", {"run_time": int(self.run_time * unit) & 0xFFFFFFFF, "fault_code_2": 0}),
+            ("msg_exp9", {"total_run_time": whole(n["total_run_time"] * unit) & 0xFFFFFFFF,
+                          "fault_code_1": self.self_test_fault}),
+            ("msg_exp10", {"run_time": whole(self.run_time * unit) & 0xFFFFFFFF, "fault_code_2": 0}),
             ("msg_exp11", dict(zip(("mos_t", "mcu_t", "cap_t", "motor_t"), exp11))),
         ]
 
@@ -696,6 +731,8 @@ class EscModel:
         option = f.fields["option"]
         if option == CAN_TEST_ON and not self.can_test:
             self.can_test = True
+            if self.config.can_test_count == "zero_each_session":
+                self.can_test_count = 0
             self._next_can_test = now
         elif option == CAN_TEST_OFF and self.can_test and "can_test_off_ignored" not in self.faults:
             self.can_test = False  # R16: back to the state before; reporting state was kept
@@ -740,6 +777,11 @@ class EscModel:
             return
         self._emit(due, "get_esc_id", {"node_id": node, "throttle_channel": channel}, layout="reply")
 
+    def _over_max(self, value: int, maximum: int) -> int:
+        """R6 (OBSERVE): a throttle above its maximum clamped, taken as zero, or (-1) ignored for the held one."""
+        how = self.config.over_max_throttle
+        return maximum if how == "clamp" else 0 if how == "zero" else -1
+
     def throttle_keys(self) -> set[tuple[str, int | None]] | None:
         """The throttle frames this ESC can be addressed by, as (frame name, 12-bit group or None);
         None: all of them (a fault changes how it reads them). Lets a bench route throttle frames
@@ -777,11 +819,16 @@ class EscModel:
             if "ten_bit_tail_checked" in self.faults and f.fields["tail_bits"] != TAIL_BITS_10B:
                 return False  # the high nibble of payload[7] read as a tail byte, and this one refused
             if 1 <= channel <= 6:
-                raw = min(f.fields["channels"][channel - 1], THROTTLE_10B_MAX)
-                value = raw if "ten_bit_not_doubled" in self.faults else raw * 2
+                raw = f.fields["channels"][channel - 1]
+                if raw > THROTTLE_10B_MAX:
+                    raw = self._over_max(raw, THROTTLE_10B_MAX)
+                value = raw if "ten_bit_not_doubled" in self.faults or raw < 0 else raw * 2
         if value is None:
             return False  # not addressed to this ESC's channel: not a command for it
-        value = min(value, THROTTLE_MAX)
+        if value > THROTTLE_MAX:
+            value = self._over_max(value, THROTTLE_MAX)
+        if value < 0:  # over_max_throttle "hold": the frame's value ignored, the command still heard
+            value = self.can_throttle
         answered = "throttle_answered" in self.faults
         if answered:  # the broadcast taken for a request: a report at once, as its answer
             self._emit_report("msg1", now + self.config.service_delay)
@@ -791,7 +838,7 @@ class EscModel:
             self.last_command = now
             return answered  # an answer was queued: the ESC's next deadline moved
         self._update(now)
-        self.can_throttle = value  # R6: above 2000 is OBSERVE; this ESC clamps
+        self.can_throttle = value  # R6: above 2000 is OBSERVE (over_max_throttle)
         self.last_command = now
         if self.comm_fault and "comm_loss_sticky" not in self.faults:
             self.comm_fault = False
@@ -824,10 +871,13 @@ class EscModel:
         node, channel = f.fields["node_id"], f.fields["throttle_channel"]
         legal = 1 <= node <= 0x7D or ("set_id_accepts_illegal" in self.faults and node <= 0x7F)
         legal = legal and 1 <= channel <= 20
-        if legal and self._in_window(now, "set_id_after_window") and not self._settings_locked():
-            if "set_id_channel_ignored" in self.faults:
-                channel = self.nvm["throttle_channel"]
-            self._set_nvm(node_id=node, throttle_channel=channel)
+        current = {"node_id": self.node_id, "throttle_channel": self.nvm["throttle_channel"]}
+        if not (legal and self._in_window(now, "set_id_after_window") and not self._settings_locked()):
+            self._respond_rejected(f, now, current)
+            return
+        if "set_id_channel_ignored" in self.faults:
+            channel = self.nvm["throttle_channel"]
+        self._set_nvm(node_id=node, throttle_channel=channel)
         self._respond(f, now, {"node_id": self.node_id, "throttle_channel": self.nvm["throttle_channel"]})
 
     def _on_set_baud(self, f: Frame, now: float) -> None:
@@ -835,17 +885,20 @@ class EscModel:
             return
         code = f.fields["baud"]
         legal = code in BAUD_RATES or "set_baud_accepts_illegal" in self.faults
-        if legal and self._in_window(now, "set_baud_after_window") and not self._settings_locked():
-            self._set_nvm(baud=code)
-            if "set_baud_immediate" in self.faults:
-                self.bitrate = BAUD_RATES.get(code, self.bitrate)
+        if not (legal and self._in_window(now, "set_baud_after_window") and not self._settings_locked()):
+            self._respond_rejected(f, now, {"baud": self.nvm["baud"]})
+            return
+        self._set_nvm(baud=code)
+        if "set_baud_immediate" in self.faults:
+            self.bitrate = BAUD_RATES.get(code, self.bitrate)
         self._respond(f, now, {"baud": self.nvm["baud"]})
 
     def _on_set_led(self, f: Frame, now: float) -> None:
         if not self._addressed(f):
             return
         option, color, blink = f.fields["option"], f.fields["color"], f.fields["blink"]
-        if self.config.has_led and option in (0, 1) and not self._settings_locked():
+        no_operation = blink not in cat.LED_BLINK and self.config.led_blink_other == "no_operation"
+        if self.config.has_led and option in (0, 1) and not self._settings_locked() and not no_operation:
             color &= 0x07  # "the lower three bits of Color are valid"
             blink = blink if blink in cat.LED_BLINK else 0  # "other: no operation is performed, no blinking"
             self.led_color, self.led_blink = color, blink
@@ -866,6 +919,12 @@ class EscModel:
                     self._set_nvm(rotation=rotation)
             elif "rotation_accepts_illegal" in self.faults:
                 self._set_nvm(rotation=1)
+            else:
+                self._respond_rejected(f, now, {"rotation": self.nvm["rotation"]})
+                return
+        elif rotation != 0xFF:
+            self._respond_rejected(f, now, {"rotation": self.nvm["rotation"]})
+            return
         self._respond(f, now, {"rotation": self.nvm["rotation"]})
 
     def _on_set_freq(self, f: Frame, now: float) -> None:
@@ -873,12 +932,14 @@ class EscModel:
             return
         names = ("msg1_interval", "msg2_interval", "msg3_interval")
         lo, hi = cat.REPORT_INTERVAL_RANGE
+        applied = f.fields["option"] != 1
         if f.fields["option"] == 1 and not self._settings_locked():
             values = {k: f.fields[k] for k in names}
             legal = {k: v for k, v in values.items() if lo <= v <= hi}
             if "set_freq_accepts_illegal" in self.faults:
                 legal = {k: v for k, v in values.items() if v > 0}
             if len(legal) == 3 or ("set_freq_partial" in self.faults and legal):
+                applied = True
                 old = {k: self.nvm[k] for k in names}
                 self._set_nvm(**legal)
                 for which in _REPORT_NAMES:
@@ -888,6 +949,9 @@ class EscModel:
         current = {k: self.nvm[k] for k in names}
         if "set_freq_read_wrong" in self.faults and f.fields["option"] == 0:
             current = dict(cat.DEFAULT_REPORT_INTERVALS)
+        if not applied:
+            self._respond_rejected(f, now, {"option": f.fields["option"], **current})
+            return
         self._respond(f, now, {"option": f.fields["option"], **current})
 
     def _set_freq_next(self, which: str, now: float, old: float) -> float:
@@ -914,7 +978,10 @@ class EscModel:
             return
         source = f.fields["source"]
         legal = source in (0, 1) or "throttle_select_accepts_illegal" in self.faults
-        if legal and not self._settings_locked() and not self._motor_busy() and "throttle_select_ignored" not in self.faults:
+        if not (legal and not self._settings_locked() and not self._motor_busy()):
+            self._respond_rejected(f, now, {"source": self.nvm["throttle_source"]})
+            return
+        if "throttle_select_ignored" not in self.faults:
             self._set_nvm(throttle_source=source)
         self._respond(f, now, {"source": self.nvm["throttle_source"]})
 
@@ -933,8 +1000,7 @@ class EscModel:
         if "expand_set_big_endian" in self.faults:
             code = int.from_bytes(f.data[:2], "big")
         if "expand_set_answered" in self.faults:  # the catalogue has no response layout (R14): echo the request
-            can_id = service_id(int(f.spec.priority), f.type_id, False, f.source, self.node_id)  # type: ignore[union-attr, arg-type]
-            self._push(now + self.config.service_delay, WireFrame(can_id, f.data))
+            self._echo_request(f, now)
         command = EXPAND_COMMANDS.get(code)
         if command is None or part not in command.parts or command.reserved:
             self.counters["rx_ignored"] += 1
@@ -979,12 +1045,21 @@ class EscModel:
             self._emit(due, "msg_exp12", {"t_max": rec["t_max"], "times": rec["times"] & 0xFFFF,
                                           "time": rec["time"] & 0xFFFFFFFF}, transfer_id=tag)
 
+    def _echo_request(self, f: Frame, now: float) -> None:
+        """A service answer repeating the request's payload (for requests the catalogue gives no answer)."""
+        can_id = service_id(int(f.spec.priority), f.type_id, False, f.source, self.node_id)  # type: ignore[union-attr, arg-type]
+        self._push(now + self.config.service_delay, WireFrame(can_id, f.data))
+
     def _on_get_rec(self, f: Frame, now: float) -> None:
         if self._addressed(f):
+            if self.config.rec_answer == "echo" and "get_rec_absent" not in self.faults:
+                self._echo_request(f, now)
             self._send_records(now)
 
     def _on_clear_rec(self, f: Frame, now: float) -> None:
         if self._addressed(f) and not {"clear_rec_ignored", "get_rec_absent"} & self.faults:
+            if self.config.rec_answer == "echo":
+                self._echo_request(f, now)
             self._set_nvm(records={s: {"t_max": 0, "times": 0, "time": 0} for s in _RECORD_SENSORS})
 
     def _on_esc_information(self, f: Frame, now: float) -> None:
@@ -1003,10 +1078,10 @@ class EscModel:
             return
         option, n = f.fields["option"], self.nvm
         if option == 0:
-            fields = {"total_run_time": int(n["total_run_time"]), "mos_t_max": n["records"]["mos"]["t_max"],
+            fields = {"total_run_time": self._whole(n["total_run_time"]), "mos_t_max": n["records"]["mos"]["t_max"],
                       "cap_t_max": n["records"]["cap"]["t_max"], "info_7": 0}
         elif option == 1:
-            fields = {"run_time": int(self.run_time), "runs": n["starts"], "info_7": 1}
+            fields = {"run_time": self._whole(self.run_time), "runs": n["starts"], "info_7": 1}
         elif option == 2:
             ups, stops = n["power_ups"], n["stops"]
             if "maintenance_counts_wrong" in self.faults:
@@ -1035,7 +1110,7 @@ class EscModel:
         return True
 
     def _on_major_config(self, f: Frame, now: float) -> None:
-        if not self._addressed(f):
+        if not self._addressed(f) or (f.fields.get("option") and self.config.major_config_option == "ignore"):
             return
         n = self.nvm
         direction, source = n["rotation"], n["throttle_source"]
@@ -1047,6 +1122,9 @@ class EscModel:
                                "led_color": self.led_color & 0x07, "msg1_interval": n["msg1_interval"],
                                "msg2_interval": n["msg2_interval"], "msg3_interval": n["msg3_interval"]})
 
+
+#: unlisted_priority (F5-unlisted): the priority of 240/241/242 answers; "request" keeps the request's
+_UNLISTED_PRIORITY = {"medium": Priority.MEDIUM, "low": Priority.LOW, "lowest": Priority.LOWEST}
 
 _TAIL_FAULTS = frozenset({"tail_toggle_set", "tail_not_single_frame"})
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import difflib
 import random
+import textwrap
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, Iterable, Mapping
@@ -113,6 +114,50 @@ _FREEDOMS = (
             "(a random place, the frame ending inside the slot) or late (as late as leaves room for one frame on "
             "the bus ahead of it, the answer still ending inside the slot)",
             choices=("start", "inside", "late")),
+    # power-up order of the reports (R9a: each report's first within one interval of power-up; their phase is free)
+    Freedom("report_phase", ("R9a", "R9a-gaps"),
+            "the first MSG1, MSG2 and MSG3 after power-up: together, or staggered (MSG2 7 ms, MSG3 13 ms after MSG1)",
+            choices=("together", "staggered")),
+    # framing (F3: +1 per transfer, modulo 32; the first value after power-up is not written)
+    Freedom("transfer_id_start", ("F3",), "each message transfer-id counter's first value after power-up: 0, "
+            "or a random one (then +1 per transfer)", choices=("zero", "random")),
+    # priorities (F5-unlisted: 240/241/242 have none in 4.3.2's table)
+    Freedom("unlisted_priority", ("F5-unlisted",), "the priority of 240/241/242 answers: the request's, or a fixed one",
+            choices=("request", "medium", "low", "lowest")),
+    # host node (F6: a non-zero host node is OBSERVE)
+    Freedom("foreign_host", ("F6",), "commands and requests from a host node other than 0: obeyed, or ignored",
+            choices=("accept", "ignore")),
+    # service answers (4.4.2-4's 64 ms bound is the longest delay the document names; services name none)
+    Freedom("service_delay", ("4.4.2-4",), "request to answer for services (Set ID .. 242)", span=(0.0002, 0.064)),
+    # illegal or refused requests (R10: answered or not, and with what, is OBSERVE; R11/R12 refuse without saying
+    # what is answered)
+    Freedom("rejected_answer", ("R10", "R11", "R12"),
+            "a request with an illegal value, or refused (outside the 120 s window, while suspended, motor running): "
+            "answered with the current values, not answered, or answered with the request's values echoed "
+            "while nothing is applied", choices=("current", "none", "echo")),
+    # throttle above its maximum (R6)
+    Freedom("over_max_throttle", ("R6",), "a throttle value above 2000 (14/12-bit) or 1000 (10-bit): clamped to the "
+            "maximum, the frame's value ignored (the throttle held), or taken as zero",
+            choices=("clamp", "hold", "zero")),
+    # MSG_EXP mode (R9-exp: which MSG_EXP frames come and how often is OBSERVE)
+    Freedom("exp_frames", ("R9-exp",), "in MSG_EXP mode: EXP1 at MSG1's interval and EXP7..11 at MSG3's (msg3), "
+            "all of them at MSG2's (msg2), EXP1 only, or EXP7..11 only", choices=("msg3", "msg2", "exp1_only", "no_exp1")),
+    # rounding where the document names a unit but no rounding (4.4.5-T .. 4.4.11-T, 4.4.27)
+    Freedom("value_rounding", ("4.4.5-T", "4.4.6-T", "4.4.27-T"),
+            "temperatures, run times, voltage and current to their units: temperatures and run times truncated, "
+            "voltage and current rounded (mixed), all rounded, or all truncated", choices=("mixed", "round", "truncate")),
+    # CAN Test (R16: the count grows by one per frame; where it starts is not written)
+    Freedom("can_test_count", ("R16",), "CAN Test's count: from 0 at power-up and on across CAN Test sessions, from "
+            "a random value, or from 0 at each CAN Test on", choices=("from_zero", "from_random", "zero_each_session")),
+    # Set LED blink codes other than 0/1/2/5 (4.4.20: "No operation is performed, no blinking")
+    Freedom("led_blink_other", ("4.4.20-4", "4.4.20-T"), "a Set LED blink code other than 0/1/2/5: the colour set "
+            "and no blinking, or no operation at all", choices=("no_blink", "no_operation")),
+    # Get Major Configuration's other options (4.4.28-2: "Option Indicates the ESC type", against "Fixed to 0")
+    Freedom("major_config_option", ("4.4.28-2",), "242 with an option other than 0: answered as option 0, or not",
+            choices=("answer", "ignore")),
+    # Get Rec / Clear Rec (R15-payload: whether they are answered is OBSERVE)
+    Freedom("rec_answer", ("R15-payload",), "Get Rec / Clear Rec requests: no answer (the records come as MSG_EXP12), "
+            "or also a service answer echoing the request", choices=("none", "echo")),
 )
 
 FREEDOMS: Mapping[str, Freedom] = MappingProxyType({f.name: f for f in _FREEDOMS})
@@ -151,6 +196,29 @@ def draw(seed: int, names: Iterable[str] | None = None) -> dict[str, Any]:
     return {name: FREEDOMS[name].draw(rng) for name in chosen}
 
 
+def alternatives(f: Freedom) -> list[Any]:
+    """Every value of a freedom other than the emulator's default: its other choices, or a span's two ends."""
+    if f.span is not None:
+        from .model import EscConfig  # (model imports this module)
+
+        default = getattr(EscConfig(), f.name)
+        return [v for v in f.span if v != default]
+    return list(f.choices[1:])
+
+
+def each() -> list[dict[str, Any]]:
+    """One variant per alternative of every freedom, the others at their defaults: what a FAIL is pinned to."""
+    return [{f.name: value} for f in FREEDOMS.values() for value in alternatives(f)]
+
+
+def covering() -> list[dict[str, Any]]:
+    """The fewest combinations that play every alternative of every freedom at least once (combination i takes
+    each freedom's alternative i, cycling): a cheap run of them all, e.g. in every CI run."""
+    alts = {f.name: alternatives(f) for f in FREEDOMS.values()}
+    n = max((len(a) for a in alts.values()), default=0)
+    return [{name: a[i % len(a)] for name, a in alts.items() if a} for i in range(n)]
+
+
 def combination(options: Iterable[str] = (), seed: int | None = None) -> dict[str, Any]:
     """What a run plays: the combination drawn from ``seed`` (none: the defaults), with ``options``
     (``NAME=VALUE``) on top."""
@@ -175,5 +243,8 @@ def describe(values: Mapping[str, Any]) -> str:
 def table() -> str:
     """The freedoms as a text table (``ckesc emulate --list-variants``, the README)."""
     rows = [(f.name, f.values_text(), ", ".join(f.allowed_by), f.description) for f in FREEDOMS.values()]
-    w = [max(len(r[i]) for r in rows) for i in range(3)]
-    return "\n".join(f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {d}" for a, b, c, d in rows)
+    w = [max(len(r[i]) for r in rows) for i in range(2)]
+    # name, values and the ids on one line; the description wrapped under it (a 100-column terminal)
+    return "\n".join(f"{a:<{w[0]}}  {b:<{w[1]}}  ({c})\n" + textwrap.fill(d, 100, initial_indent="    ",
+                                                                           subsequent_indent="    ")
+                     for a, b, c, d in rows)

@@ -242,7 +242,7 @@ class Intervals:
 class _Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
                  "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
-                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain")
+                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -267,6 +267,9 @@ class _Node:
         self.from_read = False  # the periods come from a read answer (4.4.22-2 says it tells the settings)
         self.before_silence = False  # ... stated before a silence that may have been a power cycle (R13 keeps them)
         self.shared = False  # two ESCs answered one broadcast from this node id: its frames are two ESCs' (4.4.18-2)
+        #: a Set ID to this node id went out when no ESC had been heard (how many ESCs may take it is not known) and
+        #: its answers may still come: until then (the longest answer delay and a service's) its frames are not compared
+        self.unsure_until = -math.inf
         self.floor = True  # judge reports against the shortest legal interval while the periods are unknown
         self.comm_fault: bool | None = None
         self.comm_events: list[dict[str, Any]] = []
@@ -578,7 +581,7 @@ class BusRules:
     # ------------------------------------------------------------------------------------- F3 and R9
     def _stream(self, out, st: _Stream, info: _Id, node: _Node, data, ts: float, start: float, busy_from: float, tid: int):
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
-        if st.ts is not None and st.chain == node.chain and not node.shared:
+        if st.ts is not None and st.chain == node.chain and not node.shared and ts > node.unsure_until:
             gap = start - st.start
             advance = (tid - st.tid) % TRANSFER_ID_MODULO
             period = None
@@ -787,6 +790,7 @@ class BusRules:
                 dest = self._node(info.dest)  # type: ignore[arg-type]
                 # the new intervals count from the write (its answer tells them), the old ones as the node last said
                 self._event(dest, ts, "a Set Freq write", list(dest.periods))
+                dest.periods = [None] * len(_INTERVAL_FIELDS)  # unknown until that answer: it may come after reports
         q = self._requests.get(key)
         if q is None:
             if len(self._requests) > 4096:
@@ -829,7 +833,11 @@ class BusRules:
         since = max(self._set_id_ts, ts - LONGEST_S - RESTART_SILENCE_S)
         self._set_id_ts = ts
         escs = sum(1 for n in self._nodes.values() if n.esc and n.last_ts > since)
-        if escs > 1 and len(data) > _SET_ID_NODE.offset + _SET_ID_NODE.size:
+        if len(data) <= _SET_ID_NODE.offset + _SET_ID_NODE.size:
+            return
+        if escs == 0:  # none heard: several may take it, and answer up to 64 ms later (their answers tell then)
+            self._node(_field(data, _SET_ID_NODE)).unsure_until = ts + 2 * cat.ANSWER_DELAY_MAX_S
+        if escs > 1:
             node = self._node(_field(data, _SET_ID_NODE))
             node.shared = True
             self._observe(("4.4.18-2",), ts, node.id, "shared-node-id",

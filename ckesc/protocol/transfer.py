@@ -6,7 +6,7 @@ byte is ``0xC0 | transfer_id``.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 from .errors import EncodeError
 
@@ -42,14 +42,20 @@ class TransferIdCounter:
     Messages use ``destination=None``.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, first: Callable[[], int] | None = None) -> None:
         self._next: dict[tuple[object, int | None], int] = {}
+        self._first = first  # each counter's first value (None: 0); F3 says only +1 per transfer
 
     def next(self, key: object, destination: int | None = None) -> int:
         slot = (key, destination)
-        tid = self._next.get(slot, 0)
+        tid = self._next.get(slot)
+        if tid is None:
+            tid = self._first() % TRANSFER_ID_MODULO if self._first else 0
         self._next[slot] = (tid + 1) % TRANSFER_ID_MODULO
         return tid
 
     def peek(self, key: object, destination: int | None = None) -> int:
-        return self._next.get((key, destination), 0)
+        slot = (key, destination)
+        if slot not in self._next and self._first:
+            self._next[slot] = self._first() % TRANSFER_ID_MODULO
+        return self._next.get(slot, 0)

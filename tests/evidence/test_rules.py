@@ -241,6 +241,30 @@ def test_set_id_makes_every_interval_unknown():
     assert stream(rules, 1, [t + 0.001, t + 0.021, t + 0.041]) == []  # 20 ms is legal; 30 ms was only said before
 
 
+def test_reports_between_a_set_freq_write_and_its_late_answer_are_not_judged_on_the_old_interval():
+    """A service answer may come up to 64 ms after the request (a conforming variant, service_delay): an ESC that
+    applies the write on receipt reports on the new interval before its answer says what it is."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0, {**INTERVALS, "msg1_interval": 25})  # 50 ms
+    stream(rules, 1, [t, t + 0.05])
+    write = {"option": 1, **INTERVALS}  # to 20 ms
+    feed(rules, encode("set_freq", write, source=0, destination=1, transfer_id=1), t + 0.06)
+    assert stream(rules, 1, [t + 0.061, t + 0.081, t + 0.101, t + 0.121], start_tid=2) == []
+    feed(rules, encode("set_freq", write, kind="response", source=1, destination=0, transfer_id=1), t + 0.124)
+    assert stream(rules, 1, [t + 0.141, t + 0.161], start_tid=6) == []
+    (v,) = stream(rules, 1, [t + 0.191], start_tid=8)  # 30 ms where the answer said 20: still caught
+    assert "20.000 ms" in v.message
+
+
+def test_two_escs_taking_one_id_before_their_late_answers_are_not_compared():
+    """Set ID is a pseudo-broadcast (R11): every ESC may take the new id at once and answer up to 64 ms later,
+    so two ESCs' reports from it come before the answers show the id is shared."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    feed(rules, encode("set_id", {"node_id": 34, "throttle_channel": 1}, source=0, destination=1, transfer_id=0), 1.0)
+    assert stream(rules, 34, [1.001, 1.0013, 1.021, 1.0213], tids=[0, 0, 1, 1]) == []  # two ESCs, one id
+    assert stream(rules, 34, [1.2, 1.21], tids=[5, 7])  # later, a single ESC's frames are compared again
+
+
 def test_an_illegal_interval_in_an_answer_stops_the_floor():
     """An answer to an illegal write may say anything (R10-answer, OBSERVE): nothing is judged on it."""
     rules = BusRules(bitrate=BITRATE)

@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
+from ckesc.emulator import variants
 from ckesc.emulator.faults import FAULTS
-from ckesc.selftest import selftest, table
+from ckesc.selftest import headline, run_variant, selftest, table, variant_matrix, variant_selftest, variant_table
 
 #: Faults whose self-test result is known to be off, with why; each must still be off (so that a fix
 #: is noticed and the entry removed). Empty is the goal.
@@ -49,3 +50,38 @@ def test_every_fault_is_caught_where_its_rules_are_cited():
 @pytest.mark.timeout(3600)
 def test_suite_against_every_fault():
     check("full")
+
+
+def check_variants(which: str, seeds: list[int] = ()) -> None:
+    runs = variant_selftest(variant_matrix(which, seeds), jobs=os.cpu_count() or 2)
+    out = Path(__file__).resolve().parents[2] / "reports" / "selftest"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"table-variants-{which}.md").write_text(headline([], runs) + "\n\n" + variant_table(runs) + "\n")
+    bad = [r.problem for r in runs if not r.ok]
+    assert not bad, "conforming variants the suite does not pass:\n" + "\n".join(bad)
+
+
+@pytest.mark.timeout(900)
+def test_the_suite_passes_combinations_playing_every_conforming_variant():
+    cover = variant_matrix("covering")
+    for f in variants.FREEDOMS.values():  # every alternative of every freedom is in one of them
+        assert set(variants.alternatives(f)) <= {c.get(f.name) for _, c in cover}, f.name
+    check_variants("covering")
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600)
+def test_the_suite_passes_every_conforming_variant_alone_and_drawn_combinations():
+    check_variants("all", list(range(1, 9)))
+
+
+def test_a_variant_run_with_a_fail_is_reported_as_the_suites_bug():
+    """The self-test's own judgement: a FAIL in a variant run (here forced by a fault on top) is a PROBLEM
+    naming the test, the variant and the requirements that allow it; INCONCLUSIVE is counted, not a problem."""
+    run = run_variant("exp_frames=exp1_only", {"exp_frames": "exp1_only"},
+                      ["--emulator-faults", "answer_late", "-k", "test_s4_4_3_get_esc_id or test_exp8_counts"])
+    assert not run.ok and run.failing
+    assert run.problem.startswith("the suite's bug: conformance/test_s4_4_3_get_esc_id.py::")
+    assert "FAILed on conforming variant exp_frames=exp1_only (allowed by R9-exp)" in run.problem
+    assert any("MSG_EXP8" in i for i in run.inconclusive), run.inconclusive
+    assert "1 of 1 variant runs FAILED" in headline([], [run])
