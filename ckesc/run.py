@@ -145,6 +145,10 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
         argv += ["--emulator-option", kv]
     if args.emulator_seed:
         argv += ["--emulator-seed", str(args.emulator_seed)]
+    if getattr(args, "progress", "on") != "on":
+        argv += ["--ckesc-progress", args.progress]
+    if getattr(args, "time_from", None):
+        argv += ["--ckesc-durations", str(Path(args.time_from).resolve())]
     if getattr(args, "emulator_variants", None) is not None:
         argv += ["--emulator-variants", str(args.emulator_variants)]
     if args.allow_motor_spin:

@@ -70,6 +70,12 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
     o.add_argument("--trace-format", choices=TRACE_FORMATS, default="blf",
                    help="each test's CAN traffic under <run>/traces/: blf (default), asc, log (candump), none")
     o.add_argument("-q", "--quiet", action="store_true", help="no per-test progress lines")
+    o.add_argument("--progress", choices=("on", "off"), default="on",
+                   help="a line per section with the protocol time planned, spent and an estimate of what is left "
+                   "(default on; on a terminal also after pytest's counter)")
+    o.add_argument("--time-from", metavar="RESULTS_JSON",
+                   help="estimate the time left from this earlier run of the bench (its results.json; default: the "
+                   "suite's own table of a faultless simulated run)")
     p.add_argument("pytest_args", nargs=argparse.REMAINDER, metavar="SECTION|MODULE ... [-- PYTEST_ARGS]",
                    help="sections (4.4.22), test modules by name or path; after --: passed to pytest")
 

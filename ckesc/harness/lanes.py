@@ -33,6 +33,7 @@ from typing import Any
 import can
 
 from ..emulator import sim_bus
+from ..emulator.variants import FREEDOMS
 from ..protocol.catalogue import DEFAULT_BITRATE
 from .epochs import PowerEpoch
 
@@ -579,8 +580,8 @@ class RealtimeEmulatorLane(BusLane):
                  timing_error: float = 0.002, temp_flash: bool = False, esc_options: dict[str, Any] | None = None) -> None:
         cmd = [sys.executable, "-m", "ckesc", "emulate", "--nodes", ",".join(map(str, nodes)), "--socketcand", "0",
                "--control", "0", "--seed", str(seed)]
-        for key, value in (esc_options or {}).items():  # conforming variants (EscConfig fields): --option NAME=VALUE
-            cmd += ["--option", f"{key}={value}"]
+        for key, value in (esc_options or {}).items():  # conforming variants: --option NAME=VALUE; others (boot_spread):
+            cmd += ["--option", f"{key}={value}"] if key in FREEDOMS else [f"--{key.replace('_', '-')}", str(value)]
         if faults:
             cmd += ["--faults", ",".join(faults)]
         # temp_flash: the emulated ESCs keep their flash across power cycles in a file that lives as long as
