@@ -1208,7 +1208,7 @@ def _outcome(rep: pytest.TestReport, strength: str, d: Dut | None) -> tuple[str,
             return "OBSERVED", ""
         return "PASS", ""
     if rep.skipped:
-        return ("INCONCLUSIVE" if "INCONCLUSIVE" in text else "SKIPPED"), text.removeprefix(f"{NotClaimed.__module__}.NotClaimed: ")
+        return ("INCONCLUSIVE" if "INCONCLUSIVE" in text else "SKIPPED"), text
     if rep.when == "setup":
         return "ERROR", text
     return "FAIL", text
@@ -1219,9 +1219,13 @@ def _longrepr_text(rep: pytest.TestReport) -> str:
     if lr is None:
         return ""
     if isinstance(lr, tuple):
-        return str(lr[2])
-    crash = getattr(getattr(lr, "reprcrash", None), "message", None)
-    return crash if crash else str(lr)
+        text = str(lr[2])
+    else:
+        crash = getattr(getattr(lr, "reprcrash", None), "message", None)
+        text = crash if crash else str(lr)
+    for verdict in (Inconclusive, NotClaimed):  # raised below the test (a helper, a fixture): pytest names the class
+        text = text.removeprefix(f"{verdict.__module__}.{verdict.__qualname__}: ")
+    return text
 
 
 # ----------------------------------------------------------------------------------------- reports
