@@ -48,6 +48,7 @@ def _run(config: str, seed: int, tmp: Path) -> dict:
                                    "can0", "--can-config", "host=127.0.0.1", "--can-config", f"port={emu.port}",
                                    "--can-config", "tcp_tune=True", "--node-id", "1", "--profile", str(where / "bench.toml"),
                                    "--power", "command", "--power-off-cmd", f"{power} off", "--power-on-cmd", f"{power} on",
+                                   "--can-bitrate-cmd", f"{sys.executable} -m ckesc control --port {emu.control} bitrate {{bitrate}}",
                                    "--allow-motor-spin", "--reports", str(reports), "--trace-format", "none"],
                                   cwd=where, env=env(where), capture_output=True, text=True)
     else:

@@ -492,7 +492,8 @@ class BusLane(Lane):
     @property
     def can_change_bitrate(self) -> bool:
         """Whether reopen() really moves the host to another bit rate (Set Baud's tests need it)."""
-        return bool(self.bitrate_cmd) or self.bus_kwargs.get("interface") != "socketcan"
+        # python-can sets no bit rate on SocketCAN (ip link does) nor through socketcand (its daemon's interface does)
+        return bool(self.bitrate_cmd) or self.bus_kwargs.get("interface") not in ("socketcan", "socketcand")
 
     def now(self) -> float:
         """Lane time: the epoch clock that SocketCAN (kernel receive stamps, and the host's own frames by
@@ -554,8 +555,9 @@ class BusLane(Lane):
 
     def reopen(self, bitrate: int) -> None:
         if not self.can_change_bitrate and bitrate != self.bitrate:
-            raise RuntimeError(f"the host cannot move {self.bus_kwargs.get('channel') or 'its SocketCAN interface'} to "
-                               f"{bitrate} bit/s: python-can does not set a SocketCAN bit rate (and vcan has none). Give "
+            raise RuntimeError(f"the host cannot move {self.bus_kwargs.get('channel') or 'its interface'} to "
+                               f"{bitrate} bit/s: python-can does not set a SocketCAN or socketcand bit rate (and vcan has "
+                               "none). Give "
                                "--can-bitrate-cmd (see --help), or deselect the tests that change it (-k 'not set_baud')")
         self.bus.shutdown()
         if self.bitrate_cmd:
@@ -652,6 +654,10 @@ class RealtimeEmulatorLane(BusLane):
                 h, p = parts[1].rsplit(":", 1)
                 ports[parts[0]] = (h, int(p))
         return ports
+
+    @property
+    def can_change_bitrate(self) -> bool:
+        return True  # the emulator's own hub: :meth:`reopen` moves the host
 
     def reopen(self, bitrate: int) -> None:
         # socketcand carries no bit rate: the emulator's bench decides who hears whom
