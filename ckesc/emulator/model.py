@@ -54,8 +54,6 @@ EXP_MODE = "exp"
 
 #: How the report timer may behave when reporting comes back (EscConfig.report_timer; R9a allows each)
 REPORT_TIMERS = _variants.FREEDOMS["report_timer"].choices
-#: ... and when a report comes next after a Set Freq write changed its interval (EscConfig.set_freq_timer; R9a)
-SET_FREQ_TIMERS = _variants.FREEDOMS["set_freq_timer"].choices
 _REPORT_NAMES = ("msg1", "msg2", "msg3")
 
 #: Fault code 1 -> the MSG1 self-test error bit it lights (4.4.4 status bits 7..0).
@@ -275,7 +273,7 @@ class EscModel:
         self.nvm_dirty = True
         start = self.ready_at + self.config.report_delay
         stagger = (0.0, 0.007, 0.013) if self.config.report_phase == "staggered" else (0.0, 0.0, 0.0)
-        self._next_report = {k: start + d for k, d in zip(("msg1", "msg2", "msg3"), stagger)}
+        self._next_report = {k: start + d for k, d in zip(_REPORT_NAMES, stagger)}
         self._report_floor = start
         self._next_can_test = start
 
@@ -777,7 +775,7 @@ class EscModel:
             return
         self._emit(due, "get_esc_id", {"node_id": node, "throttle_channel": channel}, layout="reply")
 
-    def _over_max(self, value: int, maximum: int) -> int:
+    def _over_max(self, maximum: int) -> int:
         """R6 (OBSERVE): a throttle above its maximum clamped, taken as zero, or (-1) ignored for the held one."""
         how = self.config.over_max_throttle
         return maximum if how == "clamp" else 0 if how == "zero" else -1
@@ -821,12 +819,12 @@ class EscModel:
             if 1 <= channel <= 6:
                 raw = f.fields["channels"][channel - 1]
                 if raw > THROTTLE_10B_MAX:
-                    raw = self._over_max(raw, THROTTLE_10B_MAX)
+                    raw = self._over_max(THROTTLE_10B_MAX)
                 value = raw if "ten_bit_not_doubled" in self.faults or raw < 0 else raw * 2
         if value is None:
             return False  # not addressed to this ESC's channel: not a command for it
         if value > THROTTLE_MAX:
-            value = self._over_max(value, THROTTLE_MAX)
+            value = self._over_max(THROTTLE_MAX)
         if value < 0:  # over_max_throttle "hold": the frame's value ignored, the command still heard
             value = self.can_throttle
         answered = "throttle_answered" in self.faults

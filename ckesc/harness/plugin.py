@@ -22,7 +22,7 @@ from ..emulator import variants
 from ..evidence.live import LaneRules, causes, failure_text
 from ..protocol import catalogue as cat
 from ..protocol import functions
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, requirement, strongest
+from ..protocol.requirements import REQUIREMENTS, requirement, section_heading, strongest
 from . import preflight
 from . import report as _report
 from .causes import broken_outside_a_fail
@@ -1271,8 +1271,7 @@ def _section_of(item: pytest.Item) -> str:
 
 
 def _section_title(item: pytest.Item) -> str:
-    section = _section_of(item)
-    return f"{section} {SECTION_TITLES.get(section, '')}".strip()
+    return section_heading(_section_of(item))
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:

@@ -27,7 +27,7 @@ from typing import Callable
 
 import pytest
 
-from ..protocol.requirements import SECTION_TITLES
+from ..protocol.requirements import section_heading
 
 #: the suite's own table of expected lane seconds per test id (``python -m ckesc.harness.progress``)
 TABLE = Path(__file__).resolve().parents[2] / "conformance" / "durations.json"
@@ -137,7 +137,7 @@ def section_of_id(nodeid: str) -> str:
     """``conformance/test_s4_4_22_set_freq.py::...`` -> ``4.4.22 Set/Get Freq`` (a batch's controller has ids only)."""
     m = _SECTION_OF_ID.search(str(nodeid))
     section = (m.group(1).replace("_", ".") if m.group(1) else m.group(2)) if m else ""
-    return f"{section} {SECTION_TITLES.get(section, '')}".strip()
+    return section_heading(section)
 
 
 class BatchProgress:
@@ -181,7 +181,6 @@ class ProgressReporter:
         self._current = ""
         self._said: set[str] = set()
         self._last_said = 0.0
-        self._wrapped = False
         self._mid_line = False
 
     def _now(self) -> tuple[float | None, float]:
@@ -203,7 +202,6 @@ class ProgressReporter:
                 return text[:-1] + self.clock.suffix() + "]" if self.clock and text.endswith("]") else text
 
             tr._get_progress_information_message = with_time_left
-            self._wrapped = True
 
     @pytest.hookimpl(tryfirst=True)  # before pytest's own line for the test starts
     def pytest_runtest_logstart(self, nodeid: str, location) -> None:

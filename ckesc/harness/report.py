@@ -27,7 +27,7 @@ from junit_xml import TestCase, TestSuite, to_xml_report_string
 from .. import __version__
 from ..protocol import catalogue as cat
 from ..protocol.ids import Kind
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_heading, section_key
 from . import causes, html_report
 from .verdict import claim_text, incomplete_banner
 
@@ -129,7 +129,7 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
             cases_props.append(props)
         cases += skipped_cases.get(section, [])
         cases_props += [{"verdict": "NOT RUN"}] * len(skipped_cases.get(section, []))
-        suites.append(TestSuite(f"{section} {SECTION_TITLES.get(section, '')}".strip(), cases, properties=suite_props))
+        suites.append(TestSuite(section_heading(section), cases, properties=suite_props))
     if unjudged := causes.rule_failures(results):  # the rules' failures, each where it was seen
         cases = []
         for u in unjudged:

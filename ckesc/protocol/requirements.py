@@ -43,6 +43,11 @@ SECTION_TITLES = MappingProxyType(
 )
 
 
+def section_heading(section: str) -> str:
+    """``4.4.22 Set/Get Freq``: a section's number and its title, as the reports and the console name it."""
+    return f"{section} {SECTION_TITLES.get(section, '')}".strip()
+
+
 @dataclass(frozen=True)
 class Requirement:
     id: str
