@@ -89,8 +89,8 @@ def run_suite(tmp: Path, port: int, selection: str, name: str) -> dict:
     """``ckesc run`` in a child process: its verdicts, wall time and peak RSS (MB)."""
     profile = tmp / "emulator-realtime.toml"
     if not profile.exists():  # the emulator's profile with the real-time lane's stated error (2 ms)
-        from ckesc import harness
-        text = (Path(harness.__file__).parent / "profiles" / "emulator.toml").read_text()
+        from ckesc import bench
+        text = (Path(bench.__file__).parent / "profiles" / "emulator.toml").read_text()
         profile.write_text(text.replace("error_s = 0.0 ", "error_s = 0.002 "))
     reports = tmp / f"reports-{name}"
     cmd = [sys.executable, "-m", "ckesc", "run", "--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0",

@@ -16,8 +16,8 @@ was broken while a SKIPPED test ran (INCONCLUSIVE and SKIPPED are reported, and 
 INCONCLUSIVE fail the run too).
 
 With ``--rig``, the same on every bench of a rig file at once (:func:`run_batch`): pytest-xdist, one worker
-per bench (:mod:`ckesc.harness.batch`), each bench's report in ``reports/<timestamp>/<bench>/`` and the
-batch's own (``batch.html``, ``batch.json``, ``junit.xml``: :mod:`ckesc.harness.batch_report`) beside them.
+per bench (:mod:`ckesc.rigs.batch`), each bench's report in ``reports/<timestamp>/<bench>/`` and the
+batch's own (``batch.html``, ``batch.json``, ``junit.xml``: :mod:`ckesc.rigs.batch_report`) beside them.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def _suite_root() -> str:
     """The directory holding the ``conformance`` package (a checkout, or site-packages of a wheel install):
     pytest's rootdir, so that test ids read ``conformance/test_s4_4_22_set_freq.py::...`` however the
     suite was installed and wherever it is run from."""
-    from .harness.plugin import conformance_dir  # pytest with it: only when a run is about to start
+    from .session.plugin import conformance_dir  # pytest with it: only when a run is about to start
 
     where = conformance_dir()
     return str(where.parent) if where else "."
@@ -125,7 +125,7 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
     selectors, extra = split_selection(list(args.pytest_args))
     targets = resolve_selection(selectors) or ["--pyargs", "conformance"]
     # labgrid (the rig extra) is a library here: its pytest plugin (step logging, LG_ENV) stays out of the run;
-    # the run order is the plugin's (harness/schedule.py): pytest-randomly, when installed, only on request
+    # the run order is the plugin's (session/schedule.py): pytest-randomly, when installed, only on request
     # (`-- -p randomly`, which comes later on the command line and so wins)
     argv = [*targets, "-p", "no:cacheprovider", "-p", "no:labgrid", "-p", "no:randomly", "--rootdir", _suite_root(), "--ckesc-summary", "--ckesc-reports", args.reports,
             "--dut", args.dut, "--lane", args.lane, "--ckesc-trace-format", args.trace_format,
@@ -160,7 +160,7 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
 def run_command(args: argparse.Namespace) -> int:
     import pytest
 
-    from .harness.causes import broken_outside_a_fail
+    from .reporting.causes import broken_outside_a_fail
 
     if getattr(args, "rig", None):
         return run_batch(args)
@@ -203,7 +203,7 @@ class _Collector:
     stopped: str | None = None
 
     def pytest_sessionfinish(self, session):
-        from .harness.plugin import state
+        from .session.plugin import state
 
         st = state(session.config)
         self.results = list(st.results.values())
@@ -226,7 +226,7 @@ class BatchError(ValueError):
 def _static_preflight(bench) -> None:
     """The bench's preflight without its bus (that is opened by its own worker: a bench that is not there is
     ABSENT, not a set-up mistake of the batch)."""
-    from .harness import preflight
+    from .session import preflight
 
     opts = {**BENCH_OPTIONS, "ckesc_reports": None, **bench.options()}
     if opts.get("power") == "manual":
@@ -240,7 +240,7 @@ def _static_preflight(bench) -> None:
 
 def batch_plan(args: argparse.Namespace) -> tuple[Any, list]:
     """The rig and its chosen benches, each checked (:class:`BatchError`)."""
-    from .harness import rig as rigs
+    from .rigs import rig as rigs
 
     given = [f"--{dest.replace('_', '-')}" for dest, default in BENCH_OPTIONS.items()
              if getattr(args, dest, default) not in (default, None, [], "")]
@@ -266,8 +266,9 @@ def run_batch(args: argparse.Namespace) -> int:
         print("ckesc run: error: --rig runs its benches through pytest-xdist, which is not installed: "
               "pip install 'ckesc-conformance[rig]' (or pip install -e '.[rig]' in a checkout)", file=sys.stderr)
         return EXIT_USAGE
-    from .harness import batch, batch_report, preflight
-    from .harness import report as reports
+    from .reporting import report as reports
+    from .rigs import batch, batch_report
+    from .session import preflight
 
     try:
         rig, benches = batch_plan(args)
@@ -306,7 +307,7 @@ def run_batch(args: argparse.Namespace) -> int:
     argv = [*targets, "-p", "no:cacheprovider", "-p", "no:terminal", "-p", "no:tmpdir", "-p", "no:labgrid",
             "-p", "no:randomly", "--rootdir", _suite_root(),
             "--ckesc-reports", str(batch_dir), "--ckesc-trace-format", args.trace_format,
-            "-p", "ckesc.harness.batch", "-n", str(len(benches)), "--dist", "each", "--max-worker-restart", "0",
+            "-p", "ckesc.rigs.batch", "-n", str(len(benches)), "--dist", "each", "--max-worker-restart", "0",
             "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning", *extra]
     print(f"ckesc run: batch of {len(benches)} benches ({', '.join(b.name for b in benches)}) from {rig.path}; "
           f"reports in {batch_dir}/", flush=True)

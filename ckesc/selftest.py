@@ -32,8 +32,8 @@ from typing import Any
 
 from .emulator import variants
 from .emulator.faults import FAULTS
-from .harness.causes import broken_outside_a_fail
 from .protocol.requirements import requirement
+from .reporting.causes import broken_outside_a_fail
 
 RUN_TIMEOUT_S = 600  # one suite run takes seconds in the simulated lane; this only stops a hang
 

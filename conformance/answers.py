@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 from contextlib import contextmanager
 
-from ckesc.harness.dut import DutError
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.dut import DutError
+from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, Kind

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.verdict import Inconclusive
 
 from .reports import need_decoded
 from .throttle import STREAM_PERIOD_S, can_throttle, command_for

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.verdict import Inconclusive
 
 from .reports import node_settings
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 
 from .reports import exp_capture

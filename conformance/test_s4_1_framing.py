@@ -24,9 +24,8 @@ from typing import Any
 
 import pytest
 
-from ckesc.harness.dut import DutError
-from ckesc.harness.plugin import state
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.dut import DutError
+from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import Frame, classify, encode
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, Kind
@@ -156,27 +155,27 @@ def run_counting_problems(frames: list[Heard], error_s: float) -> list[tuple[Hea
 # ------------------------------------------------------------------------------------------ tests: every frame
 @pytest.mark.requirement("F1")
 @pytest.mark.parametrize("scope", SCOPES)
-def test_frames_are_29_bit_message_or_service_frames(traffic, request, scope):
+def test_frames_are_29_bit_message_or_service_frames(traffic, ckesc_run, scope):
     """Every frame the DUT sends is a 29-bit extended data frame with the F1 layout: a message frame
     (not an anonymous one), or a service frame answering a request (request bit 0)."""
-    frames = in_scope(scope, traffic, request.config)
+    frames = in_scope(scope, traffic, ckesc_run)
     problems = check_each(frames, id_layout_problems)
     assert not problems, f"[F1] {describe(problems)}"
 
 
 @pytest.mark.requirement("F2", "4.1.3-start", "4.1.3-end", "4.1.3-toggle")
 @pytest.mark.parametrize("scope", SCOPES)
-def test_tail_byte_marks_a_single_frame_transfer(traffic, request, scope):
+def test_tail_byte_marks_a_single_frame_transfer(traffic, ckesc_run, scope):
     """Every frame the DUT sends ends with a tail byte start=1, end=1, toggle=0 (RawCommand_10b, the
     one frame without a tail byte, is the host's)."""
-    frames = in_scope(scope, traffic, request.config)
+    frames = in_scope(scope, traffic, ckesc_run)
     problems = check_each(frames, tail_problems)
     assert not problems, describe(problems)
 
 
 @pytest.mark.requirement("F3", "4.1.3-tid")
 @pytest.mark.parametrize("scope", SCOPES)
-def test_transfer_ids_count_per_frame_type(traffic, request, scope):
+def test_transfer_ids_count_per_frame_type(traffic, ckesc_run, scope):
     """Consecutive frames of one message type carry transfer ids +1 modulo 32 (the provoked capture
     has more than 32 MSG1 frames: the wrap from 31 to 0 is seen)."""
     problems, pairs = [], 0
@@ -185,16 +184,16 @@ def test_transfer_ids_count_per_frame_type(traffic, request, scope):
         problems, pairs = problems + more, pairs + n
     assert pairs, "no two frames of one message type in the capture: nothing to check"
     if scope == "run":
-        lane = state(request.config).lane
-        problems += run_counting_problems(run_heard(request.config), lane.timing_error if lane else 0.0)
+        lane = ckesc_run.lane
+        problems += run_counting_problems(run_heard(ckesc_run), lane.timing_error if lane else 0.0)
     assert not problems, describe(problems)
 
 
 @pytest.mark.requirement("4.1.2-N2", "F7")
 @pytest.mark.parametrize("scope", SCOPES)
-def test_source_is_an_esc_node_id(traffic, request, scope):
+def test_source_is_an_esc_node_id(traffic, ckesc_run, scope):
     """Every frame the DUT sends comes from a node id in 1..0x7D."""
-    frames = in_scope(scope, traffic, request.config)
+    frames = in_scope(scope, traffic, ckesc_run)
     problems = check_each(frames, source_problems)
     assert not problems, describe(problems)
 

@@ -59,30 +59,30 @@ def _not_in_table(frames: list[Heard]) -> list[str]:
 
 @pytest.mark.requirement("4.3.1-1")
 @pytest.mark.parametrize("scope", SCOPES)
-def test_message_type_ids_in_the_vendor_range(traffic, request, scope):
+def test_message_type_ids_in_the_vendor_range(traffic, ckesc_run, scope):
     """Every message frame the DUT sends has a type id in [20000, 21000)."""
-    frames = in_scope(scope, traffic, request.config)
+    frames = in_scope(scope, traffic, ckesc_run)
     problems = check_each(frames, message_range_problems)
     assert not problems, describe(problems)
 
 
 @pytest.mark.requirement("4.3.1-2")
 @pytest.mark.parametrize("scope", SCOPES)
-def test_service_ids_in_the_vendor_range(traffic, request, scope):
+def test_service_ids_in_the_vendor_range(traffic, ckesc_run, scope):
     """Every service frame the DUT sends has a service id in [200, 256): it does not answer a request
     outside the range either (the provoked traffic includes DroneCAN's GetNodeInfo)."""
-    frames = in_scope(scope, traffic, request.config)
+    frames = in_scope(scope, traffic, ckesc_run)
     problems = check_each(frames, service_range_problems)
     assert not problems, describe(problems)
 
 
 @pytest.mark.requirement("4.3.2-T", "F5")
 @pytest.mark.parametrize("scope", SCOPES)
-def test_every_frame_type_at_the_table_priority(traffic, request, scope):
+def test_every_frame_type_at_the_table_priority(traffic, ckesc_run, scope):
     """Every frame the DUT sends whose type the table gives a priority carries that priority
     (HIGHEST 0, HIGH 8, MEDIUM 16, LOW 24, LOWEST 31): reports LOWEST, MSG Control and GET_ESC_ID
     answers MEDIUM, each service answer its service's."""
-    frames = in_scope(scope, traffic, request.config)
+    frames = in_scope(scope, traffic, ckesc_run)
     problems = check_each(frames, priority_problems)
     assert not problems, f"[F5] {describe(problems)}"
     assert any(h.spec is not None and h.spec.priority is not None for h in traffic.heard), "no frame with a listed priority"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.verdict import Inconclusive
 
 from .physics import SAME_SENSOR_C
 from .reports import REACT_S, exp_reports, interval_s

@@ -8,8 +8,8 @@ moved to an unexpected id is still found.
 
 import pytest
 
-from ckesc.harness.epochs import AFTER, INSIDE
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.epochs import AFTER, INSIDE
+from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.host import HostProtocol

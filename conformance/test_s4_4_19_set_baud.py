@@ -9,9 +9,9 @@ at whichever rate the DUT answers after it.
 
 import pytest
 
-from ckesc.harness.dut import DutError
-from ckesc.harness.epochs import AFTER, INSIDE
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.dut import DutError
+from ckesc.bench.epochs import AFTER, INSIDE
+from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 

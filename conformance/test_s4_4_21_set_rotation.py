@@ -8,7 +8,7 @@ fixture restores (and verifies) the direction it found.
 
 import pytest
 
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import Status
 from ckesc.protocol.frame import frame_bits

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.verdict import Inconclusive
 
 from .physics import CELL_FULL_V, MIN_SUPPLY_V, check_voltage_current, esc_limits
 from .reports import exp_reports, interval_s

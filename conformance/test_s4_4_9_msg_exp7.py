@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import LedColor
 

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import pytest
 
-from ckesc.harness.dut import DutError
-from ckesc.harness.verdict import Inconclusive
+from ckesc.bench.dut import DutError
+from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import Kind

@@ -17,8 +17,7 @@ from typing import Any
 
 import pytest
 
-from ckesc.harness.dut import Dut, DutError
-from ckesc.harness.plugin import keep_segment, state
+from ckesc.bench.dut import Dut, DutError
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import FALLBACK_PRIORITY, Frame, WireFrame, classify
 from ckesc.protocol.ids import Kind, parse_can_id, service_id
@@ -176,21 +175,20 @@ def find_node(d: Recorder) -> int:
     return max(set(sources), key=sources.count)
 
 
-def bare_dut(config: pytest.Config, lane) -> Recorder:
+def bare_dut(run, lane) -> Recorder:
     """A host on the lane that needs no decodable answer to start. The plugin's ``dut`` fixture reads
     the settings through decoded answers: with a DUT whose framing is broken it cannot even start,
     yet that is exactly the DUT this module must fail, not error on."""
-    st = state(config)
-    node = config.getoption("node_id") or st.node_id
+    node = run.node_id
     if node:
-        return Recorder(lane, st.profile, node_id=node)
+        return Recorder(lane, run.profile, node_id=node)
     try:
-        d = Recorder(lane, st.profile)  # GET_ESC_ID discovery (R1)
+        d = Recorder(lane, run.profile)  # GET_ESC_ID discovery (R1)
     except DutError:
-        d = Recorder(lane, st.profile, node_id=0)  # a placeholder until the raw search below
+        d = Recorder(lane, run.profile, node_id=0)  # a placeholder until the raw search below
         d.node_id = find_node(d)
         d.nodes = [d.node_id]
-    st.node_id = st.node_id or d.node_id
+    run.node_id = run.node_id or d.node_id
     return d
 
 
@@ -249,26 +247,26 @@ def provoke(d: Recorder) -> Traffic:
     return Traffic(d.node_id, d.host_node, heard, asked, broadcasts)
 
 
-def provoked_traffic(request: pytest.FixtureRequest, lane) -> Iterator[Traffic]:
+def provoked_traffic(run, lane) -> Iterator[Traffic]:
     """Body of the module-scoped ``traffic`` fixtures: provoke, yield, and put the DUT's decoded frames
     into the run-wide record as the plugin does for every test."""
-    d = bare_dut(request.config, lane)
+    d = bare_dut(run, lane)
     try:
         yield provoke(d)
     finally:
         d.zero_throttle()
         d.wait(cat.ANSWER_DELAY_MAX_S)  # read the echoes: the next test's host must not hear them as new
-        keep_segment(request.config, [f for f in d.trace if f.source == d.node_id])
+        run.keep([f for f in d.trace if f.source == d.node_id])
 
 
 @pytest.fixture(scope="module")
-def traffic(request: pytest.FixtureRequest, ckesc_lane) -> Iterator[Traffic]:
+def traffic(ckesc_run, ckesc_lane) -> Iterator[Traffic]:
     """The provoked traffic, once per module that uses it (``traffic = wire.traffic``)."""
-    yield from provoked_traffic(request, ckesc_lane)
+    yield from provoked_traffic(ckesc_run, ckesc_lane)
 
 
 # ------------------------------------------------------------------------------------------ scopes
-def run_heard(config: pytest.Config) -> list[Heard]:
+def run_heard(run) -> list[Heard]:
     """Every frame the DUT sent in the run so far, as the plugin collected them.
 
     Harness gap: ``dut_segments`` keeps decoded frames only (a frame that did not decode - the very
@@ -276,14 +274,14 @@ def run_heard(config: pytest.Config) -> list[Heard]:
     a test's settings are restored, and the frames of ``multi_dut``'s private bench come with that
     bench's own clock. The run-wide checks therefore add a fresh provoked capture, and the transfer
     id check looks only at pairs of frames that provably had nothing between them."""
-    return [replace(Heard.of_frame(f), segment=i) for i, seg in enumerate(state(config).dut_segments) for f in seg]
+    return [replace(Heard.of_frame(f), segment=i) for i, seg in enumerate(run.segments) for f in seg]
 
 
 SCOPES = (pytest.param("provoked", id="provoked"), pytest.param("run", id="run", marks=pytest.mark.last))
 
 
-def in_scope(scope: str, traffic: Traffic, config: pytest.Config) -> list[Heard]:
-    return traffic.heard if scope == "provoked" else run_heard(config) + traffic.heard
+def in_scope(scope: str, traffic: Traffic, run) -> list[Heard]:
+    return traffic.heard if scope == "provoked" else run_heard(run) + traffic.heard
 
 
 def check_each(frames: list[Heard], rule: Callable[[Heard], list[str]]) -> list[tuple[Heard, str]]:

@@ -1,4 +1,4 @@
-"""``ckesc compare``: its arguments, output files and exit code; :mod:`ckesc.harness.compare` compares the runs."""
+"""``ckesc compare``: its arguments, output files and exit code; :mod:`ckesc.reporting.compare` compares the runs."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from ..harness import compare
+from ..reporting import compare
 from .common import EXIT_OK, EXIT_USAGE
 
 EXIT_REGRESSED = 1

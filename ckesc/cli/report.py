@@ -1,11 +1,11 @@
-"""``ckesc report``: its argument and exit code; :mod:`ckesc.harness.html_report` builds the page."""
+"""``ckesc report``: its argument and exit code; :mod:`ckesc.reporting.html_report` builds the page."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-from ..harness.html_report import build
+from ..reporting.html_report import build
 
 
 def add_report_command(sub) -> None:

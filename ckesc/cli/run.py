@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .. import run as run_lib
-from ..harness.traces import TRACE_FORMATS
+from ..session.traces import TRACE_FORMATS
 
 
 def add_run_command(sub: argparse._SubParsersAction) -> None:

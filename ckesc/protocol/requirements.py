@@ -8,15 +8,29 @@ from __future__ import annotations
 
 import tomllib
 from dataclasses import dataclass
+from enum import StrEnum
 from importlib import resources
 from types import MappingProxyType
 
 from .catalogue import CATALOGUE
 
+#: a requirement's strength, strongest first (a failure message leads with the strongest broken one)
 STRENGTHS = ("SHALL", "READING", "OBSERVE")
 
-#: what a test can come out as: SHALL / READING tests PASS or FAIL, OBSERVE ones are OBSERVED
-VERDICTS = ("PASS", "FAIL", "INCONCLUSIVE", "OBSERVED", "SKIPPED", "ERROR")
+
+class Verdict(StrEnum):
+    """What a test can come out as: SHALL / READING tests PASS or FAIL, OBSERVE ones are OBSERVED. A
+    ``str``: it compares equal to, and is written as, its name."""
+
+    PASS = "PASS"
+    FAIL = "FAIL"
+    INCONCLUSIVE = "INCONCLUSIVE"
+    OBSERVED = "OBSERVED"
+    SKIPPED = "SKIPPED"
+    ERROR = "ERROR"
+
+
+VERDICTS = tuple(Verdict)
 
 
 def section_key(section: str) -> tuple:

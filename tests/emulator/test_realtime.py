@@ -27,14 +27,14 @@ import can
 import pytest
 from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_message, convert_can_message_to_ascii_message
 
+from ckesc.bench.dut import echo_probe
+from ckesc.bench.lanes import BusLane, NoPower
 from ckesc.cli import main
 from ckesc.emulator.bench import Bench
 from ckesc.emulator.control import control_request
 from ckesc.emulator.flash import FlashStore
 from ckesc.emulator.realtime import Histogram, RealtimeEmulator
 from ckesc.emulator.socketcand import _parse_send, fmt_frame
-from ckesc.harness.dut import echo_probe
-from ckesc.harness.lanes import BusLane, NoPower
 from ckesc.protocol import Decoder, Frame, Kind, WireFrame, decode, encode
 from ckesc.protocol import catalogue as cat
 

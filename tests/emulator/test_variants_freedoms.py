@@ -233,7 +233,7 @@ def test_the_slowest_conforming_boot_still_reports_within_the_emulator_profiles_
     import tomllib
     from importlib import resources
 
-    profile = tomllib.loads(resources.files("ckesc.harness").joinpath("profiles/emulator.toml").read_text())
+    profile = tomllib.loads(resources.files("ckesc.bench").joinpath("profiles/emulator.toml").read_text())
     boot_s = profile["timing"]["boot_s"]
     m = EscModel(EscConfig(node_id=NODE, boot_time=variants.FREEDOMS["boot_time"].span[1],  # type: ignore[index]
                            report_delay=variants.FREEDOMS["report_delay"].span[1],  # type: ignore[index]

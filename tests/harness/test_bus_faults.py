@@ -19,15 +19,15 @@ from pathlib import Path
 import can
 import flaky_bus
 import pytest
+from ckesc.harness import lanes
 from procs import CKESC, Emulator
 from procs import env as _env
 
+from ckesc.bench.dut import Dut
+from ckesc.bench.lanes import BenchGone, BusFault, BusLane, NoPower
+from ckesc.bench.profile import DutProfile
 from ckesc.emulator.bench import Bench
 from ckesc.emulator.realtime import RealtimeEmulator
-from ckesc.harness import lanes
-from ckesc.harness.dut import Dut
-from ckesc.harness.lanes import BenchGone, BusFault, BusLane, NoPower
-from ckesc.harness.profile import DutProfile
 
 _channels = itertools.count()
 

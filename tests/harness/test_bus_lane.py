@@ -17,9 +17,9 @@ from types import SimpleNamespace
 
 import can
 import pytest
-
 from ckesc.harness import lanes
-from ckesc.harness.lanes import BusLane, NoPower
+
+from ckesc.bench.lanes import BusLane, NoPower
 
 _CHANNELS = itertools.count()
 EXT = {"is_extended_id": True}

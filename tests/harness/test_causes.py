@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from ckesc.harness.causes import groups, summary_lines
+from ckesc.reporting.causes import groups, summary_lines
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FAULTS = "report_interval_wrong,answer_late"

@@ -21,13 +21,13 @@ from pathlib import Path
 
 import pytest
 
+from ckesc.bench.profile import DutProfile, ProfileError
 from ckesc.evidence import BusRules
-from ckesc.harness.batch_report import bench_status
-from ckesc.harness.profile import DutProfile, ProfileError
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import encode
 from ckesc.protocol.functions import CORE, OPTIONAL
 from ckesc.protocol.requirements import REQUIREMENTS
+from ckesc.rigs.batch_report import bench_status
 
 SUITE = Path(__file__).resolve().parents[2] / "conformance"
 #: the emulator without Get Rec, Expand Set Part and MSG_EXP mode (an ESC model lacking them)
@@ -49,7 +49,7 @@ def latest(reports: Path) -> tuple[dict, ET.Element, str, str]:
 
 def emulator_profile(tmp: Path, name: str, extra: str) -> Path:
     """The shipped emulator profile with ``extra`` TOML appended (a bench's own copy)."""
-    text = (Path(__file__).resolve().parents[2] / "ckesc/harness/profiles/emulator.toml").read_text()
+    text = (Path(__file__).resolve().parents[2] / "ckesc/bench/profiles/emulator.toml").read_text()
     path = tmp / name
     path.write_text(text.replace("[timing]\n", "[timing]\n" + extra) if extra.startswith("jitter_s") else text + extra)
     return path

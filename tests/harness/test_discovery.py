@@ -15,11 +15,11 @@ widened to 0.3 s so that the queries (one every 128 ms while nothing answers) al
 
 from __future__ import annotations
 
-from ckesc.harness.dut import Dut
-from ckesc.harness.lanes import RealtimeEmulatorLane
-from ckesc.harness.plugin import MULTI_NODES
-from ckesc.harness.profile import DutProfile
+from ckesc.bench.dut import Dut
+from ckesc.bench.lanes import RealtimeEmulatorLane
+from ckesc.bench.profile import DutProfile
 from ckesc.protocol import catalogue as cat
+from ckesc.session.plugin import MULTI_NODES
 
 SPREAD_S = 0.3  # ESC k of 3 boots k x 0.1 s after the first: wider than the 128 ms between discovery's queries
 

@@ -106,7 +106,7 @@ def test_a_setup_mistake_is_one_line_exit_2_and_no_report(tmp_path, args, expect
 
 
 def test_a_good_profile_of_ones_own_is_found_by_path_and_by_name_in_fixtures_duts(tmp_path):
-    from ckesc.harness.profile import DutProfile
+    from ckesc.bench.profile import DutProfile
 
     own = tmp_path / "fixtures" / "duts"
     own.mkdir(parents=True)

@@ -13,8 +13,8 @@ import pytest
 from junitparser import JUnitXml
 
 import ckesc
-from ckesc.harness.report import classname, git_revision, suite_properties
 from ckesc.protocol.requirements import SECTION_TITLES
+from ckesc.reporting.report import classname, git_revision, suite_properties
 
 REPO = Path(ckesc.__file__).resolve().parents[1]
 SAFE = re.compile(r"ckesc\.[a-z][a-z0-9_]*")  # one dot: Jenkins' package "ckesc", a class per section

@@ -27,12 +27,12 @@ from procs import CKESC, Emulator
 from procs import env as _env
 
 from ckesc import harness
+from ckesc.bench.dut import Dut, echo_probe
+from ckesc.bench.lanes import BusLane, NoPower, OwnFrame
+from ckesc.bench.profile import DutProfile
 from ckesc.emulator.bench import Bench
 from ckesc.emulator.realtime import RealtimeEmulator
 from ckesc.evidence.live import LaneRules
-from ckesc.harness.dut import Dut, echo_probe
-from ckesc.harness.lanes import BusLane, NoPower, OwnFrame
-from ckesc.harness.profile import DutProfile
 
 _channels = itertools.count()
 

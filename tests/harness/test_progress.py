@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from procs import CKESC, env
 
-from ckesc.harness.progress import SHRINK_S, TABLE, RunClock, read_table
+from ckesc.session.progress import SHRINK_S, TABLE, RunClock, read_table
 
 LINE = re.compile(r"^time: \[(?P<where>[^\]]+)\] protocol time (?P<spent>\d+) s of ~(?P<total>\d+) s, "
                   r"(?P<elapsed>[\d:]+) elapsed, ~(?P<left>[\d:]+) left \((?P<done>\d+) of (?P<n>\d+) tests\)$")
@@ -50,5 +50,5 @@ def test_a_whole_run_says_its_time_left_and_ends_where_it_said(tmp_path: Path) -
         assert abs(int(m["total"]) - real_end) <= ESTIMATE_ERROR * real_end, (m.group(0), real_end)
     # the suite's table knows every test of the suite (a test added without remaking it is estimated blind)
     missing = {r["nodeid"] for r in doc["results"]} - set(read_table())
-    assert not missing, f"{len(missing)} tests not in {TABLE.name} (remake: python -m ckesc.harness.progress " \
+    assert not missing, f"{len(missing)} tests not in {TABLE.name} (remake: python -m ckesc.session.progress " \
                         f"reports/latest/results.json), e.g. {sorted(missing)[:3]}"

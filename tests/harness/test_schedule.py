@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from ckesc.harness.epochs import AFTER, INSIDE, PowerEpoch, unusable
-from ckesc.harness.schedule import LEAD_S, UNKNOWN_S, Plan
+from ckesc.bench.epochs import AFTER, INSIDE, PowerEpoch, unusable
 from ckesc.protocol import catalogue as cat
+from ckesc.session.schedule import LEAD_S, UNKNOWN_S, Plan
 
 W = cat.CONFIG_WINDOW_S
 

@@ -12,11 +12,11 @@ from pathlib import Path
 import can
 import pytest
 
-from ckesc.harness.lanes import SimLane
-from ckesc.harness.plugin import MULTI_NODES
-from ckesc.harness.traces import TRACE_FORMATS, TestTraces, trace_name
+from ckesc.bench.lanes import SimLane
 from ckesc.protocol import DecodeError, Decoder, encode
 from ckesc.protocol.ids import parse_can_id
+from ckesc.session.plugin import MULTI_NODES
+from ckesc.session.traces import TRACE_FORMATS, TestTraces, trace_name
 
 
 class _Collect(can.Listener):

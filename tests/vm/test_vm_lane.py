@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from ckesc.harness.profile import DutProfile
+from ckesc.bench.profile import DutProfile
 
 ROOT = Path(__file__).resolve().parents[2]
 VM_LANE = ROOT / "tools" / "vm-lane"

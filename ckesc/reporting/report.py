@@ -29,7 +29,7 @@ from ..protocol import catalogue as cat
 from ..protocol.ids import Kind
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_heading, section_key
 from . import causes, html_report
-from .verdict import claim_text, incomplete_banner
+from .results import claim_text, incomplete_banner
 
 
 def _properties(r) -> dict[str, str]:

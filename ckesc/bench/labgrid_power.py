@@ -31,11 +31,11 @@ import os
 import signal
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-from . import preflight
+from .errors import PreflightError
 from .lanes import PowerControl
-from .preflight import PreflightError
 
 #: what installs labgrid (the set-up error names it)
 INSTALL_HINT = 'pip install ".[rig]"'
@@ -211,11 +211,29 @@ def _remote_places(config: dict) -> list[str]:
     return [name for name in resources.get("RemotePlace", {}) if name]
 
 
+LABGRID_OPTIONS = ("labgrid_env", "labgrid_target", "labgrid_place", "labgrid_coordinator")
+
+
+def labgrid_options(get: Callable[[str], Any]) -> None:
+    """--power labgrid's options: given together, the environment file there (labgrid itself is not needed yet)."""
+    if get("power") != "labgrid":
+        for opt in LABGRID_OPTIONS:
+            if get(opt):
+                raise PreflightError(f"--{opt.replace('_', '-')} is for --power labgrid")
+        return
+    env_file = get("labgrid_env")
+    if not env_file:
+        raise PreflightError("--power labgrid needs --labgrid-env FILE (a labgrid environment file whose target has a "
+                             "power driver) and --labgrid-target NAME")
+    if not Path(env_file).is_file():
+        raise PreflightError(f"--labgrid-env {env_file}: no such file")
+
+
 def open_power(get: Option) -> LabgridPower:
     """--power labgrid: the target's power driver, activated, on its place (acquired) if it has one.
     Every set-up problem is a :class:`PreflightError` naming the file, the target or the place; a place
     acquired here is released again when a later step fails."""
-    preflight.labgrid_options(get)
+    labgrid_options(get)
     _import_labgrid()
     from labgrid import Environment
     from labgrid.exceptions import NoDriverFoundError

@@ -37,8 +37,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from ..bench.profile import validated
 from ..protocol.ids import ESC_NODE_IDS
-from .profile import validated
 
 BENCH_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
 POWER_WORDS = ("emulator", "none", "manual")

@@ -1,5 +1,5 @@
 """DUT profiles: what a device has, how precisely the lane can time it, and which READINGs it
-overrides. The profiles this package ships (``ckesc/harness/profiles/*.toml``: ``emulator``,
+overrides. The profiles this package ships (``ckesc/bench/profiles/*.toml``: ``emulator``,
 ``ckesc-generic``, ``vcan-vm``) are package data, found by name from any directory; a profile of
 your own is a path, or a name found in ``./fixtures/duts/``.
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable, Generic, Hashable, TypeVar
 
-from .epochs import AFTER, INSIDE
+from ..bench.epochs import AFTER, INSIDE
 
 T = TypeVar("T", bound=Hashable)
 

@@ -29,7 +29,7 @@ import pytest
 
 from ..protocol.requirements import section_heading
 
-#: the suite's own table of expected lane seconds per test id (``python -m ckesc.harness.progress``)
+#: the suite's own table of expected lane seconds per test id (``python -m ckesc.session.progress``)
 TABLE = Path(__file__).resolve().parents[2] / "conformance" / "durations.json"
 #: how many lane seconds of "expected" the correction needs before it trusts the run's own pace fully
 SHRINK_S = 60.0
@@ -254,7 +254,7 @@ def write_table(results: str | Path, out: str | Path = TABLE) -> int:
         raise SystemExit("the table is made from a complete, faultless run in the simulated lane (ckesc run)")
     seconds = {r["nodeid"]: round(float(r.get("lane_seconds") or 0.0), 3) for r in doc["results"]}
     Path(out).write_text(json.dumps({"about": "each conformance test's lane seconds in a faultless simulated run "
-                                              "(ckesc/harness/progress.py; remake: python -m ckesc.harness.progress "
+                                              "(ckesc/session/progress.py; remake: python -m ckesc.session.progress "
                                               "reports/latest/results.json)", "lane_seconds": seconds},
                                     indent=1, sort_keys=False) + "\n", encoding="utf-8")
     return len(seconds)

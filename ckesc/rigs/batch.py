@@ -1,7 +1,7 @@
 """Several benches in one pytest session through pytest-xdist (``ckesc run --rig``): one worker per bench,
 each running every selected test against its own bench, with its own plugin state and its own report.
 
-How: ``-n N --dist each`` (xdist sends every test to every worker), ``-p ckesc.harness.batch`` (this module,
+How: ``-n N --dist each`` (xdist sends every test to every worker), ``-p ckesc.rigs.batch`` (this module,
 loaded in every worker too), and :class:`Controller` in the controlling process, which
 
 * gives each worker its bench when xdist sets it up (``pytest_configure_node``: the bench's plugin options
@@ -42,8 +42,8 @@ from typing import Any
 import pytest
 from xdist.scheduler import EachScheduling
 
-from . import plugin
-from .progress import BatchProgress
+from ..session import plugin
+from ..session.progress import BatchProgress
 
 WORKER_KEY = "ckesc_bench"
 _SETUP_ERROR = pytest.StashKey[str]()

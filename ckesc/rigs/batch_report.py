@@ -29,10 +29,10 @@ from pathlib import Path
 from typing import Any
 
 from ..protocol.requirements import SECTION_TITLES, VERDICTS, section_key
-from . import compare
-from .causes import broken_outside_a_fail
-from .html_report import _CSS, _badge, _e, _requirement_result
-from .report import classname
+from ..reporting import compare
+from ..reporting.causes import broken_outside_a_fail
+from ..reporting.html_report import _CSS, _badge, _e, _requirement_result
+from ..reporting.report import classname
 
 STATUSES = ("PASS", "FAIL", "ABSENT", "ABORTED", "BROKEN", "INTERRUPTED")
 

@@ -22,15 +22,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ..bench.errors import PreflightError
+from ..bench.labgrid_power import labgrid_options
+from ..bench.profile import DutProfile, ProfileError
 from ..emulator import variants
 from ..emulator.faults import FAULTS
 from ..protocol.ids import ESC_NODE_IDS
-from .profile import DutProfile, ProfileError
-
-
-class PreflightError(Exception):
-    """A set-up mistake: the message is one line naming what is wrong and, where there is one, the way out."""
-
 
 Option = Callable[[str], Any]  # the run's options by dest name (pytest's config.getoption)
 
@@ -141,24 +138,6 @@ def open_bus(kwargs: dict[str, Any]) -> None:
         bus.shutdown()
     except Exception:  # noqa: BLE001 - it opened; closing is best effort
         pass
-
-
-LABGRID_OPTIONS = ("labgrid_env", "labgrid_target", "labgrid_place", "labgrid_coordinator")
-
-
-def labgrid_options(get: Option) -> None:
-    """--power labgrid's options: given together, the environment file there (labgrid itself is not needed yet)."""
-    if get("power") != "labgrid":
-        for opt in LABGRID_OPTIONS:
-            if get(opt):
-                raise PreflightError(f"--{opt.replace('_', '-')} is for --power labgrid")
-        return
-    env_file = get("labgrid_env")
-    if not env_file:
-        raise PreflightError("--power labgrid needs --labgrid-env FILE (a labgrid environment file whose target has a "
-                             "power driver) and --labgrid-target NAME")
-    if not Path(env_file).is_file():
-        raise PreflightError(f"--labgrid-env {env_file}: no such file")
 
 
 def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None,

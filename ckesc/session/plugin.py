@@ -18,17 +18,9 @@ from typing import Any
 
 import pytest
 
-from ..emulator import variants
-from ..evidence.live import LaneRules, causes, failure_text
-from ..protocol import catalogue as cat
-from ..protocol import functions
-from ..protocol.requirements import REQUIREMENTS, requirement, section_heading, strongest
-from . import preflight
-from . import report as _report
-from .causes import broken_outside_a_fail
-from .dut import Dut, DutError, DutUnreachable, echo_probe
-from .epochs import PowerEpoch, unusable
-from .lanes import (
+from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
+from ..bench.epochs import PowerEpoch, unusable
+from ..bench.lanes import (
     HOST_SEND_ERROR_S,
     BenchGone,
     BusFault,
@@ -41,11 +33,19 @@ from .lanes import (
     RealtimeEmulatorLane,
     SimLane,
 )
-from .profile import DutProfile
+from ..bench.profile import DutProfile
+from ..bench.verdict import Inconclusive, NotClaimed
+from ..emulator import variants
+from ..evidence.live import LaneRules, causes, failure_text
+from ..protocol import catalogue as cat
+from ..protocol import functions
+from ..protocol.requirements import REQUIREMENTS, requirement, section_heading, strongest
+from ..reporting import report as _report
+from ..reporting.causes import broken_outside_a_fail
+from . import preflight
 from .progress import ProgressReporter
 from .schedule import LEAD_S, Plan
 from .traces import TRACE_FORMATS, TestTraces
-from .verdict import Inconclusive, NotClaimed
 
 CONFORMANCE_PACKAGE = "conformance"
 
@@ -268,7 +268,7 @@ _LABGRID = pytest.StashKey[PowerControl]()
 
 def _open_labgrid(config: pytest.Config) -> None:
     """--power labgrid: its driver (and place, acquired), released by pytest's cleanup on every way out."""
-    from .labgrid_power import open_power
+    from ..bench.labgrid_power import open_power
 
     power = open_power(config.getoption)
     config.add_cleanup(power.close)
@@ -830,6 +830,45 @@ def keep_segment(config: pytest.Config, frames: list) -> None:
         st.info["run_frames_not_kept"] = st.info.get("run_frames_not_kept", 0) + len(frames) - max(room, 0)
         frames = frames[:max(room, 0)]
     st.dut_segments.append(frames)
+
+class RunView:
+    """What a conformance module may know of the run (the ``ckesc_run`` fixture): the lane and profile, the
+    DUT's node id once known, the DUT's frames of the tests so far (one list per test), and a way to add its
+    own frames to that record. Conformance modules reach the run through it, never the plugin's state."""
+
+    def __init__(self, config: pytest.Config) -> None:
+        self._config = config
+
+    @property
+    def lane(self) -> Lane | None:
+        return state(self._config).lane
+
+    @property
+    def profile(self) -> DutProfile | None:
+        return state(self._config).profile
+
+    @property
+    def node_id(self) -> int | None:
+        """The DUT's node id: ``--node-id``, else the one discovered so far (None before)."""
+        return self._config.getoption("node_id") or state(self._config).node_id
+
+    @node_id.setter
+    def node_id(self, node: int | None) -> None:
+        state(self._config).node_id = node
+
+    @property
+    def segments(self) -> list[list]:
+        return state(self._config).dut_segments
+
+    def keep(self, frames: list) -> None:
+        keep_segment(self._config, frames)
+
+
+@pytest.fixture(scope="session")
+def ckesc_run(request: pytest.FixtureRequest) -> RunView:
+    """The run as a conformance module sees it (:class:`RunView`)."""
+    return RunView(request.config)
+
 
 #: The private bench of :func:`multi_dut` in the emulator lanes: node ids chosen so that
 #: node_id % 32 covers 1, 2 and wraps (33 -> slot 1).

@@ -28,7 +28,7 @@ from typing import Any
 from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
 from .causes import groups
-from .verdict import claim_text, incomplete_banner
+from .results import claim_text, incomplete_banner
 
 #: how a requirement's result is drawn from its tests' verdicts: the first that occurs
 _WORST_FIRST = ("FAIL", "ERROR", "INCONCLUSIVE", "PASS", "OBSERVED", "SKIPPED")

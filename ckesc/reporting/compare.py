@@ -33,7 +33,7 @@ from typing import Any
 from ..protocol.catalogue import firmware_date
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
 from .html_report import _CSS, _badge, _e, _measurements, _new_figure, _requirement_result, _svg
-from .verdict import incomplete_banner
+from .results import incomplete_banner
 
 GOOD = ("PASS", "OBSERVED")
 BAD = ("FAIL", "ERROR", "INCONCLUSIVE")

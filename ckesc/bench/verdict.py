@@ -18,10 +18,12 @@ from typing import Any
 
 import pytest
 
+from ..protocol.requirements import STRENGTHS
+
 CLOCKS = ("simulated", "bus timestamp", "host clock")
 
 #: the order in which broken requirements lead a failure message
-STRENGTH_ORDER = ("SHALL", "READING", "OBSERVE")
+STRENGTH_ORDER = STRENGTHS
 
 _OPS = {"<=": operator.le, "<": operator.lt, ">=": operator.ge, ">": operator.gt, "==": operator.eq}
 
@@ -148,21 +150,3 @@ def _tag_strength(message: str) -> str | None:
     if message.lstrip().startswith("[") and first.rsplit(" ", 1)[-1] in STRENGTH_ORDER:
         return first.rsplit(" ", 1)[-1]
     return None
-
-
-def incomplete_banner(info: dict[str, Any]) -> str:
-    """One line saying why a run is less than the whole suite ("" for a complete one)."""
-    why = info.get("incomplete") or ""
-    if not why:
-        return ""
-    kind = why.split(":")[0].split(" ")[0].upper()
-    kind = {"STOPPED": "INCOMPLETE"}.get(kind, kind)
-    return f"{kind} - not a conformance result for the whole suite: {why}; {info.get('not_run', 0)} tests not run"
-
-
-def claim_text(info: dict[str, Any]) -> str:
-    """What the conformance claim leaves out (R9b: functions the DUT profile declares absent)."""
-    left_out = info.get("not_claimed") or ""
-    if not left_out:
-        return "claim: every function of the document (the DUT profile declares none absent, R9b)"
-    return f"claim: leaves out (declared absent by the DUT profile, R9b; their tests SKIPPED): {left_out}"

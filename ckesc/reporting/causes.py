@@ -23,7 +23,7 @@ from typing import Any
 from ..evidence.live import causes as violation_causes
 from ..evidence.live import generalise, shorten, without_context
 from ..evidence.rules import Violation
-from .verdict import STRENGTH_ORDER
+from ..protocol.requirements import STRENGTHS as STRENGTH_ORDER
 
 #: a violation quoted in a bus-rule failure message (read back from records without ``bus_causes``)
 _QUOTED = re.compile(r"^\[(?P<rules>.+?) (?P<strength>SHALL|READING)\] t=(?P<t>\S+) (?:node (?P<node>\d+)|bus): (?P<what>.*)$")

@@ -1,1 +1,0 @@
-"""The conformance harness: lanes, the DUT, requirements, verdicts, the pytest plugin and reports."""
