@@ -1,8 +1,40 @@
-"""The results of a run as the reports read them."""
+"""The results of a run as the reports read them: one :class:`Result` per test, the run's info."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
+
+
+@dataclass
+class Result:
+    """One test's result, as results.json, JUnit and the HTML report write it."""
+
+    nodeid: str
+    name: str
+    section: str
+    requirements: list[str]
+    strength: str
+    outcome: str = "PASS"  # PASS FAIL INCONCLUSIVE OBSERVED SKIPPED ERROR
+    message: str = ""
+    duration: float = 0.0
+    lane_seconds: float = 0.0  # lane time the test took: in the simulated lane, the waits the protocol imposes
+    properties: dict[str, str] = field(default_factory=dict)
+    observations: list[tuple[str, str]] = field(default_factory=list)
+    #: the test's CAN traces by lane ("": the DUT's, "bench": multi_dut's private bench), relative to the
+    #: run's report directory; a lane that heard no frame during the test has none
+    traces: dict[str, str] = field(default_factory=dict)
+    #: what the test's traffic shows, for the HTML report's plots (answer delays, report intervals, R8
+    #: timeline): see report.evidence
+    evidence: dict[str, Any] = field(default_factory=dict)
+    #: requirement ids of the bus rules (ckesc/evidence) the traffic broke while the test ran: such a test
+    #: FAILs, quoting the frames, and these ids are what it cites besides its own
+    bus_rules: list[str] = field(default_factory=list)
+    #: the distinct problems among those violations (evidence.live.causes: a stable key per problem, its
+    #: title, rules, node, how often among the quoted ones, its first occurrence): report.html, summary.txt
+    #: and the console group the run's failures by them
+    bus_causes: list[dict[str, Any]] = field(default_factory=list)
+
 
 
 def incomplete_banner(info: dict[str, Any]) -> str:
