@@ -19,7 +19,7 @@ from pathlib import Path
 import can
 import flaky_bus
 import pytest
-from ckesc.harness import lanes
+from ckesc.bench import lanes
 from procs import CKESC, Emulator
 from procs import env as _env
 
