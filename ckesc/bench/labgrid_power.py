@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import PreflightError
-from .lanes import PowerControl
+from .power import PowerControl
 
 #: what installs labgrid (the set-up error names it)
 INSTALL_HINT = 'pip install ".[rig]"'

@@ -36,6 +36,7 @@ from ..emulator import sim_bus
 from ..emulator.variants import FREEDOMS
 from ..protocol.catalogue import DEFAULT_BITRATE
 from .epochs import PowerEpoch
+from .power import ControlPower, EmulatorPower, PowerControl
 
 _SIM_CHANNELS = itertools.count()
 
@@ -53,19 +54,6 @@ class OwnFrame(can.Message):
     echo), stamped by the host clock when it was sent."""
 
     __slots__ = ()
-
-
-class PowerControl(ABC):
-    """Switches the DUT's supply. ``available`` False: tests that need a power cycle are skipped."""
-
-    name = "power"
-    available = True
-
-    @abstractmethod
-    def off(self) -> None: ...
-
-    @abstractmethod
-    def on(self) -> None: ...
 
 
 class Lane(ABC):
@@ -149,19 +137,6 @@ class Lane(ABC):
 # ------------------------------------------------------------------------------------------ simulated
 
 
-class EmulatorPower(PowerControl):
-    name = "emulator"
-
-    def __init__(self, lane: SimLane) -> None:
-        self.lane = lane
-
-    def off(self) -> None:
-        self.lane.sim.power_off()
-
-    def on(self) -> None:
-        self.lane.sim.power_on()
-
-
 class SimLane(Lane):
     name = "simulated"
     clock = "simulated"
@@ -199,74 +174,6 @@ class SimLane(Lane):
 
 
 # ------------------------------------------------------------------------------------------ real bus
-
-
-class CommandPower(PowerControl):
-    """Runs shell commands (e.g. a lab PSU's CLI, or ``ckesc control ... power off``)."""
-
-    name = "command"
-
-    def __init__(self, off_cmd: str, on_cmd: str) -> None:
-        if not off_cmd or not on_cmd:
-            raise ValueError("--power command needs both --power-off-cmd and --power-on-cmd")
-        self.off_cmd, self.on_cmd = off_cmd, on_cmd
-
-    def _run(self, cmd: str) -> None:
-        done = subprocess.run(shlex.split(cmd), capture_output=True, text=True, timeout=60)
-        if done.returncode != 0:
-            raise RuntimeError(f"power command {cmd!r} failed ({done.returncode}): {done.stderr.strip()}")
-
-    def off(self) -> None:
-        self._run(self.off_cmd)
-
-    def on(self) -> None:
-        self._run(self.on_cmd)
-
-
-class ControlPower(PowerControl):
-    """A running ``ckesc emulate``'s power through its control channel, in-process: what ``ckesc control
-    --port P power off|on`` sends, without starting a Python process per switch (about 0.2 s each here)."""
-
-    name = "emulator control channel"
-
-    def __init__(self, host: str, port: int) -> None:
-        self.host, self.port = host, port
-
-    def _switch(self, action: str) -> None:
-        from ..emulator.control import control_request
-
-        control_request(self.port, {"cmd": "power", "action": action}, host=self.host)
-
-    def off(self) -> None:
-        self._switch("off")
-
-    def on(self) -> None:
-        self._switch("on")
-
-
-class ManualPower(PowerControl):
-    """Asks an operator; works while pytest captures output (the plugin suspends capture)."""
-
-    name = "manual"
-
-    def __init__(self, prompt) -> None:
-        self.prompt = prompt  # callable(text) -> None, provided by the plugin
-
-    def off(self) -> None:
-        self.prompt("Switch the DUT's power OFF, then press Enter")
-
-    def on(self) -> None:
-        self.prompt("Switch the DUT's power ON, then press Enter")
-
-
-class NoPower(PowerControl):
-    name = "none"
-    available = False
-
-    def off(self) -> None:
-        raise RuntimeError("no power control")
-
-    on = off
 
 
 #: The receive buffer a SocketCAN socket asks for. A host that is not scheduled for a while (a loaded

@@ -20,19 +20,10 @@ import pytest
 
 from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
 from ..bench.epochs import PowerEpoch, unusable
-from ..bench.lanes import (
-    HOST_SEND_ERROR_S,
-    BenchGone,
-    BusFault,
-    BusLane,
-    CommandPower,
-    Lane,
-    ManualPower,
-    NoPower,
-    PowerControl,
-    RealtimeEmulatorLane,
-    SimLane,
-)
+from ..bench.errors import PreflightError
+from ..bench.lanes import HOST_SEND_ERROR_S, BenchGone, BusFault, BusLane, Lane, RealtimeEmulatorLane, SimLane
+from ..bench.power import PowerControl, open_power
+from ..bench.power import names as power_names
 from ..bench.profile import DutProfile
 from ..bench.verdict import Inconclusive, NotClaimed
 from ..emulator import variants
@@ -83,7 +74,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     g.addoption("--node-id", type=int, help="the DUT's node id (default: discovered with GET_ESC_ID)")
     g.addoption("--nodes", help="emulator: node ids of the emulated bench (default 1); the DUT is the first")
     g.addoption("--profile", help="DUT profile: a shipped one by name (emulator, ckesc-generic, vcan-vm), a name in ./fixtures/duts, or a path (default: emulator / ckesc-generic)")
-    g.addoption("--power", choices=("emulator", "command", "labgrid", "manual", "none"),
+    g.addoption("--power", choices=power_names(),
                 help="power control (default: emulator for --dut emulator, none for --dut bus)")
     g.addoption("--power-off-cmd", help="--power command: shell command that switches the DUT off")
     g.addoption("--power-on-cmd", help="--power command: shell command that switches the DUT on")
@@ -241,9 +232,7 @@ _LABGRID = pytest.StashKey[PowerControl]()
 
 def _open_labgrid(config: pytest.Config) -> None:
     """--power labgrid: its driver (and place, acquired), released by pytest's cleanup on every way out."""
-    from ..bench.labgrid_power import open_power
-
-    power = open_power(config.getoption)
+    power = open_power("labgrid", config.getoption, _prompt(config))
     config.add_cleanup(power.close)
     config.stash[_LABGRID] = power
     state(config).info["power_labgrid"] = power.where
@@ -652,16 +641,13 @@ def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
         lane.timing_error = profile.error_s
         return lane
     power_kind = config.getoption("power") or "none"
-    if power_kind == "command":
-        power = CommandPower(config.getoption("power_off_cmd"), config.getoption("power_on_cmd"))
-    elif power_kind == "manual":
-        power = ManualPower(_prompt(config))
-    elif power_kind == "none":
-        power = NoPower()
-    elif power_kind == "labgrid":
+    if power_kind == "labgrid":
         power = config.stash[_LABGRID]  # opened by the preflight
     else:
-        raise pytest.UsageError("--power emulator works only with --dut emulator")
+        try:
+            power = open_power(power_kind, config.getoption, _prompt(config))
+        except PreflightError as exc:
+            raise pytest.UsageError(str(exc)) from None
     return BusLane(_bus_kwargs(config), power, timing_error=profile.error_s, bitrate_cmd=config.getoption("can_bitrate_cmd"),
                    host_send_error=config.getoption("host_send_error") / 1000)
 

@@ -28,7 +28,8 @@ import pytest
 from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_message, convert_can_message_to_ascii_message
 
 from ckesc.bench.dut import echo_probe
-from ckesc.bench.lanes import BusLane, NoPower
+from ckesc.bench.lanes import BusLane
+from ckesc.bench.power import NoPower
 from ckesc.cli import main
 from ckesc.emulator.bench import Bench
 from ckesc.emulator.control import control_request

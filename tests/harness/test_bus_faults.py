@@ -24,7 +24,8 @@ from procs import env as _env
 
 from ckesc.bench import lanes
 from ckesc.bench.dut import Dut
-from ckesc.bench.lanes import BenchGone, BusFault, BusLane, NoPower
+from ckesc.bench.lanes import BenchGone, BusFault, BusLane
+from ckesc.bench.power import NoPower
 from ckesc.bench.profile import DutProfile
 from ckesc.emulator.bench import Bench
 from ckesc.emulator.realtime import RealtimeEmulator

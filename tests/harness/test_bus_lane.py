@@ -19,7 +19,8 @@ import can
 import pytest
 
 from ckesc.bench import lanes
-from ckesc.bench.lanes import BusLane, NoPower
+from ckesc.bench.lanes import BusLane
+from ckesc.bench.power import NoPower
 
 _CHANNELS = itertools.count()
 EXT = {"is_extended_id": True}

@@ -28,7 +28,8 @@ from procs import env as _env
 
 from ckesc import bench as bench_pkg
 from ckesc.bench.dut import Dut, echo_probe
-from ckesc.bench.lanes import BusLane, NoPower, OwnFrame
+from ckesc.bench.lanes import BusLane, OwnFrame
+from ckesc.bench.power import NoPower
 from ckesc.bench.profile import DutProfile
 from ckesc.emulator.bench import Bench
 from ckesc.emulator.realtime import RealtimeEmulator

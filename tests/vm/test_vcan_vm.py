@@ -70,7 +70,8 @@ def test_bus_lane_on_vcan0_stamps_echoes_and_reopens(vm_ready):
     back as its receive_own_messages echo with a kernel stamp, a reopen through the bit rate command."""
     code = (
         "import sys, can\n"
-        "from ckesc.bench.lanes import BusLane, NoPower, SOCKETCAN_RCVBUF\n"
+        "from ckesc.bench.lanes import BusLane, SOCKETCAN_RCVBUF\n"
+        "from ckesc.bench.power import NoPower\n"
         "lane = BusLane({'interface': 'socketcan', 'channel': 'vcan0'}, NoPower(), timing_error=0.0, bitrate_cmd='true')\n"
         "assert lane.rcvbuf >= SOCKETCAN_RCVBUF, lane.rcvbuf\n"
         "for rate in (500000, 1000000):\n"
