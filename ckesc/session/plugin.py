@@ -21,10 +21,11 @@ import pytest
 from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
 from ..bench.epochs import PowerEpoch, unusable
 from ..bench.errors import PreflightError
-from ..bench.lanes import HOST_SEND_ERROR_S, BenchGone, BusFault, BusLane, Lane, RealtimeEmulatorLane, SimLane
+from ..bench.lanes import HOST_SEND_ERROR_S, BenchGone, BusFault, BusLane, Lane, SimLane
 from ..bench.power import PowerControl, open_power
 from ..bench.power import names as power_names
 from ..bench.profile import DutProfile
+from ..bench.realtime_lane import RealtimeEmulatorLane
 from ..bench.verdict import Inconclusive, NotClaimed
 from ..emulator import variants
 from ..evidence.live import LaneRules, causes, failure_text

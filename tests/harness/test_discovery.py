@@ -16,8 +16,8 @@ widened to 0.3 s so that the queries (one every 128 ms while nothing answers) al
 from __future__ import annotations
 
 from ckesc.bench.dut import Dut
-from ckesc.bench.lanes import RealtimeEmulatorLane
 from ckesc.bench.profile import DutProfile
+from ckesc.bench.realtime_lane import RealtimeEmulatorLane
 from ckesc.protocol import catalogue as cat
 from ckesc.session.plugin import MULTI_NODES
 
