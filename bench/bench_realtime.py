@@ -48,7 +48,7 @@ from typing import Any, Sequence
 
 import can
 
-from ckesc.emulator.realtime import Histogram
+from ckesc.emulator.realtime_timing import Histogram
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_decode import cpu_model  # noqa: E402

@@ -83,7 +83,8 @@ def _run_emulate(args: argparse.Namespace) -> int:
 
     from ..emulator.bench import Bench
     from ..emulator.flash import FlashError
-    from ..emulator.realtime import RealtimeEmulator, stagger_boot
+    from ..emulator.realtime import RealtimeEmulator
+    from ..emulator.realtime_timing import stagger_boot
 
     if args.list_variants:
         print(variants.table())

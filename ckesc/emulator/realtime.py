@@ -39,10 +39,6 @@ Control channel (``control_port``), for harness power switching and fault inject
 
 from __future__ import annotations
 
-import bisect
-import ctypes
-import itertools
-import math
 import os
 import select
 import sys
@@ -57,10 +53,11 @@ import can
 
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame
-from . import faults as _faults
 from .bench import Bench
 from .control import ControlServer, Handler, Reply, dispatch
 from .model import EscModel
+from .realtime_control import ControlCommands
+from .realtime_timing import Histogram, clock_offset, set_timer_slack
 from .socketcand import SocketcandServer, fmt_frame
 from .tcp import Conn
 
@@ -69,105 +66,6 @@ SWITCH_INTERVAL_S = 5e-4
 READER_POLL_S = 0.1  # how often the bus reader thread looks at the stop flag
 PLAUSIBLE_RX_STAMP_S = 1.0  # a bus receive stamp further back than this is not trusted
 MAX_POLL_ROUNDS = 100  # polls of the due ESCs at one instant (frames they hear from one another can make more due)
-
-_PR_SET_TIMERSLACK = 29
-_PR_GET_TIMERSLACK = 30
-
-
-# ---------------------------------------------------------------------------------------------------
-# small helpers
-
-
-def set_timer_slack(ns: int) -> int | None:
-    """Set the calling thread's timer slack (Linux); the previous value, or None where unsupported."""
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        prctl = libc.prctl
-    except (OSError, AttributeError):
-        return None
-    prctl.restype = ctypes.c_int
-    prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong]
-    old = prctl(_PR_GET_TIMERSLACK, 0, 0, 0, 0)
-    if old < 0 or prctl(_PR_SET_TIMERSLACK, ns, 0, 0, 0) != 0:
-        return None
-    return old
-
-
-def stagger_boot(bench: Bench, spread: float) -> None:
-    """Make ESC k of n boot ``k/n x spread`` seconds later than the first (its ``boot_time``), every
-    power-up. Real ESCs on one supply do not boot in lockstep; identical models would report in
-    lockstep forever, and a batch of n reports due at the same instant leaves the last one late by
-    n poll times. ``spread`` = one MSG1 interval (0.02 s) spaces their reports evenly."""
-    n = len(bench.escs)
-    for k, esc in enumerate(bench.escs):
-        esc.config.boot_time += spread * k / n
-
-
-def clock_offset() -> float:
-    """``time.time() - time.monotonic()``, read so that the two clocks are sampled together."""
-    best = None
-    for _ in range(5):
-        a = time.monotonic()
-        w = time.time()
-        b = time.monotonic()
-        if best is None or b - a < best[0]:
-            best = (b - a, w - (a + b) / 2)
-    return best[1]  # type: ignore[index]
-
-
-class Histogram:
-    """Durations in 1 µs bins up to 10 ms, 1 ms bins up to 1 s (the exact maximum is kept): O(1) to
-    add and cheap to summarise, so a status query never stalls the scheduler with a sort."""
-
-    FINE = 10_000  # 1 µs bins: 0 .. 10 ms
-    COARSE = 990  # 1 ms bins: 10 ms .. 1 s, then one overflow bin
-
-    def __init__(self) -> None:
-        self.reset()
-
-    def reset(self) -> None:
-        self.counts = [0] * (self.FINE + self.COARSE + 1)
-        self.n = 0
-        self.max = 0.0
-        self.total = 0.0
-
-    def add(self, seconds: float) -> None:
-        if seconds < 0.0:
-            seconds = 0.0
-        us = int(seconds * 1e6)
-        if us < self.FINE:
-            self.counts[us] += 1
-        else:
-            self.counts[self.FINE + min(us // 1000 - 10, self.COARSE)] += 1
-        self.n += 1
-        self.total += seconds
-        if seconds > self.max:
-            self.max = seconds
-
-    def _upper_edge(self, i: int) -> float:
-        if i < self.FINE:
-            return (i + 1) * 1e-6
-        return (i - self.FINE + 11) * 1e-3 if i < self.FINE + self.COARSE else math.inf
-
-    def summary(self) -> dict[str, Any]:
-        """count, mean, p50/p90/p99/p99.9 (the upper edge of the bin, never above the maximum) and max
-        in µs; over_1ms / over_5ms: how many took 1 ms / 5 ms or more."""
-        out: dict[str, Any] = {"count": self.n}
-        cum = list(itertools.accumulate(self.counts))
-        for key, q in (("p50_us", 0.5), ("p90_us", 0.9), ("p99_us", 0.99), ("p999_us", 0.999)):
-            if not self.n:
-                out[key] = None
-                continue
-            i = bisect.bisect_left(cum, max(1, math.ceil(q * self.n)))
-            out[key] = round(min(self._upper_edge(i), self.max) * 1e6, 1)
-        out["mean_us"] = round(self.total / self.n * 1e6, 1) if self.n else None
-        out["max_us"] = round(self.max * 1e6, 1) if self.n else None
-        out["over_1ms"] = self.n - cum[999]
-        out["over_5ms"] = self.n - cum[4999]
-        return out
-
 
 class _Input:
     __slots__ = ("t", "msg", "wire", "origin")
@@ -180,7 +78,7 @@ class _Input:
 # the emulator
 
 
-class RealtimeEmulator:
+class RealtimeEmulator(ControlCommands):
     """A :class:`Bench` driven in real time on a python-can bus and/or as a socketcand hub.
 
     ``run()`` drives it in the calling thread until :meth:`stop` (the CLI: main thread, signals call
@@ -602,130 +500,6 @@ class RealtimeEmulator:
         """One control request, in the loop thread. ``reply`` is called once (maybe later: power cycle)."""
         dispatch(self._commands, req, reply)
 
-    def _cmd_status(self, req: dict, reply: Reply) -> dict:
-        now = time.monotonic()
-        escs = []
-        for esc in self._escs:
-            escs.append({
-                "slot": esc.config.slot,
-                "node_id": esc.node_id,
-                "powered": esc.powered,
-                "ready": esc.powered and now >= esc.ready_at,
-                "bitrate": esc.bitrate,
-                "on_bus": esc.bitrate == self.bitrate,
-                "reporting": esc.reporting,
-                "can_test": esc.can_test,
-                "comm_fault": esc.comm_fault,
-                "throttle": esc.throttle,
-                "faults": sorted(esc.faults),
-                "counters": dict(esc.counters),
-                "power_ups": esc.nvm.get("power_ups"),
-            })
-        return {
-            "powered": self.bench.powered,
-            "power_on_in": None if self._power_on_at is None else round(self._power_on_at - now, 6),
-            "bitrate": self.bitrate,
-            "uptime": round(now - self._t_start, 6),
-            "monotonic": now,
-            "clock_offset": self.offset,
-            "stamp": self.stamp,
-            "scheduling": self.scheduling,
-            "flash": None if self.bench.flash is None else str(self.bench.flash.path),
-            "socketcand": _addr(self.socketcand_address),
-            "clients": 0 if self._socketcand is None else len(self._socketcand.conns),
-            "counters": dict(self.counters),
-            "lateness": self.lateness.summary(),
-            "wakeup": self.wakeup.summary(),
-            "escs": escs,
-        }
-
-    def _cmd_power(self, req: dict, reply: Reply) -> dict | None:
-        action = req.get("action")
-        now = time.monotonic()
-        if action == "off":
-            self._emit_due(now)
-            self._cancel_power_on("power switched off")
-            err = self._do_power_off(now)
-            return {"powered": False, **({"flash_error": err} if err else {})}
-        if action == "on":
-            self._cancel_power_on("power switched on")
-            self._do_power_on(now)
-            return {"powered": True}
-        if action == "cycle":
-            off_time = req.get("off_time", 1.0)
-            if isinstance(off_time, bool) or not isinstance(off_time, (int, float)) or not 0 <= off_time <= 3600:
-                raise ValueError(f"off_time must be a number of seconds 0..3600, not {off_time!r}")
-            self._emit_due(now)
-            self._cancel_power_on("power cycled again")
-            err = self._do_power_off(now)
-            self._power_on_at = now + off_time
-            self._power_waiters.append(lambda answer: reply({**answer, **({"flash_error": err} if err else {})}))
-            return None  # answered at power-on
-        raise ValueError(f"power action must be off, on or cycle, not {action!r}")
-
-    def _do_power_off(self, now: float) -> str | None:
-        self._deadlines_stale = True
-        try:
-            self.bench.power_off(now)  # writes the flash file
-        except OSError as exc:
-            self._log(f"could not write the flash file: {exc}")
-            return str(exc)
-        return None
-
-    def _do_power_on(self, at: float) -> None:
-        self._power_on_at = None
-        self.bench.power_on(at)
-        self._deadlines_stale = True
-        waiters, self._power_waiters = self._power_waiters, []
-        for w in waiters:
-            w({"ok": True, "powered": True})
-
-    def _cancel_power_on(self, why: str) -> None:
-        self._power_on_at = None
-        waiters, self._power_waiters = self._power_waiters, []
-        for w in waiters:
-            w({"ok": False, "error": f"power cycle interrupted: {why}"})
-
-    def _cmd_fault(self, req: dict, reply: Reply) -> dict:
-        name, node = req.get("name"), req.get("node")
-        on = req.get("on", True)
-        if not isinstance(name, str):
-            raise ValueError(f"fault name must be a string, not {name!r}; known: {', '.join(sorted(_faults.FAULTS))}")
-        if not isinstance(on, bool):
-            raise ValueError(f"'on' must be true or false, not {on!r}")
-        if node is not None:
-            if isinstance(node, bool) or not isinstance(node, int):
-                raise ValueError(f"node must be a node id, not {node!r}")
-            self.bench.esc(node)  # KeyError naming the node ids present
-        self.bench.set_fault(name, on, node)  # ValueError listing the known names
-        self._deadlines_stale = True
-        return {"faults": {str(esc.node_id): sorted(esc.faults) for esc in self._escs}}
-
-    def _cmd_faults(self, req: dict, reply: Reply) -> dict:
-        return {"faults": {f.name: {"rules": list(f.rules), "description": f.description} for f in _faults.FAULTS.values()}}
-
-    def _cmd_bitrate(self, req: dict, reply: Reply) -> dict:
-        value = req.get("bitrate")
-        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-            raise ValueError(f"bitrate must be a positive integer (bit/s), not {value!r}")
-        self.bitrate = value
-        return {"bitrate": value}
-
-    def _cmd_stats(self, req: dict, reply: Reply) -> dict:
-        out = {"lateness": self.lateness.summary(), "wakeup": self.wakeup.summary(), "counters": dict(self.counters)}
-        if req.get("reset"):
-            self.lateness.reset()
-            self.wakeup.reset()
-        return out
-
-    def _cmd_save(self, req: dict, reply: Reply) -> dict:
-        self.bench.persist()
-        return {"flash": None if self.bench.flash is None else str(self.bench.flash.path)}
-
-    def _cmd_stop(self, req: dict, reply: Reply) -> dict:
-        self._stopping = True
-        return {"stopping": True}
-
     # ------------------------------------------------------------------ shutdown
 
     def _shutdown(self) -> None:
@@ -756,8 +530,3 @@ class RealtimeEmulator:
             except OSError:
                 pass
         self._wake_r = self._wake_w = -1
-
-
-
-def _addr(address: tuple[str, int] | None) -> str | None:
-    return None if address is None else f"{address[0]}:{address[1]}"

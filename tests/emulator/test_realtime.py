@@ -34,7 +34,8 @@ from ckesc.cli import main
 from ckesc.emulator.bench import Bench
 from ckesc.emulator.control import control_request
 from ckesc.emulator.flash import FlashStore
-from ckesc.emulator.realtime import Histogram, RealtimeEmulator
+from ckesc.emulator.realtime import RealtimeEmulator
+from ckesc.emulator.realtime_timing import Histogram
 from ckesc.emulator.socketcand import _parse_send, fmt_frame
 from ckesc.protocol import Decoder, Frame, Kind, WireFrame, decode, encode
 from ckesc.protocol import catalogue as cat
