@@ -261,6 +261,22 @@ FAULT_CODES_1: Mapping[int, str] = MappingProxyType(
     }
 )
 
+#: Fault code 1 -> the MSG1 self-test error bit (4.4.4 status bits 7..0) of the same test. The document lists
+#: both tables but does not say how they map: this is the reading the emulator plays (phase and COM by name).
+FAULT_CODE_STATUS_BITS: Mapping[int, int] = MappingProxyType(
+    {
+        0x00: 0,
+        0x01: int(Status.SELFTEST_COM_INPUT_LOW),
+        0x02: int(Status.SELFTEST_COM_INPUT_HIGH),
+        0x11: int(Status.SELFTEST_A_OUTPUT_HIGH),
+        0x12: int(Status.SELFTEST_B_OUTPUT_HIGH),
+        0x13: int(Status.SELFTEST_C_OUTPUT_HIGH),
+        0x21: int(Status.SELFTEST_A_OUTPUT_LOW),
+        0x22: int(Status.SELFTEST_B_OUTPUT_LOW),
+        0x23: int(Status.SELFTEST_C_OUTPUT_LOW),
+    }
+)
+
 
 @dataclass(frozen=True)
 class ExpandCommand:

@@ -12,6 +12,7 @@ import math
 import pytest
 
 from ckesc.protocol import BY_NAME, Kind, Status, illegal_cases
+from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import SELFTEST_ERROR_MASK
 
 # --------------------------------------------------------------------------------------------------
@@ -111,19 +112,8 @@ def test_power_up_counter_counts_power_ups(lane):
     assert counts == [1, 2, 3]
 
 
-#: Fault code 1 (the document's attachment) -> MSG1 status bit of the same test (4.4.4). The link is
-#: the emulator's reading: the document lists both tables but does not say how they map.
-SELF_TEST_BITS = {
-    0x00: 0,
-    0x01: Status.SELFTEST_COM_INPUT_LOW,  # "Low com voltage"
-    0x02: Status.SELFTEST_COM_INPUT_HIGH,  # "High com voltage"
-    0x11: Status.SELFTEST_A_OUTPUT_HIGH,
-    0x12: Status.SELFTEST_B_OUTPUT_HIGH,
-    0x13: Status.SELFTEST_C_OUTPUT_HIGH,
-    0x21: Status.SELFTEST_A_OUTPUT_LOW,
-    0x22: Status.SELFTEST_B_OUTPUT_LOW,
-    0x23: Status.SELFTEST_C_OUTPUT_LOW,
-}
+#: Fault code 1 -> MSG1 self-test bit: the reading the emulator plays, a protocol table (catalogue)
+SELF_TEST_BITS = cat.FAULT_CODE_STATUS_BITS
 
 
 @pytest.mark.parametrize("code", sorted(SELF_TEST_BITS), ids=lambda c: f"0x{c:02X}")
