@@ -21,6 +21,9 @@ from .lanes import Lane, OwnFrame
 from .profile import DutProfile
 from .verdict import Inconclusive, NotClaimed, Record
 
+#: How long the host waits for the echo of its own frame once it has left (the echo follows in microseconds
+#: to milliseconds; it is read late only when the host itself was held up)
+ECHO_WAIT_S = 0.05
 #: Frames that did not decode kept per test (the latest): about 0.5 kB each
 MAX_GARBLED = 20_000
 #: type id -> name of the requests the 120 s window governs (R11): a power-up epoch records each one sent
@@ -139,6 +142,15 @@ class Link:
             if frame is not None and stop is not None and stop(frame):
                 return frame
 
+    def await_echo(self, sent: Sent, bound: float = ECHO_WAIT_S) -> None:
+        """Read until the echo of ``sent`` is in (its bus time known), at most ``bound`` lane seconds: frames
+        are kept as ever. Nothing to wait for on a lane without echo."""
+        until = self.now() + bound
+        while self.lane.echo and sent.bus_time is None and (left := until - self.now()) > 0:
+            msg = self.lane.recv(left)
+            if msg is not None:
+                self._take(msg)
+
     def _take(self, msg: can.Message) -> Frame | None:
         if msg.is_extended_id and (msg.arbitration_id & 0x7F) == self.host_node and not msg.is_error_frame:
             self._match_echo(msg)
@@ -218,7 +230,9 @@ class Link:
     def request(self, name: str, fields: Mapping[str, Any] | None = None, *, destination: int | None = None,
                 timeout: float | None = None, **kw: Any) -> Exchange:
         """Send a request and read until its answer or ``timeout`` (lane seconds; default 0.1 s plus the
-        lane's stated timing error: an answer that late is not "no answer" on a lane that cannot tell)."""
+        lane's stated timing error: an answer that late is not "no answer" on a lane that cannot tell). The
+        timeout runs from when the request reached the bus: from its echo where that shows it left later than
+        the host sent it (a host stalled between reading the clock and sending), else from the send."""
         self._check_claimed(name, fields)
         if timeout is None:
             timeout = 0.1 + self.lane.timing_error
@@ -228,7 +242,15 @@ class Link:
         ex = Exchange(sent, pending)
         spec = cat.spec(name)
         if spec.responses and kw.get("expect_response", True):
-            self.read_until(sent.host_time + timeout, stop=lambda f: pending.response is not None)
+            deadline = sent.host_time + timeout
+            while True:
+                self.read_until(deadline, stop=lambda f: pending.response is not None)
+                if pending.response is None and sent.bus_time is None:  # past the deadline before the echo was read
+                    self.await_echo(sent)
+                left_at = sent.bus_time if sent.bus_time is not None else sent.host_time
+                if pending.response is not None or left_at + timeout <= deadline:
+                    break
+                deadline = pending.deadline = left_at + timeout  # the echo came late: the window is the bus's
             self.proto.expire(self.now())
         ex.response = pending.response
         ex.mismatch = pending.mismatch
