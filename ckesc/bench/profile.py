@@ -58,32 +58,38 @@ class _Section(BaseModel):
 
 
 class _Dut(_Section):
-    name: str | None = None
-    description: str = ""
+    name: str | None = Field(None, description="how the reports name the DUT (default: the file's name)")
+    description: str = Field("", description="free text, shown in the reports")
 
 
 class _Capabilities(_Section):
-    led: bool = False
-    motor: bool = False
-    pwm_input: bool = False
-    motor_temperature: bool = False
-    multi_node: bool = False
+    led: bool = Field(False, description="an LED Set LED (4.4.20) can drive")
+    motor: bool = Field(False, description="a motor attached (spinning it still needs --allow-motor-spin)")
+    pwm_input: bool = Field(False, description="a PWM throttle input the bench can drive (Throttle Select, 4.4.23)")
+    motor_temperature: bool = Field(False, description="a motor temperature sensor")
+    multi_node: bool = Field(False, description="several ESCs on the bus (the multi-ESC tests)")
 
 
 class _Timing(_Section):
     model_config = ConfigDict(extra="forbid", strict=False)  # an int (2) is a float here, a string is not
-    error_s: float = Field(0.0, ge=0.0, le=10.0)
-    jitter_s: float = Field(0.0, ge=0.0, le=1.0)
-    boot_s: float = Field(1.0, ge=0.0, le=600.0)
-    off_s: float = Field(1.0, ge=0.0, le=600.0)
+    error_s: float = Field(0.0, ge=0.0, le=10.0, description=(
+        "**the bench's** measurement error (host + adapter timestamps): a timing margin smaller than it is INCONCLUSIVE"))
+    jitter_s: float = Field(0.0, ge=0.0, le=1.0, description=(
+        "**the DUT's** report-interval jitter allowance: how far one single report interval (R9) may stray beyond the "
+        "suite's own allowance (the live bus rules; a first report after a restart, R9a, too), never the mean interval "
+        "a test judges (R9: an ESC that reports every 25 ms instead of 20 FAILs however much jitter it declares). It "
+        "widens what the DUT may do; error_s still decides INCONCLUSIVE around it. The reports state both"))
+    boot_s: float = Field(1.0, ge=0.0, le=600.0, description="power-on to first report")
+    off_s: float = Field(1.0, ge=0.0, le=600.0, description="off time of a power cycle")
 
 
 class _Readings(_Section):
-    R4: Literal["lsb", "swapped"] = "lsb"
+    R4: Literal["lsb", "swapped"] = Field("lsb", description="RawCommand_12b's 12-bit nibble order (R4)")
 
 
 class _Functions(_Section):
-    absent: list[str] = []
+    absent: list[str] = Field([], description=(
+        "optional functions the ESC lacks (R9b): their tests are SKIPPED as \"not claimed\""))
 
     @field_validator("absent")
     @classmethod
@@ -106,6 +112,11 @@ class _ProfileDoc(_Section):
     timing: _Timing = _Timing()
     readings: _Readings = _Readings()
     functions: _Functions = _Functions()
+
+
+#: the profile's schema (sections and keys, with types, defaults, ranges and descriptions): the documentation's
+#: key table is made from it
+PROFILE_SCHEMA: type[BaseModel] = _ProfileDoc
 
 
 def _model_at(loc: tuple) -> type[BaseModel] | None:
