@@ -1,0 +1,147 @@
+"""The documentation site (docs/): it builds with warnings as errors, its generated tables hold what the code
+holds, every shell example says whether it runs here, and the ones that do are run for real and checked.
+
+A shell example (a fence of ``sh``, ``bash``, ``shell`` or ``console``) follows a MyST comment line, which the site
+does not show:
+
+    % example: run                           exit status 0
+    % example: run; exit 1; prints "R2"      exit status 1, and "R2" in what it printed (stdout or stderr)
+    % example: not run (a CAN adapter)       needs what this machine has not: the reason is required
+
+The runnable ones of a page run in order, each with ``bash -e`` in one temporary directory per page (with the
+repository's ``fixtures/*`` linked into it) and this interpreter's ``ckesc`` first on PATH. Cost: about 5 s for the
+build, 40-50 s for the examples (each a few sections of the suite in the simulated lane).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+PAGES = sorted(p for p in DOCS.rglob("*.md") if "_build" not in p.parts)
+SHELL = {"sh", "bash", "shell", "console"}
+FENCE = re.compile(r"^(?P<indent> *)```(?P<info>[\w{}-]*)[^\n]*$")
+MARKER = re.compile(r'^ *% example: (?:(?P<run>run)(?:; exit (?P<exit>\d+))?(?:; prints "(?P<prints>[^"]+)")?'
+                    r"|not run \((?P<why>[^)]+)\))\s*$")
+
+
+@dataclass(frozen=True)
+class Example:
+    page: Path
+    line: int
+    code: str
+    runs: bool
+    exit: int = 0
+    prints: str | None = None
+
+    @property
+    def where(self) -> str:
+        return f"{self.page.relative_to(ROOT)}:{self.line}"
+
+
+def examples(page: Path) -> tuple[list[Example], list[str]]:
+    """A page's shell examples, and what is wrong with its markers (an example without one, a bad marker)."""
+    lines = page.read_text(encoding="utf-8").split("\n")
+    found: list[Example] = []
+    problems: list[str] = []
+    i = 0
+    while i < len(lines):
+        fence = FENCE.match(lines[i])
+        if not fence:
+            i += 1
+            continue
+        end = next((j for j in range(i + 1, len(lines)) if lines[j].strip() == "```"), len(lines))
+        if fence["info"] in SHELL:
+            indent = len(fence["indent"])
+            code = "\n".join(line[indent:] for line in lines[i + 1:end])
+            before = next((lines[j] for j in range(i - 1, -1, -1) if lines[j].strip()), "")
+            marker = MARKER.match(before)
+            if marker is None:
+                problems.append(f"{page.relative_to(ROOT)}:{i + 1}: a shell example without a '% example: run' or "
+                                f"'% example: not run (why)' line before it (found: {before.strip()!r})")
+            else:
+                found.append(Example(page, i + 1, code, runs=bool(marker["run"]), exit=int(marker["exit"] or 0),
+                                     prints=marker["prints"]))
+        i = end + 1
+    return found, problems
+
+
+def test_every_shell_example_says_whether_it_runs():
+    problems = [p for page in PAGES for p in examples(page)[1]]
+    assert not problems, "\n".join(problems)
+    runnable = [e for page in PAGES for e in examples(page)[0] if e.runs]
+    assert len(runnable) >= 10, f"only {len(runnable)} runnable examples found: the marker parser lost them?"
+
+
+def test_the_docs_build_with_warnings_as_errors(tmp_path):
+    missing = [m for m in ("sphinx", "myst_parser", "furo") if _absent(m)]
+    assert not missing, (f"the docs packages are not installed ({', '.join(missing)}): pip install -e '.[test]' "
+                         "(the test extra includes docs)")
+    out = tmp_path / "html"
+    proc = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html",
+                           "-d", str(tmp_path / "doctrees"), str(DOCS), str(out)],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, f"sphinx-build -W failed:\n{proc.stderr[-4000:]}"
+    # the generated tables hold what the code holds
+    from ckesc.bench.profile import PROFILE_SCHEMA
+    from ckesc.emulator.faults import FAULTS
+    from ckesc.emulator.variants import FREEDOMS
+    from ckesc.protocol.requirements import REQUIREMENTS
+
+    def cells(name: str) -> set[str]:
+        """The text of every table cell of a built page."""
+        html = (out / name).read_text(encoding="utf-8")
+        return {" ".join(re.sub(r"<[^>]+>", "", c).split()) for c in re.findall(r"<td>(.*?)</td>", html, re.S)}
+
+    keys = {f"[{s}] {k}" for s, f in PROFILE_SCHEMA.model_fields.items() for k in f.annotation.model_fields}
+    assert not keys - cells("bench/profiles.html"), "profile keys missing from the docs"
+    assert not (set(FAULTS) | set(FREEDOMS)) - cells("emulator.html"), "faults or variants missing from the docs"
+    assert not set(REQUIREMENTS) - cells("catalogue.html"), "requirements missing from the catalogue"
+
+
+def _absent(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is None
+
+
+RUNNABLE = [e for page in PAGES for e in examples(page)[0] if e.runs]
+
+
+@pytest.mark.parametrize("page", sorted({e.page for e in RUNNABLE}), ids=lambda p: str(p.relative_to(DOCS)))
+def test_runnable_examples_run(page, tmp_path):
+    (tmp_path / "fixtures").mkdir()  # the repository's fixtures, read-only by way of links: an example writes beside them
+    for item in (ROOT / "fixtures").iterdir():
+        (tmp_path / "fixtures" / item.name).symlink_to(item)
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+           "COLUMNS": "100"}
+    for example in (e for e in RUNNABLE if e.page == page):
+        proc = subprocess.run(["bash", "-e", "-c", example.code], cwd=tmp_path, env=env, capture_output=True,
+                              text=True, timeout=120)
+        said = proc.stdout + proc.stderr
+        assert proc.returncode == example.exit, (
+            f"{example.where}: exit {proc.returncode}, the page says {example.exit}:\n"
+            f"$ {shlex.quote(example.code)}\n{said[-3000:]}")
+        if example.prints:
+            assert example.prints in said, f"{example.where}: the page says it prints {example.prints!r}:\n{said[-3000:]}"
+
+
+def test_readme_is_one_screen_and_points_at_the_docs():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(readme.splitlines()) <= 70, f"README.md has {len(readme.splitlines())} lines: the rest goes in docs/"
+    assert "docs/" in readme and "sphinx" in readme
+    # the two commands for a fresh machine, and the project's tests as .ci/run runs them
+    assert 'pip install . && ckesc run' in readme
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    installs = re.findall(r'pip install --quiet -e "(\.\[[\w,]+\])"', ci)
+    assert installs and f'pip install -e "{installs[0]}" && python -m pytest' in readme, (
+        f"README's test command does not install what .ci/run installs ({installs})")
