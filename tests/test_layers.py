@@ -1,4 +1,4 @@
-"""The layers contract (pyproject.toml ``[tool.importlinter]``, README "Layout"): imports point down
+"""The layers contract (pyproject.toml ``[tool.importlinter]``, docs/architecture.md): imports point down
 only, from the command line to the sans-IO protocol, and no conformance test module imports another.
 Checked with import-linter, whose report names each offending import and its line."""
 

@@ -33,7 +33,7 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--can-config", action="append", default=[], metavar="KEY=VALUE", help="extra bus argument (repeatable)")
     g.add_argument("--can-bitrate-cmd", metavar="CMD",
                    help="--dut bus: command that moves the host's bus to {bitrate} when Set Baud's tests need it "
-                        "(python-can cannot set a SocketCAN bit rate; see README, Firmware qualification)")
+                        "(python-can cannot set a SocketCAN bit rate; see docs/bench/socketcan.md)")
     g.add_argument("--host-send-error", type=float, metavar="MS",
                    help="an adapter that does not echo the host's frames: how much later than the host clock at send "
                         "a frame may reach the bus, ms (default 2): the error of times taken from the host's frames")

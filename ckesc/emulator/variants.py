@@ -241,7 +241,7 @@ def describe(values: Mapping[str, Any]) -> str:
 
 
 def table() -> str:
-    """The freedoms as a text table (``ckesc emulate --list-variants``, the README)."""
+    """The freedoms as a text table (``ckesc emulate --list-variants``)."""
     rows = [(f.name, f.values_text(), ", ".join(f.allowed_by), f.description) for f in FREEDOMS.values()]
     w = [max(len(r[i]) for r in rows) for i in range(2)]
     # name, values and the ids on one line; the description wrapped under it (a 100-column terminal)
