@@ -18,7 +18,8 @@ source_suffix = {".md": "markdown"}
 exclude_patterns = ["_build"]
 myst_enable_extensions = ["colon_fence", "deflist"]
 myst_heading_anchors = 3
-suppress_warnings = []
+# command lines in prose keep their "--": no typographic dashes or quotes
+smartquotes = False
 
 html_theme = "furo"
 html_title = f"ckesc-conformance {release}"
