@@ -135,6 +135,47 @@ def test_runnable_examples_run(page, tmp_path):
             assert example.prints in said, f"{example.where}: the page says it prints {example.prints!r}:\n{said[-3000:]}"
 
 
+def _blocks(info: str) -> list[tuple[str, str]]:
+    """Every fenced block of one kind in the pages: (where, text)."""
+    out = []
+    for page in PAGES:
+        lines = page.read_text(encoding="utf-8").split("\n")
+        for i, line in enumerate(lines):
+            fence = FENCE.match(line)
+            if fence and fence["info"] == info:
+                end = next(j for j in range(i + 1, len(lines)) if lines[j].strip() == "```")
+                indent = len(fence["indent"])
+                out.append((f"{page.relative_to(ROOT)}:{i + 1}", "\n".join(x[indent:] for x in lines[i + 1:end])))
+    return out
+
+
+def test_the_rig_files_and_ci_recipes_shown_are_valid():
+    """What cannot run here is still checked: a rig file shown is one the rig loader takes, a CI recipe is YAML and
+    each ckesc command in it is one the command line takes."""
+    import yaml
+
+    from ckesc.cli import build_parser
+    from ckesc.rigs.rig import parse
+
+    rigs = [(where, text) for where, text in _blocks("toml") if "[bench." in text]
+    assert rigs, "no rig file example found in the docs"
+    for where, text in rigs:
+        assert parse(text, ROOT / "fixtures" / "rigs" / "docs-example.toml").benches, where
+    commands = []
+    for where, text in _blocks("yaml"):
+        doc = yaml.safe_load(text)
+        assert doc, f"{where}: empty YAML"
+        commands += [(where, c) for c in re.findall(r"(?:run: |- )(ckesc [^\n#]+)", text)]
+    assert len(commands) >= 2, "the CI recipes run no ckesc command?"
+    parser = build_parser()
+    for where, command in commands:
+        try:
+            args = parser.parse_args(shlex.split(command)[1:])
+        except SystemExit:
+            raise AssertionError(f"{where}: '{command}' is not a valid ckesc command line") from None
+        assert args.handler, where
+
+
 def test_readme_is_one_screen_and_points_at_the_docs():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     assert len(readme.splitlines()) <= 70, f"README.md has {len(readme.splitlines())} lines: the rest goes in docs/"

@@ -184,6 +184,8 @@ def packages() -> str:
                 out += [_table(("module", "what it holds"), rows), ""]
                 if tests:
                     out += [f"And {len(tests)} test modules, one per section of the document: [](catalogue.md).", ""]
+                for sub in sorted(d for d in path.iterdir() if (d / "__init__.py").is_file()):
+                    out += [f"`{sub.relative_to(ROOT)}/`: {_docstring(sub / '__init__.py')}", ""]
             else:
                 out += [f"### `{path.relative_to(ROOT)}.py`", "", _docstring(path.with_suffix(".py")), ""]
     return "\n".join(out)
