@@ -19,10 +19,10 @@ from pathlib import Path
 import can
 import flaky_bus
 import pytest
-from ckesc.harness import lanes
 from procs import CKESC, Emulator
 from procs import env as _env
 
+from ckesc.bench import lanes
 from ckesc.bench.dut import Dut
 from ckesc.bench.lanes import BenchGone, BusFault, BusLane, NoPower
 from ckesc.bench.profile import DutProfile

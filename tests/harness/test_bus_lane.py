@@ -17,8 +17,8 @@ from types import SimpleNamespace
 
 import can
 import pytest
-from ckesc.harness import lanes
 
+from ckesc.bench import lanes
 from ckesc.bench.lanes import BusLane, NoPower
 
 _CHANNELS = itertools.count()

@@ -15,7 +15,7 @@ import pytest
 from procs import CKESC
 from procs import env as _env
 
-from ckesc import harness
+from ckesc import bench
 
 ERROR_S = 0.004
 SELECT = "comm_loss or node_slot or reply_comes_in"
@@ -23,7 +23,7 @@ COMM, SLOT = "comm_loss", "slot"
 
 
 def _profile(tmp: Path) -> Path:
-    text = (Path(harness.__file__).parent / "profiles" / "emulator.toml").read_text()
+    text = (Path(bench.__file__).parent / "profiles" / "emulator.toml").read_text()
     path = tmp / "coarse.toml"
     path.write_text(text.replace("error_s = 0.0 ", f"error_s = {ERROR_S} "))
     assert f"error_s = {ERROR_S}" in path.read_text()

@@ -17,7 +17,7 @@ import pytest
 # the report's DOM reader and headless Chromium, as tests/harness/test_html_report.py uses them
 from test_html_report import _chromium, _render
 
-from ckesc.harness import compare
+from ckesc.reporting import compare
 
 SELECTION = "test_s4_4_2_msg_control or test_s4_4_26"  # answer-delay margins (R2, 4.4.2-4) and ESC Information
 FAULT = "answer_late"  # MSG Control answered after 80 ms: R2 and 4.4.2-4 FAIL

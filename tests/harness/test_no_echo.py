@@ -26,7 +26,7 @@ import pytest
 from procs import CKESC, Emulator
 from procs import env as _env
 
-from ckesc import harness
+from ckesc import bench as bench_package
 from ckesc.bench.dut import Dut, echo_probe
 from ckesc.bench.lanes import BusLane, NoPower, OwnFrame
 from ckesc.bench.profile import DutProfile
@@ -115,7 +115,7 @@ def _profile(tmp: Path) -> Path:
     """The emulator's profile with the real-time lane's stated error (``--lane realtime`` uses 2 ms): its
     answers are stamped when due, not when their last bit would have gone, so the R2 slot checks sit
     within a fraction of a millisecond of their limits."""
-    text = (Path(harness.__file__).parent / "profiles" / "emulator.toml").read_text()
+    text = (Path(bench_package.__file__).parent / "profiles" / "emulator.toml").read_text()
     path = tmp / "emulator-realtime.toml"
     path.write_text(text.replace("error_s = 0.0 ", "error_s = 0.002 "))
     assert "error_s = 0.002" in path.read_text()

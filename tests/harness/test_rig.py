@@ -10,7 +10,7 @@ import pytest
 from procs import CKESC
 from procs import env as _env
 
-from ckesc.harness import rig as rigs
+from ckesc.rigs import rig as rigs
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "fixtures" / "rigs" / "example.toml"
 
