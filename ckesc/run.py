@@ -39,7 +39,7 @@ def _suite_root() -> str:
     """The directory holding the ``conformance`` package (a checkout, or site-packages of a wheel install):
     pytest's rootdir, so that test ids read ``conformance/test_s4_4_22_set_freq.py::...`` however the
     suite was installed and wherever it is run from."""
-    from .session.plugin import conformance_dir  # pytest with it: only when a run is about to start
+    from .session.collection import conformance_dir  # pytest with it: only when a run is about to start
 
     where = conformance_dir()
     return str(where.parent) if where else "."
@@ -203,7 +203,7 @@ class _Collector:
     stopped: str | None = None
 
     def pytest_sessionfinish(self, session):
-        from .session.plugin import state
+        from .session.state import state
 
         st = state(session.config)
         self.results = list(st.results.values())
