@@ -15,7 +15,7 @@ EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a writer killed by `| head`
 
 
-class _Parser(argparse.ArgumentParser):
+class Parser(argparse.ArgumentParser):
     """argparse with one-line errors: ``ckesc encode: error: ... (see ckesc encode --help)``."""
 
     def error(self, message: str):  # type: ignore[override]
@@ -29,7 +29,7 @@ class UsageError(Exception):
 Handler = Callable[[argparse.Namespace], int]
 
 
-def _int_arg(text: str) -> int:
+def int_arg(text: str) -> int:
     try:
         return parse_int(text)
     except ValueError:
