@@ -6,6 +6,7 @@
     ckesc run --dut bus ... --power labgrid --labgrid-env env.yaml --labgrid-target esc   # power by labgrid
     ckesc run 4.4.22 4.4.3                      # some sections (numbers as in the document)
     ckesc run conformance/test_s4_4_22_set_freq.py   # a test module, by path (absolute or relative)
+    ckesc run 4.4.22 -- -k read -x              # pytest's own arguments after `--`, handed on untouched
     ckesc run --rig fixtures/rigs/example.toml [--benches a,b] [4.4.3 ...]   # every bench of a rig at once
 
 
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import shlex
 import shutil
 import sys
 import time
@@ -31,15 +33,17 @@ from pathlib import Path
 from typing import Any
 
 from .protocol.requirements import section_key
+from .session import options
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ABORTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_PYTEST_USAGE = 4  # pytest.ExitCode.USAGE_ERROR
 
 
 def _suite_root() -> str:
     """The directory holding the ``conformance`` package (a checkout, or site-packages of a wheel install):
     pytest's rootdir, so that test ids read ``conformance/test_s4_4_22_set_freq.py::...`` however the
     suite was installed and wherever it is run from."""
-    from .session.plugin import conformance_dir  # pytest with it: only when a run is about to start
+    from .session.collection import conformance_dir  # pytest with it: only when a run is about to start
 
     where = conformance_dir()
     return str(where.parent) if where else "."
@@ -51,33 +55,6 @@ class SelectionError(ValueError):
 
 #: a section number as the document numbers them ("4.4.22", "4.1"), the attachment, or a module name
 _SECTION = re.compile(r"^(\d+(\.\d+)+|attachment|test_\w+)$")
-#: pytest flags that take no value: a section number after one of them is a selection, after any other
-#: option (``--maxfail 4.4``? ``--timeout 2.5``) it is that option's value
-_FLAGS = frozenset({"-x", "--exitfirst", "-v", "-vv", "-vvv", "--verbose", "-q", "-qq", "--quiet", "-s", "-l", "--showlocals",
-                    "--lf", "--last-failed", "--ff", "--failed-first", "--nf", "--new-first", "--sw", "--stepwise",
-                    "--pdb", "--co", "--collect-only", "--strict-markers", "--runxfail", "--strict", "--allow-motor-spin"})
-
-
-def is_selector(token: str, previous: str | None = None) -> bool:
-    """Whether ``token`` selects part of the suite: a section number, a test module's name or a path
-    to one (``.py``, with or without ``::test``), and not the value of the option before it."""
-    if token.startswith("-") or (previous is not None and previous.startswith("-") and "=" not in previous
-                                 and previous not in _FLAGS):
-        return False
-    return bool(_SECTION.match(token)) or ".py" in token or "/" in token
-
-
-def split_selection(tokens: list[str]) -> tuple[list[str], list[str]]:
-    """``ckesc run``'s free arguments -> (selectors, the rest for pytest, without the ``--``)."""
-    selectors, rest = [], []
-    previous, dashes = None, False
-    for token in tokens:
-        if token == "--" and not dashes:  # ckesc's own arguments end here
-            previous, dashes = None, True
-            continue
-        (selectors if is_selector(token, previous) else rest).append(token)
-        previous = token
-    return selectors, rest
 
 
 def section_modules(where: Path) -> dict[str, Path]:
@@ -120,41 +97,44 @@ def resolve_selection(selectors: list[str], cwd: Path | None = None) -> list[str
     return list(dict.fromkeys(out))
 
 
+def targets_of(args: argparse.Namespace) -> list[str]:
+    """What pytest collects for ``args``' selection (the whole suite without one); raises :class:`SelectionError`
+    for a selection of nothing."""
+    return resolve_selection(list(args.selection)) or ["--pyargs", "conformance"]
+
+
 def pytest_argv(args: argparse.Namespace) -> list[str]:
     """pytest's command line for ``args``; raises :class:`SelectionError` for a selection of nothing."""
-    selectors, extra = split_selection(list(args.pytest_args))
-    targets = resolve_selection(selectors) or ["--pyargs", "conformance"]
+    targets = targets_of(args)
     # labgrid (the rig extra) is a library here: its pytest plugin (step logging, LG_ENV) stays out of the run;
     # the run order is the plugin's (session/schedule.py): pytest-randomly, when installed, only on request
     # (`-- -p randomly`, which comes later on the command line and so wins)
-    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:labgrid", "-p", "no:randomly", "--rootdir", _suite_root(), "--ckesc-summary", "--ckesc-reports", args.reports,
-            "--dut", args.dut, "--lane", args.lane, "--ckesc-trace-format", args.trace_format,
-            "--ckesc-order", getattr(args, "order", "overlap"),
+    argv = [*targets, "-p", "no:cacheprovider", "-p", "no:labgrid", "-p", "no:randomly", "--rootdir", _suite_root(),
+            "--ckesc-summary", *options.command_line({o.dest: getattr(args, o.dest) for o in options.run_options()}),
             "-o", "console_output_style=count",
             # ckesc itself is the plugin and is imported before pytest starts: nothing of it needs rewriting
-            "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning"]
-    for opt in ("can_interface", "can_channel", "can_bitrate", "node_id", "nodes", "profile", "power", "power_off_cmd",
-                "power_on_cmd", "emulator_faults", "can_bitrate_cmd", "host_send_error", "labgrid_env", "labgrid_target",
-                "labgrid_place", "labgrid_coordinator"):
-        value = getattr(args, opt)
-        if value not in (None, ""):
-            argv += [f"--{opt.replace('_', '-')}", str(value)]
-    for kv in args.can_config:
-        argv += ["--can-config", kv]
-    for kv in getattr(args, "emulator_option", []):
-        argv += ["--emulator-option", kv]
-    if args.emulator_seed:
-        argv += ["--emulator-seed", str(args.emulator_seed)]
-    if getattr(args, "progress", "on") != "on":
-        argv += ["--ckesc-progress", args.progress]
-    if getattr(args, "time_from", None):
-        argv += ["--ckesc-durations", str(Path(args.time_from).resolve())]
-    if getattr(args, "emulator_variants", None) is not None:
-        argv += ["--emulator-variants", str(args.emulator_variants)]
-    if args.allow_motor_spin:
-        argv.append("--allow-motor-spin")
-    argv.append("-q" if args.quiet else "-v")
-    return argv + extra
+            "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning",
+            "-q" if args.quiet else "-v"]
+    return argv + list(args.pytest_args)  # last: pytest's own word wins
+
+
+class _AfterDashes:
+    """What pytest made of the arguments after ``--``, read by pytest's own parser: a free argument there (not an
+    option's value) would be a path for pytest to collect, beside the selection (``ckesc run -- --no-header 4.4.22``:
+    "file not found: 4.4.22"). It is a usage error that names the way out: the selection goes before ``--``."""
+
+    def __init__(self, targets: list[str], args: argparse.Namespace) -> None:
+        self.targets, self.args = targets, args
+
+    def pytest_cmdline_main(self, config) -> int | None:  # (registered after pytest's own: before its session)
+        extra = [a for a in config.args if a not in self.targets]  # (targets: ``--pyargs`` and the paths)
+        if not extra:
+            return None
+        rest = [a for a in self.args.pytest_args if a not in extra]
+        way_out = shlex.join(["ckesc", "run", *self.args.selection, *extra, "--", *rest])
+        print(f"ckesc run: error: {extra[0]} after `--` would be a path for pytest to collect: the selection goes before "
+              f"`--` ({way_out})", file=sys.stderr)
+        return EXIT_PYTEST_USAGE
 
 
 def run_command(args: argparse.Namespace) -> int:
@@ -162,19 +142,19 @@ def run_command(args: argparse.Namespace) -> int:
 
     from .reporting.causes import broken_outside_a_fail
 
-    if getattr(args, "rig", None):
+    if args.rig:
         return run_batch(args)
-    if getattr(args, "benches", None):
+    if args.benches:
         print("ckesc run: error: --benches chooses benches of a rig: it needs --rig FILE", file=sys.stderr)
         return EXIT_USAGE
 
     collector = _Collector()
     try:
-        argv = pytest_argv(args)
+        argv, targets = pytest_argv(args), targets_of(args)
     except SelectionError as exc:
         print(f"ckesc run: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    code = pytest.main(argv, plugins=[collector])
+    code = pytest.main(argv, plugins=[collector, _AfterDashes(targets, args)])
     stopped = collector.stopped or ""
     if stopped.startswith("aborted"):  # the DUT did not answer, or the bench went away
         return EXIT_ABORTED
@@ -203,7 +183,7 @@ class _Collector:
     stopped: str | None = None
 
     def pytest_sessionfinish(self, session):
-        from .session.plugin import state
+        from .session.state import state
 
         st = state(session.config)
         self.results = list(st.results.values())
@@ -211,14 +191,6 @@ class _Collector:
 
 
 # ----------------------------------------------------------------------------------------- batches
-#: ``ckesc run``'s options that a rig file sets per bench, with their defaults (given with --rig: an error)
-BENCH_OPTIONS = {"dut": "emulator", "lane": "simulated", "can_interface": None, "can_channel": None, "can_bitrate": None,
-                 "can_config": [], "node_id": None, "nodes": None, "profile": None, "power": None, "power_off_cmd": None,
-                 "power_on_cmd": None, "emulator_faults": "", "emulator_seed": 0, "emulator_option": [], "emulator_variants": None,
-                 "can_bitrate_cmd": None, "host_send_error": None, "allow_motor_spin": None,
-                 "labgrid_env": None, "labgrid_target": None, "labgrid_place": None}
-
-
 class BatchError(ValueError):
     """A batch that cannot start: the rig file, a bench's set-up, the options (one line, exit 2)."""
 
@@ -228,7 +200,7 @@ def _static_preflight(bench) -> None:
     ABSENT, not a set-up mistake of the batch)."""
     from .session import preflight
 
-    opts = {**BENCH_OPTIONS, "ckesc_reports": None, **bench.options()}
+    opts = {**options.BENCH_OPTIONS, "ckesc_reports": None, **bench.options()}
     if opts.get("power") == "manual":
         raise BatchError(f"bench {bench.name}: power 'manual' prompts an operator at the console, which a batch cannot; "
                          f"run that bench alone: {bench.command_line()}")
@@ -242,10 +214,11 @@ def batch_plan(args: argparse.Namespace) -> tuple[Any, list]:
     """The rig and its chosen benches, each checked (:class:`BatchError`)."""
     from .rigs import rig as rigs
 
-    given = [f"--{dest.replace('_', '-')}" for dest, default in BENCH_OPTIONS.items()
-             if getattr(args, dest, default) not in (default, None, [], "")]
+    given = [o for o in map(options.BY_DEST.get, options.BENCH_OPTIONS)
+             if getattr(args, o.dest, None) not in (o.default_on(run=True), None, [], "")]
     if given:
-        raise BatchError(f"{given[0]} is set per bench in the rig file (with --rig, the rig says it)")
+        raise BatchError(f"{given[0].run_flags[0]} is set per bench in the rig file ({given[0].rig}; with --rig, the rig "
+                         "says it)")
     try:
         rig = rigs.load(args.rig)
         benches = rig.select([b.strip() for b in (args.benches or "").split(",") if b.strip()])
@@ -272,14 +245,13 @@ def run_batch(args: argparse.Namespace) -> int:
 
     try:
         rig, benches = batch_plan(args)
-        selectors, extra = split_selection(list(args.pytest_args))
-        targets = resolve_selection(selectors) or ["--pyargs", "conformance"]
-        preflight.reports_writable(args.reports)
+        targets = targets_of(args)
+        preflight.reports_writable(args.ckesc_reports)
     except (BatchError, SelectionError, preflight.PreflightError) as exc:
         print(f"ckesc run: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     started = time.time()
-    batch_dir = reports.run_dir(Path(args.reports), started)
+    batch_dir = reports.run_dir(Path(args.ckesc_reports), started)
     plans = [{"name": b.name, "options": b.options(), "report_dir": str((batch_dir / b.name).resolve())} for b in benches]
     records: dict[str, dict[str, Any]] = {}
 
@@ -306,14 +278,14 @@ def run_batch(args: argparse.Namespace) -> int:
     # no:labgrid, no:randomly: as in a one-bench run (labgrid is a library here; the run order is the plugin's)
     argv = [*targets, "-p", "no:cacheprovider", "-p", "no:terminal", "-p", "no:tmpdir", "-p", "no:labgrid",
             "-p", "no:randomly", "--rootdir", _suite_root(),
-            "--ckesc-reports", str(batch_dir), "--ckesc-trace-format", args.trace_format,
+            "--ckesc-reports", str(batch_dir), "--ckesc-trace-format", args.ckesc_trace_format,
             "-p", "ckesc.rigs.batch", "-n", str(len(benches)), "--dist", "each", "--max-worker-restart", "0",
-            "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning", *extra]
+            "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning", *args.pytest_args]
     print(f"ckesc run: batch of {len(benches)} benches ({', '.join(b.name for b in benches)}) from {rig.path}; "
           f"reports in {batch_dir}/", flush=True)
     controller.install_signals()
     try:
-        code = pytest.main(argv, plugins=[controller])
+        code = pytest.main(argv, plugins=[controller, _AfterDashes(targets, args)])
     finally:
         controller.restore_signals()
     if code in (pytest.ExitCode.USAGE_ERROR, pytest.ExitCode.INTERNAL_ERROR) and not records:

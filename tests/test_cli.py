@@ -376,27 +376,65 @@ def test_installed_script_survives_a_closed_pipe(tmp_path):
     assert proc.returncode == 141
 
 
-def test_run_passes_the_trace_format_to_the_plugin():
-    import argparse
+def _run_args(*argv: str):
+    """``ckesc run ARGV``'s namespace as its handler sees it (selection and pytest's arguments split at ``--``)."""
+    from ckesc.cli import build_parser
 
-    from ckesc.cli.run import add_run_command
+    args = build_parser().parse_args(["run", *argv])
+    args.selection, args.pytest_args = args.free, args.after_dashes
+    return args
+
+
+def test_run_passes_the_trace_format_to_the_plugin():
     from ckesc.run import pytest_argv
 
-    parser = argparse.ArgumentParser()
-    add_run_command(parser.add_subparsers())
-    argv = pytest_argv(parser.parse_args(["run", "--trace-format", "asc"]))
+    argv = pytest_argv(_run_args("--trace-format", "asc"))
     assert argv[argv.index("--ckesc-trace-format") + 1] == "asc"
-    default = pytest_argv(parser.parse_args(["run"]))
+    default = pytest_argv(_run_args())
     assert default[default.index("--ckesc-trace-format") + 1] == "blf"
-    with pytest.raises(SystemExit):
-        parser.parse_args(["run", "--trace-format", "pcap"])
+    assert main(["run", "--trace-format", "pcap"]) == 2
 
 
-def test_run_tells_sections_and_modules_from_pytest_options_and_their_values():
-    from ckesc.run import split_selection
+def test_run_splits_at_the_first_dashes_its_own_before_pytests_after_untouched():
+    """Before the first ``--``: ckesc run's options (also after a section) and the selection; after it: pytest's
+    arguments as given, a section number among them an option's value (``-k 4.4``), ckesc run's own flags pytest's."""
+    from ckesc.run import pytest_argv
 
-    tokens = ["4.4.22", "--", "-k", "4.4", "--maxfail", "3", "--timeout", "2.5", "-x", "4.4.3", "conformance/t.py::a",
-              "--deselect", "conformance/t.py::b", "--junitxml=out/j.xml", "--ignore=conformance/u.py"]
-    assert split_selection(tokens) == (["4.4.22", "4.4.3", "conformance/t.py::a"],
-                                       ["-k", "4.4", "--maxfail", "3", "--timeout", "2.5", "-x", "--deselect",
-                                        "conformance/t.py::b", "--junitxml=out/j.xml", "--ignore=conformance/u.py"])
+    args = _run_args("-q", "4.4.22", "--strict", "4.4.3", "--", "-k", "4.4", "--maxfail", "3", "-x", "--strict", "--",
+                     "--junitxml=out/j.xml")
+    assert args.strict and args.quiet
+    assert args.selection == ["4.4.22", "4.4.3"]
+    assert args.pytest_args == ["-k", "4.4", "--maxfail", "3", "-x", "--strict", "--", "--junitxml=out/j.xml"]
+    argv = pytest_argv(_run_args("4.4.22", "--", "--no-header"))
+    assert argv[0].endswith("conformance/test_s4_4_22_set_freq.py") and argv[-1] == "--no-header"
+
+
+def test_run_names_the_way_out_for_pytest_options_before_the_dashes(capsys):
+    assert main(["run", "4.4.18", "-k", "just_inside"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["ckesc run: error: -k is not an option of ckesc run: pytest's options go after `--` (ckesc run 4.4.18 "
+                   "-- -k just_inside)"]
+
+
+def test_run_refuses_a_selection_after_the_dashes_and_says_where_it_goes(tmp_path):
+    """``ckesc run -- --no-header 4.4.22``: pytest's own parser reads ``4.4.22`` as a path to collect, not as an
+    option's value; that is one line and exit 2 naming the way out (not pytest's "file not found"), no report."""
+    done = subprocess.run([sys.executable, "-m", "ckesc", "run", "--reports", str(tmp_path / "r"), "--", "--no-header",
+                           "4.4.22"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stdout[-2000:] + done.stderr
+    assert done.stderr.strip().splitlines() == [
+        "ckesc run: error: 4.4.22 after `--` would be a path for pytest to collect: the selection goes before `--` "
+        "(ckesc run 4.4.22 -- --no-header)"]
+    assert not (tmp_path / "r").exists()
+
+
+def test_run_selects_before_the_dashes_and_hands_pytest_what_follows(tmp_path):
+    """``ckesc run 4.4.22 -- --no-header``: the section's tests only, and pytest's header left out as asked."""
+    done = subprocess.run([sys.executable, "-m", "ckesc", "run", "--reports", str(tmp_path), "--trace-format", "none",
+                           "4.4.22", "--", "--no-header", "-k", "read_answers"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr
+    assert "platform " not in done.stdout and "rootdir:" not in done.stdout, done.stdout[:2000]
+    doc = json.loads(next(tmp_path.glob("*/results.json")).read_text())
+    assert {r["nodeid"].split("::")[0] for r in doc["results"]} == {"conformance/test_s4_4_22_set_freq.py"}
+
+

@@ -24,7 +24,7 @@ from typing import Callable, Sequence
 
 from .. import __version__
 from .check_log import add_check_log_command
-from .common import EXIT_BROKEN_PIPE, EXIT_INTERRUPTED, EXIT_USAGE, Handler, UsageError, _Parser
+from .common import EXIT_BROKEN_PIPE, EXIT_INTERRUPTED, EXIT_USAGE, Handler, Parser, UsageError
 from .compare import add_compare_command
 from .control import add_control_command
 from .decode import add_decode_command
@@ -51,9 +51,9 @@ COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="ckesc", description="Tools for the CKESC UAVCAN Protocol 2.1 conformance suite.")
+    parser = Parser(prog="ckesc", description="Tools for the CKESC UAVCAN Protocol 2.1 conformance suite.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     for add in COMMANDS:
         add(sub)
     return parser

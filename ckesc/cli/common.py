@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Callable
 
 from ..protocol.assignments import parse_int
@@ -15,8 +16,25 @@ EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a writer killed by `| head`
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``ckesc encode: error: ... (see ckesc encode --help)``."""
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``ckesc encode: error: ... (see ckesc encode --help)``.
+
+    ``split_at_dashes=True`` (``ckesc run``): the command's arguments end at the first ``--``. Before it, its
+    options; the other arguments, in their order, in ``args.free`` (unknown options among them, for the command
+    to name); after it, everything untouched in ``args.after_dashes``."""
+
+    def __init__(self, *args, split_at_dashes: bool = False, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.split_at_dashes = split_at_dashes
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        if not self.split_at_dashes:
+            return super().parse_known_args(args, namespace)
+        tokens = list(sys.argv[1:] if args is None else args)
+        cut = tokens.index("--") if "--" in tokens else len(tokens)
+        namespace, free = super().parse_known_args(tokens[:cut], namespace)
+        namespace.free, namespace.after_dashes = free, tokens[cut + 1:]
+        return namespace, []
 
     def error(self, message: str):  # type: ignore[override]
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
@@ -29,7 +47,7 @@ class UsageError(Exception):
 Handler = Callable[[argparse.Namespace], int]
 
 
-def _int_arg(text: str) -> int:
+def int_arg(text: str) -> int:
     try:
         return parse_int(text)
     except ValueError:

@@ -9,7 +9,7 @@ import sys
 from typing import Any
 
 from ..protocol.assignments import parse_int
-from .common import EXIT_FRAMES_FAILED, EXIT_OK, EXIT_UNREACHABLE, UsageError, _int_arg, _Parser
+from .common import EXIT_FRAMES_FAILED, EXIT_OK, EXIT_UNREACHABLE, Parser, UsageError, int_arg
 
 
 def _control_port(args: argparse.Namespace) -> int:
@@ -71,9 +71,9 @@ def add_control_command(sub: argparse._SubParsersAction) -> None:
         "          CKESC_CONTROL_PORT=29536 ckesc control power cycle --off-time 0.5",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--port", type=_int_arg, metavar="P", help="the emulator's control port (default: $CKESC_CONTROL_PORT)")
+    p.add_argument("--port", type=int_arg, metavar="P", help="the emulator's control port (default: $CKESC_CONTROL_PORT)")
     p.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for the answer (default 10, plus the off time)")
-    actions = p.add_subparsers(dest="action", metavar="ACTION", parser_class=_Parser, required=True)
+    actions = p.add_subparsers(dest="action", metavar="ACTION", parser_class=Parser, required=True)
     actions.add_parser("status", help="power state, bit rate, per-ESC node ids, faults and counters, timing")
     power = actions.add_parser("power", help="power off / on / cycle")
     power.add_argument("state", choices=("off", "on", "cycle"))
@@ -81,10 +81,10 @@ def add_control_command(sub: argparse._SubParsersAction) -> None:
     fault = actions.add_parser("fault", help="switch a fault on or off")
     fault.add_argument("name", metavar="NAME", help="fault name (ckesc control faults lists them)")
     fault.add_argument("state", choices=("on", "off"))
-    fault.add_argument("--node", type=_int_arg, metavar="N", help="only the ESC with this node id (default: every ESC)")
+    fault.add_argument("--node", type=int_arg, metavar="N", help="only the ESC with this node id (default: every ESC)")
     actions.add_parser("faults", help="list the known faults")
     bitrate = actions.add_parser("bitrate", help="set the emulated bus's bit rate")
-    bitrate.add_argument("bitrate", type=_int_arg, metavar="BIT/S")
+    bitrate.add_argument("bitrate", type=int_arg, metavar="BIT/S")
     stats = actions.add_parser("stats", help="frame lateness (send - due) and wake-up lateness")
     stats.add_argument("--reset", action="store_true", help="start counting afresh")
     actions.add_parser("save", help="write the flash file now")

@@ -10,7 +10,7 @@ import can
 
 from ..emulator import variants
 from ..protocol.assignments import parse_int
-from .common import EXIT_FRAMES_FAILED, EXIT_OK, UsageError, _int_arg
+from .common import EXIT_FRAMES_FAILED, EXIT_OK, UsageError, int_arg
 
 
 def _node_ids(text: str) -> list[int]:
@@ -180,14 +180,14 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--nodes", type=_node_ids, default=[1], metavar="IDS", help="node ids of factory-fresh ESCs: 1,2,3 or 1-20 (default 1)")
     p.add_argument("--faults", metavar="NAMES", help="faults for every ESC, name@node for one (see ckesc.emulator.faults)")
     p.add_argument("--flash-path", metavar="FILE", help="flash file: settings and counters persist across runs (default: none)")
-    p.add_argument("--seed", type=_int_arg, default=0, metavar="N", help="seed of the models' noise (default 0)")
-    p.add_argument("--socketcand", type=_int_arg, metavar="PORT", help="serve socketcand on 127.0.0.1:PORT (0: a free port)")
+    p.add_argument("--seed", type=int_arg, default=0, metavar="N", help="seed of the models' noise (default 0)")
+    p.add_argument("--socketcand", type=int_arg, metavar="PORT", help="serve socketcand on 127.0.0.1:PORT (0: a free port)")
     p.add_argument("--interface", metavar="NAME", help="python-can interface to sit on (socketcan, virtual, ...)")
     p.add_argument("--channel", metavar="NAME", help="python-can channel (vcan0, ...)")
-    p.add_argument("--bitrate", type=_int_arg, default=DEFAULT_BITRATE, metavar="BIT/S",
+    p.add_argument("--bitrate", type=int_arg, default=DEFAULT_BITRATE, metavar="BIT/S",
                    help=f"bit rate of the emulated bus; ESCs at another rate neither hear nor are heard (default {DEFAULT_BITRATE})")
     p.add_argument("--bus-arg", action="append", metavar="KEY=VALUE", help="extra python-can bus argument (repeatable)")
-    p.add_argument("--control", type=_int_arg, metavar="PORT", help="control channel on 127.0.0.1:PORT (0: a free port); see ckesc control")
+    p.add_argument("--control", type=int_arg, metavar="PORT", help="control channel on 127.0.0.1:PORT (0: a free port); see ckesc control")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
     p.add_argument("--stamp", choices=("due", "send"), default="due",
                    help="bus timestamp of ESC frames: the time they were due (default) or the time they were sent")
@@ -206,12 +206,12 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--option", action="append", metavar="NAME=VALUE",
                    help="one conforming variant for every ESC (repeatable): a behaviour the document leaves free, "
                    "e.g. report_timer=grid; --list-variants lists them with the requirements that allow each")
-    p.add_argument("--variants", type=_int_arg, metavar="SEED",
+    p.add_argument("--variants", type=int_arg, metavar="SEED",
                    help="play the conforming combination drawn from SEED (every freedom at a random conforming value; "
                    "--option wins over it)")
     p.add_argument("--list-variants", action="store_true",
                    help="list the conforming variants (name, values, the requirements that allow it) and exit")
-    p.add_argument("--rt-priority", type=_int_arg, metavar="N",
+    p.add_argument("--rt-priority", type=int_arg, metavar="N",
                    help="run the scheduler thread SCHED_FIFO at priority N (1..99; needs CAP_SYS_NICE, else a warning): "
                    "on a loaded machine this keeps other processes from delaying frames by milliseconds")
     p.add_argument("--no-echo-own", action="store_true", help="socketcand: do not echo a client's frames back to it")

@@ -10,7 +10,7 @@ from ..protocol.assignments import AssignmentError, chosen_layout, encode_warnin
 from ..protocol.errors import EncodeError
 from ..protocol.frame import FALLBACK_PRIORITY, encode
 from ..protocol.ids import Kind, Priority
-from .common import EXIT_OK, UsageError, _int_arg
+from .common import EXIT_OK, UsageError, int_arg
 
 
 def _priority_arg(text: str) -> int:
@@ -76,9 +76,9 @@ def add_encode_command(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("name", metavar="NAME", help="catalogue name (set_freq), type id (214) or title; see 'ckesc frames'")
     p.add_argument("fields", nargs="*", metavar="KEY=VALUE", help="field values")
-    p.add_argument("--source", type=_int_arg, default=0, metavar="N", help="source node id (default 0, the host: 4.4.18 note 8)")
-    p.add_argument("--destination", type=_int_arg, metavar="N", help="destination node id (services only; required for them)")
-    p.add_argument("--transfer-id", type=_int_arg, default=0, metavar="N", help="transfer id 0..31 (default 0)")
+    p.add_argument("--source", type=int_arg, default=0, metavar="N", help="source node id (default 0, the host: 4.4.18 note 8)")
+    p.add_argument("--destination", type=int_arg, metavar="N", help="destination node id (services only; required for them)")
+    p.add_argument("--transfer-id", type=int_arg, default=0, metavar="N", help="transfer id 0..31 (default 0)")
     p.add_argument(
         "--priority",
         type=_priority_arg,

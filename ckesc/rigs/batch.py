@@ -42,8 +42,9 @@ from typing import Any
 import pytest
 from xdist.scheduler import EachScheduling
 
-from ..session import plugin
+from ..session import collection, order
 from ..session.progress import BatchProgress
+from ..session.state import state
 
 WORKER_KEY = "ckesc_bench"
 _SETUP_ERROR = pytest.StashKey[str]()
@@ -77,10 +78,10 @@ def pytest_configure(config: pytest.Config) -> None:
     try:
         out = Path(bench["report_dir"])
         out.mkdir(parents=True, exist_ok=True)
-        st = plugin.state(config)
+        st = state(config)
         st.report_dir = out  # reports/<batch>/<bench>/, not a new timestamped directory
         st.info["run_id"] = f"{out.parent.name}/{bench['name']}"
-        plugin._preflight(config)  # noqa: SLF001 - here, so that a bench's mistake is its own and not a crash
+        collection.preflight(config)  # here, so that a bench's mistake is its own and not a crash
     except pytest.UsageError as exc:
         config.stash[_SETUP_ERROR] = str(exc)
     except Exception as exc:  # noqa: BLE001 - whatever breaks one bench's set-up must not end its worker: xdist
@@ -96,22 +97,22 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         items[:] = []  # nothing of this bench can run: its worker ends at once, the others go on
 
 
-# The bench's run order (issue #21): the same plan, shared windows and cold boots as the bench alone (plugin.py's
+# The bench's run order (issue #21): the same plan, shared windows and cold boots as the bench alone (session/order.py's
 # PlanRunner), run through xdist's own worker loop. With ``--dist each`` the worker is told to run every test, and
 # it takes each test from ``session.items`` by position when it gets to it (the test after it too, as pytest's
 # ``nextitem``). So the plan's choice is put at the next position between two tests, and what pytest is to be told
 # comes after it at the position after that: the worker runs the plan's order, every test once, each report sent
 # for the test at its own position. Nothing of xdist is replaced or reached into.
-_RUNNER = pytest.StashKey[plugin.PlanRunner]()
+_RUNNER = pytest.StashKey[order.PlanRunner]()
 
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtestloop(session: pytest.Session) -> None:
     """Before xdist's worker loop: the plan's first test (and its hint) at the first positions."""
     config = session.config
-    if _bench_of(config) is None or _SETUP_ERROR in config.stash or not plugin.overlaps(session):
+    if _bench_of(config) is None or _SETUP_ERROR in config.stash or not order.overlaps(session):
         return None
-    runner = plugin.overlap_plan(session)
+    runner = order.overlap_plan(session)
     first = runner.first() if runner is not None else None
     if first is None:
         return None
@@ -148,7 +149,7 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
     bench = _bench_of(config)
     if bench is None:
         return
-    st = plugin.state(config)
+    st = state(config)
     config.workeroutput[WORKER_KEY] = {"name": bench["name"], "setup_error": config.stash.get(_SETUP_ERROR, None),
                                        "stopped": st.stopped, "exitstatus": int(session.exitstatus)}
 

@@ -21,8 +21,9 @@
 
 A rig is checked against this schema (pydantic) when it is loaded, as DUT profiles are: an unknown
 section or key, a wrong type or a value out of range is a :class:`RigError` naming the file, the bench
-and the key. Each bench becomes the options of one bench's run (:meth:`Bench.options`, the pytest
-plugin's option names; :meth:`Bench.argv`, the same as a ``ckesc run`` command line). Sans-IO: only
+and the key. Each bench becomes the options of one bench's run (:meth:`Bench.options`, the run option table's
+dest names, ``ckesc/session/options.py``, whose ``rig`` column names the key that sets each; :meth:`Bench.argv`,
+the same as a ``ckesc run`` command line). Sans-IO: only
 :func:`load` reads a file.
 """
 
@@ -39,6 +40,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from ..bench.profile import validated
 from ..protocol.ids import ESC_NODE_IDS
+from ..session.options import command_line
 
 BENCH_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
 POWER_WORDS = ("emulator", "none", "manual")
@@ -223,7 +225,8 @@ class Bench:
 
     name: str
     description: str = ""
-    #: the pytest plugin's options (dest names) this bench sets; any other keeps its default
+    #: the run options (dest names, ``session/options.py``: its BENCH_OPTIONS) this bench sets; any other keeps its
+    #: default
     settings: dict[str, Any] = field(default_factory=dict)
 
     def options(self) -> dict[str, Any]:
@@ -231,17 +234,7 @@ class Bench:
 
     def argv(self) -> list[str]:
         """The same bench as ``ckesc run`` / pytest options (``--dut bus --can-interface ...``)."""
-        out: list[str] = []
-        for dest, value in self.settings.items():
-            flag = "--" + dest.replace("_", "-")
-            if value is True:
-                out.append(flag)
-            elif isinstance(value, list):
-                for v in value:
-                    out += [flag, str(v)]
-            elif value is not None and value is not False and value != "":  # (a seed 0 is a value)
-                out += [flag, str(value)]
-        return out
+        return command_line(self.settings)
 
     def command_line(self) -> str:
         return shlex.join(["ckesc", "run", *self.argv()])

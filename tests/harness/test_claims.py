@@ -177,13 +177,13 @@ def _modules(doc: dict) -> set[str]:
     return {r["nodeid"].split("::")[0] for r in doc["results"]}
 
 
-@pytest.mark.parametrize("how", ["sections", "relative", "relative-after-dashes", "absolute", "from-elsewhere"])
+@pytest.mark.parametrize("how", ["sections", "relative", "relative-with-test", "absolute", "from-elsewhere"])
 def test_sections_and_module_paths_select_just_those(tmp_path, how):
     freq = "conformance/test_s4_4_22_set_freq.py"
     args, cwd = {
         "sections": (["4.4.22", "4.4.3"], tmp_path),
         "relative": ([freq], SUITE.parent),
-        "relative-after-dashes": (["--", freq], SUITE.parent),
+        "relative-with-test": ([f"{freq}::test_read_answers_the_current_settings"], SUITE.parent),
         "absolute": ([str(SUITE / "test_s4_4_22_set_freq.py")], tmp_path),
         "from-elsewhere": ([os.path.relpath(SUITE / "test_s4_4_22_set_freq.py", tmp_path)], tmp_path),
     }[how]

@@ -64,6 +64,33 @@ place = "lab2-esc"
                                                  "--labgrid-place", "lab2-esc"]
 
 
+def test_the_rig_keys_of_the_option_table_are_the_rig_files_and_its_benches_set_just_those():
+    """The run option table (session/options.py) names the rig file key that sets each bench option: each names a
+    key of the schema, and a bench sets rig options only (so ``ckesc run --rig`` refuses each of them given)."""
+    from ckesc.session.options import BENCH_OPTIONS, BY_DEST
+
+    schema = set(rigs._BenchDoc.model_fields)
+    assert {BY_DEST[d].rig.split(".")[0] for d in BENCH_OPTIONS} <= schema
+    rig = rigs.parse("""
+[bench.bus]
+bus = { interface = "socketcand", channel = "can0", bitrate = 500000, host = "h" }
+node_id = 5
+power = { labgrid = { env = "lab.yaml", target = "t" } }
+place = "p"
+bitrate_cmd = "b {bitrate}"
+host_send_error_ms = 3
+allow_motor_spin = true
+profile = "x"
+[bench.emu]
+lane = "realtime"
+power = "emulator"
+emulator = { nodes = [1, 2], faults = ["answer_late"], seed = 3, options = { boot_time = 0.2 }, variants = 4 }
+""", "/lab/rig.toml")
+    for bench in rig.benches.values():
+        assert set(bench.options()) <= set(BENCH_OPTIONS), bench.name
+    assert set(BENCH_OPTIONS) - {d for b in rig.benches.values() for d in b.options()} <= {"power_off_cmd", "power_on_cmd"}
+
+
 @pytest.mark.parametrize("text, expected", [
     ("[bench.a]\nprofil = 'x'\n", "lab/rig.toml: [bench.a] unknown key 'profil' (known: description, dut, lane, bus, profile"),
     ("[bench.a]\nprofil = 'x'\n", "did you mean 'profile'?"),

@@ -161,7 +161,7 @@ def test_random_order_changes_no_verdict(overlap_run, tmp_path):
 
 
 def test_a_window_test_alone_opens_its_own_window(tmp_path):
-    doc = _ckesc_run(tmp_path, "4.4.18", "-k", "just_inside")
+    doc = _ckesc_run(tmp_path, "4.4.18", "--", "-k", "just_inside")
     [r] = doc["results"]
     assert r["outcome"] == "PASS"
     assert dict(r["observations"])["window"].startswith("opened by this test")
@@ -217,7 +217,7 @@ def test_a_test_failing_after_a_shared_cycle_is_judged_alone(tmp_path):
 
 
 def test_a_persistence_test_alone_makes_its_own_power_cycle(tmp_path):
-    doc = _ckesc_run(tmp_path, "4.4.22", "-k", "intervals_persist")
+    doc = _ckesc_run(tmp_path, "4.4.22", "--", "-k", "intervals_persist")
     [r] = doc["results"]
     assert r["outcome"] == "PASS" and "write" not in r["traces"]
     assert not any(k == "power cycle" for k, _ in r["observations"])

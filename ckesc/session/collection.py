@@ -1,0 +1,130 @@
+"""Collection and preflight: which tests are the conformance suite's, what each cites, the check that every one
+cites known requirements, and the preflight that ends a mistaken set-up before pytest's header (:func:`preflight`)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+from ..bench.profile import DutProfile
+from ..bench.verdict import NotClaimed
+from ..protocol import functions
+from ..protocol.requirements import REQUIREMENTS, requirement, section_heading
+from . import preflight as checks
+from .lane_setup import bus_kwargs, open_labgrid
+from .state import state
+
+CONFORMANCE_PACKAGE = "conformance"
+_PREFLIGHT_DONE = pytest.StashKey[bool]()
+
+
+def is_conformance(item: pytest.Item) -> bool:
+    mod = getattr(item, "module", None)
+    return mod is not None and (mod.__name__.split(".")[0] == CONFORMANCE_PACKAGE)
+
+
+def item_requirements(item: pytest.Item) -> list[str]:
+    ids: list[str] = []
+    for m in item.iter_markers("requirement"):
+        ids.extend(m.args)
+    return list(dict.fromkeys(ids))
+
+
+def section_of(item: pytest.Item) -> str:
+    ids = item_requirements(item)
+    return getattr(getattr(item, "module", None), "SECTION", None) or (requirement(ids[0]).section if ids else "")
+
+
+def section_title(item: pytest.Item) -> str:
+    return section_heading(section_of(item))
+
+
+def lacking(item: pytest.Item, profile: DutProfile) -> tuple[str, str] | None:
+    """(requirement id, capability) of the first requirement ``item`` cites whose capability the profile lacks."""
+    for rid in item_requirements(item):
+        cap = requirement(rid).capability
+        if cap and not profile.has(cap):
+            return rid, cap
+    return None
+
+
+def check_claims(item: pytest.Item, profile: DutProfile) -> None:
+    """A test of a function the profile declares absent is SKIPPED before it starts: not claimed (R9b)."""
+    absent = functions.of_requirements(item_requirements(item), profile.absent)
+    if absent:
+        raise NotClaimed(absent[0].name, profile.name)
+
+
+def conformance_dir() -> Path | None:
+    """The installed ``conformance`` package's directory (a checkout, or site-packages of a wheel)."""
+    spec = importlib.util.find_spec(CONFORMANCE_PACKAGE)
+    locations = list(spec.submodule_search_locations or []) if spec else []
+    return Path(locations[0]).resolve() if locations else None
+
+
+def targets_conformance(config: pytest.Config) -> bool:
+    """Whether the command line names the conformance suites (``--pyargs conformance[.module]``, or a
+    path inside the package), so that set-up mistakes are found before pytest even collects."""
+    where = conformance_dir()
+    for arg in config.args:
+        head = arg.split("::")[0]
+        if config.option.pyargs and head.split(".")[0] == CONFORMANCE_PACKAGE:
+            return True
+        path = Path(head).resolve()
+        if where is not None and (path == where or where in path.parents):
+            return True
+    return False
+
+
+def preflight(config: pytest.Config) -> None:
+    """The preflight (:mod:`.preflight`), once per session: a mistake is a ``pytest.UsageError`` naming it. A batch's
+    worker calls it itself, so that its bench's mistake is that bench's and not a crash (``ckesc/rigs/batch.py``)."""
+    if config.stash.get(_PREFLIGHT_DONE, False):
+        return
+    config.stash[_PREFLIGHT_DONE] = True
+    try:
+        state(config).profile = checks.run(config.getoption, bus_kwargs=lambda: bus_kwargs(config),
+                                           labgrid=lambda: open_labgrid(config))
+    except checks.PreflightError as exc:
+        raise pytest.UsageError(f"preflight: {exc}") from None
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Set-up mistakes end the run here, before pytest's header, collection or any report."""
+    if targets_conformance(session.config):
+        preflight(session.config)
+
+
+def pytest_deselected(items: list[pytest.Item]) -> None:
+    if items:
+        st = state(items[0].config)
+        st.deselected += [it.nodeid for it in items if is_conformance(it)]
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    st = state(session.config)
+    st.selected = [it for it in session.items if is_conformance(it)]
+    if st.selected:
+        preflight(session.config)  # collected from a path the command line did not name as the suites
+
+
+def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config, items: list[pytest.Item]) -> None:
+    st = state(config)
+    problems = []
+    for item in items:
+        if not is_conformance(item):
+            continue
+        st.conformance = True
+        ids = item_requirements(item)
+        if not ids:
+            problems.append(f"{item.nodeid}: no @pytest.mark.requirement(...)")
+        for i in ids:
+            if i not in REQUIREMENTS:
+                problems.append(f"{item.nodeid}: unknown requirement id {i!r}")
+    if problems:
+        raise pytest.UsageError("conformance tests must cite known requirements:\n  " + "\n  ".join(problems))
+    # run-wide checks (4.1 framing over every frame of the run) go last
+    items.sort(key=lambda it: 1 if it.get_closest_marker("last") else 0)

@@ -1,0 +1,90 @@
+"""The session's end: whether the run was the whole suite run to its end (or why not, and which tests it did not
+run), its exit status, and its reports written (``ckesc/reporting``) and summarised on the console."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from ..reporting import report
+from ..reporting.causes import broken_outside_a_fail
+from . import tracing
+from .collection import conformance_dir, item_requirements, section_of
+from .state import EXIT_ABORTED, report_dir, state
+
+
+def _module_name(nodeid_or_item) -> str:
+    mod = getattr(nodeid_or_item, "module", None)
+    if mod is not None:
+        return mod.__name__.rsplit(".", 1)[-1]
+    return Path(str(nodeid_or_item).split("::")[0]).stem
+
+
+def _completeness(session: pytest.Session, exitstatus: int) -> tuple[str | None, list[dict[str, Any]]]:
+    """Why this run is less than the whole suite ("aborted: ...", "interrupted", "stopped: ...",
+    "subset: ..."; None: it is the whole suite, run to its end), and the tests it did not run."""
+    st = state(session.config)
+    reason = st.stopped
+    if reason is None and exitstatus == pytest.ExitCode.INTERRUPTED:
+        reason = f"stopped: {session.shouldstop}" if isinstance(session.shouldstop, str) else "interrupted"
+    if reason is None and session.shouldfail:
+        reason = f"stopped: {session.shouldfail} (-x / --maxfail)"
+    why_not = {"aborted": "not run: the run was aborted", "interrupted": "not run: the run was interrupted",
+               "stopped": "not run: the run stopped early"}.get((reason or "").split(":")[0].split(" ")[0], "not run")
+    not_run = [{"nodeid": it.nodeid, "name": it.name, "section": section_of(it), "requirements": item_requirements(it),
+                "reason": why_not} for it in st.selected if it.nodeid not in st.results]
+    not_run += [{"nodeid": n, "name": n.split("::")[-1], "section": "", "requirements": [], "reason": "not run: deselected"}
+                for n in st.deselected]
+    where = conformance_dir()
+    suite = {p.stem for p in where.glob("test_*.py")} if where else set()
+    ran = {_module_name(it) for it in st.selected} | {_module_name(n) for n in st.deselected}
+    left_out = sorted(suite - ran)
+    if reason is None and (st.deselected or left_out or any("::" in a for a in session.config.args)):
+        parts = []
+        if left_out:
+            parts.append(f"{len(suite) - len(left_out)} of {len(suite)} section modules selected")
+        if st.deselected:
+            parts.append(f"{len(st.deselected)} tests deselected")
+        reason = "subset: " + ("; ".join(parts) or "single tests selected")
+    return reason, not_run
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    st = state(session.config)
+    traces = tracing.writer(session.config)
+    if traces is not None:
+        traces.end()
+    if not st.conformance or not st.selected:
+        return
+    reason, not_run = _completeness(session, exitstatus)
+    st.info["complete"] = reason is None
+    st.info["incomplete"] = reason or ""
+    st.info["not_run"] = len(not_run)
+    if reason is not None and reason.startswith("aborted"):
+        session.exitstatus = EXIT_ABORTED
+    elif session.exitstatus == pytest.ExitCode.OK and any(map(broken_outside_a_fail, st.results.values())):
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED  # a bus rule broken while a SKIPPED test ran
+    out = report_dir(session.config)
+    if out is not None:
+        report.write_reports(out, list(st.results.values()), st.info, not_run=not_run,
+                             html=not session.config.getoption("ckesc_no_html"))
+        st.info["report_dir"] = str(out)
+    if session.exitstatus == EXIT_ABORTED:  # pytest prints no terminal summary for this status: ours, then
+        tr = session.config.pluginmanager.get_plugin("terminalreporter")
+        if tr is not None:
+            pytest_terminal_summary(tr, EXIT_ABORTED, session.config)
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:
+    st = state(config)
+    for left in st.info.get("not_restored", []):  # always said, summary or not: the bench needs a look
+        terminalreporter.write_line(f"WARNING: the DUT's settings were not restored after {left['test']}: {left['why']}")
+    if not st.conformance or not st.selected or not config.getoption("ckesc_summary"):
+        return
+    terminalreporter.write_sep("=", "CKESC conformance summary")
+    terminalreporter.write_line(report.summary_text(list(st.results.values()), st.info))
+    if "report_dir" in st.info:
+        terminalreporter.write_line(f"reports: {st.info['report_dir']}")
+

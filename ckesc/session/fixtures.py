@@ -1,0 +1,271 @@
+"""The fixtures a conformance test uses (``ckesc_lane``, ``dut``, ``multi_dut``, ``record``, ``ckesc_run``) and the
+run's safety: no test before the DUT reports, its settings snapshotted and restored, zero throttle on every way out
+of a test and of the run (Ctrl-C and SIGTERM: the signal guard), and the abort when the DUT does not answer."""
+
+from __future__ import annotations
+
+import dataclasses
+import signal
+
+import pytest
+
+from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
+from ..bench.lanes import BenchGone, BusLane, Lane
+from ..bench.profile import DutProfile
+from ..bench.verdict import Inconclusive
+from ..emulator import variants
+from ..protocol import catalogue as cat
+from ..protocol import functions
+from . import preflight
+from .bus_rules import watch_lane
+from .cold_boots import restore_point
+from .collection import check_claims, lacking
+from .lane_setup import echo_info, emulator_options, make_lane, make_multi_lane
+from .state import EXIT_ABORTED, state
+from .tracing import trace_lane
+
+#: Frames kept across the run for the run-wide checks (4.1): a whole suite in real time is ~70,000; a
+#: DUT that floods the bus must not grow memory without bound
+RUN_FRAMES_KEPT = 150_000
+
+_DUT = pytest.StashKey[Dut]()
+_READY = pytest.StashKey[bool]()  # the DUT has been seen reporting (no test starts before: _await_ready)
+
+
+def dut_of(item: pytest.Item) -> Dut | None:
+    """The ``Dut`` (or ``multi_dut``) the test ``item`` was given, if any."""
+    return item.stash.get(_DUT, None)
+
+
+@pytest.fixture(scope="session")
+def ckesc_lane(request: pytest.FixtureRequest):
+    config = request.config
+    st = state(config)
+    profile = st.profile or preflight.profile(config.getoption)  # loaded by the preflight, before any test
+    played = emulator_options(config) if config.getoption("dut") == "emulator" else {}
+    for key, value in variants.declared(played).items():  # what the emulated ESC's vendor would state in its profile
+        if value > getattr(profile, key):
+            profile = dataclasses.replace(profile, **{key: value})
+    lane = make_lane(config, profile)
+    st.lane, st.profile = lane, profile
+    trace_lane(config, lane, "")
+    watch_lane(config, lane)
+    if isinstance(lane, BusLane):  # do the host's own frames come back? (the frames it reads go to the listeners)
+        lane.find_echo(echo_probe(nibble_order=profile.nibble_order))
+    st.info.update(dut=config.getoption("dut"), lane=lane.name, clock=lane.clock, profile=profile.name,
+                   bitrate=lane.bitrate, power=lane.power.name, timing_error_s=lane.timing_error,
+                   jitter_s=profile.jitter_s, not_claimed=functions.not_claimed_text(profile.absent),
+                   faults=config.getoption("emulator_faults") or "", **echo_info(lane))
+    if config.getoption("dut") == "emulator":  # the conforming variant the emulator played, to replay a verdict
+        st.info.update(emulator_variants=variants.describe(played), emulator_variants_seed=config.getoption("emulator_variants"))
+    _install_signal_guard(config)
+    opened = lane.now()
+    yield lane
+    st.info["lane_seconds"] = round(lane.now() - opened, 3)  # the whole run on the lane's clock (bench_suite.py)
+    try:
+        if st.node_id is not None:
+            Dut(lane, profile, node_id=st.node_id).zero_throttle()
+    except BenchGone:  # the run was aborted for it already (and says so): nothing reaches the DUT now
+        pass
+    finally:
+        if isinstance(lane, BusLane):
+            st.info["bus_recoveries"] = list(lane.recoveries)
+        lane.close()
+
+
+def _allow_spin(config: pytest.Config) -> bool:
+    flag = config.getoption("allow_motor_spin")
+    return bool(flag) if flag is not None else config.getoption("dut") == "emulator"
+
+
+@pytest.fixture
+def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
+    """The device under test, with its settings snapshotted before and restored (and verified)
+    after the test, and zero throttle on every exit path."""
+    config = request.config
+    st = state(config)
+    profile = st.profile
+    assert profile is not None
+    check_claims(request.node, profile)
+    if (lacks := lacking(request.node, profile)) is not None:
+        pytest.skip(f"the DUT profile {profile.name!r} lacks capability '{lacks[1]}' ({lacks[0]})")
+    if request.node.get_closest_marker("power_cycle") and not ckesc_lane.power.available:
+        pytest.skip("needs a power cycle; no power control (--power none)")
+    node = config.getoption("node_id") or st.node_id
+    since = ckesc_lane.now()
+    try:
+        d = Dut(ckesc_lane, profile, node_id=node, allow_motor_spin=_allow_spin(config))
+    except DutUnreachable as exc:
+        _abort(config, f"the DUT did not answer: {exc}")
+    if not config.stash.get(_READY, False):
+        _await_ready(config, d, since)
+    st.node_id = d.node_id
+    st.info.setdefault("node_id", d.node_id)
+    if "esc_information" not in st.info:
+        ex = d.request("esc_information", {"option": 0})
+        st.info["esc_information"] = ex.response.physical() if ex.response else None
+    started = ckesc_lane.now()
+    d.zero_throttle()
+    snapshot = d.settings()
+    request.node.stash[_DUT] = d
+    try:
+        yield d
+    finally:
+        d.lane_seconds = ckesc_lane.now() - started
+        d.zero_throttle()
+        if d.throttled:  # a motor still coasting refuses setting changes (R12): the next test must not meet it
+            d.wait_motor_stopped()
+        keep_segment(config, [f for f in d.trace if f.source == d.node_id])
+        if d.node_id != st.node_id:
+            st.node_id = d.node_id
+        snapshot = restore_point(config, request.node.nodeid, snapshot)
+        try:
+            problems = d.restore(snapshot)
+        except (DutError, Inconclusive) as exc:
+            if not (st.stopped or "").startswith("interrupted"):
+                raise
+            # Ctrl-C / SIGTERM may have come while the DUT was switched off: the run ends INTERRUPTED (exit
+            # 130, reports written), and says what was left undone instead of a traceback
+            st.info.setdefault("not_restored", []).append({"test": request.node.nodeid, "why": str(exc)})
+            return
+        if problems:
+            raise RuntimeError("settings could not be restored after the test: " + "; ".join(problems))
+
+
+def keep_segment(config: pytest.Config, frames: list) -> None:
+    """Keep one test's frames of the DUT for the run-wide checks (``dut_segments``), up to RUN_FRAMES_KEPT in
+    the run; what is not kept is counted in the run's info (``run_frames_not_kept``), which the reports show."""
+    st = state(config)
+    room = RUN_FRAMES_KEPT - sum(len(s) for s in st.dut_segments)
+    if len(frames) > room:
+        st.info["run_frames_not_kept"] = st.info.get("run_frames_not_kept", 0) + len(frames) - max(room, 0)
+        frames = frames[:max(room, 0)]
+    st.dut_segments.append(frames)
+
+
+class RunView:
+    """What a conformance module may know of the run (the ``ckesc_run`` fixture): the lane and profile, the
+    DUT's node id once known, the DUT's frames of the tests so far (one list per test), and a way to add its
+    own frames to that record. Conformance modules reach the run through it, never the plugin's state."""
+
+    def __init__(self, config: pytest.Config) -> None:
+        self._config = config
+
+    @property
+    def lane(self) -> Lane | None:
+        return state(self._config).lane
+
+    @property
+    def profile(self) -> DutProfile | None:
+        return state(self._config).profile
+
+    @property
+    def node_id(self) -> int | None:
+        """The DUT's node id: ``--node-id``, else the one discovered so far (None before)."""
+        return self._config.getoption("node_id") or state(self._config).node_id
+
+    @node_id.setter
+    def node_id(self, node: int | None) -> None:
+        state(self._config).node_id = node
+
+    @property
+    def segments(self) -> list[list]:
+        return state(self._config).dut_segments
+
+    def keep(self, frames: list) -> None:
+        keep_segment(self._config, frames)
+
+
+@pytest.fixture(scope="session")
+def ckesc_run(request: pytest.FixtureRequest) -> RunView:
+    """The run as a conformance module sees it (:class:`RunView`)."""
+    return RunView(request.config)
+
+
+@pytest.fixture
+def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
+    """Several ESCs on one bus. With the emulator: a private bench of ``lane_setup.MULTI_NODES`` (the main
+    DUT stays alone, as Set ID needs); on a real bus: the bus as it is (capability multi_node), with
+    ``dut.nodes`` the node ids that answered GET_ESC_ID. Settings are not snapshotted: tests using it
+    must change nothing persistent on a real bus."""
+    config = request.config
+    st = state(config)
+    profile = st.profile
+    assert profile is not None
+    check_claims(request.node, profile)
+    if config.getoption("dut") == "emulator":
+        lane = make_multi_lane(config, ckesc_lane.timing_error)
+        trace_lane(config, lane, "bench")
+        watch_lane(config, lane)
+        own = True
+    else:
+        if not profile.has("multi_node"):
+            pytest.skip(f"the DUT profile {profile.name!r} lacks capability 'multi_node' (several ESCs on the bus)")
+        lane, own = ckesc_lane, False
+    since = lane.now()
+    d = Dut(lane, profile, node_id=None, allow_motor_spin=_allow_spin(config))  # discovery lists every ESC
+    d.await_reports(since, since + d.ready_bound_s())  # no test starts before the (first) ESC reports
+    request.node.stash[_DUT] = d
+    try:
+        yield d
+    finally:
+        d.zero_throttle()
+        keep_segment(config, [f for f in d.trace if f.source != d.host_node])
+        if own:
+            lane.close()
+
+
+@pytest.fixture
+def record(dut: Dut):
+    """The current test's measurement record (same as ``dut.record``)."""
+    return dut.record
+
+
+def _await_ready(config: pytest.Config, d: Dut, since: float) -> None:
+    """No test starts before the DUT reports: after discovery, wait for its first MSG1..MSG3 (at most
+    Dut.ready_bound_s from ``since``, the profile's boot time on top of one longest report interval). A
+    DUT that answers but does not report is sent MSG Control 0xAAAAAAAA once (an earlier run may have left
+    it suspended); if it still sends nothing the run is aborted: every report test would fail for it."""
+    st = state(config)
+    heard = d.await_reports(since, since + d.ready_bound_s())
+    if not heard:
+        d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+        t = d.now()
+        heard = d.await_reports(t, t + d.ready_bound_s(0.0))
+        st.info["readiness"] = ("reported only after MSG Control 0xAAAAAAAA (an earlier run left it suspended?)" if heard
+                                else "no report")
+    if not heard:
+        _abort(config, f"node {d.node_id} answers but sent no report (MSG1..MSG3, MSG_EXP, CAN Test) within "
+                       f"{d.ready_bound_s():.2f} s of discovery (the profile's boot_s {d.profile.boot_s} s and one longest "
+                       "report interval), nor after MSG Control 0xAAAAAAAA: is it in CAN Test mode or suspended? "
+                       "Power-cycle it, or raise [timing] boot_s in its profile")
+    config.stash[_READY] = True
+    st.info["first_reports_s"] = {name: round(t - since, 4) for name, t in sorted(heard.items())}
+
+
+def _abort(config: pytest.Config, why: str) -> None:
+    """Stop the run now: no further test can reach the DUT. The reports say ABORTED with ``why`` and
+    list every test not run; the exit status is :data:`EXIT_ABORTED`."""
+    state(config).stopped = f"aborted: {why}"
+    pytest.exit(f"ABORTED: {why}", returncode=EXIT_ABORTED)
+
+
+def _install_signal_guard(config: pytest.Config) -> None:
+    """Ctrl-C / SIGTERM: stop throttle before anything else happens, then stop the run (pytest
+    tears the fixtures down, zero throttle again, and the reports say INTERRUPTED)."""
+
+    def handler(signum, frame):  # noqa: ARG001
+        st = state(config)
+        st.stopped = st.stopped or f"interrupted ({signal.Signals(signum).name})"
+        if st.lane is not None and st.profile is not None and st.node_id is not None:
+            try:
+                Dut(st.lane, st.profile, node_id=st.node_id).zero_throttle()
+            except Exception:  # noqa: BLE001 - best effort on the way out
+                pass
+        raise KeyboardInterrupt
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            signal.signal(sig, handler)
+        except ValueError:  # not the main thread
+            pass

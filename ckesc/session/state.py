@@ -1,0 +1,61 @@
+"""The run's record, typed: what several of the plugin's modules read and write (the results, the run's info,
+the lane, profile and node id, why the run stopped, the DUT's frames per test), one :class:`RunState` per
+pytest session in ``config.stash``. What only one module needs (the preflight's done flag, the shared cold
+boots, the bus-rule watchers, the trace writer, the silent-test count) stays in that module's own stash key.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from ..bench.lanes import Lane
+from ..bench.profile import DutProfile
+from ..reporting import report
+from ..reporting.results import Result
+
+#: exit status of a run aborted because the DUT did not answer or the bench went away (pytest's own
+#: statuses are 0-5; ``ckesc run`` passes this one on)
+EXIT_ABORTED = 3
+
+
+@dataclass
+class RunState:
+    results: dict[str, Result] = field(default_factory=dict)
+    conformance: bool = False  # the session collected conformance tests (else the plugin stays inert)
+    lane: Lane | None = None
+    profile: DutProfile | None = None
+    node_id: int | None = None
+    #: every frame the DUT sent in the run (4.1 checks), one list per test: frames between two tests
+    #: (restoring settings, other fixtures) are in none, so only frames of one list are known adjacent
+    dut_segments: list[list] = field(default_factory=list)
+    started: float = field(default_factory=time.time)
+    info: dict[str, Any] = field(default_factory=dict)
+    report_dir: Path | None = None  # reports/<run>/, made at the first test that writes into it
+    #: the run's tests as collected (after -k / -m deselection), and what deselection left out
+    selected: list[pytest.Item] = field(default_factory=list)
+    deselected: list[str] = field(default_factory=list)
+    #: why the run stopped early: "aborted: ..." (the DUT did not answer, the bench went away) or
+    #: "interrupted" (Ctrl-C, SIGTERM); None while it runs or when it ran to its end
+    stopped: str | None = None
+
+
+_STATE = pytest.StashKey[RunState]()
+
+
+def state(config: pytest.Config) -> RunState:
+    """This session's :class:`RunState` (made on first use)."""
+    return config.stash.setdefault(_STATE, RunState())
+
+
+def report_dir(config: pytest.Config) -> Path | None:
+    """This run's report directory (made on first use), or None without --ckesc-reports."""
+    st = state(config)
+    base = config.getoption("ckesc_reports")
+    if st.report_dir is None and base:
+        st.report_dir = report.run_dir(Path(base), st.started)
+    return st.report_dir
