@@ -25,7 +25,7 @@ class Result:
     #: run's report directory; a lane that heard no frame during the test has none
     traces: dict[str, str] = field(default_factory=dict)
     #: what the test's traffic shows, for the HTML report's plots (answer delays, report intervals, R8
-    #: timeline): see report.evidence
+    #: timeline): see evidence.timing
     evidence: dict[str, Any] = field(default_factory=dict)
     #: requirement ids of the bus rules (ckesc/evidence) the traffic broke while the test ran: such a test
     #: FAILs, quoting the frames, and these ids are what it cites besides its own

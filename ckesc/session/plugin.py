@@ -29,6 +29,7 @@ from ..bench.realtime_lane import RealtimeEmulatorLane
 from ..bench.verdict import Inconclusive, NotClaimed
 from ..emulator import variants
 from ..evidence.live import LaneRules, causes, failure_text
+from ..evidence.timing import evidence
 from ..protocol import catalogue as cat
 from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, requirement, section_heading, strongest
@@ -1193,7 +1194,7 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
             res.properties.update(m.as_properties(n))
         res.observations = [(w, str(v)) for w, v in d.record.observations]
     if d is not None and rep.when == "teardown":
-        res.evidence = _report.evidence(d.trace, host=d.host_node, node=d.node_id, comm_loss="R8" in ids)
+        res.evidence = evidence(d.trace, host=d.host_node, node=d.node_id, comm_loss="R8" in ids)
         st.info.setdefault("interval_tolerance_ms", d.interval_tolerance_ms)
 
 
