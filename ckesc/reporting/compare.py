@@ -32,8 +32,8 @@ from typing import Any
 
 from ..protocol.catalogue import firmware_date
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
-from .html_report import _CSS, _badge, _e, _measurements, _new_figure, _requirement_result, _svg
-from .results import incomplete_banner
+from .htmlkit import CSS, badge, e, new_figure, svg
+from .results import incomplete_banner, measurements, requirement_result
 
 GOOD = ("PASS", "OBSERVED")
 BAD = ("FAIL", "ERROR", "INCONCLUSIVE")
@@ -125,7 +125,7 @@ def requirement_results(run: Run) -> dict[str, str]:
     for r in run.results.values():
         for rid in r.get("requirements") or []:
             by_req[rid].append(r["outcome"])
-    return {rid: _requirement_result(outcomes) for rid, outcomes in by_req.items()}
+    return {rid: requirement_result(outcomes) for rid, outcomes in by_req.items()}
 
 
 _NUMBER = re.compile(r"\s*([-+0-9.eE]+(?:inf)?)\s*(.*)")
@@ -147,7 +147,7 @@ def timing_margins(run: Run) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for nodeid, r in run.results.items():
         seen: Counter = Counter()
-        for m in _measurements(r):
+        for m in measurements(r.get("properties", {})):
             margin, value = _quantity(m.get("margin")), _quantity(m.get("value"))
             if margin is None or value is None or margin[1] not in TIMING_UNITS:
                 continue
@@ -390,45 +390,45 @@ def page(doc: dict[str, Any]) -> str:
     """The comparison as one self-contained HTML page, in report.html's style."""
     runs = doc["runs"]
     overall = "REGRESSED" if doc["regressed"] else "NO REGRESSION"
-    parts = [f"<header><h1>CKESC run comparison</h1><p class=run>{_badge(overall)} {len(runs)} runs, oldest first; each "
+    parts = [f"<header><h1>CKESC run comparison</h1><p class=run>{badge(overall)} {len(runs)} runs, oldest first; each "
              f"compared with the one before it</p>"
-             + "".join(f"<p class=banner role=alert>{_e(f)}</p>" for f in doc["flags"]) + "</header>",
-             _identity_table(runs)]
+             + "".join(f"<p class=banner role=alert>{e(f)}</p>" for f in doc["flags"]) + "</header>",
+             identity_table(runs)]
     parts += [_pair_section(doc, p) for p in doc["pairs"]]
-    parts += [_matrix_table(doc), _trend_section(doc)]
+    parts += [matrix_table(doc), _trend_section(doc)]
     return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC run comparison "
-            f"{_e(' / '.join(r['label'] for r in runs))}</title><style>{_CSS}{_EXTRA_CSS}</style></head><body>\n"
+            f"{e(' / '.join(r['label'] for r in runs))}</title><style>{CSS}{EXTRA_CSS}</style></head><body>\n"
             + "\n".join(parts) + "\n</body></html>\n")
 
 
 def _run_heads(runs: list[dict[str, Any]]) -> str:
-    return "".join(f'<th data-run="{_e(r["letter"])}">{_e(r["letter"])}<div class=note>{_e(r["label"])}</div></th>' for r in runs)
+    return "".join(f'<th data-run="{e(r["letter"])}">{e(r["letter"])}<div class=note>{e(r["label"])}</div></th>' for r in runs)
 
 
-def _identity_table(runs: list[dict[str, Any]]) -> str:
+def identity_table(runs: list[dict[str, Any]]) -> str:
     keys = _identity_keys(runs)
     rows = []
     for k in keys[1:] if keys[:1] == ["run id"] else keys:  # the run id heads its column
         values = [r["identity"].get(k, "") for r in runs]
         differs = k != "run id" and len(set(values)) > 1
-        rows.append(f'<tr data-field="{_e(k)}"{" class=diff" if differs else ""}><th>{_e(k)}</th>'
-                    + "".join(f"<td>{_e(v)}</td>" for v in values) + "</tr>")
+        rows.append(f'<tr data-field="{e(k)}"{" class=diff" if differs else ""}><th>{e(k)}</th>'
+                    + "".join(f"<td>{e(v)}</td>" for v in values) + "</tr>")
     return (f"<section id=identity><h2>Devices under test</h2><table class=kv><tr><th></th>{_run_heads(runs)}</tr>"
             f"{''.join(rows)}</table><p class=note>Highlighted: differs between runs.</p></section>")
 
 
 def _change_rows(rows: list[dict[str, Any]], key: str) -> str:
-    return "".join(f'<tr data-{key}="{_e(r[key])}"><td>{_e(r[key])}</td>'
-                   + (f"<td>{_e(r.get('strength', ''))}</td>" if key == "requirement" else f"<td>{_e(r['section'])}</td>")
-                   + f"<td class=vv>{_badge(r['before'])} &rarr; {_badge(r['after'])}</td>"
-                   + (f"<td>{_e(r.get('message', ''))}</td>" if key == "test" else "") + "</tr>" for r in rows)
+    return "".join(f'<tr data-{key}="{e(r[key])}"><td>{e(r[key])}</td>'
+                   + (f"<td>{e(r.get('strength', ''))}</td>" if key == "requirement" else f"<td>{e(r['section'])}</td>")
+                   + f"<td class=vv>{badge(r['before'])} &rarr; {badge(r['after'])}</td>"
+                   + (f"<td>{e(r.get('message', ''))}</td>" if key == "test" else "") + "</tr>" for r in rows)
 
 
 def _pair_section(doc: dict[str, Any], p: dict[str, Any]) -> str:
     name = _pair_name(doc, p)
     sid = "pair-" + name.replace(" -> ", "-")
-    out = [f'<section id="{sid}" class=pair data-regressed="{str(p["regressed"]).lower()}"><h2>{_e(name)}: '
-           f'{_badge("REGRESSED" if p["regressed"] else "NO REGRESSION")}</h2><p>{_e(_pair_counts(p))}</p>']
+    out = [f'<section id="{sid}" class=pair data-regressed="{str(p["regressed"]).lower()}"><h2>{e(name)}: '
+           f'{badge("REGRESSED" if p["regressed"] else "NO REGRESSION")}</h2><p>{e(_pair_counts(p))}</p>']
     for title, key in (("Regressed", "regressed"), ("Fixed", "fixed"), ("Other verdict changes", "changed")):
         reqs, tests = p["requirements"][key], p["tests"][key]
         if reqs:
@@ -443,10 +443,10 @@ def _pair_section(doc: dict[str, Any], p: dict[str, Any]) -> str:
             out.append(f'<details class="test-{key}"><summary>{title} ({len(tests)})</summary><table class=chg><tr><th>test</th>'
                        f"<th>section</th><th>verdict</th><th>message</th></tr>{_change_rows(tests, 'test')}</table></details>")
     if p["margins_shrank"]:
-        rows = "".join(f'<tr data-measurement="{_e(m["measurement"])}">{_what(m)}<td class=lim>{_e(m["limit_after"])}</td>'
+        rows = "".join(f'<tr data-measurement="{e(m["measurement"])}">{_what(m)}<td class=lim>{e(m["limit_after"])}</td>'
                        f'<td class=num>{_ms(m["value_before_ms"])}</td><td class=num>{_ms(m["value_after_ms"])}</td>'
                        f'<td class=num>{_ms(m["before_ms"])}</td><td class=num>{_ms(m["after_ms"])}</td>'
-                       f'<td>{_badge(m["verdict_after"])}</td></tr>' for m in p["margins_shrank"])
+                       f'<td>{badge(m["verdict_after"])}</td></tr>' for m in p["margins_shrank"])
         out.append(f"<h3>Timing margins that shrank by more than {doc['threshold'] * 100:g} % ({len(p['margins_shrank'])})</h3>"
                    "<table class=margins-shrank><tr><th>measurement and test</th><th>limit</th><th>measured before</th><th>after</th><th>margin before</th>"
                    f"<th>margin after</th><th></th></tr>{rows}</table>")
@@ -454,17 +454,17 @@ def _pair_section(doc: dict[str, Any], p: dict[str, Any]) -> str:
     return "".join(out)
 
 
-def _matrix_table(doc: dict[str, Any]) -> str:
+def matrix_table(doc: dict[str, Any]) -> str:
     runs = doc["runs"]
     rows, section = [], None
     for row in doc["matrix"]:
         if row["section"] != section:
             section = row["section"]
-            rows.append(f'<tr class=group><th colspan="{len(runs) + 2}">{_e(section)} {_e(SECTION_TITLES.get(section, ""))}</th></tr>')
+            rows.append(f'<tr class=group><th colspan="{len(runs) + 2}">{e(section)} {e(SECTION_TITLES.get(section, ""))}</th></tr>')
         differs = " class=diff" if len(set(row["results"])) > 1 else ""
-        rows.append(f'<tr data-requirement="{_e(row["requirement"])}" data-results="{_e(" ".join(row["results"]))}"{differs}>'
-                    f'<td>{_e(row["requirement"])}</td><td>{_e(row["strength"])}</td>'
-                    + "".join(f'<td class="cell c-{v.replace(" ", "-")}">{_e(_SHORT.get(v, v))}</td>' for v in row["results"])
+        rows.append(f'<tr data-requirement="{e(row["requirement"])}" data-results="{e(" ".join(row["results"]))}"{differs}>'
+                    f'<td>{e(row["requirement"])}</td><td>{e(row["strength"])}</td>'
+                    + "".join(f'<td class="cell c-{v.replace(" ", "-")}">{e(_SHORT.get(v, v))}</td>' for v in row["results"])
                     + "</tr>")
     return (f"<section id=matrix><h2>Requirements x runs</h2><table class=matrix><tr><th>requirement</th><th>strength</th>"
             f"{_run_heads(runs)}</tr>{''.join(rows)}</table></section>")
@@ -478,8 +478,8 @@ def _trend_section(doc: dict[str, Any]) -> str:
     rows = []
     for t in trends:
         cells = "".join(f"<td class=num>{_ms(v)}</td>" for v in t["margins_ms"])
-        rows.append(f'<tr data-measurement="{_e(t["measurement"])}" data-shrank="{_e(" ".join(t["shrank_at"]))}"'
-                    f'{" class=diff" if t["shrank_at"] else ""}>{_what(t)}<td class=lim>{_e(t["limit"])}</td>{cells}'
+        rows.append(f'<tr data-measurement="{e(t["measurement"])}" data-shrank="{e(" ".join(t["shrank_at"]))}"'
+                    f'{" class=diff" if t["shrank_at"] else ""}>{_what(t)}<td class=lim>{e(t["limit"])}</td>{cells}'
                     f'<td class=spark>{_sparkline(t["margins_ms"])}</td></tr>')
     shrinking = sum(1 for t in trends if t["shrank_at"])
     return (f"<section id=trends><h2>Timing margins in every run</h2><p>{len(trends)} timing measurements; {shrinking} shrank "
@@ -491,7 +491,7 @@ def _trend_section(doc: dict[str, Any]) -> str:
 
 def _what(m: dict[str, Any]) -> str:
     """A measurement's cell: its name, and the test that made it."""
-    return f'<td class=what><b>{_e(m["name"])}</b><div class=note>{_e(m["test"].removeprefix("conformance/"))}</div></td>'
+    return f'<td class=what><b>{e(m["name"])}</b><div class=note>{e(m["test"].removeprefix("conformance/"))}</div></td>'
 
 
 def _sparkline(series: list[float | None]) -> str:
@@ -499,7 +499,7 @@ def _sparkline(series: list[float | None]) -> str:
     points = [(i, v) for i, v in enumerate(series) if v is not None]
     if len(points) < 2:
         return ""
-    fig = _new_figure(1.6, 0.42)
+    fig = new_figure(1.6, 0.42)
     fig.set_facecolor("none")  # the row's colour shows through
     ax = fig.add_axes((0.02, 0.08, 0.96, 0.84))
     xs, ys = [p[0] for p in points], [p[1] for p in points]
@@ -511,10 +511,10 @@ def _sparkline(series: list[float | None]) -> str:
     ax.set_ylim(lo - pad, hi + pad)
     ax.set_xlim(-0.3, len(series) - 0.7)
     ax.set_axis_off()
-    return _svg(fig)
+    return svg(fig)
 
 
-_EXTRA_CSS = """
+EXTRA_CSS = """
 .v-REGRESSED{background:#cf222e}.v-NO-REGRESSION{background:#1a7f37}.v-NOT-RUN{background:#6e7781}
 tr.diff>td:not(.cell),tr.diff>th{background:#fff8c5}#identity table{width:100%;table-layout:fixed}td{overflow-wrap:anywhere}
 .num,.lim,.chg td.vv{white-space:nowrap}.num{text-align:right;font-variant-numeric:tabular-nums}.what{min-width:16rem}

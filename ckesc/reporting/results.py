@@ -2,8 +2,35 @@
 
 from __future__ import annotations
 
+from collections import defaultdict
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+from ..protocol.requirements import Verdict
+
+#: how a requirement's result is drawn from its tests' verdicts: the first that occurs
+WORST_FIRST = (Verdict.FAIL, Verdict.ERROR, Verdict.INCONCLUSIVE, Verdict.PASS, Verdict.OBSERVED, Verdict.SKIPPED)
+#: a requirement no test of the run checked
+NOT_CHECKED = "NOT CHECKED"
+
+
+def requirement_result(outcomes: Iterable[str]) -> str:
+    """A requirement's (or a section's) result from its tests' verdicts: the worst (:data:`WORST_FIRST`), or
+    :data:`NOT_CHECKED` when there are none."""
+    outcomes = set(outcomes)
+    return next((v for v in WORST_FIRST if v in outcomes), NOT_CHECKED)
+
+
+def measurements(properties: Mapping[str, str]) -> list[dict[str, str]]:
+    """A test's measurements (name, value, limit, margin, clock, error, verdict), in order, from its
+    ``measurement.<n>.<key>`` properties."""
+    found: dict[int, dict[str, str]] = defaultdict(dict)
+    for key, value in properties.items():
+        parts = key.split(".")
+        if len(parts) == 3 and parts[0] == "measurement" and parts[1].isdigit():
+            found[int(parts[1])][parts[2]] = value
+    return [found[i] for i in sorted(found)]
 
 
 @dataclass
