@@ -31,12 +31,12 @@ from pathlib import Path
 from typing import Any
 
 from ..protocol.catalogue import firmware_date
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_key
 from .htmlkit import CSS, badge, e, new_figure, svg
-from .results import incomplete_banner, measurements, requirement_result
+from .results import NotRun, Result, RunInfo, RunRecord, incomplete_banner, requirement_result
 
-GOOD = ("PASS", "OBSERVED")
-BAD = ("FAIL", "ERROR", "INCONCLUSIVE")
+GOOD = (Verdict.PASS, Verdict.OBSERVED)
+BAD = (Verdict.FAIL, Verdict.ERROR, Verdict.INCONCLUSIVE)
 NOT_CHECKED = "NOT CHECKED"
 NOT_RUN = "NOT RUN"
 #: the units of a timing measurement, to ms
@@ -55,9 +55,9 @@ class Run:
 
     label: str  # the run's id (its directory's name)
     path: str
-    info: dict[str, Any]
-    results: dict[str, dict[str, Any]]  # by nodeid
-    not_run: dict[str, dict[str, Any]] = field(default_factory=dict)
+    info: RunInfo
+    results: dict[str, Result]  # by nodeid
+    not_run: dict[str, NotRun] = field(default_factory=dict)
 
 
 # ------------------------------------------------------------------------------------------ reading
@@ -84,18 +84,23 @@ def read_run(path: str | Path) -> Run:
 
 
 def parse_run(doc: Any, *, label: str = "", path: str = "") -> Run:
-    """A :class:`Run` from a parsed ``results.json``; :class:`RunError` when it is not one."""
+    """A :class:`Run` from a :class:`~.results.RunRecord` or a parsed ``results.json``; :class:`RunError` when it
+    is not one."""
     where = path or label or "run"
-    if not isinstance(doc, dict) or not isinstance(doc.get("results"), list) or not isinstance(doc.get("info"), dict):
-        raise RunError(f"{where}: not a results record of `ckesc run` (an object with 'info' and 'results')")
-    results: dict[str, dict[str, Any]] = {}
-    for n, r in enumerate(doc["results"]):
-        if not isinstance(r, dict) or not isinstance(r.get("nodeid"), str) or r.get("outcome") not in VERDICTS:
-            raise RunError(f"{where}: result {n} has no nodeid or no verdict this version knows ({', '.join(VERDICTS)})")
-        results[r["nodeid"]] = r
-    not_run = {n["nodeid"]: n for n in doc.get("not_run") or [] if isinstance(n, dict) and isinstance(n.get("nodeid"), str)}
-    info = doc["info"]
-    return Run(label=str(info.get("run_id") or label or where), path=path, info=info, results=results, not_run=not_run)
+    if not isinstance(doc, RunRecord):
+        if not isinstance(doc, dict) or not isinstance(doc.get("results"), list) or not isinstance(doc.get("info"), dict):
+            raise RunError(f"{where}: not a results record of `ckesc run` (an object with 'info' and 'results')")
+        for n, r in enumerate(doc["results"]):
+            if not isinstance(r, dict) or not isinstance(r.get("nodeid"), str) or r.get("outcome") not in VERDICTS:
+                raise RunError(f"{where}: result {n} has no nodeid or no verdict this version knows ({', '.join(VERDICTS)})")
+        try:
+            doc = RunRecord.from_json(doc)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise RunError(f"{where}: not a results record this version reads: {exc!r}") from None
+    results = {r.nodeid: r for r in doc.results}
+    not_run = {n["nodeid"]: n for n in doc.not_run if isinstance(n.get("nodeid"), str)}
+    return Run(label=str(doc.info.get("run_id") or label or where), path=path, info=doc.info, results=results,
+               not_run=not_run)
 
 
 # ------------------------------------------------------------------------------------------ facts of one run
@@ -123,8 +128,8 @@ def requirement_results(run: Run) -> dict[str, str]:
     """Each requirement's result in the run: the worst verdict of the tests citing it, or NOT CHECKED."""
     by_req: dict[str, list[str]] = defaultdict(list)
     for r in run.results.values():
-        for rid in r.get("requirements") or []:
-            by_req[rid].append(r["outcome"])
+        for rid in r.requirements:
+            by_req[rid].append(r.outcome)
     return {rid: requirement_result(outcomes) for rid, outcomes in by_req.items()}
 
 
@@ -147,7 +152,7 @@ def timing_margins(run: Run) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for nodeid, r in run.results.items():
         seen: Counter = Counter()
-        for m in measurements(r.get("properties", {})):
+        for m in r.measurements:
             margin, value = _quantity(m.get("margin")), _quantity(m.get("value"))
             if margin is None or value is None or margin[1] not in TIMING_UNITS:
                 continue
@@ -178,10 +183,10 @@ def diff(a: Run, b: Run, *, threshold: float = DEFAULT_THRESHOLD) -> dict[str, A
                                                              "not_run")}
     known_a, known_b = a.results.keys() | a.not_run.keys(), b.results.keys() | b.not_run.keys()
     for nodeid in sorted(known_a | known_b, key=lambda n: (_section(a, b, n), n)):
-        before = a.results[nodeid]["outcome"] if nodeid in a.results else NOT_RUN
-        after = b.results[nodeid]["outcome"] if nodeid in b.results else NOT_RUN
-        row = {"test": nodeid, "section": _section(a, b, nodeid), "before": before, "after": after,
-               "message": (b.results.get(nodeid) or {}).get("message", "").split("\n")[0][:300]}
+        before = a.results[nodeid].outcome if nodeid in a.results else NOT_RUN
+        after = b.results[nodeid].outcome if nodeid in b.results else NOT_RUN
+        row = {"test": nodeid, "section": _section(a, b, nodeid), "before": str(before), "after": str(after),
+               "message": b.results[nodeid].message.split("\n")[0][:300] if nodeid in b.results else ""}
         if nodeid not in known_a:
             tests["added"].append(row)
         elif nodeid not in known_b:
@@ -221,9 +226,12 @@ def diff(a: Run, b: Run, *, threshold: float = DEFAULT_THRESHOLD) -> dict[str, A
 
 
 def _section(a: Run, b: Run, nodeid: str) -> str:
-    for source in (b.results, a.results, b.not_run, a.not_run):
-        if source.get(nodeid, {}).get("section"):
-            return source[nodeid]["section"]
+    for r in (b.results.get(nodeid), a.results.get(nodeid)):
+        if r is not None and r.section:
+            return r.section
+    for n in (b.not_run.get(nodeid), a.not_run.get(nodeid)):
+        if n and n.get("section"):
+            return n["section"]
     return ""
 
 
@@ -281,7 +289,7 @@ def compare(runs: list[Run], *, threshold: float = DEFAULT_THRESHOLD) -> dict[st
     return {
         "runs": [{"letter": _letter(i), "label": r.label, "path": r.path, "identity": identity(r.info, r.label),
                   "complete": r.info.get("complete") is True, "incomplete": r.info.get("incomplete") or "",
-                  "counts": dict(Counter(x["outcome"] for x in r.results.values())), "not_run": len(r.not_run)}
+                  "counts": {str(v): n for v, n in Counter(x.outcome for x in r.results.values()).items()}, "not_run": len(r.not_run)}
                  for i, r in enumerate(runs)],
         "threshold": threshold,
         "flags": flags(runs),

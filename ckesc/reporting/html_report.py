@@ -18,35 +18,35 @@ Inline CSS and SVG only, no script and no external URL; traces are linked relati
 
 from __future__ import annotations
 
-import json
 from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
 
 from ..protocol import catalogue as cat
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_key
 from .causes import groups
 from .htmlkit import CSS, anchor, badge, e, figure, new_figure, svg
-from .results import WORST_FIRST, claim_text, incomplete_banner, measurements, requirement_result
+from .results import WORST_FIRST, Result, RunInfo, RunRecord, claim_text, incomplete_banner, requirement_result
 
 
 def build(out: Path) -> Path:
     """Write ``out/report.html`` from ``out/results.json``; returns its path."""
-    doc = json.loads((out / "results.json").read_text(encoding="utf-8"))
-    page = render(doc, run=out.name)
+    page = render(RunRecord.read(out / "results.json"), run=out.name)
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")
     return path
 
 
 # ----------------------------------------------------------------------------------------- page
-def render(doc: dict[str, Any], *, run: str = "") -> str:
-    info: dict[str, Any] = doc.get("info", {})
-    results: list[dict[str, Any]] = doc.get("results", [])
-    counts = Counter(r["outcome"] for r in results)
+def render(doc: RunRecord | dict[str, Any], *, run: str = "") -> str:
+    """The page of a run, from its :class:`RunRecord` (or a parsed results.json)."""
+    record = doc if isinstance(doc, RunRecord) else RunRecord.from_json(doc)
+    info: RunInfo = record.info
+    results = record.results
+    counts = Counter(r.outcome for r in results)
     banner = incomplete_banner(info)
     # never a green PASS for less than the whole suite: ABORTED / INTERRUPTED / SUBSET / INCOMPLETE
-    overall = "FAIL" if counts["FAIL"] or counts["ERROR"] else (banner.split(" ")[0] if banner else "PASS")
+    overall = Verdict.FAIL if counts[Verdict.FAIL] or counts[Verdict.ERROR] else (banner.split(" ")[0] if banner else Verdict.PASS)
     parts = [
         f"<header><h1>CKESC conformance report</h1><p class=run>run {e(run)} &middot; "
         f"{badge(overall)} {len(results)} tests: "
@@ -87,10 +87,10 @@ def _identity(info: dict[str, Any]) -> str:
     return f'<section id=dut><h2>Device under test</h2><table class="kv">{body}</table></section>'
 
 
-def _matrix(results: list[dict[str, Any]]) -> str:
+def _matrix(results: list[Result]) -> str:
     rows: dict[str, Counter] = defaultdict(Counter)
     for r in results:
-        rows[r["section"]][r["outcome"]] += 1
+        rows[r.section][r.outcome] += 1
     head = "<tr><th>section</th><th>title</th>" + "".join(f"<th>{badge(v)}</th>" for v in VERDICTS) + "</tr>"
     body = []
     total: Counter = Counter()
@@ -110,39 +110,39 @@ def _count_cell(verdict: str, n: int) -> str:
 
 def _evidence(r: dict[str, Any]) -> str:
     out = []
-    ms = measurements(r.get("properties", {}))
+    ms = r.measurements
     if ms:
         rows = "".join(f"<tr><td>{e(m.get('name', ''))}</td><td>{e(m.get('value', ''))}</td><td>{e(m.get('limit', ''))}</td>"
                        f"<td>{e(m.get('margin', ''))}</td><td>{e(m.get('clock', ''))}{e(' ' + m['error']) if 'error' in m else ''}</td>"
                        f"<td>{badge(m.get('verdict', ''))}</td></tr>" for m in ms)
         out.append("<table class=meas><tr><th>measured</th><th>value</th><th>limit</th><th>margin</th><th>clock</th><th></th></tr>"
                    f"{rows}</table>")
-    obs = r.get("observations") or []
+    obs = r.observations or []
     if obs:
         out.append("<ul class=obs>" + "".join(f"<li><b>{e(w)}</b>: {e(v)}</li>" for w, v in obs) + "</ul>")
-    traces = r.get("traces") or {}
+    traces = r.traces or {}
     if traces:
         out.append("<p class=traces>trace: " + " ".join(f'<a href="{e(p)}">{e(lane or "DUT")}: {e(Path(p).name)}</a>'
                                                        for lane, p in traces.items()) + "</p>")
     return "".join(out)
 
 
-def _failures(results: list[dict[str, Any]]) -> str:
-    bad = [r for r in results if r["outcome"] in ("FAIL", "ERROR", "INCONCLUSIVE")]
+def _failures(results: list[Result]) -> str:
+    bad = [r for r in results if r.outcome in (Verdict.FAIL, Verdict.ERROR, Verdict.INCONCLUSIVE)]
     if not bad:
         return "<section id=failures><h2>Failures</h2><p>No test failed, errored or was inconclusive.</p></section>"
     items = []
-    for r in sorted(bad, key=lambda r: (WORST_FIRST.index(r["outcome"]), section_key(r["section"]))):
-        reqs = ", ".join(f'<a href="#req-{e(i)}">{e(i)}</a>' for i in r["requirements"])
-        items.append(f'<article class="fail" data-nodeid="{e(r["nodeid"])}"><h3>{badge(r["outcome"])} {e(r["nodeid"])}</h3>'
-                     f"<p>{e(r['section'])} {e(SECTION_TITLES.get(r['section'], ''))} &middot; {reqs} ({e(r['strength'])})</p>"
-                     f"<pre>{e(r.get('message', ''))}</pre>{_evidence(r)}</article>")
+    for r in sorted(bad, key=lambda r: (WORST_FIRST.index(r.outcome), section_key(r.section))):
+        reqs = ", ".join(f'<a href="#req-{e(i)}">{e(i)}</a>' for i in r.requirements)
+        items.append(f'<article class="fail" data-nodeid="{e(r.nodeid)}"><h3>{badge(r.outcome)} {e(r.nodeid)}</h3>'
+                     f"<p>{e(r.section)} {e(SECTION_TITLES.get(r.section, ''))} &middot; {reqs} ({e(r.strength)})</p>"
+                     f"<pre>{e(r.message)}</pre>{_evidence(r)}</article>")
     return (f"<section id=failures><h2>Failures ({len(bad)})</h2><details{' open' if len(bad) <= 10 else ''}>"
             f"<summary>every test that failed, errored or was inconclusive, with its evidence</summary>"
             f"{''.join(items)}</details></section>")
 
 
-def _causes(results: list[dict[str, Any]]) -> str:
+def _causes(results: list[Result]) -> str:
     """The run's distinct problems first (causes.groups), each with its first occurrence, frames and
     trace, the tests it showed in collapsed under it: never k copies of one."""
     gs = groups(results)
@@ -170,16 +170,16 @@ def _causes(results: list[dict[str, Any]]) -> str:
             f"several.</p>{''.join(items)}</section>")
 
 
-def _requirements(results: list[dict[str, Any]]) -> str:
-    by_req: dict[str, list[dict[str, Any]]] = defaultdict(list)
+def _requirements(results: list[Result]) -> str:
+    by_req: dict[str, list[Result]] = defaultdict(list)
     for r in results:
-        for rid in r["requirements"]:
+        for rid in r.requirements:
             by_req[rid].append(r)
     rows = []
     for rid, req in sorted(REQUIREMENTS.items(), key=lambda kv: (section_key(kv[1].section), kv[0])):
         tests = by_req.get(rid, [])
-        result = requirement_result([t["outcome"] for t in tests])
-        listed = "".join(f'<li>{badge(t["outcome"])} <a href="#t-{anchor(t["nodeid"])}">{e(t["name"])}</a></li>' for t in tests)
+        result = requirement_result([t.outcome for t in tests])
+        listed = "".join(f'<li>{badge(t.outcome)} <a href="#t-{anchor(t.nodeid)}">{e(t.name)}</a></li>' for t in tests)
         rows.append(f'<tr id="req-{e(rid)}" data-result="{e(result)}"><td>{e(rid)}</td><td>{e(req.strength)}</td>'
                     f"<td>{e(req.section)}</td><td>{badge(result)}</td><td><q>{e(req.quote)}</q>"
                     + (f"<div class=note>{e(req.note)}</div>" if req.note else "")
@@ -188,12 +188,12 @@ def _requirements(results: list[dict[str, Any]]) -> str:
             f"<th>result</th><th>requirement and tests</th></tr>{''.join(rows)}</table></section>")
 
 
-def _tests(results: list[dict[str, Any]]) -> str:
+def _tests(results: list[Result]) -> str:
     rows = []
-    for r in sorted(results, key=lambda r: section_key(r["section"])):
-        rows.append(f'<tr id="t-{anchor(r["nodeid"])}"><td>{badge(r["outcome"])}</td><td>{e(r["nodeid"])}'
-                    + (f"<div class=msg>{e(r['message'].splitlines()[0][:300])}</div>" if r.get("message") else "")
-                    + f"{_evidence(r)}</td><td>{e(r['section'])}</td><td>{r.get('lane_seconds', 0):.3f} s</td></tr>")
+    for r in sorted(results, key=lambda r: section_key(r.section)):
+        rows.append(f'<tr id="t-{anchor(r.nodeid)}"><td>{badge(r.outcome)}</td><td>{e(r.nodeid)}'
+                    + (f"<div class=msg>{e(r.message.splitlines()[0][:300])}</div>" if r.message else "")
+                    + f"{_evidence(r)}</td><td>{e(r.section)}</td><td>{r.lane_seconds:.3f} s</td></tr>")
     return ("<section id=tests><h2>Tests and their evidence</h2><table class=tests><tr><th>verdict</th><th>test</th>"
             f"<th>section</th><th>lane time</th></tr>{''.join(rows)}</table></section>")
 
@@ -206,7 +206,7 @@ _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">", "h", "p")
 _ACROSS = 2.5
 
 
-def _plots(results: list[dict[str, Any]], info: dict[str, Any]) -> str:
+def _plots(results: list[Result], info: dict[str, Any]) -> str:
     clock = info.get("clock", "")
     err = (info.get("timing_error_s") or 0.0) * 1000
     parts = ["<section id=plots><h2>Timing</h2>"]
@@ -214,7 +214,7 @@ def _plots(results: list[dict[str, Any]], info: dict[str, Any]) -> str:
     intervals: dict[tuple[str, float], list[float]] = defaultdict(list)
     timelines = []
     for r in results:
-        ev = r.get("evidence") or {}
+        ev = r.evidence or {}
         for node, by_request in ev.get("answers", {}).items():
             for request, delays in by_request.items():
                 answers[int(node)][request].extend(delays)
@@ -364,7 +364,7 @@ def _comm_loss_plot(timelines: list[tuple[dict[str, Any], dict[str, Any]]]) -> s
         msg1 = tl.get("msg1", [])
         last = _last_command(commands)
         ax.set_yticks([])
-        ax.set_ylabel(r["name"].split("[")[-1].rstrip("]") or r["name"], rotation=0, ha="right", va="center")
+        ax.set_ylabel(r.name.split("[")[-1].rstrip("]") or r.name, rotation=0, ha="right", va="center")
         if last is None:
             ax.text(0.5, 0.5, "no throttle command recorded", transform=ax.transAxes, ha="center")
             continue

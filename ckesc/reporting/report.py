@@ -12,7 +12,6 @@ shows one package ``ckesc`` with a class per section.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import subprocess
@@ -26,9 +25,9 @@ from junit_xml import TestCase, TestSuite, to_xml_report_string
 
 from .. import __version__
 from ..protocol import catalogue as cat
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_heading, section_key
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_heading, section_key
 from . import causes, html_report
-from .results import claim_text, incomplete_banner
+from .results import RunRecord, claim_text, incomplete_banner
 
 
 def _properties(r) -> dict[str, str]:
@@ -122,7 +121,7 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
                 tc.add_failure_info(message=r.message[:500], output=r.message, failure_type=r.strength)
             elif r.outcome == "ERROR":
                 tc.add_error_info(message=r.message[:500], output=r.message)
-            elif r.outcome in ("INCONCLUSIVE", "SKIPPED"):
+            elif r.outcome in (Verdict.INCONCLUSIVE, Verdict.SKIPPED):
                 tc.add_skipped_info(message=r.message[:500] or r.outcome)
             cases.append(tc)
             cases_props.append(props)
@@ -134,11 +133,11 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
         for u in unjudged:
             text = "\n".join(c["first"] for c in u["causes"]) or " ".join(u["rules"])
             tc = TestCase(f"{' '.join(u['rules'])} while {u['test'].split('::', 1)[-1]} ran ({u['outcome']})",
-                          classname="ckesc.bus_rules", status="FAIL")
+                          classname="ckesc.bus_rules", status=Verdict.FAIL)
             tc.add_failure_info(message=f"[bus rules {' '.join(u['rules'])}] broken while {u['test']} ran; its own "
                                         f"verdict: {u['outcome']}"[:500], output=text, failure_type="bus rule")
             cases.append(tc)
-            cases_props.append({"requirements": " ".join(u["rules"]), "verdict": "FAIL", "seen_in": u["test"]})
+            cases_props.append({"requirements": " ".join(u["rules"]), "verdict": Verdict.FAIL, "seen_in": u["test"]})
         suites.append(TestSuite("bus rules broken outside a test's FAIL", cases, properties=suite_props))
     text = to_xml_report_string(suites, prettyprint=False)
     root = ET.fromstring(text)
@@ -250,11 +249,7 @@ def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: li
     info.setdefault("suite_version", __version__)
     info.setdefault("git_revision", git_revision())
     (out / "junit.xml").write_text(junit_xml(results, info, out, not_run), encoding="utf-8")
-    (out / "results.json").write_text(json.dumps({"info": info, "coverage": coverage(results),
-                                                  "results": [r.__dict__ for r in results], "not_run": list(not_run),
-                                                  "rule_failures": causes.rule_failures(results)},
-                                                 indent=1, default=str),
-                                      encoding="utf-8")
+    RunRecord(info, list(results), list(not_run), coverage(results), causes.rule_failures(results)).write(out / "results.json")  # type: ignore[arg-type]
     (out / "summary.txt").write_text(summary_text(results, info) + "\n", encoding="utf-8")
     point_latest(out)
     if html:

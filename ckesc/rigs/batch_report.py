@@ -28,17 +28,17 @@ from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
 
-from ..protocol.requirements import SECTION_TITLES, VERDICTS, section_key
+from ..protocol.requirements import SECTION_TITLES, VERDICTS, Verdict, section_key
 from ..reporting import compare
 from ..reporting.causes import broken_outside_a_fail
 from ..reporting.htmlkit import CSS, badge, e
 from ..reporting.report import classname
-from ..reporting.results import requirement_result
+from ..reporting.results import RunRecord, requirement_result
 
 STATUSES = ("PASS", "FAIL", "ABSENT", "ABORTED", "BROKEN", "INTERRUPTED")
 
 
-def bench_status(doc: dict[str, Any] | None, *, setup_error: str | None = None, crash: str | None = None,
+def bench_status(doc: RunRecord | dict[str, Any] | None, *, setup_error: str | None = None, crash: str | None = None,
                  strict: bool = False) -> tuple[str, str]:
     """(status, why) of one bench from its ``results.json`` (None: there is none), the set-up error its worker
     met before any test, or how its worker died."""
@@ -46,13 +46,14 @@ def bench_status(doc: dict[str, Any] | None, *, setup_error: str | None = None, 
         return "ABSENT", setup_error
     if doc is None:
         return "BROKEN", crash or "the bench's run ended without a report"
-    info, results = doc.get("info") or {}, doc.get("results") or []
+    record = doc if isinstance(doc, RunRecord) else RunRecord.from_json(doc)
+    info, results = record.info, record.results
     why = str(info.get("incomplete") or "")
     if why.startswith("aborted"):
         return ("ABORTED" if results else "ABSENT"), why.removeprefix("aborted: ")
     if why.startswith("interrupted"):
         return "INTERRUPTED", why
-    bad = [r for r in results if r["outcome"] in ("FAIL", "ERROR") or (strict and r["outcome"] == "INCONCLUSIVE")]
+    bad = [r for r in results if r.outcome in (Verdict.FAIL, Verdict.ERROR) or (strict and r.outcome == Verdict.INCONCLUSIVE)]
     if bad:
         return "FAIL", f"{len(bad)} of {len(results)} tests " + ("FAILed, ERRORed or were INCONCLUSIVE" if strict else
                                                                   "FAILed or ERRORed")
@@ -74,10 +75,11 @@ def exit_status(statuses: list[str], *, interrupted: bool = False) -> int:
     return 0
 
 
-def read_results(bench_dir: Path) -> dict[str, Any] | None:
+def read_results(bench_dir: Path) -> RunRecord | None:
+    """The bench's results.json, None when there is none this version reads."""
     try:
-        return json.loads((bench_dir / "results.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        return RunRecord.read(bench_dir / "results.json")
+    except (OSError, ValueError, KeyError, TypeError):
         return None
 
 
@@ -90,17 +92,16 @@ def bench_record(name: str, bench_dir: Path, batch_dir: Path, *, description: st
     rec: dict[str, Any] = {"name": name, "description": description, "status": status, "why": why, "command": command,
                            "report_dir": rel, "counts": {}, "sections": {}, "identity": {}}
     if doc is not None:
-        results = doc.get("results") or []
-        rec["counts"] = {v: n for v, n in Counter(r["outcome"] for r in results).items()}
+        rec["counts"] = {str(v): n for v, n in Counter(r.outcome for r in doc.results).items()}
         by_section: dict[str, list[str]] = defaultdict(list)
-        for r in results:
-            by_section[r.get("section") or ""].append(r["outcome"])
-        for n in doc.get("not_run") or []:
+        for r in doc.results:
+            by_section[r.section or ""].append(r.outcome)
+        for n in doc.not_run:
             by_section.setdefault(n.get("section") or "", [])
         rec["sections"] = {s: (requirement_result(v) if v else compare.NOT_RUN)
                            for s, v in sorted(by_section.items(), key=lambda kv: section_key(kv[0]))}
-        rec["identity"] = compare.identity(doc.get("info") or {}, name)
-        rec["run_id"] = (doc.get("info") or {}).get("run_id")
+        rec["identity"] = compare.identity(doc.info, name)
+        rec["run_id"] = doc.info.get("run_id")
         for f in ("report.html", "summary.txt", "junit.xml", "results.json"):
             if (bench_dir / f).is_file():
                 rec.setdefault("files", {})[f] = f"{rel}/{f}"
