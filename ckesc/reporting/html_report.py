@@ -9,8 +9,8 @@ Built from what the run recorded (``results.json``), so ``ckesc report DIR`` can
 * what failed, with its evidence (measurements with limit, margin, clock; observations; traces);
 * plots (matplotlib, inlined as SVG, full page width): answer delay per node against that node's own
   limits (its R2 slot and the 64 ms bound), one marker per service, violations red and labelled;
-  report intervals as their deviation from the target with the tolerance band (intervals across a
-  power cycle, a suspension or a Set Freq change left out and counted); the comm-loss (R8) timelines;
+  report intervals as their deviation from the target with the tolerance band (the intervals the bus
+  rules judged, as evidence/tracker.py pairs them); the comm-loss (R8) timelines;
 * every requirement of the table with its result, the tests that checked it and their evidence.
 
 Inline CSS and SVG only, no script and no external URL; traces are linked relative to the file.
@@ -201,9 +201,6 @@ def _tests(results: list[Result]) -> str:
 # ----------------------------------------------------------------------------------------- plots
 #: one marker per service in the answer-delay plot
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">", "h", "p")
-#: a report interval longer than this many times its target spans a power cycle, a suspension or a
-#: Set Freq change (the DUT was silent or on another schedule): left out of the plot and counted
-_ACROSS = 2.5
 
 
 def _plots(results: list[Result], info: dict[str, Any]) -> str:
@@ -238,14 +235,14 @@ def _plots(results: list[Result], info: dict[str, Any]) -> str:
         parts.append("<p>No answered request was recorded.</p>")
     if intervals:
         tol = float(info.get("interval_tolerance_ms") or 0.0)
-        drawn, left_out, outside = _interval_plot(intervals, tol)
+        drawn, outside = _interval_plot(intervals, tol)
         parts.append(figure(
             "report-intervals", "Report intervals: deviation from their target", drawn,
             f"Time between consecutive MSG1/MSG2/MSG3 of the DUT minus the interval its latest Set/Get Freq answer "
             f"stated (ms, linear; box: quartiles, whiskers: min and max). Grey band: the tolerance, +-{tol:g} ms; red: "
-            f"{outside} interval(s) outside it (the bus rules also allow for bus queueing). {left_out} interval(s) "
-            f"longer than {_ACROSS:g} x their target are left out: they span a power cycle, a suspension or a Set "
-            f"Freq change."))
+            f"{outside} interval(s) outside it (the bus rules also allow for bus queueing). The intervals the bus rules "
+            f"judged, start to start: none before the DUT stated a target, none across a power cycle, a suspension or "
+            f"a Set Freq change, nor up to the second report after a restart (R9a)."))
     else:
         parts.append("<p>No report interval was recorded.</p>")
     if timelines:
@@ -308,10 +305,9 @@ def _answer_plot(answers: dict[int, dict[str, list[float]]], err: float) -> tupl
     return svg(fig), late
 
 
-def _interval_plot(intervals: dict[tuple[str, float], list[float]], tol: float) -> tuple[str, int, int]:
-    """The deviation plot - one panel per report and target, each on its own linear scale - how many
-    intervals were left out (across a power cycle, a suspension, a Set Freq change) and how many of the
-    rest are outside the tolerance band."""
+def _interval_plot(intervals: dict[tuple[str, float], list[float]], tol: float) -> tuple[str, int]:
+    """The deviation plot - one panel per report and target, each on its own linear scale - and how many
+    intervals are outside the tolerance band."""
     import numpy as np
 
     keys = sorted(intervals)
@@ -320,12 +316,9 @@ def _interval_plot(intervals: dict[tuple[str, float], list[float]], tol: float) 
     fig = new_figure(11.0, 2.4 * rows + 0.4)
     axes = fig.subplots(rows, cols, squeeze=False)
     rng = np.random.default_rng(0)
-    left_out = outside = 0
+    outside = 0
     for ax, k in zip(axes.flat, keys):
-        gaps = np.array(intervals[k])
-        kept = gaps[gaps <= _ACROSS * k[1]]
-        left_out += len(gaps) - len(kept)
-        dev = (kept - k[1]) * 1000
+        dev = (np.array(intervals[k]) - k[1]) * 1000
         band = ax.axhspan(-tol, tol, color="#6e7781", alpha=0.25, linewidth=0)
         band.set_gid(f"tolerance-{k[0]}-{k[1] * 1000:g}ms")
         tick = ax.axhline(0, color="#1a7f37", linewidth=1.5)
@@ -352,7 +345,7 @@ def _interval_plot(intervals: dict[tuple[str, float], list[float]], tol: float) 
     for ax in axes[:, 0]:
         ax.set_ylabel("interval - target (ms)")
     fig.tight_layout()
-    return svg(fig), left_out, outside
+    return svg(fig), outside
 
 
 def _comm_loss_plot(timelines: list[tuple[dict[str, Any], dict[str, Any]]]) -> str:
