@@ -132,7 +132,7 @@ def groups(results: list) -> list[Group]:
             g.rules = list(dict.fromkeys(g.rules + list(c["rules"])))
             if r.nodeid not in g.tests:
                 g.tests.append(r.nodeid)
-                if r.outcome != "FAIL":
+                if r.outcome != Verdict.FAIL:
                     g.unjudged[r.nodeid] = r.outcome
             g.occurrences += c.get("count", 1)
     order = list(found)

@@ -301,8 +301,8 @@ def compare(runs: list[Run], *, threshold: float = DEFAULT_THRESHOLD) -> dict[st
 
 
 # ------------------------------------------------------------------------------------------ text
-_SHORT = {"PASS": "PASS", "FAIL": "FAIL", "ERROR": "ERROR", "INCONCLUSIVE": "INCONC", "OBSERVED": "OBS", "SKIPPED": "SKIP",
-          NOT_CHECKED: "-", NOT_RUN: "-"}
+_SHORT = {Verdict.PASS: "PASS", Verdict.FAIL: "FAIL", Verdict.ERROR: "ERROR", Verdict.INCONCLUSIVE: "INCONC",
+          Verdict.OBSERVED: "OBS", Verdict.SKIPPED: "SKIP", NOT_CHECKED: "-", NOT_RUN: "-"}
 _LISTED = 40  # rows per list on the console; --json and --html have them all
 
 

@@ -117,9 +117,9 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
                 lines += "".join(f"\n[[ATTACHMENT|{(out / path).resolve()}]]" for path in r.traces.values())
             tc = TestCase(f"{r.name} [{' '.join(r.requirements)}]", classname=classname(section),
                           elapsed_sec=round(r.duration, 6), stdout=lines, status=r.outcome)
-            if r.outcome == "FAIL":
+            if r.outcome == Verdict.FAIL:
                 tc.add_failure_info(message=r.message[:500], output=r.message, failure_type=r.strength)
-            elif r.outcome == "ERROR":
+            elif r.outcome == Verdict.ERROR:
                 tc.add_error_info(message=r.message[:500], output=r.message)
             elif r.outcome in (Verdict.INCONCLUSIVE, Verdict.SKIPPED):
                 tc.add_skipped_info(message=r.message[:500] or r.outcome)
