@@ -93,7 +93,6 @@ def field_value(data, f) -> int:
     return int.from_bytes(data[f.offset:f.offset + f.size], "little")
 
 
-
 @dataclass
 class Heard:
     """What the tracker paired while :attr:`Tracker.heard` was set, as the report's plots draw it (seconds):
