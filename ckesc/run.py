@@ -32,7 +32,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .protocol.requirements import section_key
+from .protocol.requirements import Verdict, section_key
 from .session import options
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ABORTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -169,8 +169,8 @@ def run_command(args: argparse.Namespace) -> int:
     if not results:
         print("ckesc run: no conformance test ran", file=sys.stderr)
         return EXIT_FAILED
-    failed = [r for r in results if r.outcome in ("FAIL", "ERROR") or broken_outside_a_fail(r)]
-    inconclusive = [r for r in results if r.outcome == "INCONCLUSIVE"]
+    failed = [r for r in results if r.outcome in (Verdict.FAIL, Verdict.ERROR) or broken_outside_a_fail(r)]
+    inconclusive = [r for r in results if r.outcome == Verdict.INCONCLUSIVE]
     if failed or (args.strict and inconclusive):
         return EXIT_FAILED
     return EXIT_OK

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import ast
 import functools
-import json
 import os
 import re
 import subprocess
@@ -32,8 +31,9 @@ from typing import Any
 
 from .emulator import variants
 from .emulator.faults import FAULTS
-from .protocol.requirements import requirement
+from .protocol.requirements import Verdict, requirement
 from .reporting.causes import broken_outside_a_fail
+from .reporting.results import RunRecord
 
 RUN_TIMEOUT_S = 600  # one suite run takes seconds in the simulated lane; this only stops a hang
 
@@ -101,7 +101,7 @@ def _suite(targets: list[str], args: list[str]) -> tuple[list[dict[str, Any]] | 
         reports = sorted(Path(tmp).glob("*/results.json"))
         if not reports:
             return None, f"no report (pytest exit {done.returncode}): {done.stdout[-800:]}{done.stderr[-800:]}"
-        return json.loads(reports[-1].read_text())["results"], ""
+        return RunRecord.read(reports[-1]).results, ""
 
 
 def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full") -> FaultRun:
@@ -112,17 +112,17 @@ def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full
         return run
     run.ran = len(results)
     for r in results:
-        if r["outcome"] == "FAIL":
+        if r.outcome == Verdict.FAIL:
             # a test failed by the bus rules (ckesc/evidence) also cites the ids of the rules the traffic broke
-            run.failing.append((r["nodeid"], list(dict.fromkeys(r["requirements"] + r.get("bus_rules", [])))))
-            if r.get("bus_rules") and not set(r["requirements"]) & set(rules):  # failed for the bus rules alone
-                run.bus_failed.append(r["nodeid"])
-                run.bus_rules = list(dict.fromkeys(run.bus_rules + r["bus_rules"]))
-        elif r["outcome"] == "ERROR":
-            run.errors.append(f"{r['nodeid']}: {r['message'][:200]}")
+            run.failing.append((r.nodeid, list(dict.fromkeys(r.requirements + r.bus_rules))))
+            if r.bus_rules and not set(r.requirements) & set(rules):  # failed for the bus rules alone
+                run.bus_failed.append(r.nodeid)
+                run.bus_rules = list(dict.fromkeys(run.bus_rules + r.bus_rules))
+        elif r.outcome == Verdict.ERROR:
+            run.errors.append(f"{r.nodeid}: {r.message[:200]}")
         elif broken_outside_a_fail(r):  # a bus rule broken while a SKIPPED test ran: the rule's failure
-            run.failing.append((r["nodeid"], list(r["bus_rules"])))
-            run.bus_failed.append(r["nodeid"])
+            run.failing.append((r.nodeid, list(r.bus_rules)))
+            run.bus_failed.append(r.nodeid)
             run.bus_rules = list(dict.fromkeys(run.bus_rules + r["bus_rules"]))
     if fault is None:
         if run.failing or run.errors:
@@ -215,10 +215,10 @@ def run_variant(label: str, options: dict[str, Any], pytest_args: list[str] = ()
         return run
     run.ran = len(results)
     for r in results:
-        bucket = {"FAIL": run.failing, "ERROR": run.errors, "INCONCLUSIVE": run.inconclusive}.get(r["outcome"])
+        bucket = {Verdict.FAIL: run.failing, Verdict.ERROR: run.errors, Verdict.INCONCLUSIVE: run.inconclusive}.get(r.outcome)
         if bucket is not None:
-            message = _VERDICT_PREFIX.sub("", (r.get("message") or "").strip()).splitlines()
-            bucket.append(f"{r['nodeid']}: {message[0][:160] if message else ''}")
+            message = _VERDICT_PREFIX.sub("", r.message.strip()).splitlines()
+            bucket.append(f"{r.nodeid}: {message[0][:160] if message else ''}")
     if run.failing or run.errors:
         first = (run.failing or run.errors)[0].split(": ", 1)[0]
         verb = "FAILed" if run.failing else "ERRORed"

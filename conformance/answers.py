@@ -16,6 +16,7 @@ from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, Kind
+from ckesc.protocol.requirements import Verdict
 
 from .reports import frame_start, ms
 
@@ -100,7 +101,7 @@ def check_answer_slot(dut, answer, sent, node: int, what: str, max_requirement: 
                       limit=ms(lo), op=">=", unit="ms", clock=sent.clock, requirement="R2", strength="READING")
     rec.measure(f"{what} node {node}: answer end after the request (slot end + bench error)", ms(end), limit=ms(hi),
                 unit="ms", clock=sent.clock, requirement="R2", strength="READING")
-    if low.verdict != "FAIL" and not tells(node, error):
+    if low.verdict != Verdict.FAIL and not tells(node, error):
         rec.inconclusive.append(f"the bench's stated error +-{err:g} ms: at node {node} (slot {ms(slot):g} ms) it cannot "
                                 "tell an answer in its slot from one sent at once, whatever the node id (the DUT's own "
                                 "slot tests move it to a slot that tells)")

@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from ..protocol.requirements import STRENGTHS
+from ..protocol.requirements import STRENGTHS, Verdict
 
 CLOCKS = ("simulated", "bus timestamp", "host clock")
 
@@ -54,7 +54,7 @@ class Measurement:
     unit: str
     clock: str
     error: float = 0.0  # the lane's stated measurement error for this clock
-    verdict: str = "PASS"
+    verdict: str = Verdict.PASS
     requirement: str | None = None
 
     @property
@@ -116,11 +116,11 @@ class Record:
         ok = _OPS[op](value, limit)
         margin = m.margin or 0.0
         if error and abs(margin) < error:
-            m.verdict = "INCONCLUSIVE"
+            m.verdict = Verdict.INCONCLUSIVE
             self.inconclusive.append(f"{m} is within the measurement error")
             return m
         if not ok:
-            m.verdict = "OBSERVED" if strength == "OBSERVE" else "FAIL"
+            m.verdict = Verdict.OBSERVED if strength == "OBSERVE" else Verdict.FAIL
             if strength != "OBSERVE":
                 tag = f"[{requirement} {strength}] " if requirement else f"[{strength}] "
                 self.failed.append((strength, f"{tag}{m}"))

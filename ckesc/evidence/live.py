@@ -14,6 +14,7 @@ from collections import Counter
 import can
 
 from .rules import BusRules, Violation
+from .tracker import timing_tolerance
 
 #: Violations quoted in a failure message; the rest are counted.
 QUOTED = 3
@@ -21,9 +22,8 @@ _KEPT = 50
 
 
 def tolerance_for(lane) -> float:
-    """The timing tolerance of a lane: exact in simulated time; elsewhere the lane's stated error plus one
-    1 ms report-scheduling tick (what ``Dut.interval_tolerance_ms`` allows a report interval)."""
-    return 0.0 if lane.clock == "simulated" else lane.timing_error + 0.001
+    """The timing tolerance of a lane (:func:`.tracker.timing_tolerance`)."""
+    return timing_tolerance(lane.clock, lane.timing_error)
 
 
 class LaneRules(can.Listener):

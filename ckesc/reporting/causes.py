@@ -24,12 +24,14 @@ from ..evidence.live import causes as violation_causes
 from ..evidence.live import generalise, shorten, without_context
 from ..evidence.rules import Violation
 from ..protocol.requirements import STRENGTHS as STRENGTH_ORDER
+from ..protocol.requirements import Verdict
+from .results import Result
 
 #: a violation quoted in a bus-rule failure message (read back from records without ``bus_causes``)
 _QUOTED = re.compile(r"^\[(?P<rules>.+?) (?P<strength>SHALL|READING)\] t=(?P<t>\S+) (?:node (?P<node>\d+)|bus): (?P<what>.*)$")
 _TAG = re.compile(r"^\[(?P<rules>[^\]]+?) (?P<strength>SHALL|READING|OBSERVE)\]\s*")
 _LIMIT = re.compile(r"\(limit ([^,)]+)")
-_OUTCOMES = ("FAIL", "ERROR")
+_OUTCOMES = (Verdict.FAIL, Verdict.ERROR)
 
 
 @dataclass
@@ -57,8 +59,8 @@ class Group:
         return f"{self.title} - in {n} test{'s' if n != 1 else ''}"
 
 
-def _record(r: Any) -> dict[str, Any]:
-    return r if isinstance(r, dict) else r.__dict__
+def _record(r: Result | dict[str, Any]) -> Result:
+    return r if isinstance(r, Result) else Result.from_json(r)
 
 
 def broken_outside_a_fail(r: Any) -> bool:
@@ -66,36 +68,36 @@ def broken_outside_a_fail(r: Any) -> bool:
     (it was SKIPPED: not claimed, R9b, or lacking a capability; or it ERRORed). Such a rule's failure is
     not the test's, and it still fails the run."""
     r = _record(r)
-    return bool(r.get("bus_rules")) and r.get("outcome") != "FAIL"
+    return bool(r.bus_rules) and r.outcome != Verdict.FAIL
 
 
 def rule_failures(results: list) -> list[dict[str, Any]]:
     """The bus rules broken outside a FAIL (:func:`broken_outside_a_fail`), one entry per test they were
     seen in: results.json's ``rule_failures``, JUnit's "bus rules" testsuite."""
-    return [{"test": r["nodeid"], "outcome": r["outcome"], "rules": list(r["bus_rules"]),
-             "causes": list(r.get("bus_causes") or [])} for r in map(_record, results) if broken_outside_a_fail(r)]
+    return [{"test": r.nodeid, "outcome": r.outcome, "rules": list(r.bus_rules),
+             "causes": list(r.bus_causes)} for r in map(_record, results) if broken_outside_a_fail(r)]
 
 
-def _own_cause(r: dict[str, Any]) -> tuple[str, str, str, list[str]] | None:
+def _own_cause(r: Result) -> tuple[str, str, str, list[str]] | None:
     """(key, what, strength, rules) of a test's own failure (not the bus rules'), or None."""
-    message = (r.get("message") or "").strip()
+    message = (r.message or "").strip()
     if not message or message.startswith("[bus rules"):
         return None
     line = message.splitlines()[0].strip().removeprefix("AssertionError: ")
     tag = _TAG.match(line)
-    strength = tag["strength"] if tag else ("" if r["outcome"] == "ERROR" else r.get("strength", ""))
+    strength = tag["strength"] if tag else ("" if r.outcome == Verdict.ERROR else r.strength)
     rules = tag["rules"].split() if tag else []
     text = line[tag.end():] if tag else line
-    key = f"{r['outcome']}|{' '.join(rules)}|{strength}|{generalise(without_context(text)).strip()}"
+    key = f"{r.outcome}|{' '.join(rules)}|{strength}|{generalise(without_context(text)).strip()}"
     limit = _LIMIT.search(text)
     return key, (shorten(text) + (f" (limit {limit[1]})" if limit else ""))[:300], strength, rules
 
 
-def _bus_causes(r: dict[str, Any]) -> list[dict[str, Any]]:
+def _bus_causes(r: Result) -> list[dict[str, Any]]:
     """The test's bus-rule problems: as recorded, or read back from its message (older records)."""
-    if r.get("bus_causes"):
-        return r["bus_causes"]
-    lines = (r.get("message") or "").splitlines()
+    if r.bus_causes:
+        return r.bus_causes
+    lines = (r.message or "").splitlines()
     if not lines or not lines[0].startswith("[bus rules"):
         return []
     found = []
@@ -112,26 +114,26 @@ def groups(results: list) -> list[Group]:
     read first."""
     found: dict[str, Group] = {}
     for r in map(_record, results):
-        failed = r.get("outcome") in _OUTCOMES
-        if not failed and not r.get("bus_rules"):
+        failed = r.outcome in _OUTCOMES
+        if not failed and not r.bus_rules:
             continue
-        traces = r.get("traces") or {}
+        traces = r.traces or {}
         own = _own_cause(r) if failed else None
         if own is not None:
             key, what, strength, rules = own
-            g = found.setdefault(key, Group(key, r["outcome"], strength, rules, what, r.get("message", ""),
-                                            r["nodeid"], traces))
-            g.tests.append(r["nodeid"])
+            g = found.setdefault(key, Group(key, r.outcome, strength, rules, what, r.message,
+                                            r.nodeid, traces))
+            g.tests.append(r.nodeid)
             g.occurrences += 1
-        for c in _bus_causes(r) if r["outcome"] == "FAIL" else r.get("bus_causes") or []:
+        for c in _bus_causes(r) if r.outcome == Verdict.FAIL else r.bus_causes:
             key = "bus|" + c["key"]
-            g = found.setdefault(key, Group(key, "FAIL", c["strength"], list(c["rules"]), c["what"], c["first"],
-                                            r["nodeid"], traces))
+            g = found.setdefault(key, Group(key, Verdict.FAIL, c["strength"], list(c["rules"]), c["what"], c["first"],
+                                            r.nodeid, traces))
             g.rules = list(dict.fromkeys(g.rules + list(c["rules"])))
-            if r["nodeid"] not in g.tests:
-                g.tests.append(r["nodeid"])
-                if r["outcome"] != "FAIL":
-                    g.unjudged[r["nodeid"]] = r["outcome"]
+            if r.nodeid not in g.tests:
+                g.tests.append(r.nodeid)
+                if r.outcome != Verdict.FAIL:
+                    g.unjudged[r.nodeid] = r.outcome
             g.occurrences += c.get("count", 1)
     order = list(found)
     return sorted(found.values(), key=lambda g: (_OUTCOMES.index(g.outcome),

@@ -31,12 +31,12 @@ from pathlib import Path
 from typing import Any
 
 from ..protocol.catalogue import firmware_date
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
-from .html_report import _CSS, _badge, _e, _measurements, _new_figure, _requirement_result, _svg
-from .results import incomplete_banner
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_key
+from .htmlkit import CSS, badge, e, new_figure, svg
+from .results import NotRun, Result, RunInfo, RunRecord, incomplete_banner, requirement_result
 
-GOOD = ("PASS", "OBSERVED")
-BAD = ("FAIL", "ERROR", "INCONCLUSIVE")
+GOOD = (Verdict.PASS, Verdict.OBSERVED)
+BAD = (Verdict.FAIL, Verdict.ERROR, Verdict.INCONCLUSIVE)
 NOT_CHECKED = "NOT CHECKED"
 NOT_RUN = "NOT RUN"
 #: the units of a timing measurement, to ms
@@ -55,9 +55,9 @@ class Run:
 
     label: str  # the run's id (its directory's name)
     path: str
-    info: dict[str, Any]
-    results: dict[str, dict[str, Any]]  # by nodeid
-    not_run: dict[str, dict[str, Any]] = field(default_factory=dict)
+    info: RunInfo
+    results: dict[str, Result]  # by nodeid
+    not_run: dict[str, NotRun] = field(default_factory=dict)
 
 
 # ------------------------------------------------------------------------------------------ reading
@@ -84,18 +84,23 @@ def read_run(path: str | Path) -> Run:
 
 
 def parse_run(doc: Any, *, label: str = "", path: str = "") -> Run:
-    """A :class:`Run` from a parsed ``results.json``; :class:`RunError` when it is not one."""
+    """A :class:`Run` from a :class:`~.results.RunRecord` or a parsed ``results.json``; :class:`RunError` when it
+    is not one."""
     where = path or label or "run"
-    if not isinstance(doc, dict) or not isinstance(doc.get("results"), list) or not isinstance(doc.get("info"), dict):
-        raise RunError(f"{where}: not a results record of `ckesc run` (an object with 'info' and 'results')")
-    results: dict[str, dict[str, Any]] = {}
-    for n, r in enumerate(doc["results"]):
-        if not isinstance(r, dict) or not isinstance(r.get("nodeid"), str) or r.get("outcome") not in VERDICTS:
-            raise RunError(f"{where}: result {n} has no nodeid or no verdict this version knows ({', '.join(VERDICTS)})")
-        results[r["nodeid"]] = r
-    not_run = {n["nodeid"]: n for n in doc.get("not_run") or [] if isinstance(n, dict) and isinstance(n.get("nodeid"), str)}
-    info = doc["info"]
-    return Run(label=str(info.get("run_id") or label or where), path=path, info=info, results=results, not_run=not_run)
+    if not isinstance(doc, RunRecord):
+        if not isinstance(doc, dict) or not isinstance(doc.get("results"), list) or not isinstance(doc.get("info"), dict):
+            raise RunError(f"{where}: not a results record of `ckesc run` (an object with 'info' and 'results')")
+        for n, r in enumerate(doc["results"]):
+            if not isinstance(r, dict) or not isinstance(r.get("nodeid"), str) or r.get("outcome") not in VERDICTS:
+                raise RunError(f"{where}: result {n} has no nodeid or no verdict this version knows ({', '.join(VERDICTS)})")
+        try:
+            doc = RunRecord.from_json(doc)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise RunError(f"{where}: not a results record this version reads: {exc!r}") from None
+    results = {r.nodeid: r for r in doc.results}
+    not_run = {n["nodeid"]: n for n in doc.not_run if isinstance(n.get("nodeid"), str)}
+    return Run(label=str(doc.info.get("run_id") or label or where), path=path, info=doc.info, results=results,
+               not_run=not_run)
 
 
 # ------------------------------------------------------------------------------------------ facts of one run
@@ -123,9 +128,9 @@ def requirement_results(run: Run) -> dict[str, str]:
     """Each requirement's result in the run: the worst verdict of the tests citing it, or NOT CHECKED."""
     by_req: dict[str, list[str]] = defaultdict(list)
     for r in run.results.values():
-        for rid in r.get("requirements") or []:
-            by_req[rid].append(r["outcome"])
-    return {rid: _requirement_result(outcomes) for rid, outcomes in by_req.items()}
+        for rid in r.requirements:
+            by_req[rid].append(r.outcome)
+    return {rid: requirement_result(outcomes) for rid, outcomes in by_req.items()}
 
 
 _NUMBER = re.compile(r"\s*([-+0-9.eE]+(?:inf)?)\s*(.*)")
@@ -147,7 +152,7 @@ def timing_margins(run: Run) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for nodeid, r in run.results.items():
         seen: Counter = Counter()
-        for m in _measurements(r):
+        for m in r.measurements:
             margin, value = _quantity(m.get("margin")), _quantity(m.get("value"))
             if margin is None or value is None or margin[1] not in TIMING_UNITS:
                 continue
@@ -178,10 +183,10 @@ def diff(a: Run, b: Run, *, threshold: float = DEFAULT_THRESHOLD) -> dict[str, A
                                                              "not_run")}
     known_a, known_b = a.results.keys() | a.not_run.keys(), b.results.keys() | b.not_run.keys()
     for nodeid in sorted(known_a | known_b, key=lambda n: (_section(a, b, n), n)):
-        before = a.results[nodeid]["outcome"] if nodeid in a.results else NOT_RUN
-        after = b.results[nodeid]["outcome"] if nodeid in b.results else NOT_RUN
-        row = {"test": nodeid, "section": _section(a, b, nodeid), "before": before, "after": after,
-               "message": (b.results.get(nodeid) or {}).get("message", "").split("\n")[0][:300]}
+        before = a.results[nodeid].outcome if nodeid in a.results else NOT_RUN
+        after = b.results[nodeid].outcome if nodeid in b.results else NOT_RUN
+        row = {"test": nodeid, "section": _section(a, b, nodeid), "before": str(before), "after": str(after),
+               "message": b.results[nodeid].message.split("\n")[0][:300] if nodeid in b.results else ""}
         if nodeid not in known_a:
             tests["added"].append(row)
         elif nodeid not in known_b:
@@ -221,9 +226,12 @@ def diff(a: Run, b: Run, *, threshold: float = DEFAULT_THRESHOLD) -> dict[str, A
 
 
 def _section(a: Run, b: Run, nodeid: str) -> str:
-    for source in (b.results, a.results, b.not_run, a.not_run):
-        if source.get(nodeid, {}).get("section"):
-            return source[nodeid]["section"]
+    for r in (b.results.get(nodeid), a.results.get(nodeid)):
+        if r is not None and r.section:
+            return r.section
+    for n in (b.not_run.get(nodeid), a.not_run.get(nodeid)):
+        if n and n.get("section"):
+            return n["section"]
     return ""
 
 
@@ -281,7 +289,7 @@ def compare(runs: list[Run], *, threshold: float = DEFAULT_THRESHOLD) -> dict[st
     return {
         "runs": [{"letter": _letter(i), "label": r.label, "path": r.path, "identity": identity(r.info, r.label),
                   "complete": r.info.get("complete") is True, "incomplete": r.info.get("incomplete") or "",
-                  "counts": dict(Counter(x["outcome"] for x in r.results.values())), "not_run": len(r.not_run)}
+                  "counts": {str(v): n for v, n in Counter(x.outcome for x in r.results.values()).items()}, "not_run": len(r.not_run)}
                  for i, r in enumerate(runs)],
         "threshold": threshold,
         "flags": flags(runs),
@@ -293,8 +301,8 @@ def compare(runs: list[Run], *, threshold: float = DEFAULT_THRESHOLD) -> dict[st
 
 
 # ------------------------------------------------------------------------------------------ text
-_SHORT = {"PASS": "PASS", "FAIL": "FAIL", "ERROR": "ERROR", "INCONCLUSIVE": "INCONC", "OBSERVED": "OBS", "SKIPPED": "SKIP",
-          NOT_CHECKED: "-", NOT_RUN: "-"}
+_SHORT = {Verdict.PASS: "PASS", Verdict.FAIL: "FAIL", Verdict.ERROR: "ERROR", Verdict.INCONCLUSIVE: "INCONC",
+          Verdict.OBSERVED: "OBS", Verdict.SKIPPED: "SKIP", NOT_CHECKED: "-", NOT_RUN: "-"}
 _LISTED = 40  # rows per list on the console; --json and --html have them all
 
 
@@ -390,45 +398,45 @@ def page(doc: dict[str, Any]) -> str:
     """The comparison as one self-contained HTML page, in report.html's style."""
     runs = doc["runs"]
     overall = "REGRESSED" if doc["regressed"] else "NO REGRESSION"
-    parts = [f"<header><h1>CKESC run comparison</h1><p class=run>{_badge(overall)} {len(runs)} runs, oldest first; each "
+    parts = [f"<header><h1>CKESC run comparison</h1><p class=run>{badge(overall)} {len(runs)} runs, oldest first; each "
              f"compared with the one before it</p>"
-             + "".join(f"<p class=banner role=alert>{_e(f)}</p>" for f in doc["flags"]) + "</header>",
-             _identity_table(runs)]
+             + "".join(f"<p class=banner role=alert>{e(f)}</p>" for f in doc["flags"]) + "</header>",
+             identity_table(runs)]
     parts += [_pair_section(doc, p) for p in doc["pairs"]]
-    parts += [_matrix_table(doc), _trend_section(doc)]
+    parts += [matrix_table(doc), _trend_section(doc)]
     return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC run comparison "
-            f"{_e(' / '.join(r['label'] for r in runs))}</title><style>{_CSS}{_EXTRA_CSS}</style></head><body>\n"
+            f"{e(' / '.join(r['label'] for r in runs))}</title><style>{CSS}{EXTRA_CSS}</style></head><body>\n"
             + "\n".join(parts) + "\n</body></html>\n")
 
 
 def _run_heads(runs: list[dict[str, Any]]) -> str:
-    return "".join(f'<th data-run="{_e(r["letter"])}">{_e(r["letter"])}<div class=note>{_e(r["label"])}</div></th>' for r in runs)
+    return "".join(f'<th data-run="{e(r["letter"])}">{e(r["letter"])}<div class=note>{e(r["label"])}</div></th>' for r in runs)
 
 
-def _identity_table(runs: list[dict[str, Any]]) -> str:
+def identity_table(runs: list[dict[str, Any]]) -> str:
     keys = _identity_keys(runs)
     rows = []
     for k in keys[1:] if keys[:1] == ["run id"] else keys:  # the run id heads its column
         values = [r["identity"].get(k, "") for r in runs]
         differs = k != "run id" and len(set(values)) > 1
-        rows.append(f'<tr data-field="{_e(k)}"{" class=diff" if differs else ""}><th>{_e(k)}</th>'
-                    + "".join(f"<td>{_e(v)}</td>" for v in values) + "</tr>")
+        rows.append(f'<tr data-field="{e(k)}"{" class=diff" if differs else ""}><th>{e(k)}</th>'
+                    + "".join(f"<td>{e(v)}</td>" for v in values) + "</tr>")
     return (f"<section id=identity><h2>Devices under test</h2><table class=kv><tr><th></th>{_run_heads(runs)}</tr>"
             f"{''.join(rows)}</table><p class=note>Highlighted: differs between runs.</p></section>")
 
 
 def _change_rows(rows: list[dict[str, Any]], key: str) -> str:
-    return "".join(f'<tr data-{key}="{_e(r[key])}"><td>{_e(r[key])}</td>'
-                   + (f"<td>{_e(r.get('strength', ''))}</td>" if key == "requirement" else f"<td>{_e(r['section'])}</td>")
-                   + f"<td class=vv>{_badge(r['before'])} &rarr; {_badge(r['after'])}</td>"
-                   + (f"<td>{_e(r.get('message', ''))}</td>" if key == "test" else "") + "</tr>" for r in rows)
+    return "".join(f'<tr data-{key}="{e(r[key])}"><td>{e(r[key])}</td>'
+                   + (f"<td>{e(r.get('strength', ''))}</td>" if key == "requirement" else f"<td>{e(r['section'])}</td>")
+                   + f"<td class=vv>{badge(r['before'])} &rarr; {badge(r['after'])}</td>"
+                   + (f"<td>{e(r.get('message', ''))}</td>" if key == "test" else "") + "</tr>" for r in rows)
 
 
 def _pair_section(doc: dict[str, Any], p: dict[str, Any]) -> str:
     name = _pair_name(doc, p)
     sid = "pair-" + name.replace(" -> ", "-")
-    out = [f'<section id="{sid}" class=pair data-regressed="{str(p["regressed"]).lower()}"><h2>{_e(name)}: '
-           f'{_badge("REGRESSED" if p["regressed"] else "NO REGRESSION")}</h2><p>{_e(_pair_counts(p))}</p>']
+    out = [f'<section id="{sid}" class=pair data-regressed="{str(p["regressed"]).lower()}"><h2>{e(name)}: '
+           f'{badge("REGRESSED" if p["regressed"] else "NO REGRESSION")}</h2><p>{e(_pair_counts(p))}</p>']
     for title, key in (("Regressed", "regressed"), ("Fixed", "fixed"), ("Other verdict changes", "changed")):
         reqs, tests = p["requirements"][key], p["tests"][key]
         if reqs:
@@ -443,10 +451,10 @@ def _pair_section(doc: dict[str, Any], p: dict[str, Any]) -> str:
             out.append(f'<details class="test-{key}"><summary>{title} ({len(tests)})</summary><table class=chg><tr><th>test</th>'
                        f"<th>section</th><th>verdict</th><th>message</th></tr>{_change_rows(tests, 'test')}</table></details>")
     if p["margins_shrank"]:
-        rows = "".join(f'<tr data-measurement="{_e(m["measurement"])}">{_what(m)}<td class=lim>{_e(m["limit_after"])}</td>'
+        rows = "".join(f'<tr data-measurement="{e(m["measurement"])}">{_what(m)}<td class=lim>{e(m["limit_after"])}</td>'
                        f'<td class=num>{_ms(m["value_before_ms"])}</td><td class=num>{_ms(m["value_after_ms"])}</td>'
                        f'<td class=num>{_ms(m["before_ms"])}</td><td class=num>{_ms(m["after_ms"])}</td>'
-                       f'<td>{_badge(m["verdict_after"])}</td></tr>' for m in p["margins_shrank"])
+                       f'<td>{badge(m["verdict_after"])}</td></tr>' for m in p["margins_shrank"])
         out.append(f"<h3>Timing margins that shrank by more than {doc['threshold'] * 100:g} % ({len(p['margins_shrank'])})</h3>"
                    "<table class=margins-shrank><tr><th>measurement and test</th><th>limit</th><th>measured before</th><th>after</th><th>margin before</th>"
                    f"<th>margin after</th><th></th></tr>{rows}</table>")
@@ -454,17 +462,17 @@ def _pair_section(doc: dict[str, Any], p: dict[str, Any]) -> str:
     return "".join(out)
 
 
-def _matrix_table(doc: dict[str, Any]) -> str:
+def matrix_table(doc: dict[str, Any]) -> str:
     runs = doc["runs"]
     rows, section = [], None
     for row in doc["matrix"]:
         if row["section"] != section:
             section = row["section"]
-            rows.append(f'<tr class=group><th colspan="{len(runs) + 2}">{_e(section)} {_e(SECTION_TITLES.get(section, ""))}</th></tr>')
+            rows.append(f'<tr class=group><th colspan="{len(runs) + 2}">{e(section)} {e(SECTION_TITLES.get(section, ""))}</th></tr>')
         differs = " class=diff" if len(set(row["results"])) > 1 else ""
-        rows.append(f'<tr data-requirement="{_e(row["requirement"])}" data-results="{_e(" ".join(row["results"]))}"{differs}>'
-                    f'<td>{_e(row["requirement"])}</td><td>{_e(row["strength"])}</td>'
-                    + "".join(f'<td class="cell c-{v.replace(" ", "-")}">{_e(_SHORT.get(v, v))}</td>' for v in row["results"])
+        rows.append(f'<tr data-requirement="{e(row["requirement"])}" data-results="{e(" ".join(row["results"]))}"{differs}>'
+                    f'<td>{e(row["requirement"])}</td><td>{e(row["strength"])}</td>'
+                    + "".join(f'<td class="cell c-{v.replace(" ", "-")}">{e(_SHORT.get(v, v))}</td>' for v in row["results"])
                     + "</tr>")
     return (f"<section id=matrix><h2>Requirements x runs</h2><table class=matrix><tr><th>requirement</th><th>strength</th>"
             f"{_run_heads(runs)}</tr>{''.join(rows)}</table></section>")
@@ -478,8 +486,8 @@ def _trend_section(doc: dict[str, Any]) -> str:
     rows = []
     for t in trends:
         cells = "".join(f"<td class=num>{_ms(v)}</td>" for v in t["margins_ms"])
-        rows.append(f'<tr data-measurement="{_e(t["measurement"])}" data-shrank="{_e(" ".join(t["shrank_at"]))}"'
-                    f'{" class=diff" if t["shrank_at"] else ""}>{_what(t)}<td class=lim>{_e(t["limit"])}</td>{cells}'
+        rows.append(f'<tr data-measurement="{e(t["measurement"])}" data-shrank="{e(" ".join(t["shrank_at"]))}"'
+                    f'{" class=diff" if t["shrank_at"] else ""}>{_what(t)}<td class=lim>{e(t["limit"])}</td>{cells}'
                     f'<td class=spark>{_sparkline(t["margins_ms"])}</td></tr>')
     shrinking = sum(1 for t in trends if t["shrank_at"])
     return (f"<section id=trends><h2>Timing margins in every run</h2><p>{len(trends)} timing measurements; {shrinking} shrank "
@@ -491,7 +499,7 @@ def _trend_section(doc: dict[str, Any]) -> str:
 
 def _what(m: dict[str, Any]) -> str:
     """A measurement's cell: its name, and the test that made it."""
-    return f'<td class=what><b>{_e(m["name"])}</b><div class=note>{_e(m["test"].removeprefix("conformance/"))}</div></td>'
+    return f'<td class=what><b>{e(m["name"])}</b><div class=note>{e(m["test"].removeprefix("conformance/"))}</div></td>'
 
 
 def _sparkline(series: list[float | None]) -> str:
@@ -499,7 +507,7 @@ def _sparkline(series: list[float | None]) -> str:
     points = [(i, v) for i, v in enumerate(series) if v is not None]
     if len(points) < 2:
         return ""
-    fig = _new_figure(1.6, 0.42)
+    fig = new_figure(1.6, 0.42)
     fig.set_facecolor("none")  # the row's colour shows through
     ax = fig.add_axes((0.02, 0.08, 0.96, 0.84))
     xs, ys = [p[0] for p in points], [p[1] for p in points]
@@ -511,10 +519,10 @@ def _sparkline(series: list[float | None]) -> str:
     ax.set_ylim(lo - pad, hi + pad)
     ax.set_xlim(-0.3, len(series) - 0.7)
     ax.set_axis_off()
-    return _svg(fig)
+    return svg(fig)
 
 
-_EXTRA_CSS = """
+EXTRA_CSS = """
 .v-REGRESSED{background:#cf222e}.v-NO-REGRESSION{background:#1a7f37}.v-NOT-RUN{background:#6e7781}
 tr.diff>td:not(.cell),tr.diff>th{background:#fff8c5}#identity table{width:100%;table-layout:fixed}td{overflow-wrap:anywhere}
 .num,.lim,.chg td.vv{white-space:nowrap}.num{text-align:right;font-variant-numeric:tabular-nums}.what{min-width:16rem}

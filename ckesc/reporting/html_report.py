@@ -9,8 +9,8 @@ Built from what the run recorded (``results.json``), so ``ckesc report DIR`` can
 * what failed, with its evidence (measurements with limit, margin, clock; observations; traces);
 * plots (matplotlib, inlined as SVG, full page width): answer delay per node against that node's own
   limits (its R2 slot and the 64 ms bound), one marker per service, violations red and labelled;
-  report intervals as their deviation from the target with the tolerance band (intervals across a
-  power cycle, a suspension or a Set Freq change left out and counted); the comm-loss (R8) timelines;
+  report intervals as their deviation from the target with the tolerance band (the intervals the bus
+  rules judged, as evidence/tracker.py pairs them); the comm-loss (R8) timelines;
 * every requirement of the table with its result, the tests that checked it and their evidence.
 
 Inline CSS and SVG only, no script and no external URL; traces are linked relative to the file.
@@ -18,49 +18,42 @@ Inline CSS and SVG only, no script and no external URL; traces are linked relati
 
 from __future__ import annotations
 
-import html
-import io
-import json
 from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
 
 from ..protocol import catalogue as cat
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_key
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_key
 from .causes import groups
-from .results import claim_text, incomplete_banner
-
-#: how a requirement's result is drawn from its tests' verdicts: the first that occurs
-_WORST_FIRST = ("FAIL", "ERROR", "INCONCLUSIVE", "PASS", "OBSERVED", "SKIPPED")
-_COLOURS = {"PASS": "#1a7f37", "FAIL": "#cf222e", "ERROR": "#8250df", "INCONCLUSIVE": "#bf8700", "OBSERVED": "#0969da",
-            "SKIPPED": "#6e7781", "NOT CHECKED": "#6e7781",
-            "ABORTED": "#cf222e", "INTERRUPTED": "#bf8700", "SUBSET": "#6e7781", "INCOMPLETE": "#bf8700"}
+from .htmlkit import CSS, anchor, badge, e, figure, new_figure, svg
+from .results import WORST_FIRST, Result, RunInfo, RunRecord, claim_text, incomplete_banner, requirement_result
 
 
 def build(out: Path) -> Path:
     """Write ``out/report.html`` from ``out/results.json``; returns its path."""
-    doc = json.loads((out / "results.json").read_text(encoding="utf-8"))
-    page = render(doc, run=out.name)
+    page = render(RunRecord.read(out / "results.json"), run=out.name)
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")
     return path
 
 
 # ----------------------------------------------------------------------------------------- page
-def render(doc: dict[str, Any], *, run: str = "") -> str:
-    info: dict[str, Any] = doc.get("info", {})
-    results: list[dict[str, Any]] = doc.get("results", [])
-    counts = Counter(r["outcome"] for r in results)
+def render(doc: RunRecord | dict[str, Any], *, run: str = "") -> str:
+    """The page of a run, from its :class:`RunRecord` (or a parsed results.json)."""
+    record = doc if isinstance(doc, RunRecord) else RunRecord.from_json(doc)
+    info: RunInfo = record.info
+    results = record.results
+    counts = Counter(r.outcome for r in results)
     banner = incomplete_banner(info)
     # never a green PASS for less than the whole suite: ABORTED / INTERRUPTED / SUBSET / INCOMPLETE
-    overall = "FAIL" if counts["FAIL"] or counts["ERROR"] else (banner.split(" ")[0] if banner else "PASS")
+    overall = Verdict.FAIL if counts[Verdict.FAIL] or counts[Verdict.ERROR] else (banner.split(" ")[0] if banner else Verdict.PASS)
     parts = [
-        f"<header><h1>CKESC conformance report</h1><p class=run>run {_e(run)} &middot; "
-        f"{_badge(overall)} {len(results)} tests: "
+        f"<header><h1>CKESC conformance report</h1><p class=run>run {e(run)} &middot; "
+        f"{badge(overall)} {len(results)} tests: "
         + ", ".join(f"{counts[v]} {v}" for v in VERDICTS if counts[v])
         + (f", {info.get('not_run', 0)} not run" if info.get("not_run") else "") + "</p>"
-        + (f'<p class=banner role=alert>{_e(banner)}</p>' if banner else "")
-        + (f"<p class=claim>{_e(claim_text(info))}</p>" if info.get("not_claimed") else "") + "</header>",
+        + (f'<p class=banner role=alert>{e(banner)}</p>' if banner else "")
+        + (f"<p class=claim>{e(claim_text(info))}</p>" if info.get("not_claimed") else "") + "</header>",
         _causes(results),
         _identity(info),
         _matrix(results),
@@ -69,16 +62,8 @@ def render(doc: dict[str, Any], *, run: str = "") -> str:
         _requirements(results),
         _tests(results),
     ]
-    return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC conformance report {_e(run)}</title>"
-            f"<style>{_CSS}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
-
-
-def _e(value: Any) -> str:
-    return html.escape(str(value), quote=True)
-
-
-def _badge(verdict: str) -> str:
-    return f'<span class="v v-{verdict.replace(" ", "-")}">{_e(verdict)}</span>'
+    return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC conformance report {e(run)}</title>"
+            f"<style>{CSS}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
 
 
 def _identity(info: dict[str, Any]) -> str:
@@ -98,21 +83,21 @@ def _identity(info: dict[str, Any]) -> str:
         rows += [(k.replace("_", " "), v) for k, v in esc.items() if not k.startswith("firmware_")]
     elif "esc_information" in info:
         rows.append(("ESC information (240)", "no answer"))
-    body = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows if v not in (None, ""))
+    body = "".join(f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in rows if v not in (None, ""))
     return f'<section id=dut><h2>Device under test</h2><table class="kv">{body}</table></section>'
 
 
-def _matrix(results: list[dict[str, Any]]) -> str:
+def _matrix(results: list[Result]) -> str:
     rows: dict[str, Counter] = defaultdict(Counter)
     for r in results:
-        rows[r["section"]][r["outcome"]] += 1
-    head = "<tr><th>section</th><th>title</th>" + "".join(f"<th>{_badge(v)}</th>" for v in VERDICTS) + "</tr>"
+        rows[r.section][r.outcome] += 1
+    head = "<tr><th>section</th><th>title</th>" + "".join(f"<th>{badge(v)}</th>" for v in VERDICTS) + "</tr>"
     body = []
     total: Counter = Counter()
     for section in sorted(rows, key=section_key):
         c = rows[section]
         total.update(c)
-        body.append(f'<tr data-section="{_e(section)}"><td>{_e(section)}</td><td>{_e(SECTION_TITLES.get(section, ""))}</td>'
+        body.append(f'<tr data-section="{e(section)}"><td>{e(section)}</td><td>{e(SECTION_TITLES.get(section, ""))}</td>'
                     + "".join(_count_cell(v, c[v]) for v in VERDICTS) + "</tr>")
     body.append('<tr class=total data-section=all><td>all</td><td></td>' + "".join(_count_cell(v, total[v]) for v in VERDICTS) + "</tr>")
     return f"<section id=matrix><h2>Sections by verdict</h2><table class=matrix>{head}{''.join(body)}</table></section>"
@@ -123,51 +108,41 @@ def _count_cell(verdict: str, n: int) -> str:
     return f'<td class="{cls}" data-verdict="{verdict}">{n}</td>'
 
 
-def _measurements(r: dict[str, Any]) -> list[dict[str, str]]:
-    """The test's measurements, from its ``measurement.<n>.<key>`` properties."""
-    found: dict[int, dict[str, str]] = defaultdict(dict)
-    for key, value in r.get("properties", {}).items():
-        parts = key.split(".")
-        if len(parts) == 3 and parts[0] == "measurement" and parts[1].isdigit():
-            found[int(parts[1])][parts[2]] = value
-    return [found[i] for i in sorted(found)]
-
-
 def _evidence(r: dict[str, Any]) -> str:
     out = []
-    ms = _measurements(r)
+    ms = r.measurements
     if ms:
-        rows = "".join(f"<tr><td>{_e(m.get('name', ''))}</td><td>{_e(m.get('value', ''))}</td><td>{_e(m.get('limit', ''))}</td>"
-                       f"<td>{_e(m.get('margin', ''))}</td><td>{_e(m.get('clock', ''))}{_e(' ' + m['error']) if 'error' in m else ''}</td>"
-                       f"<td>{_badge(m.get('verdict', ''))}</td></tr>" for m in ms)
+        rows = "".join(f"<tr><td>{e(m.get('name', ''))}</td><td>{e(m.get('value', ''))}</td><td>{e(m.get('limit', ''))}</td>"
+                       f"<td>{e(m.get('margin', ''))}</td><td>{e(m.get('clock', ''))}{e(' ' + m['error']) if 'error' in m else ''}</td>"
+                       f"<td>{badge(m.get('verdict', ''))}</td></tr>" for m in ms)
         out.append("<table class=meas><tr><th>measured</th><th>value</th><th>limit</th><th>margin</th><th>clock</th><th></th></tr>"
                    f"{rows}</table>")
-    obs = r.get("observations") or []
+    obs = r.observations or []
     if obs:
-        out.append("<ul class=obs>" + "".join(f"<li><b>{_e(w)}</b>: {_e(v)}</li>" for w, v in obs) + "</ul>")
-    traces = r.get("traces") or {}
+        out.append("<ul class=obs>" + "".join(f"<li><b>{e(w)}</b>: {e(v)}</li>" for w, v in obs) + "</ul>")
+    traces = r.traces or {}
     if traces:
-        out.append("<p class=traces>trace: " + " ".join(f'<a href="{_e(p)}">{_e(lane or "DUT")}: {_e(Path(p).name)}</a>'
+        out.append("<p class=traces>trace: " + " ".join(f'<a href="{e(p)}">{e(lane or "DUT")}: {e(Path(p).name)}</a>'
                                                        for lane, p in traces.items()) + "</p>")
     return "".join(out)
 
 
-def _failures(results: list[dict[str, Any]]) -> str:
-    bad = [r for r in results if r["outcome"] in ("FAIL", "ERROR", "INCONCLUSIVE")]
+def _failures(results: list[Result]) -> str:
+    bad = [r for r in results if r.outcome in (Verdict.FAIL, Verdict.ERROR, Verdict.INCONCLUSIVE)]
     if not bad:
         return "<section id=failures><h2>Failures</h2><p>No test failed, errored or was inconclusive.</p></section>"
     items = []
-    for r in sorted(bad, key=lambda r: (_WORST_FIRST.index(r["outcome"]), section_key(r["section"]))):
-        reqs = ", ".join(f'<a href="#req-{_e(i)}">{_e(i)}</a>' for i in r["requirements"])
-        items.append(f'<article class="fail" data-nodeid="{_e(r["nodeid"])}"><h3>{_badge(r["outcome"])} {_e(r["nodeid"])}</h3>'
-                     f"<p>{_e(r['section'])} {_e(SECTION_TITLES.get(r['section'], ''))} &middot; {reqs} ({_e(r['strength'])})</p>"
-                     f"<pre>{_e(r.get('message', ''))}</pre>{_evidence(r)}</article>")
+    for r in sorted(bad, key=lambda r: (WORST_FIRST.index(r.outcome), section_key(r.section))):
+        reqs = ", ".join(f'<a href="#req-{e(i)}">{e(i)}</a>' for i in r.requirements)
+        items.append(f'<article class="fail" data-nodeid="{e(r.nodeid)}"><h3>{badge(r.outcome)} {e(r.nodeid)}</h3>'
+                     f"<p>{e(r.section)} {e(SECTION_TITLES.get(r.section, ''))} &middot; {reqs} ({e(r.strength)})</p>"
+                     f"<pre>{e(r.message)}</pre>{_evidence(r)}</article>")
     return (f"<section id=failures><h2>Failures ({len(bad)})</h2><details{' open' if len(bad) <= 10 else ''}>"
             f"<summary>every test that failed, errored or was inconclusive, with its evidence</summary>"
             f"{''.join(items)}</details></section>")
 
 
-def _causes(results: list[dict[str, Any]]) -> str:
+def _causes(results: list[Result]) -> str:
     """The run's distinct problems first (causes.groups), each with its first occurrence, frames and
     trace, the tests it showed in collapsed under it: never k copies of one."""
     gs = groups(results)
@@ -175,18 +150,18 @@ def _causes(results: list[dict[str, Any]]) -> str:
         return ""
     items = []
     for n, g in enumerate(gs, start=1):
-        traces = " ".join(f'<a href="{_e(p)}">{_e(lane or "DUT")}: {_e(Path(p).name)}</a>' for lane, p in g.traces.items())
-        reqs = ", ".join(f'<a href="#req-{_e(i)}">{_e(i)}</a>' for i in g.rules)
-        tests = "".join(f'<li><a href="#t-{_anchor(t)}">{_e(t)}</a>'
-                        + (f" ({_e(g.unjudged[t])}: seen while it ran)" if t in g.unjudged else "") + "</li>"
+        traces = " ".join(f'<a href="{e(p)}">{e(lane or "DUT")}: {e(Path(p).name)}</a>' for lane, p in g.traces.items())
+        reqs = ", ".join(f'<a href="#req-{e(i)}">{e(i)}</a>' for i in g.rules)
+        tests = "".join(f'<li><a href="#t-{anchor(t)}">{e(t)}</a>'
+                        + (f" ({e(g.unjudged[t])}: seen while it ran)" if t in g.unjudged else "") + "</li>"
                         for t in g.tests)
         items.append(
-            f'<article class="cause" id="cause-{n}" data-tests="{len(g.tests)}" data-strength="{_e(g.strength)}">'
-            f'<h3>{_badge(g.outcome)} {_e(g.strength)} {_e(g.title)} <span class=count>&ndash; in {len(g.tests)} '
+            f'<article class="cause" id="cause-{n}" data-tests="{len(g.tests)}" data-strength="{e(g.strength)}">'
+            f'<h3>{badge(g.outcome)} {e(g.strength)} {e(g.title)} <span class=count>&ndash; in {len(g.tests)} '
             f'test{"s" if len(g.tests) != 1 else ""}</span></h3>'
-            f'<p>{reqs} &middot; first in <a href="#t-{_anchor(g.first_test)}">{_e(g.first_test)}</a>'
+            f'<p>{reqs} &middot; first in <a href="#t-{anchor(g.first_test)}">{e(g.first_test)}</a>'
             + (f" &middot; trace: {traces}" if traces else "") + "</p>"
-            f"<pre>{_e(g.first)}</pre>"
+            f"<pre>{e(g.first)}</pre>"
             f"<details><summary>{len(g.tests)} test{'s' if len(g.tests) != 1 else ''} with this problem</summary>"
             f"<ul class=tests>{tests}</ul></details></article>")
     n_tests = len({t for g in gs for t in g.tests})
@@ -195,41 +170,30 @@ def _causes(results: list[dict[str, Any]]) -> str:
             f"several.</p>{''.join(items)}</section>")
 
 
-def _requirement_result(outcomes: list[str]) -> str:
-    for v in _WORST_FIRST:
-        if v in outcomes:
-            return v
-    return "NOT CHECKED"
-
-
-def _requirements(results: list[dict[str, Any]]) -> str:
-    by_req: dict[str, list[dict[str, Any]]] = defaultdict(list)
+def _requirements(results: list[Result]) -> str:
+    by_req: dict[str, list[Result]] = defaultdict(list)
     for r in results:
-        for rid in r["requirements"]:
+        for rid in r.requirements:
             by_req[rid].append(r)
     rows = []
     for rid, req in sorted(REQUIREMENTS.items(), key=lambda kv: (section_key(kv[1].section), kv[0])):
         tests = by_req.get(rid, [])
-        result = _requirement_result([t["outcome"] for t in tests])
-        listed = "".join(f'<li>{_badge(t["outcome"])} <a href="#t-{_anchor(t["nodeid"])}">{_e(t["name"])}</a></li>' for t in tests)
-        rows.append(f'<tr id="req-{_e(rid)}" data-result="{_e(result)}"><td>{_e(rid)}</td><td>{_e(req.strength)}</td>'
-                    f"<td>{_e(req.section)}</td><td>{_badge(result)}</td><td><q>{_e(req.quote)}</q>"
-                    + (f"<div class=note>{_e(req.note)}</div>" if req.note else "")
+        result = requirement_result([t.outcome for t in tests])
+        listed = "".join(f'<li>{badge(t.outcome)} <a href="#t-{anchor(t.nodeid)}">{e(t.name)}</a></li>' for t in tests)
+        rows.append(f'<tr id="req-{e(rid)}" data-result="{e(result)}"><td>{e(rid)}</td><td>{e(req.strength)}</td>'
+                    f"<td>{e(req.section)}</td><td>{badge(result)}</td><td><q>{e(req.quote)}</q>"
+                    + (f"<div class=note>{e(req.note)}</div>" if req.note else "")
                     + (f"<ul class=tests>{listed}</ul>" if listed else "") + "</td></tr>")
     return ("<section id=requirements><h2>Requirements</h2><table class=reqs><tr><th>id</th><th>strength</th><th>section</th>"
             f"<th>result</th><th>requirement and tests</th></tr>{''.join(rows)}</table></section>")
 
 
-def _anchor(nodeid: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in nodeid)
-
-
-def _tests(results: list[dict[str, Any]]) -> str:
+def _tests(results: list[Result]) -> str:
     rows = []
-    for r in sorted(results, key=lambda r: section_key(r["section"])):
-        rows.append(f'<tr id="t-{_anchor(r["nodeid"])}"><td>{_badge(r["outcome"])}</td><td>{_e(r["nodeid"])}'
-                    + (f"<div class=msg>{_e(r['message'].splitlines()[0][:300])}</div>" if r.get("message") else "")
-                    + f"{_evidence(r)}</td><td>{_e(r['section'])}</td><td>{r.get('lane_seconds', 0):.3f} s</td></tr>")
+    for r in sorted(results, key=lambda r: section_key(r.section)):
+        rows.append(f'<tr id="t-{anchor(r.nodeid)}"><td>{badge(r.outcome)}</td><td>{e(r.nodeid)}'
+                    + (f"<div class=msg>{e(r.message.splitlines()[0][:300])}</div>" if r.message else "")
+                    + f"{_evidence(r)}</td><td>{e(r.section)}</td><td>{r.lane_seconds:.3f} s</td></tr>")
     return ("<section id=tests><h2>Tests and their evidence</h2><table class=tests><tr><th>verdict</th><th>test</th>"
             f"<th>section</th><th>lane time</th></tr>{''.join(rows)}</table></section>")
 
@@ -237,12 +201,9 @@ def _tests(results: list[dict[str, Any]]) -> str:
 # ----------------------------------------------------------------------------------------- plots
 #: one marker per service in the answer-delay plot
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">", "h", "p")
-#: a report interval longer than this many times its target spans a power cycle, a suspension or a
-#: Set Freq change (the DUT was silent or on another schedule): left out of the plot and counted
-_ACROSS = 2.5
 
 
-def _plots(results: list[dict[str, Any]], info: dict[str, Any]) -> str:
+def _plots(results: list[Result], info: dict[str, Any]) -> str:
     clock = info.get("clock", "")
     err = (info.get("timing_error_s") or 0.0) * 1000
     parts = ["<section id=plots><h2>Timing</h2>"]
@@ -250,7 +211,7 @@ def _plots(results: list[dict[str, Any]], info: dict[str, Any]) -> str:
     intervals: dict[tuple[str, float], list[float]] = defaultdict(list)
     timelines = []
     for r in results:
-        ev = r.get("evidence") or {}
+        ev = r.evidence or {}
         for node, by_request in ev.get("answers", {}).items():
             for request, delays in by_request.items():
                 answers[int(node)][request].extend(delays)
@@ -260,12 +221,12 @@ def _plots(results: list[dict[str, Any]], info: dict[str, Any]) -> str:
         if "comm_loss" in ev:
             timelines.append((r, ev["comm_loss"]))
     if answers:
-        svg, late = _answer_plot(answers, err)
-        parts.append(_figure(
-            "answer-delay", "Answer delay per node against its own limits", svg,
+        drawn, late = _answer_plot(answers, err)
+        parts.append(figure(
+            "answer-delay", "Answer delay per node against its own limits", drawn,
             "Every service request the suite made and its answer, request on the bus to the answer's last bit "
-            + (f"({_e(clock)} clock)" if info.get("echo") is not False else
-               f"(the request by the host clock at send: the adapter does not echo; the answer by the {_e(clock)} clock)")
+            + (f"({e(clock)} clock)" if info.get("echo") is not False else
+               f"(the request by the host clock at send: the adapter does not echo; the answer by the {e(clock)} clock)")
             + f", one marker per service. Green band: the node's answer slot, (node id % 32) x "
             f"{cat.ANSWER_SLOT_S * 1000:g} ms to {cat.ANSWER_SLOT_S * 1000:g} ms later (R2); dashed: the "
             f"{cat.ANSWER_DELAY_MAX_S * 1000:g} ms bound (4.4.2-4, 4.4.3-4). Red: {late} answer(s) outside a limit"
@@ -274,18 +235,18 @@ def _plots(results: list[dict[str, Any]], info: dict[str, Any]) -> str:
         parts.append("<p>No answered request was recorded.</p>")
     if intervals:
         tol = float(info.get("interval_tolerance_ms") or 0.0)
-        svg, left_out, outside = _interval_plot(intervals, tol)
-        parts.append(_figure(
-            "report-intervals", "Report intervals: deviation from their target", svg,
+        drawn, outside = _interval_plot(intervals, tol)
+        parts.append(figure(
+            "report-intervals", "Report intervals: deviation from their target", drawn,
             f"Time between consecutive MSG1/MSG2/MSG3 of the DUT minus the interval its latest Set/Get Freq answer "
             f"stated (ms, linear; box: quartiles, whiskers: min and max). Grey band: the tolerance, +-{tol:g} ms; red: "
-            f"{outside} interval(s) outside it (the bus rules also allow for bus queueing). {left_out} interval(s) "
-            f"longer than {_ACROSS:g} x their target are left out: they span a power cycle, a suspension or a Set "
-            f"Freq change."))
+            f"{outside} interval(s) outside it (the bus rules also allow for bus queueing). The intervals the bus rules "
+            f"judged, start to start: none before the DUT stated a target, none across a power cycle, a suspension or "
+            f"a Set Freq change, nor up to the second report after a restart (R9a)."))
     else:
         parts.append("<p>No report interval was recorded.</p>")
     if timelines:
-        parts.append(_figure("comm-loss", "Comm-loss timelines (R8)", _comm_loss_plot(timelines),
+        parts.append(figure("comm-loss", "Comm-loss timelines (R8)", _comm_loss_plot(timelines),
                              f"MSG1 around the end of a throttle stream: grey ticks are commands, dots MSG1 with bit 13 "
                              f"(comm fault) clear or set. Dashed: {cat.COMM_LOSS_TIMEOUT_S * 1000:g} ms after the last command."))
     parts.append("</section>")
@@ -299,7 +260,7 @@ def _answer_plot(answers: dict[int, dict[str, list[float]]], err: float) -> tupl
     nodes = sorted(answers)
     services = sorted({s for by in answers.values() for s in by})
     marker = {s: _MARKERS[i % len(_MARKERS)] for i, s in enumerate(services)}
-    fig = _new_figure(11.0, 4.2)
+    fig = new_figure(11.0, 4.2)
     ax = fig.add_subplot()
     limit = cat.ANSWER_DELAY_MAX_S * 1000
     slot_w = cat.ANSWER_SLOT_S * 1000
@@ -341,27 +302,23 @@ def _answer_plot(answers: dict[int, dict[str, list[float]]], err: float) -> tupl
     ax.set_ylabel("answer delay (ms)")
     ax.set_ylim(0, top * 1.18)
     ax.grid(axis="y", alpha=0.3)
-    return _svg(fig), late
+    return svg(fig), late
 
 
-def _interval_plot(intervals: dict[tuple[str, float], list[float]], tol: float) -> tuple[str, int, int]:
-    """The deviation plot - one panel per report and target, each on its own linear scale - how many
-    intervals were left out (across a power cycle, a suspension, a Set Freq change) and how many of the
-    rest are outside the tolerance band."""
+def _interval_plot(intervals: dict[tuple[str, float], list[float]], tol: float) -> tuple[str, int]:
+    """The deviation plot - one panel per report and target, each on its own linear scale - and how many
+    intervals are outside the tolerance band."""
     import numpy as np
 
     keys = sorted(intervals)
     cols = min(7, len(keys))
     rows = -(-len(keys) // cols)
-    fig = _new_figure(11.0, 2.4 * rows + 0.4)
+    fig = new_figure(11.0, 2.4 * rows + 0.4)
     axes = fig.subplots(rows, cols, squeeze=False)
     rng = np.random.default_rng(0)
-    left_out = outside = 0
+    outside = 0
     for ax, k in zip(axes.flat, keys):
-        gaps = np.array(intervals[k])
-        kept = gaps[gaps <= _ACROSS * k[1]]
-        left_out += len(gaps) - len(kept)
-        dev = (kept - k[1]) * 1000
+        dev = (np.array(intervals[k]) - k[1]) * 1000
         band = ax.axhspan(-tol, tol, color="#6e7781", alpha=0.25, linewidth=0)
         band.set_gid(f"tolerance-{k[0]}-{k[1] * 1000:g}ms")
         tick = ax.axhline(0, color="#1a7f37", linewidth=1.5)
@@ -388,31 +345,11 @@ def _interval_plot(intervals: dict[tuple[str, float], list[float]], tol: float) 
     for ax in axes[:, 0]:
         ax.set_ylabel("interval - target (ms)")
     fig.tight_layout()
-    return _svg(fig), left_out, outside
-
-
-def _figure(fid: str, title: str, svg: str, caption: str) -> str:
-    return f'<figure id="{fid}"><figcaption><b>{_e(title)}.</b> {caption}</figcaption>{svg}</figure>'
-
-
-def _svg(fig) -> str:
-    buf = io.StringIO()
-    fig.savefig(buf, format="svg", bbox_inches="tight", metadata={"Date": None, "Creator": None})
-    text = buf.getvalue()
-    return text[text.index("<svg"):]
-
-
-def _new_figure(width: float, height: float):
-    import matplotlib
-
-    matplotlib.rcParams.update({"svg.fonttype": "none", "svg.hashsalt": "ckesc", "font.size": 10})
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=(width, height))
+    return svg(fig), outside
 
 
 def _comm_loss_plot(timelines: list[tuple[dict[str, Any], dict[str, Any]]]) -> str:
-    fig = _new_figure(11.0, 0.6 + 0.9 * len(timelines))
+    fig = new_figure(11.0, 0.6 + 0.9 * len(timelines))
     axes = fig.subplots(len(timelines), 1, sharex=True, squeeze=False)[:, 0]
     timeout = cat.COMM_LOSS_TIMEOUT_S * 1000
     for ax, (r, tl) in zip(axes, timelines):
@@ -420,7 +357,7 @@ def _comm_loss_plot(timelines: list[tuple[dict[str, Any], dict[str, Any]]]) -> s
         msg1 = tl.get("msg1", [])
         last = _last_command(commands)
         ax.set_yticks([])
-        ax.set_ylabel(r["name"].split("[")[-1].rstrip("]") or r["name"], rotation=0, ha="right", va="center")
+        ax.set_ylabel(r.name.split("[")[-1].rstrip("]") or r.name, rotation=0, ha="right", va="center")
         if last is None:
             ax.text(0.5, 0.5, "no throttle command recorded", transform=ax.transAxes, ha="center")
             continue
@@ -435,7 +372,7 @@ def _comm_loss_plot(timelines: list[tuple[dict[str, Any], dict[str, Any]]]) -> s
     axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)  # outside the data
     axes[-1].set_xlim(-150, timeout + 250)
     axes[-1].set_xlabel("time since the last command of the stream (ms)")
-    return _svg(fig)
+    return svg(fig)
 
 
 def _last_command(commands: list[float]) -> float | None:
@@ -444,29 +381,3 @@ def _last_command(commands: list[float]) -> float | None:
         return None
     gaps = [(b - a, a) for a, b in zip(commands, commands[1:])]
     return max(gaps)[1] if gaps and max(gaps)[0] > cat.COMM_LOSS_TIMEOUT_S / 2 else commands[-1]
-
-
-_CSS = """
-body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:1.5rem auto;max-width:72rem;padding:0 1rem;color:#1f2328}
-h1{font-size:1.6rem;margin:0}h2{font-size:1.25rem;border-bottom:1px solid #d0d7de;padding-bottom:.2rem;margin-top:2rem}
-h3{font-size:1rem;margin:.2rem 0}.run{color:#57606a}.banner{background:#fff8c5;border:1px solid #bf8700;padding:.5rem .8rem;font-weight:600}
-table{border-collapse:collapse;margin:.4rem 0}th,td{border:1px solid #d0d7de;padding:.2rem .45rem;vertical-align:top;text-align:left}
-th{background:#f6f8fa}.kv th{width:12rem}
-.matrix td.n{text-align:right;font-variant-numeric:tabular-nums}.matrix td.zero{color:#afb8c1}
-.matrix .total td{font-weight:600;border-top:2px solid #57606a}
-.c-PASS{background:#dafbe1}.c-FAIL{background:#ffebe9;font-weight:700}.c-ERROR{background:#fbefff;font-weight:700}
-.c-INCONCLUSIVE{background:#fff8c5}.c-OBSERVED{background:#ddf4ff}.c-SKIPPED{background:#f6f8fa}
-.v{display:inline-block;padding:0 .35rem;border-radius:.6rem;color:#fff;font-size:.75rem;font-weight:600;white-space:nowrap}
-""" + "".join(f".v-{k.replace(' ', '-')}{{background:{c}}}" for k, c in _COLOURS.items()) + """
-article.cause{border-left:4px solid #cf222e;padding:.2rem .8rem;margin:.8rem 0;background:#fffafa}
-article.cause[data-strength=READING]{border-left-color:#bf8700}.count{color:#57606a;font-weight:400}
-summary{cursor:pointer;color:#0969da}
-article.fail{border-left:4px solid #cf222e;padding:.2rem .8rem;margin:.8rem 0;background:#fffafa}
-pre{white-space:pre-wrap;font-size:.8rem;background:#f6f8fa;padding:.4rem;max-height:14rem;overflow:auto}
-.meas{font-size:.8rem}.obs{font-size:.8rem;margin:.2rem 0}.traces{font-size:.8rem;margin:.2rem 0}.msg{color:#cf222e;font-size:.8rem}
-.reqs q{quotes:none;font-style:italic}.note{color:#57606a;font-size:.8rem}.tests{margin:.2rem 0;padding-left:1rem;font-size:.8rem}
-figure{margin:1rem 0;break-inside:avoid}figure svg{width:100%;height:auto}figcaption{font-size:.85rem;color:#57606a}
-.tests td{font-size:.85rem}
-@media print{body{max-width:none;margin:0;font-size:11px}a{color:inherit;text-decoration:none}pre{max-height:none}
- section{break-inside:auto}tr,article{break-inside:avoid}h2{break-after:avoid}}
-"""

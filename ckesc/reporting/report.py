@@ -12,7 +12,6 @@ shows one package ``ckesc`` with a class per section.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import subprocess
@@ -26,10 +25,9 @@ from junit_xml import TestCase, TestSuite, to_xml_report_string
 
 from .. import __version__
 from ..protocol import catalogue as cat
-from ..protocol.ids import Kind
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, section_heading, section_key
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_heading, section_key
 from . import causes, html_report
-from .results import claim_text, incomplete_banner
+from .results import RunRecord, claim_text, incomplete_banner
 
 
 def _properties(r) -> dict[str, str]:
@@ -119,11 +117,11 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
                 lines += "".join(f"\n[[ATTACHMENT|{(out / path).resolve()}]]" for path in r.traces.values())
             tc = TestCase(f"{r.name} [{' '.join(r.requirements)}]", classname=classname(section),
                           elapsed_sec=round(r.duration, 6), stdout=lines, status=r.outcome)
-            if r.outcome == "FAIL":
+            if r.outcome == Verdict.FAIL:
                 tc.add_failure_info(message=r.message[:500], output=r.message, failure_type=r.strength)
-            elif r.outcome == "ERROR":
+            elif r.outcome == Verdict.ERROR:
                 tc.add_error_info(message=r.message[:500], output=r.message)
-            elif r.outcome in ("INCONCLUSIVE", "SKIPPED"):
+            elif r.outcome in (Verdict.INCONCLUSIVE, Verdict.SKIPPED):
                 tc.add_skipped_info(message=r.message[:500] or r.outcome)
             cases.append(tc)
             cases_props.append(props)
@@ -135,11 +133,11 @@ def junit_xml(results: list, info: dict[str, Any], out: Path | None = None, not_
         for u in unjudged:
             text = "\n".join(c["first"] for c in u["causes"]) or " ".join(u["rules"])
             tc = TestCase(f"{' '.join(u['rules'])} while {u['test'].split('::', 1)[-1]} ran ({u['outcome']})",
-                          classname="ckesc.bus_rules", status="FAIL")
+                          classname="ckesc.bus_rules", status=Verdict.FAIL)
             tc.add_failure_info(message=f"[bus rules {' '.join(u['rules'])}] broken while {u['test']} ran; its own "
                                         f"verdict: {u['outcome']}"[:500], output=text, failure_type="bus rule")
             cases.append(tc)
-            cases_props.append({"requirements": " ".join(u["rules"]), "verdict": "FAIL", "seen_in": u["test"]})
+            cases_props.append({"requirements": " ".join(u["rules"]), "verdict": Verdict.FAIL, "seen_in": u["test"]})
         suites.append(TestSuite("bus rules broken outside a test's FAIL", cases, properties=suite_props))
     text = to_xml_report_string(suites, prettyprint=False)
     root = ET.fromstring(text)
@@ -228,77 +226,6 @@ def run_dir(base: Path, started: float) -> Path:
             out = base / f"{stamp}-{n}"
 
 
-# ----------------------------------------------------------------------------------------- evidence
-#: the intervals Set/Get Freq sets, by the report frame each one times (msg1_interval -> msg1)
-_INTERVAL_OF = {key.removesuffix("_interval"): key for key in cat.DEFAULT_REPORT_INTERVALS}
-
-
-def evidence(frames: list, *, host: int, node: int | None, comm_loss: bool = False) -> dict[str, Any]:
-    """What one test's decoded traffic (``Dut.trace``, in order, lane timestamps) shows, for the
-    report's plots; values in seconds:
-
-    * ``answers``: ``{node: {request: [delay]}}`` for every service request of the host that an ESC
-      answered (same service and transfer id, to the host, from the node asked or else - Set ID
-      answers from its new id - the latest such request), and each ESC's first reply to a broadcast
-      query (GET_ESC_ID): from the request on the bus (its echo) to the answer's last bit;
-    * ``intervals``: ``{report: {target: [interval]}}`` between consecutive MSG1/2/3 of ``node``, the
-      target being the one its latest Set/Get Freq answer stated (none before the first; an interval
-      that spans a change, or a MSG Control command, bridges two schedules and is left out);
-    * with ``comm_loss``: ``{"commands": [t], "msg1": [[t, comm fault bit]]}`` (R8's timeline).
-    """
-    pending: dict[tuple, tuple[str, float]] = {}
-    queries: dict[str, tuple[float, set[int]]] = {}
-    answers: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
-    target: dict[str, float] = {}
-    last: dict[str, float] = {}  # the previous report of each kind on the current schedule
-    intervals: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
-    commands: list[float] = []
-    msg1: list[list] = []
-    for f in frames:
-        t = f.timestamp
-        if t is None:
-            continue
-        if f.kind is Kind.REQUEST and f.source == host:
-            pending[(f.type_id, f.transfer_id, f.destination)] = (f.name, t)
-            if f.name == "msg_control":
-                last.clear()  # the schedule may stop, restart or change
-        elif f.kind is Kind.RESPONSE and f.destination == host:
-            key = (f.type_id, f.transfer_id, f.source)
-            if key not in pending:  # Set ID answers from the id it was given: the latest request of its kind
-                key = max((k for k in pending if k[:2] == key[:2]), key=lambda k: pending[k][1], default=key)
-            asked = pending.pop(key, None)
-            if asked is not None:
-                answers[str(f.source)][asked[0]].append(round(t - asked[1], 9))
-            if f.name == "set_freq" and f.source == node:
-                for report, key in _INTERVAL_OF.items():
-                    value = f.fields.get(key)
-                    lo, hi = cat.REPORT_INTERVAL_RANGE
-                    if isinstance(value, int) and lo <= value <= hi and target.get(report) != value * cat.INTERVAL_UNIT_S:
-                        target[report] = value * cat.INTERVAL_UNIT_S
-                        last.pop(report, None)
-        elif f.kind is Kind.MESSAGE and f.source == host and f.layout is not None and f.layout.name == "query":
-            queries[f.name] = (t, set())  # GET_ESC_ID: a broadcast query every ESC replies to
-        elif f.kind is Kind.MESSAGE and f.layout is not None and f.layout.name == "reply" and f.name in queries:
-            asked_at, replied = queries[f.name]
-            if f.source not in replied:
-                replied.add(f.source)
-                answers[str(f.source)][f.name].append(round(t - asked_at, 9))
-        elif f.kind is Kind.MESSAGE and f.source == host and f.name.startswith("raw_command"):
-            commands.append(t)
-        elif f.kind is Kind.MESSAGE and f.source == node and f.name in _INTERVAL_OF:
-            if comm_loss and f.name == "msg1":
-                msg1.append([t, bool(f.fields.get("status", 0) & cat.Status.COMM_FAULT)])
-            if f.name in target:
-                if f.name in last:
-                    intervals[f.name][f"{target[f.name]:g}"].append(round(t - last[f.name], 9))
-                last[f.name] = t
-    out: dict[str, Any] = {"answers": {k: dict(v) for k, v in answers.items()},
-                           "intervals": {k: dict(v) for k, v in intervals.items()}}
-    if comm_loss:
-        out["comm_loss"] = {"commands": commands, "msg1": msg1}
-    return out
-
-
 def point_latest(out: Path) -> None:
     """``out.parent/latest`` -> ``out`` (replaced at once; a text file ``LATEST`` where there are no symlinks)."""
     base = out.parent
@@ -322,11 +249,7 @@ def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: li
     info.setdefault("suite_version", __version__)
     info.setdefault("git_revision", git_revision())
     (out / "junit.xml").write_text(junit_xml(results, info, out, not_run), encoding="utf-8")
-    (out / "results.json").write_text(json.dumps({"info": info, "coverage": coverage(results),
-                                                  "results": [r.__dict__ for r in results], "not_run": list(not_run),
-                                                  "rule_failures": causes.rule_failures(results)},
-                                                 indent=1, default=str),
-                                      encoding="utf-8")
+    RunRecord(info, list(results), list(not_run), coverage(results), causes.rule_failures(results)).write(out / "results.json")  # type: ignore[arg-type]
     (out / "summary.txt").write_text(summary_text(results, info) + "\n", encoding="utf-8")
     point_latest(out)
     if html:

@@ -1,9 +1,39 @@
-"""The results of a run as the reports read them: one :class:`Result` per test, the run's info."""
+"""The results of a run, as ``results.json`` holds them and every report reads them: one :class:`Result` per
+test, the run's :class:`RunInfo`, and :class:`RunRecord`, the whole file, which writes and reads it."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+import json
+from collections import defaultdict
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, TypedDict
+
+from ..protocol.requirements import Verdict
+
+#: how a requirement's result is drawn from its tests' verdicts: the first that occurs
+WORST_FIRST = (Verdict.FAIL, Verdict.ERROR, Verdict.INCONCLUSIVE, Verdict.PASS, Verdict.OBSERVED, Verdict.SKIPPED)
+#: a requirement no test of the run checked
+NOT_CHECKED = "NOT CHECKED"
+
+
+def requirement_result(outcomes: Iterable[str]) -> str:
+    """A requirement's (or a section's) result from its tests' verdicts: the worst (:data:`WORST_FIRST`), or
+    :data:`NOT_CHECKED` when there are none."""
+    outcomes = set(outcomes)
+    return next((v for v in WORST_FIRST if v in outcomes), NOT_CHECKED)
+
+
+def measurements(properties: Mapping[str, str]) -> list[dict[str, str]]:
+    """A test's measurements (name, value, limit, margin, clock, error, verdict), in order, from its
+    ``measurement.<n>.<key>`` properties."""
+    found: dict[int, dict[str, str]] = defaultdict(dict)
+    for key, value in properties.items():
+        parts = key.split(".")
+        if len(parts) == 3 and parts[0] == "measurement" and parts[1].isdigit():
+            found[int(parts[1])][parts[2]] = value
+    return [found[i] for i in sorted(found)]
 
 
 @dataclass
@@ -15,7 +45,7 @@ class Result:
     section: str
     requirements: list[str]
     strength: str
-    outcome: str = "PASS"  # PASS FAIL INCONCLUSIVE OBSERVED SKIPPED ERROR
+    outcome: str = Verdict.PASS  # a Verdict
     message: str = ""
     duration: float = 0.0
     lane_seconds: float = 0.0  # lane time the test took: in the simulated lane, the waits the protocol imposes
@@ -25,7 +55,7 @@ class Result:
     #: run's report directory; a lane that heard no frame during the test has none
     traces: dict[str, str] = field(default_factory=dict)
     #: what the test's traffic shows, for the HTML report's plots (answer delays, report intervals, R8
-    #: timeline): see report.evidence
+    #: timeline): see evidence.timing
     evidence: dict[str, Any] = field(default_factory=dict)
     #: requirement ids of the bus rules (ckesc/evidence) the traffic broke while the test ran: such a test
     #: FAILs, quoting the frames, and these ids are what it cites besides its own
@@ -35,9 +65,124 @@ class Result:
     #: and the console group the run's failures by them
     bus_causes: list[dict[str, Any]] = field(default_factory=list)
 
+    @property
+    def measurements(self) -> list[dict[str, str]]:
+        """The test's measurements (:func:`measurements`)."""
+        return measurements(self.properties)
+
+    def to_json(self) -> dict[str, Any]:
+        """As results.json holds it (its fields, in order)."""
+        return dict(self.__dict__)
+
+    @classmethod
+    def from_json(cls, record: Mapping[str, Any]) -> Result:
+        """A record of results.json (an older one may lack the later fields: they take their defaults); a key this
+        version does not know is left out. KeyError when a required one (nodeid, name, section, requirements,
+        strength) is missing, ValueError for an unknown outcome."""
+        known = {f.name for f in fields(cls)}
+        r = cls(**{k: v for k, v in record.items() if k in known})
+        r.outcome = Verdict(r.outcome)
+        r.observations = [tuple(o) for o in r.observations]  # type: ignore[misc]
+        return r
 
 
-def incomplete_banner(info: dict[str, Any]) -> str:
+class RunInfo(TypedDict, total=False):
+    """The run's info (results.json's ``info``, JUnit's testsuite properties); every key is optional.
+
+    The DUT and bench: ``dut`` (emulator / bus), ``lane``, ``clock`` (simulated, bus timestamp, host clock),
+    ``profile``, ``node_id``, ``bitrate``, ``power``, ``power_labgrid``, ``faults`` and ``emulator_variants``
+    (``emulator_variants_seed``) of an emulator, ``esc_information`` (ESC Information 240's fields; None: no
+    answer), ``not_claimed`` (the functions the profile declares absent, R9b). Timing: ``timing_error_s`` (the
+    bench's stated error), ``jitter_s`` (the DUT's allowance), ``interval_tolerance_ms`` (what the plots band),
+    ``echo``, ``echo_note``, ``own_frames_clock``, ``own_frames_error_s`` (what times the host's own frames),
+    ``first_reports_s``, ``readiness``. The run: ``order``, ``epochs``, ``cold_boots``, ``lane_seconds``,
+    ``complete``, ``incomplete`` (why not: aborted / interrupted / subset ...), ``not_run`` (how many tests),
+    ``not_restored``, ``bus_recoveries``, ``run_frames_not_kept``, ``report_dir``; and written with the reports:
+    ``run_id`` (the run directory's name), ``suite_version``, ``git_revision`` (None outside a checkout).
+    """
+
+    dut: str
+    lane: str
+    clock: str
+    profile: str
+    node_id: int
+    bitrate: int
+    power: str
+    power_labgrid: dict[str, Any]
+    faults: str
+    emulator_variants: str
+    emulator_variants_seed: int | None
+    esc_information: dict[str, Any] | None
+    not_claimed: str
+    timing_error_s: float
+    jitter_s: float
+    interval_tolerance_ms: float
+    echo: bool
+    echo_note: str
+    own_frames_clock: str
+    own_frames_error_s: float
+    first_reports_s: dict[str, Any]
+    readiness: Any
+    order: str
+    epochs: list[Any]
+    cold_boots: list[Any]
+    lane_seconds: float
+    complete: bool
+    incomplete: str
+    not_run: int
+    not_restored: Any
+    bus_recoveries: list[str]
+    run_frames_not_kept: int
+    report_dir: str
+    run_id: str
+    suite_version: str
+    git_revision: str | None
+
+
+class NotRun(TypedDict, total=False):
+    """A test the run did not get to (results.json's ``not_run``): its id, name, section, requirements, why."""
+
+    nodeid: str
+    name: str
+    section: str
+    requirements: list[str]
+    reason: str
+
+
+@dataclass
+class RunRecord:
+    """A run's ``results.json``: its info, coverage (which requirements a test checked), one :class:`Result` per
+    test, the tests it did not get to and the bus rules broken outside a test's FAIL (``rule_failures``)."""
+
+    info: RunInfo
+    results: list[Result]
+    not_run: list[NotRun] = field(default_factory=list)
+    coverage: dict[str, Any] = field(default_factory=dict)
+    rule_failures: list[dict[str, Any]] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"info": self.info, "coverage": self.coverage, "results": [r.to_json() for r in self.results],
+                "not_run": list(self.not_run), "rule_failures": self.rule_failures}
+
+    def write(self, path: Path) -> None:
+        path.write_text(json.dumps(self.to_json(), indent=1, default=str), encoding="utf-8")
+
+    @classmethod
+    def from_json(cls, doc: Any) -> RunRecord:
+        """From a parsed results.json; ValueError, KeyError or TypeError when it is not one this version reads."""
+        if not isinstance(doc, dict) or not isinstance(doc.get("results"), list) or not isinstance(doc.get("info"), dict):
+            raise ValueError("not a results record: it needs an info object and a results list")
+        return cls(info=doc["info"], results=[Result.from_json(r) for r in doc["results"]],
+                   not_run=[n for n in doc.get("not_run") or [] if isinstance(n, dict)],
+                   coverage=doc.get("coverage") or {}, rule_failures=doc.get("rule_failures") or [])
+
+    @classmethod
+    def read(cls, path: Path) -> RunRecord:
+        """``path`` (a results.json): OSError, or ValueError (a JSONDecodeError too) / KeyError / TypeError."""
+        return cls.from_json(json.loads(Path(path).read_text(encoding="utf-8")))
+
+
+def incomplete_banner(info: Mapping[str, Any]) -> str:
     """One line saying why a run is less than the whole suite ("" for a complete one)."""
     why = info.get("incomplete") or ""
     if not why:
@@ -47,7 +192,7 @@ def incomplete_banner(info: dict[str, Any]) -> str:
     return f"{kind} - not a conformance result for the whole suite: {why}; {info.get('not_run', 0)} tests not run"
 
 
-def claim_text(info: dict[str, Any]) -> str:
+def claim_text(info: Mapping[str, Any]) -> str:
     """What the conformance claim leaves out (R9b: functions the DUT profile declares absent)."""
     left_out = info.get("not_claimed") or ""
     if not left_out:

@@ -28,16 +28,17 @@ from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
 
-from ..protocol.requirements import SECTION_TITLES, VERDICTS, section_key
+from ..protocol.requirements import SECTION_TITLES, VERDICTS, Verdict, section_key
 from ..reporting import compare
 from ..reporting.causes import broken_outside_a_fail
-from ..reporting.html_report import _CSS, _badge, _e, _requirement_result
+from ..reporting.htmlkit import CSS, badge, e
 from ..reporting.report import classname
+from ..reporting.results import RunRecord, requirement_result
 
 STATUSES = ("PASS", "FAIL", "ABSENT", "ABORTED", "BROKEN", "INTERRUPTED")
 
 
-def bench_status(doc: dict[str, Any] | None, *, setup_error: str | None = None, crash: str | None = None,
+def bench_status(doc: RunRecord | dict[str, Any] | None, *, setup_error: str | None = None, crash: str | None = None,
                  strict: bool = False) -> tuple[str, str]:
     """(status, why) of one bench from its ``results.json`` (None: there is none), the set-up error its worker
     met before any test, or how its worker died."""
@@ -45,13 +46,14 @@ def bench_status(doc: dict[str, Any] | None, *, setup_error: str | None = None, 
         return "ABSENT", setup_error
     if doc is None:
         return "BROKEN", crash or "the bench's run ended without a report"
-    info, results = doc.get("info") or {}, doc.get("results") or []
+    record = doc if isinstance(doc, RunRecord) else RunRecord.from_json(doc)
+    info, results = record.info, record.results
     why = str(info.get("incomplete") or "")
     if why.startswith("aborted"):
         return ("ABORTED" if results else "ABSENT"), why.removeprefix("aborted: ")
     if why.startswith("interrupted"):
         return "INTERRUPTED", why
-    bad = [r for r in results if r["outcome"] in ("FAIL", "ERROR") or (strict and r["outcome"] == "INCONCLUSIVE")]
+    bad = [r for r in results if r.outcome in (Verdict.FAIL, Verdict.ERROR) or (strict and r.outcome == Verdict.INCONCLUSIVE)]
     if bad:
         return "FAIL", f"{len(bad)} of {len(results)} tests " + ("FAILed, ERRORed or were INCONCLUSIVE" if strict else
                                                                   "FAILed or ERRORed")
@@ -73,10 +75,11 @@ def exit_status(statuses: list[str], *, interrupted: bool = False) -> int:
     return 0
 
 
-def read_results(bench_dir: Path) -> dict[str, Any] | None:
+def read_results(bench_dir: Path) -> RunRecord | None:
+    """The bench's results.json, None when there is none this version reads."""
     try:
-        return json.loads((bench_dir / "results.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        return RunRecord.read(bench_dir / "results.json")
+    except (OSError, ValueError, KeyError, TypeError):
         return None
 
 
@@ -89,17 +92,16 @@ def bench_record(name: str, bench_dir: Path, batch_dir: Path, *, description: st
     rec: dict[str, Any] = {"name": name, "description": description, "status": status, "why": why, "command": command,
                            "report_dir": rel, "counts": {}, "sections": {}, "identity": {}}
     if doc is not None:
-        results = doc.get("results") or []
-        rec["counts"] = {v: n for v, n in Counter(r["outcome"] for r in results).items()}
+        rec["counts"] = {str(v): n for v, n in Counter(r.outcome for r in doc.results).items()}
         by_section: dict[str, list[str]] = defaultdict(list)
-        for r in results:
-            by_section[r.get("section") or ""].append(r["outcome"])
-        for n in doc.get("not_run") or []:
+        for r in doc.results:
+            by_section[r.section or ""].append(r.outcome)
+        for n in doc.not_run:
             by_section.setdefault(n.get("section") or "", [])
-        rec["sections"] = {s: (_requirement_result(v) if v else compare.NOT_RUN)
+        rec["sections"] = {s: (requirement_result(v) if v else compare.NOT_RUN)
                            for s, v in sorted(by_section.items(), key=lambda kv: section_key(kv[0]))}
-        rec["identity"] = compare.identity(doc.get("info") or {}, name)
-        rec["run_id"] = (doc.get("info") or {}).get("run_id")
+        rec["identity"] = compare.identity(doc.info, name)
+        rec["run_id"] = doc.info.get("run_id")
         for f in ("report.html", "summary.txt", "junit.xml", "results.json"):
             if (bench_dir / f).is_file():
                 rec.setdefault("files", {})[f] = f"{rel}/{f}"
@@ -166,8 +168,8 @@ def page(doc: dict[str, Any], batch_dir: Path) -> str:
     records = doc["benches"]
     overall = "PASS" if doc["exit_status"] == 0 else ("INTERRUPTED" if doc["exit_status"] == 130 else "FAIL")
     counts = ", ".join(f"{n} {s}" for s in STATUSES for k, n in doc["statuses"].items() if k == s)
-    parts = [f"<header><h1>CKESC batch</h1><p class=run>{_badge(overall)} {len(records)} benches ({_e(counts)}), rig "
-             f"{_e(doc['rig'])}, {doc['seconds']:.1f} s; exit status {doc['exit_status']}</p>"
+    parts = [f"<header><h1>CKESC batch</h1><p class=run>{badge(overall)} {len(records)} benches ({e(counts)}), rig "
+             f"{e(doc['rig'])}, {doc['seconds']:.1f} s; exit status {doc['exit_status']}</p>"
              + ("<p class=banner role=alert>INTERRUPTED: every bench was stopped with zero throttle; each report says what "
                 "ran</p>" if doc["interrupted"] else "") + "</header>",
              _bench_table(records), _section_matrix(doc)]
@@ -184,20 +186,20 @@ def page(doc: dict[str, Any], batch_dir: Path) -> str:
         cmp = compare.compare([r for _, r in runs])
         for head, (name, _) in zip(cmp["runs"], runs):
             head["letter"] = name  # the benches head the columns
-        matrix = compare._matrix_table(cmp).replace("Requirements x runs", "Requirements x benches")  # noqa: SLF001
-        parts += [compare._identity_table(cmp["runs"]), matrix]  # noqa: SLF001 - one renderer for both
+        matrix = compare.matrix_table(cmp).replace("Requirements x runs", "Requirements x benches")
+        parts += [compare.identity_table(cmp["runs"]), matrix]
     elif runs:
         name, run = runs[0]
-        parts.append(compare._identity_table([{"letter": name, "label": run.label,  # noqa: SLF001
+        parts.append(compare.identity_table([{"letter": name, "label": run.label,
                                                 "identity": compare.identity(run.info, run.label)}]))
-    return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC batch {_e(batch_dir.name)}</title>"
-            f"<style>{_CSS}{compare._EXTRA_CSS}{_EXTRA_CSS}</style></head><body>\n"  # noqa: SLF001
+    return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC batch {e(batch_dir.name)}</title>"
+            f"<style>{CSS}{compare.EXTRA_CSS}{_EXTRA_CSS}</style></head><body>\n"
             + "\n".join(parts) + "\n</body></html>\n")
 
 
 def _links(rec: dict[str, Any]) -> str:
     files = rec.get("files") or {}
-    return " ".join(f'<a href="{_e(path)}">{_e(name)}</a>' for name, path in files.items()) or "no report"
+    return " ".join(f'<a href="{e(path)}">{e(name)}</a>' for name, path in files.items()) or "no report"
 
 
 def _bench_table(records: list[dict[str, Any]]) -> str:
@@ -207,23 +209,23 @@ def _bench_table(records: list[dict[str, Any]]) -> str:
         dut = ", ".join(f"{k} {ident[k]}" for k in ("firmware date", "hardware version", "node id", "profile", "lane")
                         if k in ident)
         counts = ", ".join(f"{n} {v}" for v in VERDICTS for k, n in rec["counts"].items() if k == v)
-        rows.append(f'<tr data-bench="{_e(rec["name"])}" data-status="{_e(rec["status"])}"><th>{_e(rec["name"])}'
-                    f'<div class=note>{_e(rec["description"])}</div></th><td>{_badge(rec["status"])}</td>'
-                    f'<td>{_e(rec["why"])}</td><td>{_e(dut)}</td><td>{_e(counts)}</td><td>{_links(rec)}</td></tr>')
+        rows.append(f'<tr data-bench="{e(rec["name"])}" data-status="{e(rec["status"])}"><th>{e(rec["name"])}'
+                    f'<div class=note>{e(rec["description"])}</div></th><td>{badge(rec["status"])}</td>'
+                    f'<td>{e(rec["why"])}</td><td>{e(dut)}</td><td>{e(counts)}</td><td>{_links(rec)}</td></tr>')
     return ("<section id=benches><h2>Benches</h2><table class=benches><tr><th>bench</th><th>status</th><th>why</th>"
             f"<th>DUT</th><th>verdicts</th><th>reports</th></tr>{''.join(rows)}</table></section>")
 
 
 def _section_matrix(doc: dict[str, Any]) -> str:
     records = doc["benches"]
-    heads = "".join(f'<th data-bench="{_e(r["name"])}">{_e(r["name"])}</th>' for r in records)
+    heads = "".join(f'<th data-bench="{e(r["name"])}">{e(r["name"])}</th>' for r in records)
     rows = []
     for s in doc["sections"]:
         cells = []
         for r in records:
             v = r["sections"].get(s, compare.NOT_RUN if r["sections"] else r["status"])
-            cells.append(f'<td class="cell c-{_e(v.replace(" ", "-"))}" data-bench="{_e(r["name"])}">{_e(v)}</td>')
-        rows.append(f'<tr data-section="{_e(s)}"><th>{_e(s)} {_e(SECTION_TITLES.get(s, ""))}</th>{"".join(cells)}</tr>')
+            cells.append(f'<td class="cell c-{e(v.replace(" ", "-"))}" data-bench="{e(r["name"])}">{e(v)}</td>')
+        rows.append(f'<tr data-section="{e(s)}"><th>{e(s)} {e(SECTION_TITLES.get(s, ""))}</th>{"".join(cells)}</tr>')
     return (f"<section id=sections><h2>Sections x benches</h2><p class=note>Each cell: the worst verdict of the section's "
             f"tests on that bench.</p><table class=matrix><tr><th>section</th>{heads}</tr>{''.join(rows)}</table></section>")
 

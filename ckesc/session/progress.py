@@ -27,7 +27,7 @@ from typing import Callable
 
 import pytest
 
-from ..protocol.requirements import section_heading
+from ..protocol.requirements import Verdict, section_heading
 
 #: the suite's own table of expected lane seconds per test id (``python -m ckesc.session.progress``)
 TABLE = Path(__file__).resolve().parents[2] / "conformance" / "durations.json"
@@ -45,7 +45,7 @@ def read_table(path: str | Path | None = None) -> dict[str, float]:
     except (OSError, ValueError):
         return {}
     if isinstance(doc, dict) and "results" in doc:  # a run's results.json
-        return {r["nodeid"]: float(r.get("lane_seconds") or 0.0) for r in doc["results"] if r.get("outcome") != "SKIPPED"}
+        return {r["nodeid"]: float(r.get("lane_seconds") or 0.0) for r in doc["results"] if r.get("outcome") != Verdict.SKIPPED}
     return {str(k): float(v) for k, v in (doc.get("lane_seconds", {}) if isinstance(doc, dict) else {}).items()}
 
 

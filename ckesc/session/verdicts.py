@@ -10,8 +10,8 @@ import pytest
 from ..bench.dut import Dut
 from ..bench.lanes import BenchGone, BusFault
 from ..bench.verdict import Inconclusive, NotClaimed
-from ..protocol.requirements import requirement, strongest
-from ..reporting import report
+from ..evidence.timing import evidence
+from ..protocol.requirements import Verdict, requirement, strongest
 from ..reporting.results import Result
 from . import bus_rules
 from .collection import is_conformance, item_requirements, section_of
@@ -67,7 +67,7 @@ def _skipped(item: pytest.Item, rep: pytest.TestReport) -> bool:
     if rep.when == "call":
         return rep.skipped and "INCONCLUSIVE" not in _longrepr_text(rep)
     res = state(item.config).results.get(item.nodeid)
-    return res is not None and res.outcome == "SKIPPED"
+    return res is not None and res.outcome == Verdict.SKIPPED
 
 
 def _judged(item: pytest.Item, rep: pytest.TestReport, call: pytest.CallInfo, ids: list[str], strength: str,
@@ -120,7 +120,7 @@ def _watch_silence(item: pytest.Item, d: Dut | None) -> None:
     heard = d is not None and (any(f.source == d.node_id for f in d.trace)
                                or any(g.msg.arbitration_id & 0x7F == d.node_id for g in d.garbled))
     silent = item.config.stash[_SILENT] = (item.config.stash.get(_SILENT, 0) + 1
-                                           if res.outcome == "ERROR" and not heard else 0)
+                                           if res.outcome == Verdict.ERROR and not heard else 0)
     if silent >= SILENT_TESTS_TO_ABORT:
         _stop(item, f"aborted: the DUT stopped answering: {silent} tests in a row ERRORed and heard no frame "
                     f"from node {st.node_id} (the last: {res.message.splitlines()[0][:200] if res.message else '?'})")
@@ -133,19 +133,19 @@ def _final_report(item: pytest.Item, rep: pytest.TestReport) -> None:
     decisive = item.stash.get(_DECISIVE, None)
     if res is None or decisive is None or decisive is rep:
         return
-    if res.outcome in ("FAIL", "ERROR") and not rep.failed:
+    if res.outcome in (Verdict.FAIL, Verdict.ERROR) and not rep.failed:
         rep.outcome, rep.longrepr = "failed", decisive.longrepr
         rep.sections = decisive.sections + rep.sections
-    elif res.outcome in ("SKIPPED", "INCONCLUSIVE") and rep.passed:
+    elif res.outcome in (Verdict.SKIPPED, Verdict.INCONCLUSIVE) and rep.passed:
         rep.outcome, rep.longrepr = "skipped", decisive.longrepr
 
 
 #: how the console counts and prints each verdict (category, letter, word): the same verdicts as
 #: summary.txt, JUnit and report.html
-_CONSOLE = {"PASS": ("passed", ".", "PASSED"), "FAIL": ("failed", "F", "FAILED"), "ERROR": ("error", "E", "ERROR"),
-            "OBSERVED": ("observed", "o", ("OBSERVED", {"blue": True})),
-            "INCONCLUSIVE": ("inconclusive", "i", ("INCONCLUSIVE", {"yellow": True})),
-            "SKIPPED": ("skipped", "s", "SKIPPED")}
+_CONSOLE = {Verdict.PASS: ("passed", ".", "PASSED"), Verdict.FAIL: ("failed", "F", "FAILED"), Verdict.ERROR: ("error", "E", "ERROR"),
+            Verdict.OBSERVED: ("observed", "o", ("OBSERVED", {"blue": True})),
+            Verdict.INCONCLUSIVE: ("inconclusive", "i", ("INCONCLUSIVE", {"yellow": True})),
+            Verdict.SKIPPED: ("skipped", "s", "SKIPPED")}
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -172,10 +172,10 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
         outcome, message = _outcome(rep, strength, d)
         if rep.when == "call" and _MESSAGE in item.stash:
             message = item.stash[_MESSAGE]
-            outcome = "ERROR" if message.startswith("harness:") else "FAIL"
-        if rep.when == "teardown" and res.outcome not in ("FAIL",) and not bus_rules.failed_at_teardown(item):
-            outcome = "ERROR"
-        if rep.when != "teardown" or res.outcome != "FAIL":
+            outcome = Verdict.ERROR if message.startswith("harness:") else Verdict.FAIL
+        if rep.when == "teardown" and res.outcome not in (Verdict.FAIL,) and not bus_rules.failed_at_teardown(item):
+            outcome = Verdict.ERROR
+        if rep.when != "teardown" or res.outcome != Verdict.FAIL:
             res.outcome, res.message = outcome, message
     res.bus_rules = bus_rules.rules_of(item)
     res.bus_causes = bus_rules.causes_of(item)
@@ -186,7 +186,7 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
             res.properties.update(m.as_properties(n))
         res.observations = [(w, str(v)) for w, v in d.record.observations]
     if d is not None and rep.when == "teardown":
-        res.evidence = report.evidence(d.trace, host=d.host_node, node=d.node_id, comm_loss="R8" in ids)
+        res.evidence = evidence(d.trace, host=d.host_node, node=d.node_id, comm_loss="R8" in ids)
         st.info.setdefault("interval_tolerance_ms", d.interval_tolerance_ms)
 
 
@@ -194,16 +194,16 @@ def _outcome(rep: pytest.TestReport, strength: str, d: Dut | None) -> tuple[str,
     text = _longrepr_text(rep)
     if rep.failed and any(e in text for e in ("DutError", "BusFault", "BenchGone")):
         # the harness could not do what the test needed, or the bus failed under it: no verdict on the DUT
-        return "ERROR", text
+        return Verdict.ERROR, text
     if rep.passed:
         if strength == "OBSERVE":
-            return "OBSERVED", ""
-        return "PASS", ""
+            return Verdict.OBSERVED, ""
+        return Verdict.PASS, ""
     if rep.skipped:
-        return ("INCONCLUSIVE" if "INCONCLUSIVE" in text else "SKIPPED"), text
+        return (Verdict.INCONCLUSIVE if "INCONCLUSIVE" in text else Verdict.SKIPPED), text
     if rep.when == "setup":
-        return "ERROR", text
-    return "FAIL", text
+        return Verdict.ERROR, text
+    return Verdict.FAIL, text
 
 
 def _longrepr_text(rep: pytest.TestReport) -> str:

@@ -318,16 +318,16 @@ def test_comm_loss_events():
 
 def test_memory_is_bounded():
     """Statistics are fixed-size; a capture of ever new CAN ids does not grow the id cache without bound."""
-    from ckesc.evidence import rules as rules_module
+    from ckesc.evidence import findings, tracker
 
     stats = Intervals()
     for i in range(10_000):
         stats.add(i * 0.001)
-    assert len(stats.hist) == rules_module._HIST_BINS + 1 and stats.to_json()["histogram"]["overflow"] == 9400
+    assert len(stats.hist) == findings.HIST_BINS + 1 and stats.to_json()["histogram"]["overflow"] == 9400
     engine = BusRules()
-    for i in range(rules_module._ID_CACHE + 1000):
+    for i in range(tracker.ID_CACHE + 1000):
         engine.feed(0x10000000 | i << 8 | 5, b"\xc0", i * 1e-4)
-    assert len(engine._ids) == rules_module._ID_CACHE
+    assert len(engine._ids) == tracker.ID_CACHE
 
 
 def test_two_escs_sharing_a_node_id_are_not_compared():

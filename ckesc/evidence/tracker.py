@@ -1,0 +1,492 @@
+"""What the traffic on a CKESC bus says, one frame at a time, sans-IO: the state the bus rules
+(:mod:`.rules`) judge against and the report's plots draw (:mod:`.timing`), worked out once.
+
+* **who is who**: which node is an ESC, which a host (:class:`FrameId` works out each CAN id once);
+* **request/answer pairing**: which requests each node made, so that an answer is matched with the request it
+  answers (same requester, service and transfer id, within :data:`RESPONSE_WINDOW_S`; Set ID, a
+  pseudo-broadcast, from any node) and a broadcast query (GET_ESC_ID) with each ESC's first reply;
+* **report-interval targets**: per node the MSG1..MSG3 intervals it last stated in a Set/Get Freq answer, and
+  the events after which a report's cadence restarts (MSG Control, CAN Test, Set ID, Set Freq writes, R9a
+  restarts, silences long enough for a power cycle);
+* with :attr:`Tracker.heard` set, a record of what it paired (:class:`Heard`: answer delays, the report
+  intervals the rules judged against a stated target, the R8 timeline).
+
+The rules' docstring (:mod:`.rules`) says what each of these means for a verdict.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict, deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..protocol import catalogue as cat
+from ..protocol.frame import classify, frame_bits
+from ..protocol.ids import ESC_NODE_IDS, HOST_NODE_ID, MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind
+from .findings import KEEP, Findings, Intervals, quote
+
+#: One report-scheduling tick: how far from its grid a real-time bench's report may come on top of the lane's
+#: stated error (the simulated lane is exact).
+SCHEDULING_TICK_S = 0.001
+
+
+def timing_tolerance(clock: str, timing_error: float) -> float:
+    """The timing tolerance of a lane: exact (0) in simulated time; elsewhere the lane's stated error plus one
+    report-scheduling tick. The bus rules judge with it, and ``Dut.interval_tolerance_ms`` allows it a report
+    interval."""
+    return 0.0 if clock == "simulated" else timing_error + SCHEDULING_TICK_S
+
+
+# ------------------------------------------------------------------------------------------ facts, derived
+#: The reports whose interval Set/Get Freq sets (R9), by type id, with their interval field.
+INTERVAL_FIELDS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
+REPORT_INTERVAL = {cat.BY_NAME[k.removesuffix("_interval")].type_id: i for i, k in enumerate(INTERVAL_FIELDS)}
+SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
+LONGEST_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
+#: A node silent for longer than this may have been power cycled: its frames before and after are not compared.
+RESTART_SILENCE_S = 2 * SHORTEST_S
+#: How long after a request its response may still come (the document sets no bound for services; 64 ms for
+#: broadcasts): generous, so that a slow answer is never taken for an unasked one.
+RESPONSE_WINDOW_S = 5.0
+
+SET_FREQ = cat.spec("set_freq")
+SET_FREQ_OPTION = SET_FREQ.request.field("option")  # type: ignore[union-attr]
+SET_FREQ_WRITE = next(k for k, v in (SET_FREQ_OPTION.codes or {}).items() if v == "write")
+SET_ID_NODE = cat.spec("set_id").request.field("node_id")  # type: ignore[union-attr]
+PSEUDO_BROADCAST = frozenset({cat.spec("set_id").type_id})  # R11: answered by every ESC, from its (new) node id
+MSG1 = cat.spec("msg1")
+STATUS = MSG1.layouts[0].field("status")
+COMM_BIT = int(cat.Status.COMM_FAULT).bit_length() - 1
+COMM_BYTE, COMM_MASK = STATUS.offset + COMM_BIT // 8, 1 << (COMM_BIT % 8)
+THROTTLE = frozenset(s.type_id for s in cat.CATALOGUE if not s.service and s.layouts[0].codec.startswith("throttle"))
+#: Periodic ESC reports (they come on their own; F7: none at 0x7D): the catalogue's "report" layouts,
+#: except MSG_EXP12 (one per Get Rec, its transfer id names the record, R15).
+REPORTS = frozenset(s.type_id for s in cat.CATALOGUE if not s.service and s.layouts[0].name == "report" and s.tail_tag is None)
+
+#: Frames that either side sends: which payload value marks the ESC's (CAN Test report, MSG Control answer).
+ESC_VALUE: dict[int, tuple[int, int, int]] = {}
+for _name, _field, _value in (("can_test", "option", cat.CAN_TEST_REPORT), ("msg_control", "command", cat.MSG_CONTROL_ANSWER)):
+    _f = cat.spec(_name).layouts[0].field(_field)
+    ESC_VALUE[cat.spec(_name).type_id] = (_f.offset, _f.size, _value)
+MSG_CONTROL = cat.spec("msg_control")
+GET_ESC_ID = cat.spec("get_esc_id")
+MSG_CONTROL_COMMAND = MSG_CONTROL.layouts[0].field("command")
+CAN_TEST = cat.spec("can_test")
+CAN_TEST_OPTION = CAN_TEST.layouts[0].field("option")
+#: Host broadcasts that start, stop or switch active reporting on every ESC (4.4.1, 4.4.2).
+REPORTING_SWITCHES = {
+    MSG_CONTROL.type_id: (MSG_CONTROL_COMMAND, {cat.MSG_CONTROL_SUSPEND, cat.MSG_CONTROL_RESUME, cat.MSG_CONTROL_RESUME_EXP}),
+    CAN_TEST.type_id: (CAN_TEST_OPTION, {cat.CAN_TEST_ON, cat.CAN_TEST_OFF}),
+}
+#: ... and the values among them after which MSG1..MSG3 come back (R9a: the first within one interval)
+RESTARTS = {MSG_CONTROL.type_id: cat.MSG_CONTROL_RESUME, CAN_TEST.type_id: cat.CAN_TEST_OFF}
+
+# which side sends a frame
+SIDE_FOREIGN, SIDE_HOST, SIDE_ESC, SIDE_EITHER, SIDE_UNKNOWN = range(5)
+_SIDE_NAMES = ("foreign", "host", "esc", "either", "unknown")
+
+ID_CACHE = 65536  # distinct CAN ids remembered; a capture of random ids must not grow memory without bound
+
+
+def field_value(data, f) -> int:
+    return int.from_bytes(data[f.offset:f.offset + f.size], "little")
+
+
+@dataclass
+class Heard:
+    """What the tracker paired while :attr:`Tracker.heard` was set, as the report's plots draw it (seconds):
+
+    * ``answers``: ``{node: {request: [delay]}}``: each answer matched with the request it answers (its first
+      answer from each node), and each ESC's first reply to a broadcast query (GET_ESC_ID), from the request's
+      timestamp (its end on the bus, the host's own frame by its echo) to the answer's;
+    * ``intervals``: ``{report: {target: [interval]}}``: the MSG1..MSG3 intervals of ``node`` the rules judged
+      against the interval the node last stated (start to start of the two frames, as judged; none before
+      a stated target, none across a restart of the cadence or within the two reports after an R9a event);
+    * ``commands`` and ``msg1`` (R8's timeline): the throttle commands' timestamps, and ``[t, comm fault bit]``
+      per MSG1 of ``node``.
+    """
+
+    node: int | None = None  # None: every node's intervals and MSG1
+    answers: dict[str, dict[str, list[float]]] = field(default_factory=lambda: defaultdict(lambda: defaultdict(list)))
+    intervals: dict[str, dict[str, list[float]]] = field(default_factory=lambda: defaultdict(lambda: defaultdict(list)))
+    commands: list[float] = field(default_factory=list)
+    msg1: list[list] = field(default_factory=list)
+
+    def mine(self, node: int) -> bool:
+        return self.node is None or node == self.node
+
+    def answer(self, node: int, request: str, delay: float) -> None:
+        self.answers[str(node)][request].append(round(delay, 9))
+
+    def to_json(self, *, comm_loss: bool = False) -> dict[str, Any]:
+        """As a test's ``evidence`` in results.json (``comm_loss``: with R8's timeline)."""
+        out: dict[str, Any] = {"answers": {k: dict(v) for k, v in self.answers.items()},
+                               "intervals": {k: dict(v) for k, v in self.intervals.items()}}
+        if comm_loss:
+            out["comm_loss"] = {"commands": list(self.commands), "msg1": [list(m) for m in self.msg1]}
+        return out
+
+
+class Node:
+    __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
+                 "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
+                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until")
+
+    def __init__(self, node_id: int, host: bool) -> None:
+        self.id = node_id
+        self.esc = False
+        self.host = host
+        self.first_ts: float | None = None
+        self.last_ts = -math.inf
+        self.chain = 0  # +1 at every silence long enough for a power cycle
+        self.reset = 0  # +1 whenever this node's report cadence may restart (suspend/resume, Set Freq, ...)
+        # R9a: the reset an event started after which the reports come back (a resume, CAN Test off, a Set Freq
+        # write), its time and name (None: the first report's delay cannot be judged, e.g. after a power cycle)
+        self.event_reset = -1
+        self.event_ts: float | None = None
+        self.event_what = ""
+        self.event_old: list[float | None] | None = None  # a Set Freq write's: the periods before it (R9a)
+        # per report: the latest an earlier event's first report may still come, when a new event came before it
+        # (a resume right after a Set Freq write: the report due on the old interval may still go first)
+        self.pending: list[float | None] = [None] * len(INTERVAL_FIELDS)
+        self.grace_chain = -1  # the stretch after a power cycle the host made (power_switched): R9a-gaps too
+        self.periods: list[float | None] = [None] * len(INTERVAL_FIELDS)  # seconds, as the node last said
+        self.period_note = ""  # where the periods come from (for messages)
+        self.from_read = False  # the periods come from a read answer (4.4.22-2 says it tells the settings)
+        self.before_silence = False  # ... stated before a silence that may have been a power cycle (R13 keeps them)
+        self.shared = False  # two ESCs answered one broadcast from this node id: its frames are two ESCs' (4.4.18-2)
+        #: a Set ID to this node id went out when no ESC had been heard (how many ESCs may take it is not known) and
+        #: its answers may still come: until then (the longest answer delay and a service's) its frames are not compared
+        self.unsure_until = -math.inf
+        self.floor = True  # judge reports against the shortest legal interval while the periods are unknown
+        self.comm_fault: bool | None = None
+        self.comm_events: list[dict[str, Any]] = []
+        self.comm_dropped = 0
+        self.silences = 0
+        self.noted: set[tuple] = set()  # observations made once per node
+
+    @property
+    def role(self) -> str:
+        return "+".join(r for r, on in (("esc", self.esc), ("host", self.host)) if on) or "foreign"
+
+
+class Stream:
+    """One (node, message type) of an ESC: transfer ids (F3) and intervals (R9)."""
+
+    __slots__ = ("node", "type_id", "name", "interval", "periodic", "ts", "start", "busy_from", "tid", "data", "can_id",
+                 "chain", "reset", "min_gap", "stats", "nth", "grace", "event")
+
+    def __init__(self, node: Node, type_id: int, name: str, periodic: bool) -> None:
+        self.node = node
+        self.type_id = type_id
+        self.name = name
+        self.interval = REPORT_INTERVAL.get(type_id)  # index into node.periods, for MSG1..MSG3
+        self.periodic = periodic
+        self.ts: float | None = None
+        self.start = self.busy_from = 0.0
+        self.tid = 0
+        self.data = b""
+        self.can_id = 0
+        self.chain = self.reset = -1
+        self.min_gap = math.inf
+        self.stats = Intervals()
+        self.nth = 0  # reports in this stretch (since the chain or the reset changed)
+        self.grace = False  # the stretch began at an R9a event: its first two gaps are not judged
+        self.event = -1  # the node's R9a event (event_reset) whose first report this stream has had
+
+
+class FrameId:
+    """What one CAN id is, worked out once (the hot path looks it up)."""
+
+    __slots__ = ("can_id", "kind", "type_id", "source", "dest", "spec", "side", "node", "label", "count", "priority",
+                 "prio_ok", "bad_source", "report", "stream_key", "periodic", "has_tail")
+
+    def __init__(self, can_id: int, node: Node) -> None:
+        kind, type_id, source, dest, spec = classify(can_id)
+        self.can_id, self.kind, self.type_id, self.source, self.dest, self.spec = can_id, kind, type_id, source, dest, spec
+        self.node = node
+        self.count = 0
+        self.priority = (can_id >> 24) & 0x1F
+        vendor = SERVICE_VENDOR_RANGE if kind is not Kind.MESSAGE else MESSAGE_VENDOR_RANGE
+        if spec is None:
+            self.side = SIDE_UNKNOWN if type_id in vendor else SIDE_FOREIGN
+            what = "service " + kind.label if kind is not Kind.MESSAGE else "message"
+            self.label = f"{'unknown' if self.side == SIDE_UNKNOWN else 'foreign'} {what} {type_id}"
+        elif kind is Kind.MESSAGE:
+            senders = {lay.sender for lay in spec.layouts}
+            self.side = SIDE_ESC if senders == {"esc"} else SIDE_HOST if senders == {"host"} else SIDE_EITHER
+            self.label = spec.name
+        else:
+            self.side = SIDE_HOST if kind is Kind.REQUEST else SIDE_ESC
+            self.label = f"{spec.name} {kind.label}"
+        expected = spec.priority if spec is not None else None
+        self.prio_ok = None if expected is None else self.priority == expected
+        self.bad_source = source not in ESC_NODE_IDS  # 0 (the host's / unknown) or reserved (F7)
+        self.report = type_id in REPORTS and kind is Kind.MESSAGE
+        self.has_tail = spec is None or spec.has_tail
+        # F3 counts per message type; a response carries its request's id (F4), MSG_EXP12 names its record (R15)
+        counted = kind is Kind.MESSAGE and spec is not None and spec.has_tail and spec.tail_tag is None
+        self.stream_key = (source, type_id) if counted else None
+        self.periodic = self.report or type_id == CAN_TEST.type_id
+
+
+
+class Tracker(Findings):
+    """The traffic's state, fed by :class:`.rules.BusRules` (which judges it); see the module docstring."""
+
+    def __init__(self, *, tolerance: float = 0.0, bitrate: int = cat.DEFAULT_BITRATE, complete: bool = False,
+                 host_nodes=(HOST_NODE_ID,), jitter: float = 0.0, power_known: bool = False) -> None:
+        self.tolerance = max(float(tolerance), 1e-9)
+        self.jitter = max(float(jitter), 0.0)
+        self.complete = complete
+        self.power_known = power_known
+        self._host_nodes = frozenset(host_nodes)
+        self.frames = 0
+        self.standard = 0
+        self.error_frames = 0
+        self.error_first: list[float] = []
+        self.time_jumps = 0
+        self.first_ts: float | None = None
+        self.last_ts = -math.inf
+        self._nodes: dict[int, Node] = {}
+        self._ids: dict[int, FrameId] = {}
+        self._streams: dict[tuple[int, int], Stream] = {}
+        self._requests: dict[tuple, deque] = {}
+        super().__init__()
+        self._last_throttle: tuple[float, str, int] | None = None
+        self._answered: set[int] = set()  # nodes that answered the last Set ID / GET_ESC_ID (a second answer: shared id)
+        self._set_id_ts = -math.inf  # the last Set ID: a node id not heard since may have been left by its ESC
+        self._bus_end = -math.inf
+        self._busy_from = -math.inf
+        self.set_bitrate(bitrate)
+        self._query_ts: float | None = None  # the last GET_ESC_ID query (its replies' delays, for the plots)
+        self._paired: set[tuple] = set()  # requests whose answer was recorded (each answer once)
+        #: what the tracker paired, for the report's plots: None (the default) records nothing
+        self.heard: Heard | None = None
+
+    # ------------------------------------------------------------------------------------- setup
+    def set_bitrate(self, bitrate: int) -> None:
+        """The bus's bit rate from now on (the host reopened at another rate after Set Baud)."""
+        self.bitrate = int(bitrate)
+        self._dur = [frame_bits(n) / self.bitrate for n in range(9)]
+        # a real frame is up to ~20 % longer than its unstuffed length: a frame that starts within that of
+        # the previous one's end may have waited for it
+        self._slack = [0.25 * d + self.tolerance for d in self._dur]
+        self._bus_end = self._busy_from = -math.inf
+
+    def _node(self, node_id: int) -> Node:
+        node = self._nodes.get(node_id)
+        if node is None:
+            node = self._nodes[node_id] = Node(node_id, node_id in self._host_nodes)
+        return node
+
+    def _new_id(self, can_id: int) -> FrameId:
+        info = FrameId(can_id, self._node(can_id & 0x7F))
+        if len(self._ids) < ID_CACHE:
+            self._ids[can_id] = info
+        return info
+
+    @staticmethod
+    def _restart_period(node: Node, i: int) -> tuple[float | None, str]:
+        """R9a: the interval the first report of report ``i`` after the node's event counts (None: unknown), and
+        which: one interval, or after a Set Freq write the longer of its old and new one (the longest legal one
+        when the node had stated none)."""
+        period = node.periods[i]
+        if period is None or node.event_old is None:
+            return period, "one interval"
+        old = node.event_old[i]
+        return max(period, LONGEST_S if old is None else old), "the longer of its old and new interval"
+
+    def _event(self, node: Node, ts: float, what: str, old: list[float | None] | None = None) -> None:
+        """An R9a event for ``node``: its reports (come back and) count from ``ts``; ``old``: a Set Freq write's
+        periods before it. A report whose first since the previous event has not come keeps that event's limit."""
+        if node.event_ts is None:
+            node.pending = [None] * len(INTERVAL_FIELDS)
+        else:
+            for type_id, i in REPORT_INTERVAL.items():
+                st = self._streams.get((node.id, type_id))
+                if st is not None and st.event == node.event_reset:  # it came: nothing of before is pending
+                    node.pending[i] = None
+                    continue
+                period = self._restart_period(node, i)[0]
+                due = node.event_ts + cat.restart_limit_s(LONGEST_S if period is None else period)
+                node.pending[i] = due if node.pending[i] is None else max(node.pending[i], due)  # type: ignore[type-var]
+        node.reset += 1
+        node.event_reset, node.event_ts, node.event_what, node.event_old = node.reset, ts, what, old
+
+    def power_switched(self, ts: float) -> None:
+        """The host switched the DUT's power (off or on) at ``ts``: a pending R9a event is void (the first
+        report after a power-up is the boot's, not the command's); the next stretch has R9a-gaps grace."""
+        for node in self._nodes.values():
+            node.event_ts = None
+            node.grace_chain = node.chain + 1  # the stretch after the silence it makes
+
+    # ------------------------------------------------------------------------------------- state the traffic sets
+    def _silence(self, node: Node, ts: float) -> None:
+        if node.last_ts > -math.inf:
+            node.silences += 1
+            if any(p is not None for p in node.periods) and not node.before_silence:
+                node.before_silence = True
+                node.period_note += ", before a silence (a power cycle?)"
+        node.chain += 1
+
+    def _time_jump(self, ts: float) -> None:
+        self.time_jumps += 1
+        self._observe((), ts, None, "time-jump", f"timestamps go back from {self.last_ts:.6f} to {ts:.6f}: "
+                      "everything before is not compared with what follows")
+        for node in self._nodes.values():
+            node.chain += 1
+            node.last_ts = -math.inf
+        self._bus_end = self._busy_from = -math.inf
+
+    def _reset_all(self) -> None:
+        for node in self._nodes.values():
+            node.reset += 1
+
+    def _host_frame(self, info: FrameId, data, ts: float) -> None:
+        type_id = info.type_id
+        if info.kind is Kind.MESSAGE:
+            if type_id in THROTTLE:
+                if self.heard is not None:
+                    self.heard.commands.append(ts)
+                self._last_throttle = (ts, info.label, type_id)
+                return
+            if type_id == GET_ESC_ID.type_id:
+                self._answered.clear()  # a query: every ESC answers once
+                self._query_ts = ts
+            switch = REPORTING_SWITCHES.get(type_id)
+            if switch is not None and len(data) > switch[0].offset + switch[0].size and field_value(data, switch[0]) in switch[1]:
+                value = field_value(data, switch[0])
+                if RESTARTS.get(type_id) == value:  # reporting comes back on every ESC (R9a)
+                    what = f"{info.label} {value:#x}"
+                    for node in self._nodes.values():
+                        self._event(node, ts, what)
+                else:
+                    self._reset_all()  # reporting stops or switches on every ESC: cadence restarts
+            return
+        if info.kind is not Kind.REQUEST or not data:
+            return
+        tid = data[-1] & 0x1F
+        if type_id in PSEUDO_BROADCAST:
+            key = (info.source, None, type_id)
+            self._answered.clear()
+            for node in self._nodes.values():  # may re-address any ESC: nobody's intervals are known now
+                node.periods = [None] * len(INTERVAL_FIELDS)
+                node.reset += 1
+                node.shared = False  # ... nor whether two of them share an id
+            self._set_id_shared(data, ts)
+        else:
+            key = (info.source, info.dest, type_id)
+            if type_id == SET_FREQ.type_id and field_value(data, SET_FREQ_OPTION) == SET_FREQ_WRITE:
+                dest = self._node(info.dest)  # type: ignore[arg-type]
+                # the new intervals count from the write (its answer tells them), the old ones as the node last said
+                self._event(dest, ts, "a Set Freq write", list(dest.periods))
+                dest.periods = [None] * len(INTERVAL_FIELDS)  # unknown until that answer: it may come after reports
+        q = self._requests.get(key)
+        if q is None:
+            if len(self._requests) > 4096:
+                self._requests.clear()
+            q = self._requests[key] = deque(maxlen=32)
+        q.append((tid, ts))
+
+    def _set_id_shared(self, data, ts: float) -> None:
+        """Set ID while more than one ESC reports: any of them may take the id (R11: it ignores the destination), and
+        their answers from it, alike and in the same slot, may reach the bus as one frame; so the id is taken as
+        shared (4.4.18-2): its reports are not compared with one another. An ESC reports if heard lately and since
+        the Set ID before (a node id an ESC left then is heard no more)."""
+        since = max(self._set_id_ts, ts - LONGEST_S - RESTART_SILENCE_S)
+        self._set_id_ts = ts
+        escs = sum(1 for n in self._nodes.values() if n.esc and n.last_ts > since)
+        if len(data) <= SET_ID_NODE.offset + SET_ID_NODE.size:
+            return
+        if escs == 0:  # none heard: several may take it, and answer up to 64 ms later (their answers tell then)
+            self._node(field_value(data, SET_ID_NODE)).unsure_until = ts + 2 * cat.ANSWER_DELAY_MAX_S
+        if escs > 1:
+            node = self._node(field_value(data, SET_ID_NODE))
+            node.shared = True
+            self._observe(("4.4.18-2",), ts, node.id, "shared-node-id",
+                          f"Set ID {node.id} while {escs} ESCs report: any of them may take it, their reports from it are "
+                          "not compared with one another")
+
+    def _answer(self, node: Node, ts: float) -> None:
+        """An answer to a broadcast every ESC answers once (Set ID, GET_ESC_ID): a second one from the same
+        node id means two ESCs share it (Set ID sets every ESC on the bus, 4.4.18-2)."""
+        if node.id not in self._answered:
+            self._answered.add(node.id)
+        elif not node.shared:
+            node.shared = True
+            self._observe(("4.4.18-2",), ts, node.id, "shared-node-id",
+                          f"two ESCs answer from node id {node.id}: its reports are not compared with one another")
+
+    def _asked(self, key: tuple, ts: float) -> list[tuple[int, float]]:
+        """(transfer id, timestamp) of the requests ``key`` (requester, node asked or None for Set ID, service)
+        made within :data:`RESPONSE_WINDOW_S` before ``ts``: what an answer at ``ts`` may answer."""
+        return [(tid, when) for tid, when in self._requests.get(key, ()) if 0 <= ts - when <= RESPONSE_WINDOW_S]
+
+    def _paired_answer(self, info: FrameId, key: tuple, tid: int, asked: list[tuple[int, float]], ts: float) -> None:
+        """The answer ``info`` at ``ts`` answers the latest of ``asked`` with transfer id ``tid``: its delay, once."""
+        when = max(w for t, w in asked if t == tid)
+        pair = (key, info.source, tid, when)
+        if pair in self._paired:
+            return
+        if len(self._paired) > 4096:
+            self._paired.clear()
+        self._paired.add(pair)
+        self.heard.answer(info.source, info.spec.name, ts - when)  # type: ignore[union-attr]
+
+    def _query_reply(self, info: FrameId, node: Node, ts: float) -> None:
+        """An ESC's reply to the broadcast query (GET_ESC_ID): its delay, the first reply of each node only."""
+        if self.heard is not None and self._query_ts is not None and node.id not in self._answered:
+            self.heard.answer(node.id, info.spec.name, ts - self._query_ts)  # type: ignore[union-attr]
+
+    def _heard_interval(self, st: Stream, node: Node, gap: float) -> None:
+        """Report interval ``gap`` of ``st``, judged against the interval ``node`` stated (R9), for the plots."""
+        period = node.periods[st.interval]  # type: ignore[index]
+        if period is not None and self.heard.mine(node.id):  # type: ignore[union-attr]
+            self.heard.intervals[st.name][f"{period:g}"].append(round(gap, 9))  # type: ignore[union-attr]
+
+    def _set_freq_answer(self, node: Node, data, ts: float) -> None:
+        layout = SET_FREQ.response
+        values = [field_value(data, layout.field(k)) for k in INTERVAL_FIELDS]  # type: ignore[union-attr]
+        legal = all(layout.field(k).is_legal(v) for k, v in zip(INTERVAL_FIELDS, values))  # type: ignore[union-attr]
+        if not legal:
+            # what an answer to an illegal write says is OBSERVE (R10-answer); whether it was applied is R10's test
+            node.periods = [None] * len(INTERVAL_FIELDS)
+            node.floor = False
+            node.reset += 1
+            return
+        periods = [round(v * cat.INTERVAL_UNIT_S, 9) for v in values]
+        if periods != node.periods and not (node.event_reset == node.reset and node.event_what == "a Set Freq write"):
+            node.reset += 1  # (the answer to a write: the write restarted the cadence already, R9a counts from it)
+        node.periods = periods
+        node.floor = True
+        option = "write" if field_value(data, SET_FREQ_OPTION) == SET_FREQ_WRITE else "read"
+        node.from_read, node.before_silence = option == "read", False
+        node.period_note = f"its Set/Get Freq {option} answer at {ts:.6f} says {'/'.join(map(str, values))}"
+
+    def _comm_flag(self, node: Node, on: bool, ts: float) -> None:
+        if node.comm_fault is on:
+            return
+        first = node.comm_fault is None
+        node.comm_fault = on
+        if first and not on:
+            return
+        if len(node.comm_events) >= KEEP * 5:
+            node.comm_dropped += 1
+            return
+        event: dict[str, Any] = {"timestamp": ts, "event": "set" if on else "cleared"}
+        if first:
+            event["event"] = "set at the first MSG1 heard"
+        if self._last_throttle is not None:
+            event["since_last_throttle_ms"] = round((ts - self._last_throttle[0]) * 1000, 3)
+        node.comm_events.append(event)
+
+    def _error_frame(self, ts: float, can_id: int, data) -> None:
+        self.error_frames += 1
+        if len(self.error_first) < KEEP:
+            self.error_first.append(ts)
+        if self.error_frames == 1:
+            self._observe((), ts, None, "error-frames", "error frames on the bus (bus errors: wiring, termination, a node at "
+                          "another bit rate)", (quote(can_id, data, ts),))
+
