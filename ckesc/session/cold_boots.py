@@ -13,6 +13,8 @@ import pytest
 
 from ..bench.dut import Dut, DutError
 from ..bench.epochs import PowerEpoch
+from ..bench.link import Link
+from ..bench.supply import Supply
 from ..bench.verdict import Inconclusive
 from . import tracing
 from .collection import lacking
@@ -101,7 +103,7 @@ def traced_power_cycle(config: pytest.Config, name: str, entry: dict[str, Any]) 
     if traces is not None:
         traces.begin(name)
     try:
-        Dut(lane, profile, node_id=st.node_id).power_cycle(profile.off_s, profile.boot_s)
+        Supply(Link(lane, profile, node_id=st.node_id)).power_cycle(profile.off_s, profile.boot_s)
     except (DutError, Inconclusive) as exc:
         entry["error"] = str(exc)
         return None

@@ -11,6 +11,7 @@ import pytest
 
 from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
 from ..bench.lanes import BenchGone, BusLane, Lane
+from ..bench.link import Link
 from ..bench.profile import DutProfile
 from ..bench.verdict import Inconclusive
 from ..emulator import variants
@@ -64,7 +65,7 @@ def ckesc_lane(request: pytest.FixtureRequest):
     st.info["lane_seconds"] = round(lane.now() - opened, 3)  # the whole run on the lane's clock (bench_suite.py)
     try:
         if st.node_id is not None:
-            Dut(lane, profile, node_id=st.node_id).zero_throttle()
+            Link(lane, profile, node_id=st.node_id).zero_throttle()
     except BenchGone:  # the run was aborted for it already (and says so): nothing reaches the DUT now
         pass
     finally:
@@ -259,7 +260,7 @@ def _install_signal_guard(config: pytest.Config) -> None:
         st.stopped = st.stopped or f"interrupted ({signal.Signals(signum).name})"
         if st.lane is not None and st.profile is not None and st.node_id is not None:
             try:
-                Dut(st.lane, st.profile, node_id=st.node_id).zero_throttle()
+                Link(st.lane, st.profile, node_id=st.node_id).zero_throttle()
             except Exception:  # noqa: BLE001 - best effort on the way out
                 pass
         raise KeyboardInterrupt
