@@ -8,12 +8,11 @@ fixture restores (and verifies) the direction it found.
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from . import throttle
-from .settings import change, changes, listed
+from .settings import Setting, change, changes, listed
 
 SECTION = "4.4.21"
 SPEC = cat.spec("set_rotation")
@@ -21,14 +20,12 @@ DIRECTIONS = sorted(SPEC.response.field("rotation").codes)  # 0 forward, 1 rever
 QUERY = next(v for v, name in SPEC.request.field("rotation").codes.items() if name == "query")  # 0xFF
 ILLEGAL = illegal_cases(SPEC)  # R10: anything but 0, 1 and 0xFF
 motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
+ROTATION = Setting("set_rotation", "rotation", "rotation", "Set Rotation", tuple(DIRECTIONS), "test_direction_is_set",
+                   "with reporting on and the motor stopped")
 
 
 def _name(direction):
     return SPEC.response.field("rotation").codes.get(direction, hex(direction))
-
-
-def _other(direction):
-    return DIRECTIONS[(DIRECTIONS.index(direction) + 1) % len(DIRECTIONS)] if direction in DIRECTIONS else DIRECTIONS[0]
 
 
 def _query(dut):
@@ -37,13 +34,9 @@ def _query(dut):
     return ex.response.fields["rotation"]
 
 
-def _direction(dut):
-    return dut.settings()["rotation"]
-
-
 def _shown_changes(dut, want):
     """Where the query and 242 show another direction than ``want``: ``242 rotation 0 -> 1``; "" if nowhere."""
-    shown = {"query": _query(dut), "242 rotation": _direction(dut)}
+    shown = {"query": _query(dut), "242 rotation": ROTATION.current(dut)}
     return changes(dict.fromkeys(shown, want), shown)
 
 
@@ -53,16 +46,7 @@ def _set(dut, direction):
     assert ex.response is not None, f"no answer to Set Rotation {direction}"
     assert ex.response.fields["rotation"] == direction, f"Set Rotation {direction} answered {listed(ex.response.fields)}"
     assert _query(dut) == direction, f"after Set Rotation {direction} the query answers {_query(dut)}"
-    assert _direction(dut) == direction, f"after Set Rotation {direction} 242 shows {_direction(dut)}"
-
-
-def _ensure(dut, direction):
-    """Setup: the DUT at ``direction`` (Inconclusive if Set Rotation cannot get it there: that is what
-    test_direction_is_set judges)."""
-    dut.request("set_rotation", {"rotation": direction})
-    if _direction(dut) != direction:
-        raise Inconclusive(f"Set Rotation {direction} did not take with reporting on and the motor stopped "
-                           "(see test_direction_is_set): this test cannot be judged")
+    assert ROTATION.current(dut) == direction, f"after Set Rotation {direction} 242 shows {ROTATION.current(dut)}"
 
 
 # ------------------------------------------------------------------------------------------ tests
@@ -71,7 +55,7 @@ def _ensure(dut, direction):
 def test_direction_is_set(dut, direction):
     """Set Rotation 0 / 1 is answered with the direction, and the query and 242 show it - reached
     from the other direction."""
-    _set(dut, _other(direction))
+    _set(dut, ROTATION.other(direction))
     _set(dut, direction)
 
 
@@ -79,11 +63,11 @@ def test_direction_is_set(dut, direction):
 @pytest.mark.parametrize("direction", DIRECTIONS, ids=_name)
 def test_query_answers_the_direction_and_changes_nothing(dut, direction):
     """0xFF 'queries the current direction of rotation': answered with it, twice, nothing changed."""
-    _set(dut, _other(direction))
+    _set(dut, ROTATION.other(direction))
     _set(dut, direction)
     answers = [_query(dut), _query(dut)]
     assert answers == [direction, direction], f"the query answered {answers[0]} then {answers[1]}, the direction set is {direction}"
-    now = _direction(dut)
+    now = ROTATION.current(dut)
     assert now == direction, f"the query changed the direction: 242 {change('rotation', direction, now)}"
 
 
@@ -92,7 +76,7 @@ def test_query_answers_the_direction_and_changes_nothing(dut, direction):
 @pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
 def test_illegal_value_changes_nothing(dut, case, start):
     """A value other than 0, 1, 0xFF is ignored, whichever direction is in force."""
-    _ensure(dut, start)
+    ROTATION.ensure(dut, start)
     ex = dut.request("set_rotation", {"rotation": case.value})
     dut.record.observe("answer to the illegal value (R10-answer)", ex.response.fields if ex.response else "none")
     assert not (d := _shown_changes(dut, start)), f"Set Rotation {case.value:#04x} changed the direction: {d}"
@@ -100,7 +84,7 @@ def test_illegal_value_changes_nothing(dut, case, start):
 
 def _write_illegal(dut, case):
     start = DIRECTIONS[0]
-    _ensure(dut, start)
+    ROTATION.ensure(dut, start)
     dut.request("set_rotation", {"rotation": case.value})
     return start
 
@@ -120,16 +104,16 @@ def test_not_set_while_reporting_is_suspended(dut):
     """'only ... when data reporting is on': suspended, Set Rotation takes no effect (not even once
     reporting resumes). First shown to work with reporting on, so that a command that never works
     does not pass."""
-    before = _direction(dut)
-    _ensure(dut, _other(before))
-    _ensure(dut, before)
+    before = ROTATION.current(dut)
+    ROTATION.ensure(dut, ROTATION.other(before))
+    ROTATION.ensure(dut, before)
     dut.suspend_reporting()
     try:
-        ex = dut.request("set_rotation", {"rotation": _other(before)})
+        ex = dut.request("set_rotation", {"rotation": ROTATION.other(before)})
         dut.record.observe("answer while suspended", ex.response.fields if ex.response else "none")
     finally:
         dut.resume_reporting()
-    now = _direction(dut)
+    now = ROTATION.current(dut)
     assert now == before, f"Set Rotation while suspended took effect: 242 {change('rotation', before, now)}"
 
 
@@ -138,24 +122,24 @@ def test_not_set_while_reporting_is_suspended(dut):
 def test_not_set_while_the_motor_runs(dut):
     """'only ... when ... the motor is stopped': running, Set Rotation takes no effect (not later either).
     First shown to work with the motor stopped."""
-    before = _direction(dut)
-    _ensure(dut, _other(before))
-    _ensure(dut, before)
+    before = ROTATION.current(dut)
+    ROTATION.ensure(dut, ROTATION.other(before))
+    ROTATION.ensure(dut, before)
     throttle.start_motor(dut)
     try:
-        ex = dut.request("set_rotation", {"rotation": _other(before)})
+        ex = dut.request("set_rotation", {"rotation": ROTATION.other(before)})
         dut.record.observe("answer while running", ex.response.fields if ex.response else "none")
         running = _shown_changes(dut, before)
     finally:
         dut.stop_motor()
     assert not running, f"Set Rotation while the motor ran took effect: {running}"
-    now = _direction(dut)
+    now = ROTATION.current(dut)
     assert now == before, f"Set Rotation sent while running took effect later: 242 {change('rotation', before, now)}"
 
 
 def _write_other_direction(dut):
-    direction = _other(_direction(dut))
-    _ensure(dut, direction)
+    direction = ROTATION.other(ROTATION.current(dut))
+    ROTATION.ensure(dut, direction)
     return direction
 
 
@@ -171,6 +155,6 @@ def test_direction_persists_across_power_cycle(dut, cold_boot):
 @pytest.mark.requirement("4.4.21-3")
 def test_observe_current_direction(dut):
     """'Default positive rotation': the DUT's direction is recorded (a DUT in the field may differ)."""
-    direction = _direction(dut)
+    direction = ROTATION.current(dut)
     dut.record.observe("direction", _name(direction))
     assert direction == DIRECTIONS[0], "not at the factory default (forward)"

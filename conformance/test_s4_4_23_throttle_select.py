@@ -11,12 +11,11 @@ it found.
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from . import throttle
-from .settings import change, listed
+from .settings import Setting, change, listed
 
 SECTION = "4.4.23"
 SPEC = cat.spec("throttle_select")
@@ -24,18 +23,12 @@ SOURCES = sorted(SPEC.request.field("source").codes)  # 0 CAN, 1 PWM+CAN
 CAN, PWM_CAN = (next(v for v, n in SPEC.request.field("source").codes.items() if n == name) for name in ("CAN", "PWM+CAN"))
 ILLEGAL = illegal_cases(SPEC)  # R10: anything but 0 and 1
 motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
+SOURCE = Setting("throttle_select", "source", "throttle_source", "Throttle Select", tuple(SOURCES), "test_source_is_selected",
+                 "at zero throttle with reporting on")
 
 
 def _name(source):
     return SPEC.request.field("source").codes.get(source, hex(source))
-
-
-def _other(source):
-    return SOURCES[(SOURCES.index(source) + 1) % len(SOURCES)] if source in SOURCES else SOURCES[0]
-
-
-def _source(dut):
-    return dut.settings()["throttle_source"]
 
 
 def _select(dut, source):
@@ -43,16 +36,7 @@ def _select(dut, source):
     ex = dut.request("throttle_select", {"source": source})
     assert ex.response is not None, f"no answer to Throttle Select {source}"
     assert ex.response.fields["source"] == source, f"Throttle Select {source} answered {listed(ex.response.fields)}"
-    assert _source(dut) == source, f"after Throttle Select {source} 242 shows {_source(dut)}"
-
-
-def _ensure(dut, source):
-    """Setup: ``source`` in force (Inconclusive if Throttle Select cannot get it there: that is what
-    test_source_is_selected judges)."""
-    dut.request("throttle_select", {"source": source})
-    if _source(dut) != source:
-        raise Inconclusive(f"Throttle Select {source} did not take at zero throttle with reporting on "
-                           "(see test_source_is_selected): this test cannot be judged")
+    assert SOURCE.current(dut) == source, f"after Throttle Select {source} 242 shows {SOURCE.current(dut)}"
 
 
 @pytest.fixture
@@ -78,7 +62,7 @@ def pwm_input(dut):
 @pytest.mark.parametrize("source", SOURCES, ids=_name)
 def test_source_is_selected(dut, source):
     """Throttle Select 0 / 1 is answered with the source and 242 shows it - reached from the other."""
-    _select(dut, _other(source))
+    _select(dut, SOURCE.other(source))
     _select(dut, source)
 
 
@@ -87,18 +71,18 @@ def test_source_is_selected(dut, source):
 def test_not_selected_while_the_throttle_is_not_zero(dut):
     """'To set this command, set it at zero throttle': with the motor running, nothing changes (not
     later either). First shown to work at zero throttle."""
-    before = _source(dut)
-    _ensure(dut, _other(before))
-    _ensure(dut, before)
+    before = SOURCE.current(dut)
+    SOURCE.ensure(dut, SOURCE.other(before))
+    SOURCE.ensure(dut, before)
     throttle.start_motor(dut)
     try:
-        ex = dut.request("throttle_select", {"source": _other(before)})
+        ex = dut.request("throttle_select", {"source": SOURCE.other(before)})
         dut.record.observe("answer at non-zero throttle", ex.response.fields if ex.response else "none")
-        during = _source(dut)
+        during = SOURCE.current(dut)
     finally:
         dut.stop_motor()
     assert during == before, f"Throttle Select at non-zero throttle took effect: 242 {change('throttle_source', before, during)}"
-    now = _source(dut)
+    now = SOURCE.current(dut)
     assert now == before, f"Throttle Select sent at non-zero throttle took effect later: 242 {change('throttle_source', before, now)}"
 
 
@@ -106,16 +90,16 @@ def test_not_selected_while_the_throttle_is_not_zero(dut):
 def test_not_selected_while_reporting_is_suspended(dut):
     """'parameter changes do not take effect when the active data reporting command is suspended' (not
     even once reporting resumes). First shown to work with reporting on."""
-    before = _source(dut)
-    _ensure(dut, _other(before))
-    _ensure(dut, before)
+    before = SOURCE.current(dut)
+    SOURCE.ensure(dut, SOURCE.other(before))
+    SOURCE.ensure(dut, before)
     dut.suspend_reporting()
     try:
-        ex = dut.request("throttle_select", {"source": _other(before)})
+        ex = dut.request("throttle_select", {"source": SOURCE.other(before)})
         dut.record.observe("answer while suspended", ex.response.fields if ex.response else "none")
     finally:
         dut.resume_reporting()
-    now = _source(dut)
+    now = SOURCE.current(dut)
     assert now == before, f"Throttle Select while suspended took effect: 242 {change('throttle_source', before, now)}"
 
 
@@ -124,19 +108,19 @@ def test_not_selected_while_reporting_is_suspended(dut):
 @pytest.mark.parametrize("case", ILLEGAL, ids=lambda c: c.id)
 def test_illegal_source_changes_nothing(dut, case, start):
     """A source other than 0 / 1 is ignored, whichever source is in force."""
-    _ensure(dut, start)
+    SOURCE.ensure(dut, start)
     try:
         ex = dut.request("throttle_select", {"source": case.value})
         dut.record.observe("answer to the illegal source (R10-answer)", ex.response.fields if ex.response else "none")
-        now = _source(dut)
+        now = SOURCE.current(dut)
         assert now == start, f"Throttle Select {case.value:#04x} changed the source: 242 {change('throttle_source', start, now)}"
     finally:
         dut.request("throttle_select", {"source": start})  # whatever the DUT stored, a legal value again
 
 
 def _write_illegal(dut, case):
-    start = _other(case.value & 1)
-    _ensure(dut, start)
+    start = SOURCE.other(case.value & 1)
+    SOURCE.ensure(dut, start)
     dut.request("throttle_select", {"source": case.value})
     return start
 
@@ -150,15 +134,15 @@ def test_illegal_source_changes_nothing_after_power_cycle(dut, cold_boot, case):
     value's low bit does not name, so a device that keeps only bit 0 shows)."""
     try:
         start = cold_boot()
-        now = _source(dut)
+        now = SOURCE.current(dut)
         assert now == start, f"after {case.value:#04x} and a power cycle the source changed: 242 {change('throttle_source', start, now)}"
     finally:
-        dut.request("throttle_select", {"source": _other(case.value & 1)})  # whatever the DUT stored, a legal value
+        dut.request("throttle_select", {"source": SOURCE.other(case.value & 1)})  # whatever the DUT stored, a legal value
 
 
 def _write_other_source(dut):
-    source = _other(_source(dut))
-    _ensure(dut, source)
+    source = SOURCE.other(SOURCE.current(dut))
+    SOURCE.ensure(dut, source)
     return source
 
 
@@ -168,7 +152,7 @@ def _write_other_source(dut):
 def test_source_persists_across_power_cycle(dut, cold_boot):
     """'This parameter will be saved in FLASH ... will not be lost when power is turned off.'"""
     source = cold_boot()
-    now = _source(dut)
+    now = SOURCE.current(dut)
     assert now == source, f"a power cycle changed the source selected: 242 {change('throttle_source', source, now)}"
 
 
@@ -197,6 +181,6 @@ def test_pwm_input_is_ignored_with_source_can(dut, pwm_input):
 @pytest.mark.requirement("4.4.23-2")
 def test_observe_current_source(dut):
     """'Default CAN digital throttle': the DUT's source is recorded (a DUT in the field may differ)."""
-    source = _source(dut)
+    source = SOURCE.current(dut)
     dut.record.observe("throttle source", _name(source))
     assert source == CAN, "not at the factory default (CAN)"
