@@ -233,8 +233,8 @@ class Link:
                 timeout: float | None = None, **kw: Any) -> Exchange:
         """Send a request and read until its answer or ``timeout`` (lane seconds; default 0.1 s plus the
         lane's stated timing error: an answer that late is not "no answer" on a lane that cannot tell). The
-        timeout runs from when the request reached the bus: from its echo where that shows it left later than
-        the host sent it (a host stalled between reading the clock and sending), else from the send."""
+        timeout runs from when the request reached the bus where its echo shows that the host was held up between
+        reading the clock and sending (later than the stated send error and two frames on the bus), else from the send."""
         self._check_claimed(name, fields)
         if timeout is None:
             timeout = 0.1 + self.lane.timing_error
@@ -245,12 +245,15 @@ class Link:
         spec = cat.spec(name)
         if spec.responses and kw.get("expect_response", True):
             deadline = sent.host_time + timeout
+            # how much later than the host's send a request may reach the bus without the host having been held up:
+            # the stated send error and two frames ahead of it on the bus (within it the window runs from the send)
+            held_up = self.lane.host_send_error + 2 * frame_bits(8) / self.lane.bitrate
             while True:
                 self.read_until(deadline, stop=lambda f: pending.response is not None)
                 if pending.response is None and sent.bus_time is None:  # past the deadline before the echo was read
                     self.await_echo(sent)
                 left_at = sent.bus_time if sent.bus_time is not None else sent.host_time
-                if pending.response is not None or left_at + timeout <= deadline:
+                if pending.response is not None or left_at - sent.host_time <= held_up or left_at + timeout <= deadline:
                     break
                 deadline = pending.deadline = left_at + timeout  # the echo came late: the window is the bus's
             self.proto.expire(self.now())
