@@ -76,6 +76,7 @@ class EscModel(Output, Motor, Reporting, Settings, Answers):
         self.pwm_input: int | None = None  # PWM throttle 0..2000 on the analog input; None: no signal
         self.powered = False
         self._power_epoch = 0
+        self._boot_baud: int | None = None  # the Set Baud code in force at the last power-up
         self._reset_volatile(0.0)
 
     # ------------------------------------------------------------------------------------------
@@ -120,6 +121,14 @@ class EscModel(Output, Motor, Reporting, Settings, Answers):
         self._last_jittered: dict[str, float] = {}  # each report's last jittered time: the next never goes before it
         self._reports_were_active = True
         self._next_can_test = 0.0
+        # the interaction faults' state (faults.INTERACTION; all empty / off in a faultless ESC)
+        self._boot = {k: self.nvm[k] for k in _PERSIST_FAULTS}  # the settings as read at power-up
+        self._flash_only: dict[str, Any] = {}  # what a clobbering save wrote to flash, RAM unchanged: in force at power-up
+        self._suspends = 0  # second_suspend_latches: suspends beyond the first, each wanting a resume
+        self._default_timers = False  # resume_reloads_default_intervals
+        self._timer_from: dict[str, str] = {}  # set_freq_moves_other_stream: report -> the report whose interval it takes
+        self._resumed = False  # comm_loss_sticky_after_resume: reporting was suspended and resumed
+        self._selected = False  # throttle_select_drops_10b: a Throttle Select was taken
 
     def power_on(self, now: float) -> None:
         if self.powered:
@@ -132,7 +141,9 @@ class EscModel(Output, Motor, Reporting, Settings, Answers):
         if "suspend_persisted" in self.faults and self.nvm.get("suspended"):
             self.reporting = SUSPENDED
         if "power_up_counter_stuck" not in self.faults:
-            self.nvm["power_ups"] = (self.nvm["power_ups"] + 1) & 0xFFFF
+            twice = "baud_change_counts_power_up_twice" in self.faults and self._boot_baud not in (None, self.nvm["baud"])
+            self.nvm["power_ups"] = (self.nvm["power_ups"] + 1 + twice) & 0xFFFF
+        self._boot_baud = self.nvm["baud"]
         self.nvm_dirty = True
         start = self.ready_at + self.config.report_delay
         stagger = (0.0, 0.007, 0.013) if self.config.report_phase == "staggered" else (0.0, 0.0, 0.0)
@@ -147,6 +158,7 @@ class EscModel(Output, Motor, Reporting, Settings, Answers):
         for key, fault in _PERSIST_FAULTS.items():  # the faults that make a setting forget
             if fault in self.faults:
                 self.nvm[key] = factory_nvm(self.config)[key]
+        self.nvm.update(self._flash_only)  # a clobbering save (interaction faults): flash differs from RAM
         self.nvm["can_test"] = self.can_test
         self.nvm["suspended"] = self.reporting == SUSPENDED
         self.nvm_dirty = True

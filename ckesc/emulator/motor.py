@@ -152,6 +152,8 @@ class Motor:
             elif 4 * group - 3 <= channel <= 4 * group:
                 value = channels[channel - 4 * group + 3]
         else:  # raw_command_10b
+            if self._selected and "throttle_select_drops_10b" in self.faults:
+                return False  # the parser table rebuilt without the 10-bit format
             if "ten_bit_tail_checked" in self.faults and f.fields["tail_bits"] != TAIL_BITS_10B:
                 return False  # the high nibble of payload[7] read as a tail byte, and this one refused
             if 1 <= channel <= 6:
@@ -176,7 +178,8 @@ class Motor:
         self._update(now)
         self.can_throttle = value  # R6: above 2000 is OBSERVE (over_max_throttle)
         self.last_command = now
-        if self.comm_fault and "comm_loss_sticky" not in self.faults:
+        sticky = "comm_loss_sticky" in self.faults or (self._resumed and "comm_loss_sticky_after_resume" in self.faults)
+        if self.comm_fault and not sticky:
             self.comm_fault = False
         self._refresh_throttle(now)
 

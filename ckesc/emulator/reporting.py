@@ -57,6 +57,10 @@ class Reporting:
 
     def _interval(self, which: str) -> float:
         n = self.nvm[f"{which}_interval"]
+        if self._default_timers:  # interaction faults (faults.INTERACTION): a timer reloaded with the wrong value
+            n = cat.DEFAULT_REPORT_INTERVALS[f"{which}_interval"]
+        elif self._timer_from:
+            n = self.nvm[f"{self._timer_from.get(which, which)}_interval"]
         if which == "msg2" and "msg2_interval_ignores_setting" in self.faults:
             n = cat.DEFAULT_REPORT_INTERVALS["msg2_interval"]
         unit = 0.003 if which == "msg1" and "report_interval_wrong" in self.faults else INTERVAL_UNIT_S
@@ -255,16 +259,25 @@ class Reporting:
         command = f.fields["command"]
         was = self.reporting
         if command == MSG_CONTROL_SUSPEND and "suspend_ignored" not in self.faults:
+            self._suspends += was == SUSPENDED and "second_suspend_latches" in self.faults
             self.reporting = SUSPENDED
         elif command == MSG_CONTROL_RESUME and "resume_ignored" not in self.faults:
-            self.reporting = REPORTING
+            if self._suspends and was == SUSPENDED:
+                self._suspends -= 1  # a nested suspend's resume: still suspended
+            else:
+                self.reporting = REPORTING
         elif command == MSG_CONTROL_RESUME_EXP:
             if "resume_exp_ignored" not in self.faults:
                 self.reporting = EXP_MODE
         elif command not in (MSG_CONTROL_SUSPEND, MSG_CONTROL_RESUME):
             self.counters["rx_ignored"] += 1
             return  # the answer packet (0) or an unknown command: nothing to do
+        if self.reporting != SUSPENDED:
+            self._suspends = 0
         if was == SUSPENDED and self.reporting != SUSPENDED:
+            self._resumed = True
+            if command == MSG_CONTROL_RESUME and "resume_reloads_default_intervals" in self.faults:
+                self._default_timers = True
             self._restart_reports(now)  # "immediate recovery"
         elif was == EXP_MODE and self.reporting == REPORTING:
             self._restart_reports(now)  # leaving MSG_EXP mode: reporting comes back as after a resume (R9a)

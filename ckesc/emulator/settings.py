@@ -9,6 +9,7 @@ from typing import Any
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import BAUD_RATES, CONFIG_WINDOW_S, EXPAND_COMMANDS, INTERVAL_UNIT_S
 from ..protocol.frame import Frame
+from .config import factory_nvm
 from .reporting import REPORT_NAMES, SUSPENDED
 
 
@@ -29,6 +30,14 @@ class Settings:
     def _set_nvm(self, **values: Any) -> None:
         self.nvm.update(values)
         self.nvm_dirty = True
+        for key in values:  # its own save puts a clobbered setting right again
+            self._flash_only.pop(key, None)
+
+    def _clobber(self, fault: str, **stale: Any) -> None:
+        """An interaction fault's save that also rewrites other settings in flash with ``stale`` values (the RAM
+        copies stay: the ESC works on with them until the next power-up)."""
+        if fault in self.faults:
+            self._flash_only.update(stale)
 
     def _on_set_id(self, f: Frame, now: float) -> None:
         if "set_id_needs_destination" in self.faults and not self._addressed(f):
@@ -43,6 +52,8 @@ class Settings:
         if "set_id_channel_ignored" in self.faults:
             channel = self.nvm["throttle_channel"]
         self._set_nvm(node_id=node, throttle_channel=channel)
+        if "set_id_resets_source" in self.faults:
+            self._set_nvm(throttle_source=0)
         self._respond(f, now, {"node_id": self.node_id, "throttle_channel": self.nvm["throttle_channel"]})
 
     def _on_set_baud(self, f: Frame, now: float) -> None:
@@ -69,6 +80,8 @@ class Settings:
             self.led_color, self.led_blink = color, blink
             if option == 1 or "led_unsaved_persisted" in self.faults:
                 self._set_nvm(led_color=color, led_blink=blink)
+            if option == 1:
+                self._clobber("led_save_reverts_rotation", rotation=self._boot["rotation"])
         if "set_led_no_echo" in self.faults:
             self._respond(f, now, {"option": 0, "color": 0, "blink": 0})
             return
@@ -82,6 +95,7 @@ class Settings:
             if rotation in (0, 1):
                 if "rotation_ignored" not in self.faults:
                     self._set_nvm(rotation=rotation)
+                    self._clobber("rotation_save_resets_intervals", **cat.DEFAULT_REPORT_INTERVALS)
             elif "rotation_accepts_illegal" in self.faults:
                 self._set_nvm(rotation=1)
             else:
@@ -107,6 +121,14 @@ class Settings:
                 applied = True
                 old = {k: self.nvm[k] for k in names}
                 self._set_nvm(**legal)
+                defaults = factory_nvm(self.config)
+                self._clobber("freq_save_resets_led", led_color=defaults["led_color"], led_blink=defaults["led_blink"])
+                self._default_timers = False  # a write reloads the report timers
+                if "set_freq_moves_other_stream" in self.faults:
+                    if legal.get("msg2_interval", old["msg2_interval"]) != old["msg2_interval"]:
+                        self._timer_from.pop("msg2", None)
+                    elif legal.get("msg1_interval", old["msg1_interval"]) != old["msg1_interval"]:
+                        self._timer_from["msg2"] = "msg1"
                 for which in REPORT_NAMES:
                     key = f"{which}_interval"
                     if key in legal and legal[key] != old[key]:
@@ -129,6 +151,8 @@ class Settings:
             return
         if "throttle_select_ignored" not in self.faults:
             self._set_nvm(throttle_source=source)
+            self._clobber("source_save_reverts_led", led_color=self._boot["led_color"], led_blink=self._boot["led_blink"])
+        self._selected = True
         self._respond(f, now, {"source": self.nvm["throttle_source"]})
 
 
