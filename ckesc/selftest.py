@@ -6,6 +6,10 @@ fault names (``ckesc/emulator/faults.py``): a fault that fails nothing means a r
 not really check (except a fault that breaks only OBSERVE rules, which must fail nothing); a failing test that does not cite the broken rule means a test that fails for
 the wrong reason, or cites the wrong clause. The result is the table fault -> failing tests.
 
+An interaction fault (``kind="interaction"``: a defect where two features meet) need not fail the suite, which tests
+features one at a time: the table says whether the suite catches it, and by which tests, or leaves it to ``ckesc
+explore``. A test that fails for it must still cite one of its rules.
+
 It must also have no false teeth: against every conforming variant (``ckesc/emulator/variants.py``: a
 behaviour the document, or a stated READING, allows) no test may FAIL or ERROR; one that does is the
 suite's bug, a reading stricter than the document. ``--variants each`` runs every alternative of every
@@ -30,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from .emulator import variants
-from .emulator.faults import FAULTS
+from .emulator.faults import FAULTS, INTERACTION, SINGLE
 from .protocol.requirements import Verdict, requirement
 from .reporting.causes import broken_outside_a_fail
 from .reporting.results import RunRecord
@@ -48,10 +52,17 @@ class FaultRun:
     bus_rules: list[str] = field(default_factory=list)  # the rule ids those failures named
     ran: int = 0
     problem: str = ""
+    kind: str = SINGLE  # the fault's kind (faults.SINGLE or faults.INTERACTION)
+    inconclusive: list[str] = field(default_factory=list)  # tests the fault left INCONCLUSIVE
 
     @property
     def ok(self) -> bool:
         return not self.problem
+
+    @property
+    def caught(self) -> bool:
+        """Whether some test FAILed for the fault (for an interaction fault: the suite catches it)."""
+        return bool(self.failing)
 
 
 SCOPES = ("full", "cited")
@@ -106,7 +117,7 @@ def _suite(targets: list[str], args: list[str]) -> tuple[list[dict[str, Any]] | 
 
 def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full") -> FaultRun:
     rules = FAULTS[fault].rules if fault else ()
-    run = FaultRun(fault, rules)
+    run = FaultRun(fault, rules, kind=FAULTS[fault].kind if fault else SINGLE)
     results, run.problem = _suite(scope_targets(fault, scope), [*pytest_args, *(["--emulator-faults", fault] if fault else [])])
     if results is None:
         return run
@@ -120,10 +131,12 @@ def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full
                 run.bus_rules = list(dict.fromkeys(run.bus_rules + r.bus_rules))
         elif r.outcome == Verdict.ERROR:
             run.errors.append(f"{r.nodeid}: {r.message[:200]}")
+        elif r.outcome == Verdict.INCONCLUSIVE:
+            run.inconclusive.append(r.nodeid)
         elif broken_outside_a_fail(r):  # a bus rule broken while a SKIPPED test ran: the rule's failure
             run.failing.append((r.nodeid, list(r.bus_rules)))
             run.bus_failed.append(r.nodeid)
-            run.bus_rules = list(dict.fromkeys(run.bus_rules + r["bus_rules"]))
+            run.bus_rules = list(dict.fromkeys(run.bus_rules + r.bus_rules))
     if fault is None:
         if run.failing or run.errors:
             run.problem = f"{len(run.failing)} failed and {len(run.errors)} errored against the faultless emulator"
@@ -135,7 +148,7 @@ def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full
             run.problem = f"{len(run.errors)} test(s) errored: {run.errors[0]}"
     else:
         wrong = [t for t, ids in run.failing if not set(ids) & set(rules)]
-        if not run.failing:
+        if not run.failing and run.kind != INTERACTION:  # an interaction fault may pass the suite: explore's
             run.problem = f"no test failed (fault breaks {', '.join(rules)})"
         elif wrong:
             run.problem = f"{len(wrong)} failing test(s) cite none of {', '.join(rules)}: {', '.join(wrong[:5])}"
@@ -248,7 +261,12 @@ def headline(faults: list[FaultRun], variant_runs: list[VariantRun]) -> str:
     if faults and faults[0].fault is None:
         parts.append("the faultless emulator passes" if faults[0].ok else "the faultless emulator does NOT pass")
     if len(faults) > 1:
-        parts.append("every fault caught" if not bad_faults else f"{len(bad_faults)} of {len(faults) - 1} faults NOT caught cleanly")
+        interactions = [r for r in faults[1:] if r.kind == INTERACTION]
+        caught = "every single fault caught" if interactions else "every fault caught"
+        parts.append(caught if not bad_faults else f"{len(bad_faults)} of {len(faults) - 1} faults NOT caught cleanly")
+        if interactions:
+            parts.append(f"{sum(r.caught for r in interactions)} of {len(interactions)} interaction faults caught by "
+                         "the suite (the rest left to ckesc explore)")
     if variant_runs:
         parts.append(f"no variant failed ({len(variant_runs)} runs)" if not bad_variants
                      else f"{len(bad_variants)} of {len(variant_runs)} variant runs FAILED or ERRORED (the suite's bugs)")
@@ -277,5 +295,9 @@ def table(runs: list[FaultRun]) -> str:
             tests += (f"{'<br>' if tests else ''}{len(bus)} test(s) failed by the live bus rules "
                       f"({' '.join(r.bus_rules)})")
         verdict = ("ok (OBSERVE only: recorded, never failed)" if observe_only(r.rules) else "ok") if r.ok else "PROBLEM: " + r.problem
+        if r.kind == INTERACTION and r.ok:
+            verdict = (f"interaction: caught by {len(r.failing)} test(s)" if r.caught else
+                       "interaction: not caught by the suite, left to ckesc explore"
+                       + (f" ({len(r.inconclusive)} test(s) INCONCLUSIVE)" if r.inconclusive else ""))
         lines.append(f"| {name} | {' '.join(r.rules)} | {tests or '-'} | {verdict} |")
     return "\n".join(lines)

@@ -47,6 +47,8 @@ def selftest_command(args: argparse.Namespace) -> int:
 
     def progress(run: FaultRun, i: int, n: int) -> None:
         status = "ok" if run.ok else "PROBLEM"
+        if run.kind == "interaction" and run.ok:
+            status += " (interaction: caught)" if run.caught else " (interaction: left to ckesc explore)"
         print(f"[{i:>3}/{n}] {run.fault or '(faultless)':<34} {len(run.failing):>3} failing  {status}", flush=True)
 
     try:

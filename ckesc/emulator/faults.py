@@ -4,6 +4,12 @@ The suite's self-test switches each fault on and checks that the tests citing th
 names fail, and only those. Rule ids are requirement ids of ``ckesc/protocol/requirements.toml``:
 ``F..``/``R..`` from ``spec/INTERPRETATIONS.md``, ``4.4.5-T`` for a section's parameter table,
 ``4.4.2-4`` for a numbered clarification of the document.
+
+Two kinds: a ``single`` fault breaks one feature on its own, and the suite, which tests features one at a time,
+must catch it. An ``interaction`` fault lives where two features meet, as real firmware has them (a save that
+rewrites a whole flash block and clobbers its neighbour, a second suspend that latches): its rules are those of
+the behaviour the faultless model follows, and the self-test reports whether the suite catches it, and by which
+tests, or leaves it to ``ckesc explore`` (model-based exploration).
 """
 
 from __future__ import annotations
@@ -11,12 +17,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from types import MappingProxyType
 
+SINGLE = "single"
+INTERACTION = "interaction"
+
 
 @dataclass(frozen=True)
 class Fault:
     name: str
     rules: tuple[str, ...]
     description: str
+    kind: str = SINGLE  # SINGLE or INTERACTION (see the module docstring)
 
 
 _FAULTS = (
@@ -130,9 +140,46 @@ _FAULTS = (
     Fault("set_freq_read_wrong", ("4.4.22-2",), "Set/Get Freq read answers the defaults, not the settings"),
     Fault("major_config_bits_swapped", ("4.4.28-1",), "242 puts the direction in bit 6 and the source in bit 7"),
     Fault("maintenance_counts_wrong", ("4.4.27-T",), "241 option 2 swaps the power-up and stop counters"),
+    # where features meet (kind INTERACTION): each feature works alone
+    Fault("led_save_reverts_rotation", ("R13", "4.4.21-4"),
+          "Set Led with option 1 rewrites the flash word it shares with the rotation, taking the rotation from the copy "
+          "read at power-up: a direction set since power-up is lost at the next power cycle", INTERACTION),
+    Fault("freq_save_resets_led", ("R13", "4.4.20-5"),
+          "a Set Freq write rewrites the settings block with the LED at its factory default: a saved LED colour and "
+          "blink are lost at the next power cycle", INTERACTION),
+    Fault("rotation_save_resets_intervals", ("R13", "4.4.22-6"),
+          "Set Rotation 0 / 1 rewrites the settings block with the default report intervals (10, 50, 250): intervals "
+          "set before are lost at the next power cycle", INTERACTION),
+    Fault("source_save_reverts_led", ("R13", "4.4.20-5"),
+          "Throttle Select rewrites the settings block with the LED from the copy read at power-up: an LED saved since "
+          "power-up is lost at the next power cycle", INTERACTION),
+    Fault("set_id_resets_source", ("R13", "4.4.23-4"),
+          "Set ID (inside the 120 s window) rewrites the node record with the throttle source back at CAN", INTERACTION),
+    Fault("second_suspend_latches", ("4.4.2-1", "4.4.2-T"),
+          "MSG Control suspends nest: a suspend while suspended needs a resume of its own, so the first resume after "
+          "two suspends is answered but reporting stays off", INTERACTION),
+    Fault("resume_reloads_default_intervals", ("R9",),
+          "a resume after a suspension restarts the report timers at the default intervals (10, 50, 250) until the "
+          "next Set Freq write or power-up; Set/Get Freq still reads the settings", INTERACTION),
+    Fault("set_freq_moves_other_stream", ("R9",),
+          "a Set Freq write that changes MSG1's interval and not MSG2's reloads MSG2's timer with MSG1's interval "
+          "(until MSG2's own is written or the next power-up)", INTERACTION),
+    Fault("comm_loss_sticky_after_resume", ("R8",),
+          "once reporting has been suspended and resumed, the comm-loss flag is no longer cleared by the next "
+          "command (until the next power-up)", INTERACTION),
+    Fault("baud_change_counts_power_up_twice", ("4.4.27-T", "4.4.10-T"),
+          "the power-up that brings a new Set Baud bit rate into force counts two power-ups", INTERACTION),
+    Fault("throttle_select_drops_10b", ("4.4.17-1", "R5"),
+          "after a Throttle Select (until the next power-up) RawCommand_10b is ignored: the parser table is rebuilt "
+          "with the 14-bit and 12-bit formats only", INTERACTION),
 )
 
 FAULTS = MappingProxyType({f.name: f for f in _FAULTS})
+
+
+def interaction(name: str) -> bool:
+    """Whether fault ``name`` is an INTERACTION fault (the suite need not catch it)."""
+    return FAULTS[name].kind == INTERACTION
 
 
 def check(names) -> frozenset[str]:

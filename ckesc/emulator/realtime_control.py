@@ -121,7 +121,8 @@ class ControlCommands:
         return {"faults": {str(esc.node_id): sorted(esc.faults) for esc in self._escs}}
 
     def _cmd_faults(self, req: dict, reply: Reply) -> dict:
-        return {"faults": {f.name: {"rules": list(f.rules), "description": f.description} for f in _faults.FAULTS.values()}}
+        return {"faults": {f.name: {"rules": list(f.rules), "description": f.description, "kind": f.kind}
+                           for f in _faults.FAULTS.values()}}
 
     def _cmd_bitrate(self, req: dict, reply: Reply) -> dict:
         value = req.get("bitrate")

@@ -33,6 +33,8 @@ EXPECTED = {
     # extra MSG1 frames answering throttle break the report cadence (R9) besides 4.4.15-1..4.4.17-1, and
     # the ESC at 0x7D then sends MSG1 (F7): the bus rules name R9 and F7, which the fault does not list
     "throttle_answered": {"report-interval", "default-node-reports"},
+    # an interaction fault this script meets: its resume after non-default intervals brings the defaults back (R9)
+    "resume_reloads_default_intervals": {"report-interval"},
 }
 #: Faults whose bus-rule violations cite rules the fault does not list (see above).
 CITES_OTHER_RULES = {"throttle_answered"}
