@@ -8,21 +8,8 @@ from .. import run as run_lib
 from ..harness.traces import TRACE_FORMATS
 
 
-def add_run_command(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "run",
-        help="run the conformance suite against a DUT and write reports",
-        description=run_lib.__doc__.split("\n\n")[1] if run_lib.__doc__ else None,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="Select sections by number or test modules by path: `ckesc run 4.4.22 4.4.3`, `ckesc run "
-               "conformance/test_s4_4_22_set_freq.py`; a selection that matches nothing is an error (exit 2). Any "
-               "other pytest option can follow `--`, e.g. `ckesc run -- -k set_freq -x`.",
-    )
-    r = p.add_argument_group("several benches at once (pytest-xdist: pip install 'ckesc-conformance[rig]')")
-    r.add_argument("--rig", metavar="FILE", help="a rig file (fixtures/rigs/*.toml): run on every bench of it at once, one "
-                   "pytest-xdist worker per bench; each bench's report in <reports>/<timestamp>/<bench>/, and batch.html, "
-                   "batch.json and a merged junit.xml beside them. The options below are then set per bench by the rig")
-    r.add_argument("--benches", metavar="A,B", help="--rig: only these benches (default: every bench of the rig)")
+def add_bench_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
+    """The bench options ``ckesc run`` and ``ckesc explore`` share (the device under test, its lane and power)."""
     g = p.add_argument_group("device under test")
     g.add_argument("--dut", choices=("emulator", "bus"), default="emulator", help="default: emulator")
     g.add_argument("--lane", choices=("simulated", "realtime"), default="simulated",
@@ -60,6 +47,25 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
                    "requirements that allow each: ckesc emulate --list-variants)")
     g.add_argument("--emulator-variants", type=int, default=None, metavar="SEED",
                    help="emulator: play the conforming combination drawn from SEED (--emulator-option wins over it)")
+    return g
+
+
+def add_run_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run the conformance suite against a DUT and write reports",
+        description=run_lib.__doc__.split("\n\n")[1] if run_lib.__doc__ else None,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="Select sections by number or test modules by path: `ckesc run 4.4.22 4.4.3`, `ckesc run "
+               "conformance/test_s4_4_22_set_freq.py`; a selection that matches nothing is an error (exit 2). Any "
+               "other pytest option can follow `--`, e.g. `ckesc run -- -k set_freq -x`.",
+    )
+    r = p.add_argument_group("several benches at once (pytest-xdist: pip install 'ckesc-conformance[rig]')")
+    r.add_argument("--rig", metavar="FILE", help="a rig file (fixtures/rigs/*.toml): run on every bench of it at once, one "
+                   "pytest-xdist worker per bench; each bench's report in <reports>/<timestamp>/<bench>/, and batch.html, "
+                   "batch.json and a merged junit.xml beside them. The options below are then set per bench by the rig")
+    r.add_argument("--benches", metavar="A,B", help="--rig: only these benches (default: every bench of the rig)")
+    g = add_bench_options(p)
     g.add_argument("--order", choices=("overlap", "collection"), default="overlap",
                    help="overlap (default): tests that neither power-cycle nor reconfigure the DUT run while a 120 s "
                    "Set ID / Set Baud window elapses, persistence tests share power cycles; collection: one test "

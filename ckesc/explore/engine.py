@@ -32,6 +32,7 @@ class Found:
     seconds_before: float  # wall seconds of exploration before it was first seen
     lane_seconds_before: float
     shrink_runs: int = 0
+    also: list[str] = field(default_factory=list)  # problems seen only beside this one, in a longer program (folded in)
 
     @property
     def finding(self):
@@ -66,10 +67,11 @@ class _Shows(Exception):
 
 
 def explore(session: Session, *, budget_s: float, seed: int = 0, database: str | None = None, shrink_s: float | None = None,
-            max_size: int = 12, stop_at_first: bool = False, progress: Callable[[Stats], None] | None = None,
+            max_size: int = 12, stop_at_first: bool = False, max_programs: int | None = None, progress: Callable[[Stats], None] | None = None,
             clock: Callable[[], float] = time.monotonic) -> tuple[list[Found], Stats]:
     """Explore until ``budget_s`` wall seconds have passed; returns the problems found (shrunk) and the stats.
     A problem found is shrunk for at most ``shrink_s`` more (default: half the budget, at least 30 s).
+    ``max_programs``: also stop generating after that many programs (a budget that does not depend on the machine).
     ``clock``: the wall clock the budget is measured on (a budget is a person's time, not the lane's)."""
     from hypothesis import HealthCheck, Phase, given, settings
     from hypothesis import seed as hseed
@@ -86,7 +88,7 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
     hard = budget_s + (max(30.0, budget_s / 2) if shrink_s is None else shrink_s)
 
     def over() -> bool:
-        return clock() - start >= budget_s
+        return clock() - start >= budget_s or (max_programs is not None and stats.programs >= max_programs)
 
     round_no = 0
     broken: list[RestoreError] = []
@@ -94,7 +96,7 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
     while not over() and not (stop_at_first and found) and not broken:
 
         def check(program: list[Action]) -> None:
-            if broken or clock() - start >= (hard if current else budget_s):
+            if broken or (clock() - start >= hard if current else over()):
                 return  # the budget is spent: what is being shrunk stays as found so far
             try:
                 outcome = session.run(program)
@@ -133,15 +135,27 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
         except Exception as exc:  # noqa: BLE001 - a flaky DUT (the shrunk program passed once): keep what showed it
             if not current or type(exc).__name__ not in ("Flaky", "FlakyFailure", "FlakyReplay"):
                 raise
-        for f in current.values():
-            known.add(f.key)
-            found.append(f)
+        known.update(current)
+        found.extend(fold(list(current.values())))
         current.clear()
         round_no += 1
     stats.wall = clock() - start
     if broken:
         raise broken[0]
     return found, stats
+
+
+def fold(round_found: list[Found]) -> list[Found]:
+    """A problem first seen in a longer program beside one shrunk shorter in the same round is most likely its
+    consequence (a DUT left suspended refuses the settings after it): it is listed under that one, not alone."""
+    kept: list[Found] = []
+    for f in sorted(round_found, key=lambda f: (len(f.program), _cost(f.program))):
+        root = next((k for k in kept if k.key in {g.key for g in f.outcome.findings}), None)
+        if root is not None:
+            root.also.append(f.key)
+        else:
+            kept.append(f)
+    return kept
 
 
 def current_key(current: dict[str, Found], new: list) -> str:

@@ -135,8 +135,29 @@ def _answered(req: Frame) -> bool:
     return req.name == "get_esc_id"
 
 
+def _refusals(oracle: Oracle) -> list[tuple[float, str]]:
+    """(when, the rule) of every write the model refused: R12 while suspended, R11 Set ID / Set Baud after the
+    120 s window, R10 an illegal value. A read-back that differs after one is also that rule's business."""
+    out = []
+    ups = [s.t for s in oracle.states if s.label == "power on"]
+    for req, _ in oracle.host:
+        if (req.name, req.transfer_id or 0) not in oracle.free:
+            continue
+        state = _state_at(oracle, req.timestamp)
+        up = max([oracle.powered_at] + [t for t in ups if t <= req.timestamp])
+        if state.mode == "suspended":
+            rule = "R12"
+        elif req.name in ("set_id", "set_baud") and req.timestamp - up > cat.CONFIG_WINDOW_S:
+            rule = "R11"
+        else:
+            rule = "R10"
+        out.append((req.timestamp, rule))
+    return out
+
+
 def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Finding]:
     out = []
+    refused = _refusals(oracle)
     model = [f for f in oracle.out if f.source != p.host_node]
     powered = False  # a power cycle came before (a read-back is then also R13's)
     for req, step in oracle.host:
@@ -163,6 +184,7 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
         a = {k: v for k, v in got.fields.items() if keys is None or k in keys}
         b = {k: v for k, v in want.fields.items() if keys is None or k in keys}
         rids = reqs[:1] + (["R13"] if powered and req.name in _PERSISTED else [])
+        rids += list(dict.fromkeys(rule for t, rule in refused if t < req.timestamp and rule not in rids))
         for k in b:
             if a.get(k) != b[k]:
                 out.append(Finding("answer", rids, f"{req.name} {_fields(req)} answered {k}={a.get(k)}, the model {b[k]}",
@@ -251,7 +273,7 @@ def _interval_finding(state: State, stream: str, stamps: list[float], end: float
 def _stream_reqs(state: State, stream: str) -> list[str]:
     """The requirement a stream's flowing or not comes from, by the mode the model is in and what led there."""
     if state.label in ("power on", "ready"):
-        return ["R13", "4.4.1-4"] if stream == "can_test" or state.mode == "normal" else ["R13"]
+        return ["R13", "4.4.1-4"] if stream == "can_test" else ["R13"]
     if state.label == "can_test" or state.mode == "can_test":
         return ["R16", "4.4.1-3"] if state.mode != "can_test" else ["R16", "4.4.1-2"]
     if stream == "exp" or state.mode == "exp":
