@@ -242,11 +242,11 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
             rids = _stream_reqs(state, stream)
             on = stream in _FLOWING.get(state.mode, ())
             if on and m and hi - lo >= 2 * iv and not d:
-                out.append(Finding("stream", rids, f"{_label(stream)} stopped ({state.mode} after {state.label})",
+                out.append(Finding("stream", rids, f"{_label(stream)} stopped ({state.mode} since {state.cause})",
                                    f"no {_label(stream)} for {hi - lo:.3f} s", f"{len(m)} frames",
                                    lo - t0, state.step, subject=f"{stream} stopped, {state.mode}"))
             elif not on and d:
-                out.append(Finding("stream", rids, f"{_label(stream)} sent ({state.mode} after {state.label})",
+                out.append(Finding("stream", rids, f"{_label(stream)} sent ({state.mode} since {state.cause})",
                                    f"{len(d)} frames, the first at t={d[0] - t0:.3f} s", "none", d[0] - t0, state.step,
                                    subject=f"{stream} sent, {state.mode}"))
             elif stream in ("msg1", "msg2", "msg3") and len(m) >= 2:
@@ -266,19 +266,19 @@ def _interval_finding(state: State, stream: str, stamps: list[float], end: float
     if abs(mean - iv) <= tol:
         return []
     return [Finding("interval", ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, not {iv * 1000:g} ms "
-                    f"({state.mode} after {state.label})", f"mean of {gaps} gaps {mean * 1000:.2f} ms",
+                    f"({state.mode} since {state.cause})", f"mean of {gaps} gaps {mean * 1000:.2f} ms",
                     f"{iv * 1000:g} ms (+-{tol * 1000:.2f})", seen[0] - t0, state.step, subject=f"{stream} interval")]
 
 
 def _stream_reqs(state: State, stream: str) -> list[str]:
     """The requirement a stream's flowing or not comes from, by the mode the model is in and what led there."""
-    if state.label in ("power on", "ready"):
+    if state.cause in ("power on", "ready"):
         return ["R13", "4.4.1-4"] if stream == "can_test" else ["R13"]
-    if state.label == "can_test" or state.mode == "can_test":
+    if state.cause == "can_test" or state.mode == "can_test":
         return ["R16", "4.4.1-3"] if state.mode != "can_test" else ["R16", "4.4.1-2"]
     if stream == "exp" or state.mode == "exp":
         return ["4.4.2-T"]
-    if state.mode == "suspended" or state.label == "msg_control":
+    if state.mode == "suspended" or state.cause == "msg_control":
         return ["4.4.2-1", "4.4.2-T"]
     return ["R9"]
 
@@ -325,7 +325,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
             continue  # one finding per kind of wrong bit
         seen.add(bits)
         rids = ["R8", "R7"] if bits & 0x2000 else ["R7"]
-        out.append(Finding("status", rids, f"MSG1 status bits {bits:#06x} differ ({state.mode} after {state.label})",
+        out.append(Finding("status", rids, f"MSG1 status bits {bits:#06x} differ ({state.mode} since {state.cause})",
                            f"status {f.fields['status']:#06x}", f"status {want:#06x} (bits {STATUS_MASK:#06x} compared)",
                            t - t0, _state_at(oracle, t).step, subject=f"status {bits:#06x}"))
     return out

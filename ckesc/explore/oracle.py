@@ -45,6 +45,7 @@ class State:
     mode: str  # normal | suspended | exp | can_test | off
     intervals: dict[str, float]
     step: int | None = None
+    cause: str = ""  # the event that put the model's ESC into this mode (the label of the state it changed at)
 
 
 @dataclass
@@ -150,4 +151,7 @@ class Oracle:
     def _note(self, t: float, label: str, step: int | None = None) -> None:
         nvm = self.model.nvm
         intervals = {k: nvm[f"{k}_interval"] * cat.INTERVAL_UNIT_S for k in ("msg1", "msg2", "msg3")}
-        self.states.append(State(t, label, self.mode(), intervals, step))
+        mode = self.mode()
+        prev = self.states[-1] if self.states else None
+        cause = prev.cause if prev is not None and prev.mode == mode and label not in ("power on", "ready") else label
+        self.states.append(State(t, label, mode, intervals, step, cause))
