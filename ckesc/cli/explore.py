@@ -41,9 +41,14 @@ def add_explore_command(sub: argparse._SubParsersAction) -> None:
     x.add_argument("--replay", metavar="FILE", help="run the program of a replay file once (a finding's "
                    "findings/finding_N.replay.json) on the bench it names, or on the bench options given")
     x.add_argument("--max-steps", type=int, default=12, help="the longest program generated (default 12)")
-    x.add_argument("--database", metavar="DIR", help="Hypothesis's example database: past findings replay first "
+    x.add_argument("--database", metavar="DIR", help="where every finding's program is kept: the next exploration runs them first "
                    "(default: <reports>/explore-db; 'none' for none)")
     x.add_argument("--first", action="store_true", help="stop at the first finding (once shrunk)")
+    x.add_argument("--selftest", metavar="FAULTS", help="the self-test: for each emulator fault (comma-separated, or "
+                   "'all'), explore a fresh emulated bench from --seed until it is found or --budget is spent, and "
+                   "say within how many programs, steps and seconds (a Markdown table; --out writes it and its JSON)")
+    x.add_argument("--max-programs", type=int, help="also stop after this many programs (per fault with --selftest)")
+    x.add_argument("--out", metavar="FILE", help="--selftest: write the table here and its JSON beside it")
     o = p.add_argument_group("output")
     o.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
     o.add_argument("-q", "--quiet", action="store_true", help="no progress lines")

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
+from pathlib import Path
 from typing import Any, TextIO
 
 from ..harness.dut import DutError
@@ -27,12 +29,16 @@ def bench_options(args: argparse.Namespace) -> dict[str, Any]:
 def open_session(options: dict[str, Any]) -> Session:
     try:
         return Session(options)
-    except (PreflightError, DutError, BenchGone, OSError) as exc:
+    except PreflightError as exc:  # a set-up mistake (options, fault names, profile): a usage error
+        raise ValueError(str(exc)) from None
+    except (DutError, BenchGone, OSError) as exc:
         raise BenchProblem(f"cannot use the bench: {exc}") from None
 
 
 def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
     """``ckesc explore``: 0 nothing found, 1 a finding (or a replay that still shows one)."""
+    if getattr(args, "selftest", None):
+        return selftest_command(args, out)
     if args.replay:
         bench, program, finding = load_replay(args.replay)
         mine = bench_options(args)
@@ -62,7 +68,8 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
 
     try:
         found, stats = explore(session, budget_s=args.budget, seed=args.seed, database=database,
-                               max_size=args.max_steps, stop_at_first=args.first, progress=progress)
+                               max_size=args.max_steps, stop_at_first=args.first, progress=progress,
+                               max_programs=getattr(args, "max_programs", None))
     except (RestoreError, DutError, BenchGone) as exc:
         raise BenchProblem(str(exc)) from None
     finally:
@@ -74,3 +81,29 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
     write_reports(where, found, stats, info)
     print(summary_text(found, stats, where), file=out)
     return 1 if found else 0
+
+
+def selftest_command(args: argparse.Namespace, out: TextIO) -> int:
+    """``ckesc explore --selftest FAULTS``: 0 when exploration found every fault (citing one of its rules)."""
+    from ..emulator.faults import FAULTS
+    from .selftest import find_faults, table
+
+    names = list(FAULTS) if args.selftest == "all" else [f for f in args.selftest.split(",") if f]
+    unknown = set(names) - set(FAULTS)
+    if unknown:
+        raise ValueError(f"unknown fault(s) {', '.join(sorted(unknown))}")
+    options = {k: v for k, v in bench_options(args).items() if k != "emulator_faults"}
+
+    def progress(row) -> None:
+        if not args.quiet:
+            print(f"{row.fault:<34} {'found' if row.found else 'NOT found'} after {row.programs} programs, "
+                  f"{row.seconds} s", file=out, flush=True)
+
+    rows = find_faults(names, budget_s=args.budget, seed=args.seed, max_programs=getattr(args, "max_programs", None),
+                       options=options, progress=progress)
+    text = table(rows)
+    print(text, file=out)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+        Path(args.out).with_suffix(".json").write_text(json.dumps([r.to_json() for r in rows], indent=1) + "\n")
+    return 0 if all(r.found for r in rows) else 1

@@ -2,22 +2,26 @@
 shrinks each disagreement with the oracle on the DUT itself to the shortest program that still shows it.
 
 The budget is spent in rounds of :data:`ROUND` programs, each a Hypothesis run seeded from ``(seed, round)``:
-the same seed gives the same programs, round after round. Hypothesis's example database (``database``, a
-directory) replays the failing programs of past explorations first. A problem already found (its
+the same seed gives the same programs, round after round. The database (``database``, a directory) keeps every
+finding's shrunk program, and the next exploration runs those first (ours: Hypothesis's own example database
+stores choice sequences, which a change of the action strategy reinterprets; a program is what a person reads). A problem already found (its
 :attr:`Finding.key`) is not found again: a later program that shows only known problems passes, so each round
 looks for something new. Shrinking stops with the budget (the program found so far is kept, shrunk or not).
 """
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable
 
-from .actions import Action, programs
+from .actions import Action, program_from_json, program_json, programs
 from .runner import Outcome, RestoreError, Session
 
 ROUND = 25  # programs per Hypothesis run (a round); shrinking comes on top
+PAST = "past-findings.json"  # in the database directory: every finding's program, run first next time
 
 
 @dataclass
@@ -75,9 +79,7 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
     ``clock``: the wall clock the budget is measured on (a budget is a person's time, not the lane's)."""
     from hypothesis import HealthCheck, Phase, given, settings
     from hypothesis import seed as hseed
-    from hypothesis.database import DirectoryBasedExampleDatabase
 
-    db = DirectoryBasedExampleDatabase(database) if database else None
     stats = Stats()
     start = clock()
     found: list[Found] = []
@@ -90,8 +92,19 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
     def over() -> bool:
         return clock() - start >= budget_s or (max_programs is not None and stats.programs >= max_programs)
 
-    round_no = 0
     broken: list[RestoreError] = []
+    for program in _past(database):  # the findings of earlier explorations first, as they were shrunk
+        if over():
+            break
+        outcome = session.run(program)
+        stats.wall = clock() - start
+        stats.add(outcome)
+        new = [f for f in outcome.findings if f.key not in known]
+        if new:
+            known.add(new[0].key)
+            found.append(Found(list(program), outcome, new[0].key, stats.programs - 1, stats.steps - len(program),
+                               stats.wall, stats.lane - outcome.seconds))
+    round_no = 0
     current: dict[str, Found] = {}  # what this round found (being shrunk)
     while not over() and not (stop_at_first and found) and not broken:
 
@@ -124,9 +137,9 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
 
         test = given(strategy)(check)
         test._hypothesis_internal_add_digest = f"ckesc-explore-{session.profile.name}".encode()
-        test = settings(max_examples=ROUND, deadline=None, database=db, derandomize=False, print_blob=False,
+        test = settings(max_examples=ROUND, deadline=None, database=None, derandomize=False, print_blob=False,
                         report_multiple_bugs=False, suppress_health_check=list(HealthCheck),
-                        phases=(Phase.explicit, Phase.reuse, Phase.generate, Phase.shrink))(test)
+                        phases=(Phase.explicit, Phase.generate, Phase.shrink))(test)
         test = hseed(seed * 100_003 + round_no)(test)
         try:
             test()
@@ -140,9 +153,31 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
         current.clear()
         round_no += 1
     stats.wall = clock() - start
+    _remember(database, found)
     if broken:
         raise broken[0]
     return found, stats
+
+
+def _past(database: str | None) -> list[list[Action]]:
+    path = Path(database, PAST) if database else None
+    if path is None or not path.exists():
+        return []
+    return [program_from_json(p) for p in json.loads(path.read_text())]
+
+
+def _remember(database: str | None, found: list[Found]) -> None:
+    """Add the programs of ``found`` to the database's past findings (each once)."""
+    if not database or not found:
+        return
+    path = Path(database, PAST)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    known = json.loads(path.read_text()) if path.exists() else []
+    for f in found:
+        p = program_json(f.program)
+        if p not in known:
+            known.append(p)
+    path.write_text(json.dumps(known, indent=1) + "\n")
 
 
 def fold(round_found: list[Found]) -> list[Found]:

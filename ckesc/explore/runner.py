@@ -41,6 +41,7 @@ PROBE = (Action("send", "get_major_configuration", {"option": 0}),
          Action("send", "set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}),
          Action("send", "get_esc_id", {"option": 0}))
 STREAM_PERIOD_S = 0.01
+POWER_SETTLE_S = 0.3  # read after a power-up: the reports that should flow (or not) show before the next step
 SETTLE_S = 0.6  # read after the last step, so that what it did shows (MSG1 and MSG2 judged after the settle)
 
 
@@ -185,7 +186,9 @@ class Session:
             nonlocal fed, power_fed
             events: list[tuple[float, int, Any]] = []
             for msg in rec.messages[fed:]:
-                if not msg.is_rx and msg.is_extended_id and (msg.arbitration_id & 0x7F) == dut.host_node \
+                # the host's own frames, by their source node (an echo is is_rx False in the simulated lane and on
+                # SocketCAN, True through socketcand)
+                if msg.is_extended_id and (msg.arbitration_id & 0x7F) == dut.host_node \
                         and not msg.is_error_frame and not msg.is_remote_frame:
                     events.append((msg.timestamp, 1, msg))
             for when, on in rec.power[power_fed:]:
@@ -206,6 +209,8 @@ class Session:
             if action.op == "power" and rec.power:
                 powered_at = rec.power[-1][0]
                 oracle.mark(self.lane.now(), "ready", i)  # the DUT reported again (or its boot bound passed)
+                dut.wait(POWER_SETTLE_S)  # what it does after a power-up shows before the next step
+                feed(i)
             steps.append((start - t0, self.lane.now() - t0))
             if i == len(program) - 1:
                 dut.stop_throttle()

@@ -154,6 +154,21 @@ def test_replay_in_real_time_against_ckesc_emulate():
 
 @pytest.mark.slow
 def test_explore_finds_a_fault_in_real_time():
-    found, stats = _explore({"lane": "realtime", "emulator_faults": "suspend_persisted"}, budget_s=300, max_programs=60,
-                            stop_at_first=True)
+    found, stats = _explore({"lane": "realtime", "emulator_faults": "suspend_persisted"}, budget_s=240, max_programs=60,
+                            stop_at_first=True, shrink_s=90)
     assert found and "R13" in found[0].finding.requirements, stats.line()
+
+
+def test_past_findings_replay_first(tmp_path):
+    """Hypothesis's example database: a finding of an earlier exploration is the first program of the next (~3 s)."""
+    db = str(tmp_path / "db")
+    firsts = []
+    for seed in (SEED, 99):
+        session = Session({"emulator_faults": "suspend_persisted"})
+        try:
+            found, _ = explore(session, seed=seed, database=db, budget_s=600, max_programs=40, stop_at_first=True)
+        finally:
+            session.close()
+        assert found
+        firsts.append(found[0].programs_before)
+    assert firsts[1] == 0, firsts
