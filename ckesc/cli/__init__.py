@@ -30,6 +30,7 @@ from .control import add_control_command
 from .decode import add_decode_command
 from .emulate import add_emulate_command
 from .encode import add_encode_command
+from .explore import add_explore_command
 from .frames import add_frames_command
 from .report import add_report_command
 from .run import add_run_command
@@ -39,6 +40,7 @@ from .selftest import add_selftest_command
 COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
     add_run_command,
     add_selftest_command,
+    add_explore_command,
     add_report_command,
     add_compare_command,
     add_decode_command,

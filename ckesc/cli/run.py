@@ -17,6 +17,15 @@ from .common import UsageError
 USAGE = "%(prog)s [OPTION ...] [SECTION | MODULE[::TEST] ...] [-- PYTEST_ARGUMENT ...]"
 
 
+def add_bench_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
+    """The bench options ``ckesc run`` and ``ckesc explore`` share (the device under test, its lane and power), from
+    the one option table."""
+    g = p.add_argument_group(options.DUT)
+    for o in options.bench_options():
+        g.add_argument(*o.run_flags, **o.arguments(run=True))
+    return g
+
+
 def add_run_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "run",

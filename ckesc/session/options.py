@@ -178,6 +178,12 @@ def add_pytest_options(parser) -> None:
             group.addoption(o.pytest_flag, **o.arguments())
 
 
+def bench_options() -> tuple[Option, ...]:
+    """The options that say which bench the run drives (the device under test, its lane, bus and power): what
+    ``ckesc run`` and ``ckesc explore`` share."""
+    return tuple(o for o in OPTIONS if o.group == DUT and o.dest != "ckesc_order")
+
+
 def run_options() -> Iterable[Option]:
     """``ckesc run``'s options, in ``--help``'s order."""
     return (o for o in OPTIONS if o.run_flags)

@@ -1,0 +1,68 @@
+"""``ckesc explore``: model-based exploration of a DUT (:mod:`ckesc.explore`), with ``ckesc run``'s bench options."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+
+from .common import UsageError
+from .run import add_bench_options
+
+EXIT_FOUND = 1
+EXIT_BENCH = 3  # the bench failed the explorer (unreachable DUT, a state it could not restore): no verdict
+
+
+def parse_budget(text: str) -> float:
+    """``90``, ``90s``, ``10m``, ``1h``, ``1h30m`` -> seconds."""
+    m = re.fullmatch(r"\s*(?:(\d+(?:\.\d+)?)h)?\s*(?:(\d+(?:\.\d+)?)m)?\s*(?:(\d+(?:\.\d+)?)s?)?\s*", text)
+    if not m or not any(m.groups()):
+        raise argparse.ArgumentTypeError(f"a duration like 90s, 10m or 1h, not {text!r}")
+    h, mins, s = (float(g) if g else 0.0 for g in m.groups())
+    return h * 3600 + mins * 60 + s
+
+
+def add_explore_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "explore",
+        help="generate programs of host actions, run them on the DUT and the ESC model in lockstep, shrink every "
+             "disagreement to a replayable test",
+        description="Model-based exploration (issue #22): programs of host actions drawn from the frame catalogue run "
+                    "on the DUT, a faultless ESC model fed the same frames at the same bus times predicts what the "
+                    "document requires, and every disagreement is shrunk on the DUT to the shortest program that shows "
+                    "it, written as a replay file and a standalone pytest test. Exit 1 when something was found.",
+    )
+    add_bench_options(p)
+    x = p.add_argument_group("exploration")
+    x.add_argument("--budget", type=parse_budget, default=600.0, metavar="DURATION",
+                   help="how long to explore, wall time (90s, 10m, 1h; default 10m); shrinking a finding may take up "
+                        "to half as long again")
+    x.add_argument("--seed", type=int, default=0, help="same seed, same programs (default 0)")
+    x.add_argument("--replay", metavar="FILE", help="run the program of a replay file once (a finding's "
+                   "findings/finding_N.replay.json) on the bench it names, or on the bench options given")
+    x.add_argument("--max-steps", type=int, default=12, help="the longest program generated (default 12)")
+    x.add_argument("--database", metavar="DIR", help="where every finding's program is kept: the next exploration runs them first "
+                   "(default: <reports>/explore-db; 'none' for none)")
+    x.add_argument("--first", action="store_true", help="stop at the first finding (once shrunk)")
+    x.add_argument("--selftest", metavar="FAULTS", help="the self-test: for each emulator fault (comma-separated, or "
+                   "'all'), explore a fresh emulated bench from --seed until it is found or --budget is spent, and "
+                   "say within how many programs, steps and seconds (a Markdown table; --out writes it and its JSON)")
+    x.add_argument("--max-programs", type=int, help="also stop after this many programs (per fault with --selftest)")
+    x.add_argument("--out", metavar="FILE", help="--selftest: write the table here and its JSON beside it")
+    o = p.add_argument_group("output")
+    o.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
+    o.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+
+    def handler(args: argparse.Namespace) -> int:
+        from ..explore import command
+
+        given = {k for k in command.BENCH_OPTIONS if getattr(args, k) != p.get_default(k)}
+        try:
+            return command.main(args, given, out=sys.stdout)
+        except command.BenchProblem as exc:
+            print(f"ckesc explore: {exc}", file=sys.stderr)
+            return EXIT_BENCH
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+
+    p.set_defaults(handler=handler)

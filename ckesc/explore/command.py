@@ -1,0 +1,109 @@
+"""What ``ckesc explore`` does with its arguments (the command line only parses them and maps the exit code)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+from typing import Any, TextIO
+
+from ..bench.dut import DutError
+from ..bench.errors import PreflightError
+from ..bench.lanes import BenchGone
+from .engine import Stats, explore
+from .report import load_replay, run_dir, summary_text, write_reports
+from .runner import DEFAULTS, RestoreError, Session
+
+BENCH_OPTIONS = tuple(DEFAULTS)
+
+
+class BenchProblem(RuntimeError):
+    """The bench could not be used (exit 3): nothing was judged."""
+
+
+def bench_options(args: argparse.Namespace) -> dict[str, Any]:
+    return {k: getattr(args, k) for k in BENCH_OPTIONS if getattr(args, k, None) is not None}
+
+
+def open_session(options: dict[str, Any]) -> Session:
+    try:
+        return Session(options)
+    except PreflightError as exc:  # a set-up mistake (options, fault names, profile): a usage error
+        raise ValueError(str(exc)) from None
+    except (DutError, BenchGone, OSError) as exc:
+        raise BenchProblem(f"cannot use the bench: {exc}") from None
+
+
+def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
+    """``ckesc explore``: 0 nothing found, 1 a finding (or a replay that still shows one)."""
+    if getattr(args, "selftest", None):
+        return selftest_command(args, out)
+    if args.replay:
+        bench, program, finding = load_replay(args.replay)
+        mine = bench_options(args)
+        options = {**bench, **{k: v for k, v in mine.items() if k in given or k not in bench}}
+        session = open_session(options)
+        try:
+            outcome = session.run(program)
+        except (RestoreError, DutError, BenchGone) as exc:
+            raise BenchProblem(str(exc)) from None
+        finally:
+            session.close()
+        print(f"replayed {len(program)} steps in {outcome.seconds:.3f} s of lane time", file=out)
+        for f in outcome.findings:
+            print(f.text(), file=out)
+        same = finding is not None and any(f.key == finding.get("key") for f in outcome.findings)
+        if finding is not None:
+            print(f"the finding of {os.path.basename(args.replay)} ({finding.get('key')}): "
+                  f"{'reproduced' if same else 'NOT reproduced'}", file=out)
+        return 1 if outcome.findings else 0
+    options = bench_options(args)
+    session = open_session(options)
+    database = None if args.database == "none" else (args.database or os.path.join(args.reports, "explore-db"))
+
+    def progress(stats: Stats) -> None:
+        if not args.quiet:
+            print(stats.line(), file=out, flush=True)
+
+    try:
+        found, stats = explore(session, budget_s=args.budget, seed=args.seed, database=database,
+                               max_size=args.max_steps, stop_at_first=args.first, progress=progress,
+                               max_programs=getattr(args, "max_programs", None))
+    except (RestoreError, DutError, BenchGone) as exc:
+        raise BenchProblem(str(exc)) from None
+    finally:
+        session.close()
+    where = run_dir(args.reports)
+    info = {"bench": options, "seed": args.seed, "budget_s": args.budget, "lane": session.lane.name,
+            "clock": session.lane.clock, "profile": session.profile.name, "faults": options.get("emulator_faults") or "",
+            "emulator_variants": options.get("emulator_variants"), "emulator_option": options.get("emulator_option")}
+    write_reports(where, found, stats, info)
+    print(summary_text(found, stats, where), file=out)
+    return 1 if found else 0
+
+
+def selftest_command(args: argparse.Namespace, out: TextIO) -> int:
+    """``ckesc explore --selftest FAULTS``: 0 when exploration found every fault (citing one of its rules)."""
+    from ..emulator.faults import FAULTS
+    from .selftest import find_faults, table
+
+    names = list(FAULTS) if args.selftest == "all" else [f for f in args.selftest.split(",") if f]
+    unknown = set(names) - set(FAULTS)
+    if unknown:
+        raise ValueError(f"unknown fault(s) {', '.join(sorted(unknown))}")
+    options = {k: v for k, v in bench_options(args).items() if k != "emulator_faults"}
+
+    def progress(row) -> None:
+        if not args.quiet:
+            print(f"{row.fault:<34} {'found' if row.found else 'NOT found'} after {row.programs} programs, "
+                  f"{row.seconds} s", file=out, flush=True)
+
+    rows = find_faults(names, budget_s=args.budget, seed=args.seed, max_programs=getattr(args, "max_programs", None),
+                       options=options, progress=progress)
+    text = table(rows)
+    print(text, file=out)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+        Path(args.out).with_suffix(".json").write_text(json.dumps([r.to_json() for r in rows], indent=1) + "\n")
+    return 0 if all(r.found for r in rows) else 1

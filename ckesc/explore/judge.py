@@ -1,0 +1,340 @@
+"""Comparing what the DUT sent with what the oracle model predicts, only where the document is specific (sans-IO).
+
+Observations compared (each a :class:`Finding` when they differ):
+- **answers**: every request the model answers must be answered (4.1.1-2; R2 for MSG Control, R1 for
+  GET_ESC_ID), with the model's payload: read-backs (214 read, 242, 241 option 2's counters, GET_ESC_ID) and the
+  answers to accepted writes. A request the model rejects (R10-R12) is free: answered or not, with anything
+  (``rejected_answer``). 240's identity and 241's run times and temperatures are the DUT's own: presence only.
+- **streams**: per stretch between two events (a host frame other than throttle, a power switch) and per
+  report (MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test), whether it flows, judged only after the
+  stretch has settled (R9a's restart allowance of the longer interval, answer delay and the bench's error; a
+  power-up's boot time); which MSG_EXP frames come is OBSERVE (R9-exp), only that some do.
+- **intervals** (R9): from the third report after the event (R9a: the gaps before are OBSERVE), the mean gap
+  of MSG1/2/3 against the model's interval, held to 1 ms plus the bench's error and jitter over the gaps.
+- **status** (R7, R8): each MSG1's bits 15, 14, 13 and 8 against the model's MSG1s within one interval
+  (R8's window for bit 13: the flag may come up to one MSG1 interval after the model's).
+The live bus rules (``evidence/live.py``) run beside this and are findings of their own (runner).
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import asdict, dataclass, field
+from typing import Any, Iterable
+
+from ..protocol import catalogue as cat
+from ..protocol.frame import Frame, frame_bits
+from ..protocol.ids import Kind
+from ..protocol.requirements import requirement
+from .oracle import Oracle, State
+
+#: MSG1 status bits compared (R7): direction, throttle source, comm fault (R8), running
+STATUS_MASK = 0x8000 | 0x4000 | 0x2000 | 0x0100
+#: the requirement an answer's payload comes from, per request
+ANSWER_REQ = {
+    "get_major_configuration": "4.4.28-1", "set_freq": "4.4.22-2", "maintenance_information": "4.4.27-T",
+    "get_esc_id": "R1", "msg_control": "4.4.2-T", "set_led": "4.4.20-T", "set_rotation": "4.4.21-T",
+    "set_id": "4.4.18-1", "set_baud": "4.4.19-T", "throttle_select": "4.4.23-1", "self_test": "4.4.24-1",
+    "esc_information": "4.4.26-T",
+}
+#: settings whose read-back after a power cycle R13 covers
+_PERSISTED = {"get_major_configuration", "set_freq", "get_esc_id"}
+#: fields compared per answer (None: all); () presence only
+_COMPARED = {"esc_information": (), "maintenance_information": ("power_ups", "stops")}
+_EXP = frozenset(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp") and s.name != "msg_exp12")
+STREAMS = ("msg1", "msg2", "msg3", "exp", "can_test")
+#: what flows in each mode of the model's ESC (4.4.2's table, R16; R9-exp: which MSG_EXP frames is OBSERVE)
+_FLOWING = {"normal": ("msg1", "msg2", "msg3"), "exp": ("exp",), "can_test": ("can_test",)}
+_THROTTLE = ("raw_command_14b", "raw_command_12b", "raw_command_10b")
+ANSWER_WAIT_S = cat.ANSWER_DELAY_MAX_S + 0.036  # what the runner reads for an answer, plus its error below
+#: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
+#: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
+_ECHO_SLACK_S = 0.005
+
+
+@dataclass
+class Finding:
+    kind: str  # answer | stream | interval | status | bus_rule
+    requirements: list[str]
+    what: str
+    dut: str
+    model: str
+    at: float  # lane seconds from the program's start
+    step: int | None = None  # the program step it follows (index), None: before any
+    strength: str = field(default="")
+    subject: str = ""  # what disagrees, without the numbers of this occurrence (the problem's key)
+
+    def __post_init__(self) -> None:
+        if not self.strength:
+            strengths = [requirement(r).strength for r in self.requirements if _known(r)]
+            self.strength = "SHALL" if "SHALL" in strengths else ("READING" if "READING" in strengths else "OBSERVE")
+
+    @property
+    def key(self) -> str:
+        """The same problem, whatever program shows it (and however it got there): kind and subject."""
+        return f"{self.kind}|{self.subject or self.what}"
+
+    def to_json(self) -> dict[str, Any]:
+        return {**asdict(self), "key": self.key}
+
+    def text(self) -> str:
+        where = f"after step {self.step + 1}" if self.step is not None else "before the first step"
+        return (f"[{' '.join(self.requirements)} {self.strength}] {self.what} ({where}, t={self.at:.3f} s)\n"
+                f"  DUT:   {self.dut}\n  model: {self.model}")
+
+
+def _known(rid: str) -> bool:
+    try:
+        requirement(rid)
+    except KeyError:
+        return False
+    return True
+
+
+@dataclass
+class Params:
+    error: float = 0.0  # the bench's timing error (s)
+    jitter: float = 0.0  # the DUT's declared report jitter (profile jitter_s)
+    boot_s: float = 0.5  # power-on to first report (profile)
+    bitrate: int = cat.DEFAULT_BITRATE
+    host_node: int = 0
+
+
+def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[Finding]:
+    """Every disagreement between the DUT's frames (decoded, from the ESC, bus timestamps) and the model's."""
+    dut = sorted((f for f in dut if f.source != p.host_node and f.timestamp is not None), key=lambda f: f.timestamp)
+    out = _answers(oracle, dut, t0, p)
+    out += _streams(oracle, dut, t0, t_end, p)
+    out += _status(oracle, dut, t0, p)
+    return [f for f in out if f.strength != "OBSERVE"]
+
+
+# ------------------------------------------------------------------------------------------ answers
+def _answer_of(frames: Iterable[Frame], req: Frame, until: float, since: float | None = None) -> Frame | None:
+    since = req.timestamp if since is None else since
+    for f in frames:
+        if f.timestamp < since:
+            continue
+        if f.timestamp > until:
+            return None
+        if req.kind is Kind.REQUEST:
+            if f.kind is Kind.RESPONSE and f.type_id == req.type_id and f.transfer_id == req.transfer_id:
+                return f
+        elif f.kind is Kind.MESSAGE and f.type_id == req.type_id:  # (only the ESC's frames are given)
+            return f
+    return None
+
+
+def _answered(req: Frame) -> bool:
+    """Whether the document says this request is answered (and the model's answer is the DUT's to match)."""
+    if req.kind is Kind.REQUEST:
+        spec = req.spec
+        if spec is None or not spec.responses:
+            return False
+        if req.name == "maintenance_information" and req.fields.get("option") not in (0, 1, 2):
+            return False  # other options: not in the table
+        return True
+    if req.name == "msg_control":
+        return req.fields.get("command") in (cat.MSG_CONTROL_SUSPEND, cat.MSG_CONTROL_RESUME, cat.MSG_CONTROL_RESUME_EXP)
+    return req.name == "get_esc_id"
+
+
+def _refusals(oracle: Oracle) -> list[tuple[float, str]]:
+    """(when, the rule) of every write the model refused: R12 while suspended, R11 Set ID / Set Baud after the
+    120 s window, R10 an illegal value. A read-back that differs after one is also that rule's business."""
+    out = []
+    ups = [s.t for s in oracle.states if s.label == "power on"]
+    for req, _ in oracle.host:
+        if (req.name, req.transfer_id or 0) not in oracle.free:
+            continue
+        state = _state_at(oracle, req.timestamp)
+        up = max([oracle.powered_at] + [t for t in ups if t <= req.timestamp])
+        if state.mode == "suspended":
+            rule = "R12"
+        elif req.name in ("set_id", "set_baud") and req.timestamp - up > cat.CONFIG_WINDOW_S:
+            rule = "R11"
+        else:
+            rule = "R10"
+        out.append((req.timestamp, rule))
+    return out
+
+
+def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Finding]:
+    out = []
+    refused = _refusals(oracle)
+    model = [f for f in oracle.out if f.source != p.host_node]
+    powered = False  # a power cycle came before (a read-back is then also R13's)
+    for req, step in oracle.host:
+        if req.name in ("raw_command_14b", "raw_command_12b", "raw_command_10b"):
+            continue
+        if req.kind is Kind.MESSAGE and req.name not in ("msg_control", "get_esc_id"):
+            continue
+        if any(s.label == "power on" and s.t <= req.timestamp and s.t > t0 for s in oracle.states):
+            powered = True
+        if not _answered(req) or (req.name, req.transfer_id or 0) in oracle.free:
+            continue
+        want = _answer_of(model, req, req.timestamp + ANSWER_WAIT_S)
+        if want is None:  # the model's ESC does not answer it (not addressed to it, off, booting): nothing to compare
+            continue
+        got = _answer_of(dut, req, req.timestamp + ANSWER_WAIT_S + 2 * p.error,
+                         since=req.timestamp - (_ECHO_SLACK_S + 2 * p.error if p.error else 0.0))
+        reqs = [ANSWER_REQ.get(req.name, cat.spec(req.name).section)]
+        if req.kind is Kind.REQUEST and req.name not in ("get_esc_id", "msg_control"):
+            reqs.append("4.1.1-2")
+        if got is None:
+            out.append(Finding("answer", reqs, f"{req.name} {_fields(req)} not answered", "no answer",
+                               f"{_fields(want)}", req.timestamp - t0, step, subject=f"{req.name} not answered"))
+            continue
+        keys = _COMPARED.get(req.name)
+        a = {k: v for k, v in got.fields.items() if keys is None or k in keys}
+        b = {k: v for k, v in want.fields.items() if keys is None or k in keys}
+        rids = reqs[:1] + (["R13"] if powered and req.name in _PERSISTED else [])
+        rids += list(dict.fromkeys(rule for t, rule in refused if t < req.timestamp and rule not in rids))
+        for k in b:
+            if a.get(k) != b[k]:
+                out.append(Finding("answer", rids, f"{req.name} {_fields(req)} answered {k}={a.get(k)}, the model {b[k]}",
+                                   _fields(got), _fields(want), req.timestamp - t0, step, subject=f"{req.name}.{k}"))
+    return out
+
+
+def _fields(f: Frame) -> str:
+    return "{" + ", ".join(f"{k}={v:#x}" if isinstance(v, int) and v > 0xFFFF else f"{k}={v}"
+                           for k, v in f.fields.items()) + "}"
+
+
+# ------------------------------------------------------------------------------------------ streams
+def _stream_of(f: Frame) -> str | None:
+    n = f.name
+    if n in ("msg1", "msg2", "msg3", "can_test"):
+        return n if f.kind is Kind.MESSAGE else None
+    return "exp" if n in _EXP else None
+
+
+def _segments(oracle: Oracle, t_end: float) -> list[tuple[State, State | None, float]]:
+    """(the state a stretch starts in, the state before it, its end)."""
+    states = oracle.states
+    return [(s, states[i - 1] if i else None, states[i + 1].t if i + 1 < len(states) else t_end)
+            for i, s in enumerate(states)]
+
+
+def _interval(state: State, stream: str) -> float:
+    if stream in state.intervals:
+        return state.intervals[stream]
+    return max(state.intervals.values())  # MSG_EXP frames, CAN Test: at most the longest (R9-exp: OBSERVE)
+
+
+def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[Finding]:
+    out = []
+    by = {k: ([], []) for k in STREAMS}
+    for i, frames in enumerate((dut, oracle.out)):
+        for f in frames:
+            s = _stream_of(f)
+            if s is not None and f.source != p.host_node:
+                by[s][i].append(f.timestamp)
+    frame_s = frame_bits(8) / p.bitrate
+    for state, before, end in _segments(oracle, t_end):
+        for stream in STREAMS:
+            iv = _interval(state, stream)
+            old = _interval(before, stream) if before is not None else iv
+            settle = 1.25 * max(iv, old) + cat.RESTART_SLACK_MIN_S + cat.ANSWER_DELAY_MAX_S + 2 * p.error + p.jitter
+            if state.label == "power on":
+                settle += p.boot_s
+            lo, hi = state.t + settle, end - 2 * p.error - frame_s
+            if hi <= lo:
+                continue
+            d = _between(by[stream][0], lo, hi)
+            m = _between(by[stream][1], lo, hi)
+            rids = _stream_reqs(state, stream)
+            on = stream in _FLOWING.get(state.mode, ())
+            if on and m and hi - lo >= 2 * iv and not d:
+                out.append(Finding("stream", rids, f"{_label(stream)} stopped ({state.mode} since {state.cause})",
+                                   f"no {_label(stream)} for {hi - lo:.3f} s", f"{len(m)} frames",
+                                   lo - t0, state.step, subject=f"{stream} stopped, {state.mode}"))
+            elif not on and d:
+                out.append(Finding("stream", rids, f"{_label(stream)} sent ({state.mode} since {state.cause})",
+                                   f"{len(d)} frames, the first at t={d[0] - t0:.3f} s", "none", d[0] - t0, state.step,
+                                   subject=f"{stream} sent, {state.mode}"))
+            elif stream in ("msg1", "msg2", "msg3") and len(m) >= 2:
+                out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, frame_s)
+    return out
+
+
+def _interval_finding(state: State, stream: str, stamps: list[float], end: float, iv: float, t0: float, p: Params,
+                      frame_s: float) -> list[Finding]:
+    """R9 on the DUT's reports of one stretch from its third report on (R9a: the gaps before are OBSERVE)."""
+    seen = _between(stamps, state.t, end - 2 * p.error)[2:]
+    if len(seen) < 4:
+        return []
+    gaps = len(seen) - 1
+    mean = (seen[-1] - seen[0]) / gaps
+    tol = 0.001 + (2 * p.error + 2 * frame_s + p.jitter) / gaps
+    if abs(mean - iv) <= tol:
+        return []
+    return [Finding("interval", ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, not {iv * 1000:g} ms "
+                    f"({state.mode} since {state.cause})", f"mean of {gaps} gaps {mean * 1000:.2f} ms",
+                    f"{iv * 1000:g} ms (+-{tol * 1000:.2f})", seen[0] - t0, state.step, subject=f"{stream} interval")]
+
+
+def _stream_reqs(state: State, stream: str) -> list[str]:
+    """The requirement a stream's flowing or not comes from, by the mode the model is in and what led there."""
+    if state.cause in ("power on", "ready"):
+        return ["R13", "4.4.1-4"] if stream == "can_test" else ["R13"]
+    if state.cause == "can_test" or state.mode == "can_test":
+        return ["R16", "4.4.1-3"] if state.mode != "can_test" else ["R16", "4.4.1-2"]
+    if stream == "exp" or state.mode == "exp":
+        return ["4.4.2-T"]
+    if state.mode == "suspended" or state.cause == "msg_control":
+        return ["4.4.2-1", "4.4.2-T"]
+    return ["R9"]
+
+
+def _label(stream: str) -> str:
+    return {"exp": "MSG_EXP reporting", "can_test": "CAN Test frames"}.get(stream, stream.upper())
+
+
+def _between(stamps: list[float], lo: float, hi: float) -> list[float]:
+    return stamps[bisect.bisect_left(stamps, lo):bisect.bisect_right(stamps, hi)]
+
+
+# ------------------------------------------------------------------------------------------ MSG1 status
+def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Finding]:
+    model = [f for f in oracle.out if f.name == "msg1" and f.kind is Kind.MESSAGE]
+    stamps = [f.timestamp for f in model]
+    host_times = [f.timestamp for f, _ in oracle.host if f.name not in _THROTTLE]
+    commands = oracle.commands
+    ups = [st.t for st in oracle.states if st.label in ("start", "power on")]
+    out: list[Finding] = []
+    seen: set[int] = set()
+    for f in dut:
+        if f.name != "msg1" or f.kind is not Kind.MESSAGE or "status" not in f.fields:
+            continue
+        t = f.timestamp
+        if _between(host_times, t - cat.ANSWER_DELAY_MAX_S - 2 * p.error, t + _ECHO_SLACK_S + 2 * p.error):
+            continue  # a setting just sent (its echo may be stamped late): when within its answer time it shows is not written
+        state = _state_at(oracle, t)
+        reach = state.intervals["msg1"] + 0.001 + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
+        near = model[bisect.bisect_left(stamps, t - reach):bisect.bisect_right(stamps, t + reach)]
+        if not near:
+            continue
+        mask = STATUS_MASK
+        up = ups[max(0, bisect.bisect_right(ups, t) - 1)]
+        if not _between(commands, up, t):  # no command since the power-up: when its boot ends is the DUT's own (1-2)
+            mask &= ~0x2000
+        got = f.fields["status"] & mask
+        if any(m.fields["status"] & mask == got for m in near):
+            continue
+        want = near[len(near) // 2].fields["status"] & mask
+        bits = got ^ want
+        if bits in seen:
+            continue  # one finding per kind of wrong bit
+        seen.add(bits)
+        rids = ["R8", "R7"] if bits & 0x2000 else ["R7"]
+        out.append(Finding("status", rids, f"MSG1 status bits {bits:#06x} differ ({state.mode} since {state.cause})",
+                           f"status {f.fields['status']:#06x}", f"status {want:#06x} (bits {STATUS_MASK:#06x} compared)",
+                           t - t0, _state_at(oracle, t).step, subject=f"status {bits:#06x}"))
+    return out
+
+
+def _state_at(oracle: Oracle, t: float) -> State:
+    times = [s.t for s in oracle.states]
+    return oracle.states[max(0, bisect.bisect_right(times, t) - 1)]

@@ -1,0 +1,157 @@
+"""The ESC model as oracle, in lockstep with the DUT (sans-IO: frames and times in, predictions out).
+
+A fresh, faultless :class:`~ckesc.emulator.model.EscModel` is given the DUT's state at the start of a program
+(its node id, the settings 242 and 214 read back, the counters of 241) and then exactly what the DUT was
+given: every host frame, at the bus time the DUT saw it (its echo's timestamp), and every power switch at the
+lane time it happened. What it sends is its prediction; :mod:`ckesc.explore.judge` compares it with what the
+DUT sent, only where the document (or a stated READING) is specific.
+
+The model plays the emulator's default choice of every freedom (``variants.py``); where its choice shows in
+what it sends, the judge does not look (an answer to a rejected request, the first reports after a restart,
+which MSG_EXP frames come). A rejected request (R10-R12: whether and how it is answered is free) is noted in
+:attr:`Oracle.free` and gets no predicted answer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from ..emulator.model import EXP_MODE, SUSPENDED, EscConfig, EscModel, factory_nvm
+from ..protocol import catalogue as cat
+from ..protocol.errors import DecodeError
+from ..protocol.frame import Decoder, Frame
+
+#: DUT settings (Dut.settings() keys, 242 / 214) -> the model's flash keys: the same names
+SETTING_KEYS = ("rotation", "throttle_source", "throttle_channel", "led_color", "led_blink",
+                "msg1_interval", "msg2_interval", "msg3_interval")
+
+
+class _OracleModel(EscModel):
+    """The faultless model, noting every request it rejects (its answer is the DUT's freedom: R10-R12)."""
+
+    free: set[tuple[str, int]]
+
+    def _respond_rejected(self, req: Frame, now: float, current: dict) -> None:
+        self.free.add((req.name, req.transfer_id or 0))
+
+
+@dataclass
+class State:
+    """What the model's ESC is doing after an event: its mode and report intervals (seconds)."""
+
+    t: float
+    label: str
+    mode: str  # normal | suspended | exp | can_test | off
+    intervals: dict[str, float]
+    step: int | None = None
+    cause: str = ""  # the event that put the model's ESC into this mode (the label of the state it changed at)
+
+
+@dataclass
+class Oracle:
+    """Drive a faultless model along the DUT's program. ``baseline``: the DUT's node id, settings and counters
+    as read at the program's start; ``powered_at``: the lane time of the DUT's current power-up (its 120 s window)."""
+
+    baseline: Mapping[str, Any]
+    powered_at: float
+    start: float | None = None  # the program's start (what the model sends before it is not kept)
+    host_node: int = 0
+    model: _OracleModel = field(init=False)
+    out: list[Frame] = field(default_factory=list)  # the model's frames, decoded, stamped with their due time
+    states: list[State] = field(default_factory=list)
+    host: list[tuple[Frame, int | None]] = field(default_factory=list)  # host frames fed, with the program step
+    commands: list[float] = field(default_factory=list)  # when the model's ESC took a RawCommand as its own (R8's clock)
+
+    def __post_init__(self) -> None:
+        b = self.baseline
+        config = EscConfig(node_id=b["node_id"], throttle_channel=b.get("throttle_channel"), boot_time=0.0,
+                           report_delay=0.0, baud_code=b.get("baud", cat.DEFAULT_BAUD_CODE))
+        nvm = factory_nvm(config)
+        nvm.update({k: b[k] for k in SETTING_KEYS if k in b})
+        nvm.update({k: b[k] for k in ("power_ups", "stops") if b.get(k) is not None})
+        if b.get("power_ups") is not None:
+            nvm["power_ups"] = (b["power_ups"] - 1) & 0xFFFF  # power_on() below counts the power-up the DUT had
+        self.model = _OracleModel(config, nvm)
+        self.model.free = set()
+        self._decoder = Decoder()
+        self.model.power_on(self.powered_at)
+        start = self.powered_at if self.start is None else self.start
+        self.advance(start)
+        self.out.clear()
+        self._note(start, "start")
+
+    # ---------------------------------------------------------------- feeding
+    @property
+    def free(self) -> set[tuple[str, int]]:
+        return self.model.free
+
+    @property
+    def node_id(self) -> int:
+        return self.model.node_id
+
+    def advance(self, t: float) -> None:
+        """Let the model run up to lane time ``t``, keeping what it sends."""
+        m = self.model
+        while (d := m.next_deadline()) is not None and d <= t:
+            self._keep(m.poll(d))
+            if m.next_deadline() == d:  # nothing more can happen at d (guards a model that re-arms at once)
+                break
+        self._keep(m.poll(t))
+
+    def host_frame(self, msg: Any, step: int | None = None) -> None:
+        """A host frame the DUT heard at ``msg.timestamp`` (its bus echo)."""
+        t = msg.timestamp
+        self.advance(t)
+        try:
+            frame = self._decoder.decode(msg)
+        except DecodeError:
+            frame = None
+        self.model.receive(msg, t)
+        if self.model.last_command == t:
+            self.commands.append(t)
+        self._keep(self.model.poll(t))
+        if frame is not None:
+            self.host.append((frame, step))
+            if frame.name not in ("raw_command_14b", "raw_command_12b", "raw_command_10b"):
+                self._note(t, frame.name, step)
+
+    def power(self, on: bool, t: float, step: int | None = None) -> None:
+        self.advance(t)
+        if on:
+            self.model.power_on(t)
+        else:
+            self.model.power_off(t)
+        self._note(t, "power on" if on else "power off", step)
+
+    def mark(self, t: float, label: str, step: int | None = None) -> None:
+        """A moment the runner knows of (the DUT ready after a power-up): a stretch of its own for the judge."""
+        self.advance(t)
+        self._note(t, label, step)
+
+    def finish(self, t: float) -> None:
+        self.advance(t)
+
+    # ---------------------------------------------------------------- what it predicts
+    def _keep(self, wires) -> None:
+        for w in wires:
+            try:
+                self.out.append(self._decoder.decode(w))
+            except DecodeError:  # the faultless model sends nothing that does not decode
+                raise AssertionError(f"the oracle model sent a frame that does not decode: {w}") from None
+
+    def mode(self) -> str:
+        m = self.model
+        if not m.powered:
+            return "off"
+        if m.can_test:
+            return "can_test"
+        return {SUSPENDED: "suspended", EXP_MODE: "exp"}.get(m.reporting, "normal")
+
+    def _note(self, t: float, label: str, step: int | None = None) -> None:
+        nvm = self.model.nvm
+        intervals = {k: nvm[f"{k}_interval"] * cat.INTERVAL_UNIT_S for k in ("msg1", "msg2", "msg3")}
+        mode = self.mode()
+        prev = self.states[-1] if self.states else None
+        cause = prev.cause if prev is not None and prev.mode == mode and label not in ("power on", "ready") else label
+        self.states.append(State(t, label, mode, intervals, step, cause))

@@ -1,0 +1,263 @@
+"""Running a program on the DUT, with the oracle model in lockstep and the live bus rules listening (the IO part).
+
+:class:`Session` opens the bench as ``ckesc run`` would (the same options, the same lanes and profile), finds
+the DUT and notes its settings: the *baseline* every program starts from. :meth:`Session.run` puts the DUT back
+into that known state (a power cycle where the bench has power control, then the settings restored and
+verified, as the suite's ``dut`` fixture does), runs the program step by step, feeds every host frame and power
+switch to a fresh :class:`~ckesc.explore.oracle.Oracle` after each step (so that a request goes to the node id
+the model says the DUT has), reads the settings back at the end, and returns an :class:`Outcome`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import can
+
+from ..bench.dut import Dut, DutError, echo_probe
+from ..bench.lanes import BusLane, Lane
+from ..bench.verdict import Inconclusive
+from ..emulator import variants
+from ..evidence.live import LaneRules
+from ..protocol import catalogue as cat
+from ..protocol.errors import DecodeError
+from ..protocol.frame import Decoder, Frame
+from ..session import lane_setup, options, preflight
+from .actions import Action, Bench, stream_fields
+from .judge import Finding, Params, judge
+from .oracle import SETTING_KEYS, Oracle
+
+#: The bench options and their defaults, as the pytest plugin has them (the one option table)
+DEFAULTS: dict[str, Any] = {o.dest: o.default for o in options.bench_options()}
+#: The read-back every program ends with: a setting clobbered anywhere in it shows here (242, 214, GET_ESC_ID)
+PROBE = (Action("send", "get_major_configuration", {"option": 0}),
+         Action("send", "set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}),
+         Action("send", "get_esc_id", {"option": 0}))
+STREAM_PERIOD_S = 0.01
+POWER_SETTLE_S = 0.3  # read after a power-up: the reports that should flow (or not) show before the next step
+SETTLE_S = 0.6  # read after the last step, so that what it did shows (MSG1 and MSG2 judged after the settle)
+
+
+class _Options:
+    """What ``lane_setup.make_lane`` asks a pytest config for, from a plain dict of bench options."""
+
+    def __init__(self, options: Mapping[str, Any]) -> None:
+        self.options = {**DEFAULTS, **{k: v for k, v in options.items() if v is not None}}
+
+    def getoption(self, name: str) -> Any:
+        return self.options[name]
+
+
+class Recorder(can.Listener):
+    """Every frame the lane reads (both directions) and every power switch, with lane times."""
+
+    def __init__(self, lane: Lane) -> None:
+        self.lane = lane
+        self.messages: list[can.Message] = []
+        self.power: list[tuple[float, bool]] = []
+        self.powered = True
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.messages.append(msg)
+
+    def power_switched(self, when: float) -> None:
+        self.powered = not self.powered
+        self.power.append((when, self.powered))
+
+
+@dataclass
+class Outcome:
+    program: list[Action]
+    findings: list[Finding]
+    t0: float
+    t_end: float
+    messages: list[can.Message]  # the whole trace of the program (BLF)
+    dut: list[Frame]  # the DUT's frames, decoded
+    model: list[Frame]  # the oracle's frames
+    steps: list[tuple[float, float]] = field(default_factory=list)  # each step's start and end (lane s from t0)
+    features: set[str] = field(default_factory=set)
+
+    @property
+    def seconds(self) -> float:
+        return self.t_end - self.t0
+
+
+class RestoreError(RuntimeError):
+    """The DUT could not be put back into the baseline state: not a finding, the explorer's problem."""
+
+
+class Session:
+    """One bench, open for a whole exploration (many programs)."""
+
+    def __init__(self, options: Mapping[str, Any]) -> None:
+        self.options = _Options(options)
+        get = self.options.getoption
+        if get("power") == "labgrid":
+            raise preflight.PreflightError("ckesc explore: --power labgrid is not supported yet (use command)")
+        profile = preflight.profile(get)
+        played = lane_setup.emulator_options(self.options) if get("dut") == "emulator" else {}
+        for key, value in variants.declared(played).items():  # what the emulated ESC's vendor would state
+            if value > getattr(profile, key):
+                profile = dataclasses.replace(profile, **{key: value})
+        self.profile = profile
+        self.lane = lane_setup.make_lane(self.options, profile)
+        self.recorder = Recorder(self.lane)
+        self.rules = LaneRules(self.lane, jitter=profile.jitter_s)
+        self.lane.listeners.extend([self.recorder, self.rules])
+        if isinstance(self.lane, BusLane):
+            self.lane.find_echo(echo_probe(nibble_order=profile.nibble_order))
+        spin = get("allow_motor_spin")
+        self.dut = Dut(self.lane, profile, node_id=get("node_id"), allow_motor_spin=bool(spin))
+        self.baseline_node = self.dut.node_id
+        self.baseline = self.dut.settings()
+        self.baud_code = next((c for c, r in cat.BAUD_RATES.items() if r == self.lane.bitrate), cat.DEFAULT_BAUD_CODE)
+        self.params = Params(error=self.lane.timing_error, jitter=profile.jitter_s, boot_s=profile.boot_s,
+                             bitrate=self.lane.bitrate, host_node=self.dut.host_node)
+
+    @property
+    def bench(self) -> Bench:
+        return Bench(power=self.lane.power.available, node_id=self.baseline_node, baud_code=self.baud_code,
+                     window_waits=self.lane.clock == "simulated", absent=frozenset(self.profile.absent))
+
+    def close(self) -> None:
+        try:
+            self.dut.zero_throttle()
+        finally:
+            self.lane.close()
+
+    # ---------------------------------------------------------------- known state
+    def _reset(self) -> float:
+        """Put the DUT back to the baseline: power cycle (else leave CAN Test, resume), node id, settings.
+        Returns the lane time of its current power-up (its 120 s window's start)."""
+        dut = self.dut
+        dut.trace.clear()  # what the Dut has read (its lookups scan it): this program's only
+        dut.stop_throttle()
+        powered_at = self.lane.now() - cat.CONFIG_WINDOW_S - 10.0  # no power control: the window is long gone
+        try:
+            if self.lane.power.available:
+                powered_at = dut.switch_power(self.profile.off_s, self.profile.boot_s)
+            if not dut.frames("msg1", since=self.lane.now() - 1.0, source=dut.node_id):
+                dut.broadcast("can_test", {"option": cat.CAN_TEST_OFF, "count": 0})
+                dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+                dut.wait(cat.ANSWER_DELAY_MAX_S * 2)
+            node = dut.discover()
+            dut.node_id = node
+            if node != self.baseline_node or dut.settings()["throttle_channel"] != self.baseline["throttle_channel"]:
+                # a program moved it (Set ID): back, inside this power-up's window
+                if self.lane.now() - powered_at > cat.CONFIG_WINDOW_S - 5:
+                    raise RestoreError(f"the DUT is at node {node}, not {self.baseline_node}, and no power control "
+                                       "opens a Set ID window to move it back")
+                dut.ask("set_id", {"node_id": self.baseline_node, "throttle_channel": self.baseline["throttle_channel"]})
+                dut.node_id = self.baseline_node
+            left = dut.restore(self.baseline)
+        except (DutError, Inconclusive, AssertionError) as exc:
+            raise RestoreError(f"could not put the DUT back into its starting state: {exc}") from None
+        if left:
+            raise RestoreError(f"could not restore the DUT's settings: {'; '.join(left)}")
+        return powered_at
+
+    def _oracle(self, powered_at: float, t0: float) -> Oracle:
+        counters = self.dut.ask("maintenance_information", {"option": 2})
+        baseline = {"node_id": self.baseline_node, "baud": self.baud_code, **{k: self.baseline[k] for k in SETTING_KEYS},
+                    "power_ups": counters.get("power_ups"), "stops": counters.get("stops")}
+        return Oracle(baseline, powered_at, start=t0, host_node=self.dut.host_node)
+
+    # ---------------------------------------------------------------- one program
+    def run(self, program: Sequence[Action]) -> Outcome:
+        powered_at = self._reset()
+        oracle = self._oracle(powered_at, self.lane.now())
+        dut, rec = self.dut, self.recorder
+        rec.messages.clear()
+        rec.power.clear()
+        self.rules.begin()
+        t0 = self.lane.now()
+        fed = 0
+        power_fed = 0
+        steps: list[tuple[float, float]] = []
+
+        def feed(step: int | None) -> None:
+            nonlocal fed, power_fed
+            events: list[tuple[float, int, Any]] = []
+            for msg in rec.messages[fed:]:
+                # the host's own frames, by their source node (an echo is is_rx False in the simulated lane and on
+                # SocketCAN, True through socketcand)
+                if msg.is_extended_id and (msg.arbitration_id & 0x7F) == dut.host_node \
+                        and not msg.is_error_frame and not msg.is_remote_frame:
+                    events.append((msg.timestamp, 1, msg))
+            for when, on in rec.power[power_fed:]:
+                events.append((when, 0, on))
+            fed, power_fed = len(rec.messages), len(rec.power)
+            for when, kind, what in sorted(events, key=lambda e: (e[0], e[1])):
+                if kind:
+                    oracle.host_frame(what, step)
+                else:
+                    oracle.power(what, when, step)
+            dut.node_id = oracle.node_id  # where the model says the DUT is now (Set ID)
+
+        full = list(program) + list(PROBE)
+        for i, action in enumerate(full):
+            start = self.lane.now()
+            self._do(action, oracle, powered_at)
+            feed(i)
+            if action.op == "power" and rec.power:
+                powered_at = rec.power[-1][0]
+                oracle.mark(self.lane.now(), "ready", i)  # the DUT reported again (or its boot bound passed)
+                dut.wait(POWER_SETTLE_S)  # what it does after a power-up shows before the next step
+                feed(i)
+            steps.append((start - t0, self.lane.now() - t0))
+            if i == len(program) - 1:
+                dut.stop_throttle()
+        dut.wait(SETTLE_S)
+        feed(len(full) - 1)
+        t_end = self.lane.now()
+        oracle.finish(t_end)
+        frames = _decode(rec.messages)
+        findings = judge(oracle, frames, t0, t_end, self.params)
+        found, _count = self.rules.take()
+        for v in found:
+            at = v.timestamp - t0
+            findings.append(Finding("bus_rule", list(v.rules) or ["4.1.1-1"], f"bus rule {v.check}: {v.message}",
+                                    str(v), "the rule holds", at, None, strength=v.strength,
+                                    subject=f"{' '.join(v.rules)} {v.check}"))
+        findings = [f for f in findings if f.strength != "OBSERVE"]
+        return Outcome(list(program), findings, t0, t_end, list(rec.messages), frames, list(oracle.out), steps,
+                       {a.feature for a in program})
+
+    def _do(self, action: Action, oracle: Oracle, powered_at: float) -> None:
+        dut = self.dut
+        if action.op == "send":
+            spec = cat.spec(action.name)
+            if spec.service:
+                dut.request(action.name, action.fields, destination=oracle.node_id)
+            else:
+                dut.broadcast(action.name, action.fields, **({"layout": "query"} if action.name == "get_esc_id" else {}))
+                dut.wait(cat.ANSWER_DELAY_MAX_S + 0.006 + 2 * self.lane.timing_error)
+        elif action.op == "stream":
+            dut.stop_throttle()
+            dut.throttle_stream(action.name, stream_fields(action.name), period=STREAM_PERIOD_S)
+            dut.wait(0.05)
+        elif action.op == "stop":
+            dut.stop_throttle()
+            dut.wait(0.01)
+        elif action.op == "power":
+            if self.lane.power.available:
+                dut.switch_power(self.profile.off_s, self.profile.boot_s)
+        elif action.op == "wait":
+            dut.wait(action.seconds)
+        elif action.op == "window":
+            dut.read_until(max(self.lane.now(), powered_at + cat.CONFIG_WINDOW_S + 1.0 + 2 * self.lane.timing_error))
+        else:
+            raise ValueError(f"unknown action {action.op!r}")
+
+
+def _decode(messages) -> list[Frame]:
+    decoder = Decoder()
+    out = []
+    for m in messages:
+        try:
+            out.append(decoder.decode(m))
+        except DecodeError:
+            continue  # what does not decode is the bus rules' (4.1) business
+    return out
