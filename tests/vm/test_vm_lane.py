@@ -26,7 +26,7 @@ from ckesc.bench.profile import DutProfile
 
 ROOT = Path(__file__).resolve().parents[2]
 VM_LANE = ROOT / "tools" / "vm-lane"
-PROFILE = ROOT / "ckesc" / "harness" / "profiles" / "vcan-vm.toml"
+PROFILE = ROOT / "ckesc" / "bench" / "profiles" / "vcan-vm.toml"
 REPORTS = ROOT / "reports" / "vm"  # the inner run's JUnit lands in reports/vm/<timestamp>/ (kept out of git)
 #: vm-lane's own --timeout, boot included: the ci subset took 2-5 minutes on a loaded 2-core host; never hang
 LANE_TIMEOUT_S = 600
