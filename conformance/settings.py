@@ -7,11 +7,15 @@
 - :class:`Setting`: one persisted setting as its section sets it up: read it back (242), the next legal value
   (each setting is reached from another, so a command that does nothing shows), and the set-up write that
   makes a test INCONCLUSIVE, not FAILed, when it does not take (whether it takes is another test's verdict).
+- The neighbour check (R13 across settings): ``neighbours_moved`` moves every other persisted setting, the section
+  saves its own, ``check_neighbours_kept`` reads them all back at once and after a proven power cycle - a save that
+  rewrites a whole flash block clobbers a neighbour, and no single-setting test sees it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -62,3 +66,89 @@ class Setting:
         if self.current(dut) != value:
             raise Inconclusive(f"{self.title} {value} did not take {self.conditions} (see {self.judged_by}): this test "
                                "cannot be judged")
+
+
+# ------------------------------------------------------------------------------------------ neighbours (R13)
+#: Report intervals to move to: each set differs from the other and from the defaults (10, 50, 250).
+_INTERVALS = ({"msg1_interval": 20, "msg2_interval": 60, "msg3_interval": 80},
+              {"msg1_interval": 25, "msg2_interval": 70, "msg3_interval": 90})
+#: A saved LED to move to: neither is the factory default (green, not blinking).
+_LEDS = ({"led_color": 4, "led_blink": 1}, {"led_color": 1, "led_blink": 2})  # red blinking, blue blinking fast
+
+#: The persisted settings (R13) a test can move at once, outside the 120 s window and with the motor stopped: what
+#: a settings section's save must leave as it is (``neighbours_moved``'s ``but`` names the one a section saves), with
+#: the settings each is read back as and the request that saves it.
+NEIGHBOURS = {
+    "rotation": (("rotation",), "Set Rotation"),
+    "throttle_source": (("throttle_source",), "Throttle Select"),
+    "led": (("led_color", "led_blink"), "Set Led option 1"),
+    "intervals": (("msg1_interval", "msg2_interval", "msg3_interval"), "Set Freq"),
+}
+
+
+def _other(current: Mapping[str, Any], choices: tuple[dict[str, int], ...]) -> dict[str, int]:
+    return choices[all(current[k] == v for k, v in choices[0].items())]
+
+
+def other_intervals(current: Mapping[str, Any]) -> dict[str, int]:
+    """Report intervals none of which is ``current``'s or a default (for a Set Freq write that must show)."""
+    return _other(current, _INTERVALS)
+
+
+@contextmanager
+def neighbours_moved(dut, but: str = "") -> Iterator[dict[str, int]]:
+    """Setup of a neighbour check: a proven power cycle (so the copy of the settings an ESC reads at power-up is the
+    settings as they are), then every setting of :data:`NEIGHBOURS` but ``but`` moved to a value it is not at, each
+    saved by its own request (Set Rotation, Throttle Select, Set LED option 1 when the DUT has an LED, Set Freq), away
+    from the factory defaults: so a save that rewrites its neighbours from the copy read at power-up, or from the
+    defaults, shows after the next power cycle. Gives the settings then (242 and Set/Get Freq read); INCONCLUSIVE
+    when one did not take (its own section judges that). On leaving, every one of them (the section's own too) is
+    written back to what it read before, whatever the reads say then: a DUT whose read-back is wrong (which the ``dut`` fixture's restore
+    goes by) is still left as found for the tests after."""
+    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    s = dut.settings()
+    try:
+        yield _move(dut, s, but)
+    finally:  # the section's own setting too: all of them as read before
+        dut.request("set_rotation", {"rotation": s["rotation"]})
+        dut.request("throttle_select", {"source": s["throttle_source"]})
+        if dut.profile.has("led"):
+            dut.request("set_led", {"option": 1, "color": s["led_color"], "blink": s["led_blink"]})
+        dut.request("set_freq", {"option": 1, **{k: s[k] for k in NEIGHBOURS["intervals"][0]}})
+
+
+def _move(dut, s: Mapping[str, int], but: str) -> dict[str, int]:
+    want: dict[str, int] = {}
+    if but != "rotation":
+        want["rotation"] = 0 if s["rotation"] else 1
+        dut.request("set_rotation", {"rotation": want["rotation"]})
+    if but != "throttle_source":
+        want["throttle_source"] = 0 if s["throttle_source"] else 1
+        dut.request("throttle_select", {"source": want["throttle_source"]})
+    if but != "led" and dut.profile.has("led"):
+        want.update(led := _other(s, _LEDS))
+        dut.request("set_led", {"option": 1, "color": led["led_color"], "blink": led["led_blink"]})
+    if but != "intervals":
+        want.update(intervals := other_intervals(s))
+        dut.request("set_freq", {"option": 1, **intervals})
+    after = dut.settings()
+    if missed := changes(want, {k: after[k] for k in want}):
+        raise Inconclusive(f"moving the other persisted settings did not take ({missed}, set -> read): their own "
+                           "sections judge that; the neighbours of this save cannot be judged")
+    return after
+
+
+def check_neighbours_kept(dut, moved: Mapping[str, int], save: str, saved: Mapping[str, int]) -> None:
+    """R13 across settings: after ``save`` (what the test saved, as a message says it; ``saved`` its settings as
+    written), made once :func:`neighbours_moved` had ``moved`` the others, every setting read back (242 and Set/Get
+    Freq read) is as moved and saved - at once and after a proven power cycle: the save left its neighbours, in
+    RAM and in flash, as it found them (a save rewriting a whole flash block from stale or default values does not)."""
+    expected = {**moved, **saved}
+    moves = ", ".join(request for keys, request in NEIGHBOURS.values()
+                      if not set(keys) & set(saved) and (request != "Set Led option 1" or dut.profile.has("led")))
+    at_once = changes(expected, dut.settings())
+    dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
+    after = changes(expected, dut.settings())
+    assert not (at_once or after), (f"{save}, made after the other settings were saved ({moves}), changed settings: "
+                                    + "; ".join(f"{when} {d}" for when, d in (("at once", at_once),
+                                                ("after a power cycle", after)) if d) + " (expected -> read)")

@@ -19,6 +19,7 @@ from ckesc.protocol.legality import field_cases, illegal_cases
 from .answers import esc_id_replies, esc_ids, put_back
 from .raw_command_12b import FORMAT as RAW_12B
 from .raw_command_12b import VALUES as RAW_12B_VALUES
+from .settings import check_neighbours_kept, neighbours_moved
 
 SECTION = "4.4.18"
 SPEC = cat.spec("set_id")
@@ -293,3 +294,19 @@ def test_set_id_after_the_window_is_ignored(dut, original):
     dut.record.observe("answer to the late Set ID", {"source": ex.response.source, **ex.response.fields} if ex.response else "none")
     assert esc_ids(dut) == [(node, channel)], (
         f"Set ID {ex.sent.time - epoch.ready:.1f} s after power-up obeyed: {esc_ids(dut)}")
+
+
+@pytest.mark.requirement("R13", "4.4.18-7", "4.4.21-4", "4.4.22-6", "4.4.23-4", "4.4.22-2", "4.4.28-1")
+@pytest.mark.power_cycle
+def test_set_id_leaves_the_other_settings(dut, original):
+    """Set ID (the DUT's own node id, another channel) rewrites nothing else: the other persisted settings, moved
+    since this power-up, are as they were, at once and after a power cycle."""
+    node, channel = original
+    new_channel = _other_channel(channel)
+    with neighbours_moved(dut) as moved:  # after its power cycle: the window of that power-up
+        _open_window(dut)
+        ex = dut.request("set_id", {"node_id": node, "throttle_channel": new_channel})
+        if ex.response is None or esc_ids(dut) != [(node, new_channel)]:
+            raise Inconclusive(f"Set ID ({node}, {new_channel}) inside the window did not take (see "
+                               "test_set_id_gives_the_dut_its_id_and_channel): this test cannot be judged")
+        check_neighbours_kept(dut, moved, f"Set ID (node id {node}, channel {new_channel})", {"throttle_channel": new_channel})

@@ -12,7 +12,7 @@ from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
-from .settings import changes, listed
+from .settings import changes, check_neighbours_kept, listed, neighbours_moved
 
 SECTION = "4.4.20"
 SPEC = cat.spec("set_led")
@@ -191,3 +191,15 @@ def test_observe_led_support(dut):
     dut.record.observe("profile says LED", dut.profile.has("led"))
     dut.record.observe("answer to Set Led", ex.response.fields if ex.response else "none")
     assert ex.response is not None, "no answer to Set Led"
+
+
+@pytest.mark.requirement("R13", "4.4.20-5", "4.4.21-4", "4.4.22-6", "4.4.23-4", "4.4.22-2", "4.4.28-1")
+@pytest.mark.power_cycle
+def test_save_leaves_the_other_settings(dut):
+    """A saved LED rewrites nothing else: the other persisted settings, moved since this power-up, are as they were,
+    at once and after a power cycle (a save rewriting a whole flash block can clobber them)."""
+    with neighbours_moved(dut, but="led") as moved:
+        colour, blink = _other_colour(moved["led_color"]), _other_blink(moved["led_blink"])
+        _ensure(dut, SAVE, colour, blink)
+        check_neighbours_kept(dut, moved, f"Set Led option 1 (color {colour}, blink {blink})",
+                              {"led_color": colour, "led_blink": blink})

@@ -12,7 +12,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from . import throttle
-from .settings import Setting, change, changes, listed
+from .settings import Setting, change, changes, check_neighbours_kept, listed, neighbours_moved
 
 SECTION = "4.4.21"
 SPEC = cat.spec("set_rotation")
@@ -158,3 +158,14 @@ def test_observe_current_direction(dut):
     direction = ROTATION.current(dut)
     dut.record.observe("direction", _name(direction))
     assert direction == DIRECTIONS[0], "not at the factory default (forward)"
+
+
+@pytest.mark.requirement("R13", "4.4.21-4", "4.4.22-6", "4.4.23-4", "4.4.22-2", "4.4.28-1")
+@pytest.mark.power_cycle
+def test_setting_leaves_the_other_settings(dut):
+    """Set Rotation rewrites nothing else: the other persisted settings, moved since this power-up, are as they
+    were, at once and after a power cycle (a save rewriting a whole flash block can clobber them)."""
+    with neighbours_moved(dut, but="rotation") as moved:
+        direction = ROTATION.other(moved["rotation"])
+        ROTATION.ensure(dut, direction)
+        check_neighbours_kept(dut, moved, f"Set Rotation {direction}", {"rotation": direction})

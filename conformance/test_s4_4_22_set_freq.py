@@ -6,7 +6,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from .reports import R9_GAPS, at_report_phase, check_restart, settle_reports
-from .settings import changes, listed
+from .settings import changes, check_neighbours_kept, listed, neighbours_moved, other_intervals
 
 SECTION = "4.4.22"
 INTERVALS = ("msg1_interval", "msg2_interval", "msg3_interval")
@@ -100,3 +100,14 @@ def test_observe_current_intervals(dut):
     s = dut.settings()
     dut.record.observe("intervals", {k: s[k] for k in INTERVALS})
     assert (s["msg1_interval"], s["msg2_interval"], s["msg3_interval"]) == (10, 50, 250), "not at factory defaults"
+
+
+@pytest.mark.requirement("R13", "4.4.22-6", "4.4.21-4", "4.4.23-4", "4.4.22-2", "4.4.28-1")
+@pytest.mark.power_cycle
+def test_write_leaves_the_other_settings(dut):
+    """A Set Freq write rewrites nothing else: the other persisted settings, moved since this power-up, are as they
+    were, at once and after a power cycle (a save rewriting a whole flash block can clobber them)."""
+    with neighbours_moved(dut, but="intervals") as moved:
+        fields = other_intervals(moved)
+        dut.ask("set_freq", {"option": 1, **fields})
+        check_neighbours_kept(dut, moved, f"Set Freq {listed(fields)}", fields)

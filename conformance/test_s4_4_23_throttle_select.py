@@ -15,7 +15,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from . import throttle
-from .settings import Setting, change, listed
+from .settings import Setting, change, check_neighbours_kept, listed, neighbours_moved
 
 SECTION = "4.4.23"
 SPEC = cat.spec("throttle_select")
@@ -184,3 +184,14 @@ def test_observe_current_source(dut):
     source = SOURCE.current(dut)
     dut.record.observe("throttle source", _name(source))
     assert source == CAN, "not at the factory default (CAN)"
+
+
+@pytest.mark.requirement("R13", "4.4.23-4", "4.4.21-4", "4.4.22-6", "4.4.22-2", "4.4.28-1")
+@pytest.mark.power_cycle
+def test_select_leaves_the_other_settings(dut):
+    """Throttle Select rewrites nothing else: the other persisted settings, moved since this power-up, are as they
+    were, at once and after a power cycle (a save rewriting a whole flash block can clobber them)."""
+    with neighbours_moved(dut, but="throttle_source") as moved:
+        source = SOURCE.other(moved["throttle_source"])
+        SOURCE.ensure(dut, source)
+        check_neighbours_kept(dut, moved, f"Throttle Select {source}", {"throttle_source": source})

@@ -224,9 +224,11 @@ def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
     dut.record.measure("comm fault flag: first MSG1 with bit13 after the last command", ms(onset),
                        limit=ms(cat.COMM_LOSS_TIMEOUT_S), op=">=", unit="ms", clock=own_clock, error=own_err,
                        requirement="R8", strength="READING")
+    # the MSG1 that carries the flag may stray from its grid point by the DUT's declared jitter (profile jitter_s),
+    # as a first report after a restart may (R9a): a flag raised on time onto a late MSG1 is no late flag
     dut.record.measure("comm fault flag: first MSG1 with bit13 after the last command", ms(onset),
-                       limit=ms(cat.COMM_LOSS_TIMEOUT_S + interval), unit="ms", clock=own_clock, error=own_err,
-                       requirement="R8", strength="READING")
+                       limit=ms(cat.COMM_LOSS_TIMEOUT_S + interval + dut.profile.jitter_s), unit="ms", clock=own_clock,
+                       error=own_err, requirement="R8", strength="READING")
     # the new command too goes half an interval before an MSG1, which then shows the flag clear
     dut.read_until(_mid_interval_send(dut, [*before[-1:], first], interval))
     again = dut.broadcast(name, fields)
