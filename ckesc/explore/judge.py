@@ -316,10 +316,17 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         near = model[bisect.bisect_left(stamps, t - reach):bisect.bisect_right(stamps, t + reach)]
         if not near:
             continue
-        mask = STATUS_MASK
-        up = ups[max(0, bisect.bisect_right(ups, t) - 1)]
-        if not _between(commands, up, t):  # no command since the power-up: when its boot ends is the DUT's own (1-2)
-            mask &= ~0x2000
+        mask = STATUS_MASK & ~0x2000  # bit 13 is judged on R8's own clock below
+        comm = _comm_fault_expected(t, commands, ups, state, p)
+        if comm is not None and bool(f.fields["status"] & 0x2000) != comm:
+            bits = 0x2000
+            if bits not in seen:
+                seen.add(bits)
+                out.append(Finding("status", ["R8", "R7"], f"MSG1 comm-loss bit {'clear' if comm else 'set'} "
+                                   f"{(t - _last(commands, t)) * 1000:.0f} ms after the last command ({state.mode})",
+                                   f"status {f.fields['status']:#06x}", f"bit 13 {'set' if comm else 'clear'} "
+                                   f"(R8: set 200 ms to 200 ms + one MSG1 interval after the last command)", t - t0,
+                                   state.step, subject="status 0x2000"))
         got = f.fields["status"] & mask
         if any(m.fields["status"] & mask == got for m in near):
             continue
@@ -333,6 +340,31 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
                            f"status {f.fields['status']:#06x}", f"status {want:#06x} (bits {STATUS_MASK:#06x} compared)",
                            t - t0, _state_at(oracle, t).step, subject=f"status {bits:#06x}"))
     return out
+
+
+def _last(stamps: list[float], t: float) -> float:
+    k = bisect.bisect_right(stamps, t)
+    return stamps[k - 1] if k else float("-inf")
+
+
+def _comm_fault_expected(t: float, commands: list[float], ups: list[float], state: State, p: Params) -> bool | None:
+    """What MSG1's comm-loss bit must be at ``t`` (R8), or None where it is free: before any command since the
+    power-up (when its boot ends is the DUT's own), inside R8's window, near a command, or not under CAN throttle."""
+    if state.source != 0 or state.mode == "off":
+        return None
+    up = ups[max(0, bisect.bisect_right(ups, t) - 1)] if ups else float("-inf")
+    last = _last(commands, t + _ECHO_SLACK_S + 2 * p.error)
+    if last < up:
+        return None
+    since = t - last
+    tol = 0.001 + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
+    if since < -tol or abs(since) <= _ECHO_SLACK_S + 2 * p.error:
+        return None  # a command as the MSG1 went out: which came first is within the bench's error
+    if since < cat.COMM_LOSS_TIMEOUT_S - tol:
+        return False
+    if since > cat.COMM_LOSS_TIMEOUT_S + state.intervals["msg1"] + tol:
+        return True
+    return None
 
 
 def _state_at(oracle: Oracle, t: float) -> State:
