@@ -46,6 +46,8 @@ STREAMS = ("msg1", "msg2", "msg3", "exp", "can_test")
 #: what flows in each mode of the model's ESC (4.4.2's table, R16; R9-exp: which MSG_EXP frames is OBSERVE)
 _FLOWING = {"normal": ("msg1", "msg2", "msg3"), "exp": ("exp",), "can_test": ("can_test",)}
 _THROTTLE = ("raw_command_14b", "raw_command_12b", "raw_command_10b")
+#: events after which reporting restarts (R9a: power-up, resume, leaving MSG_EXP mode or CAN Test, a Set Freq write)
+_RESTARTS = frozenset({"start", "power on", "ready", "msg_control", "can_test", "set_freq"})
 ANSWER_WAIT_S = cat.ANSWER_DELAY_MAX_S + 0.036  # what the runner reads for an answer, plus its error below
 #: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
 #: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
@@ -232,14 +234,21 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
             if s is not None and f.source != p.host_node:
                 by[s][i].append(f.timestamp)
     frame_s = frame_bits(8) / p.bitrate
+    restart: State | None = None  # the latest event after which a report restarts (R9a), and the state before it
+    restart_before: State | None = None
     for state, before, end in _segments(oracle, t_end):
+        if state.label in _RESTARTS and (state.label != "set_freq" or before is None or before.intervals != state.intervals):
+            restart, restart_before = state, before  # (a Set Freq read, or a write that changed nothing, restarts nothing)
         for stream in STREAMS:
             iv = _interval(state, stream)
             old = _interval(before, stream) if before is not None else iv
             settle = 1.25 * max(iv, old) + cat.RESTART_SLACK_MIN_S + cat.ANSWER_DELAY_MAX_S + 2 * p.error + p.jitter
-            if state.label == "power on":
-                settle += p.boot_s
-            lo, hi = state.t + settle, end - 2 * p.error - frame_s
+            lo = state.t + settle + (p.boot_s if state.label == "power on" else 0.0)
+            if restart is not None:  # R9a's allowance counts from the restart, over the longer of its old and new interval
+                r_old = _interval(restart_before, stream) if restart_before is not None else iv
+                lo = max(lo, restart.t + settle - 1.25 * max(iv, old) + 1.25 * max(iv, r_old)
+                         + (p.boot_s if restart.label == "power on" else 0.0))
+            hi = end - 2 * p.error - frame_s
             if hi <= lo:
                 continue
             d = _between(by[stream][0], lo, hi)
@@ -247,6 +256,8 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
             rids = _stream_reqs(state, stream)
             on = stream in _FLOWING.get(state.mode, ())
             if on and m and hi - lo >= 2 * iv and not d:
+                if _between(by[stream][0], hi, end + 2 * iv):  # it came, late: the first report after a restart (R9a)
+                    rids = ["R9a", *rids]
                 out.append(Finding("stream", rids, f"{_label(stream)} stopped ({state.mode} since {state.cause})",
                                    f"no {_label(stream)} for {hi - lo:.3f} s", f"{len(m)} frames",
                                    lo - t0, state.step, subject=f"{stream} stopped, {state.mode}"))
