@@ -99,7 +99,7 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
         outcome = session.run(program)
         stats.wall = clock() - start
         stats.add(outcome)
-        new = [f for f in outcome.findings if f.key not in known]
+        new = sorted((f for f in outcome.findings if f.key not in known), key=lambda f: f.at)
         if new:
             known.add(new[0].key)
             found.append(Found(list(program), outcome, new[0].key, stats.programs - 1, stats.steps - len(program),
@@ -121,7 +121,9 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
             if progress is not None and clock() - last_progress[0] >= 5.0:
                 last_progress[0] = clock()
                 progress(stats)
-            new = [f for f in outcome.findings if f.key not in known]
+            # the first disagreement in time first: a later one may be its consequence (a DUT left suspended refuses
+            # the settings after it)
+            new = sorted((f for f in outcome.findings if f.key not in known), key=lambda f: f.at)
             if not new:
                 return
             key = current_key(current, new)

@@ -46,6 +46,8 @@ STREAMS = ("msg1", "msg2", "msg3", "exp", "can_test")
 #: what flows in each mode of the model's ESC (4.4.2's table, R16; R9-exp: which MSG_EXP frames is OBSERVE)
 _FLOWING = {"normal": ("msg1", "msg2", "msg3"), "exp": ("exp",), "can_test": ("can_test",)}
 _THROTTLE = ("raw_command_14b", "raw_command_12b", "raw_command_10b")
+#: events after which reporting restarts (R9a: power-up, resume, leaving MSG_EXP mode or CAN Test, a Set Freq write)
+_RESTARTS = frozenset({"start", "power on", "ready", "msg_control", "can_test", "set_freq"})
 ANSWER_WAIT_S = cat.ANSWER_DELAY_MAX_S + 0.036  # what the runner reads for an answer, plus its error below
 #: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
 #: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
@@ -232,14 +234,21 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
             if s is not None and f.source != p.host_node:
                 by[s][i].append(f.timestamp)
     frame_s = frame_bits(8) / p.bitrate
+    restart: State | None = None  # the latest event after which a report restarts (R9a), and the state before it
+    restart_before: State | None = None
     for state, before, end in _segments(oracle, t_end):
+        if state.label in _RESTARTS and (state.label != "set_freq" or before is None or before.intervals != state.intervals):
+            restart, restart_before = state, before  # (a Set Freq read, or a write that changed nothing, restarts nothing)
         for stream in STREAMS:
             iv = _interval(state, stream)
             old = _interval(before, stream) if before is not None else iv
             settle = 1.25 * max(iv, old) + cat.RESTART_SLACK_MIN_S + cat.ANSWER_DELAY_MAX_S + 2 * p.error + p.jitter
-            if state.label == "power on":
-                settle += p.boot_s
-            lo, hi = state.t + settle, end - 2 * p.error - frame_s
+            lo = state.t + settle + (p.boot_s if state.label == "power on" else 0.0)
+            if restart is not None:  # R9a's allowance counts from the restart, over the longer of its old and new interval
+                r_old = _interval(restart_before, stream) if restart_before is not None else iv
+                lo = max(lo, restart.t + settle - 1.25 * max(iv, old) + 1.25 * max(iv, r_old)
+                         + (p.boot_s if restart.label == "power on" else 0.0))
+            hi = end - 2 * p.error - frame_s
             if hi <= lo:
                 continue
             d = _between(by[stream][0], lo, hi)
@@ -247,6 +256,8 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
             rids = _stream_reqs(state, stream)
             on = stream in _FLOWING.get(state.mode, ())
             if on and m and hi - lo >= 2 * iv and not d:
+                if _between(by[stream][0], hi, end + 2 * iv):  # it came, late: the first report after a restart (R9a)
+                    rids = ["R9a", *rids]
                 out.append(Finding("stream", rids, f"{_label(stream)} stopped ({state.mode} since {state.cause})",
                                    f"no {_label(stream)} for {hi - lo:.3f} s", f"{len(m)} frames",
                                    lo - t0, state.step, subject=f"{stream} stopped, {state.mode}"))
@@ -316,10 +327,17 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         near = model[bisect.bisect_left(stamps, t - reach):bisect.bisect_right(stamps, t + reach)]
         if not near:
             continue
-        mask = STATUS_MASK
-        up = ups[max(0, bisect.bisect_right(ups, t) - 1)]
-        if not _between(commands, up, t):  # no command since the power-up: when its boot ends is the DUT's own (1-2)
-            mask &= ~0x2000
+        mask = STATUS_MASK & ~0x2000  # bit 13 is judged on R8's own clock below
+        comm = _comm_fault_expected(t, commands, ups, state, p)
+        if comm is not None and bool(f.fields["status"] & 0x2000) != comm:
+            bits = 0x2000
+            if bits not in seen:
+                seen.add(bits)
+                out.append(Finding("status", ["R8", "R7"], f"MSG1 comm-loss bit {'clear' if comm else 'set'} "
+                                   f"{(t - _last(commands, t)) * 1000:.0f} ms after the last command ({state.mode})",
+                                   f"status {f.fields['status']:#06x}", f"bit 13 {'set' if comm else 'clear'} "
+                                   f"(R8: set 200 ms to 200 ms + one MSG1 interval after the last command)", t - t0,
+                                   state.step, subject="status 0x2000"))
         got = f.fields["status"] & mask
         if any(m.fields["status"] & mask == got for m in near):
             continue
@@ -333,6 +351,31 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
                            f"status {f.fields['status']:#06x}", f"status {want:#06x} (bits {STATUS_MASK:#06x} compared)",
                            t - t0, _state_at(oracle, t).step, subject=f"status {bits:#06x}"))
     return out
+
+
+def _last(stamps: list[float], t: float) -> float:
+    k = bisect.bisect_right(stamps, t)
+    return stamps[k - 1] if k else float("-inf")
+
+
+def _comm_fault_expected(t: float, commands: list[float], ups: list[float], state: State, p: Params) -> bool | None:
+    """What MSG1's comm-loss bit must be at ``t`` (R8), or None where it is free: before any command since the
+    power-up (when its boot ends is the DUT's own), inside R8's window, near a command, or not under CAN throttle."""
+    if state.source != 0 or state.mode == "off":
+        return None
+    up = ups[max(0, bisect.bisect_right(ups, t) - 1)] if ups else float("-inf")
+    last = _last(commands, t + _ECHO_SLACK_S + 2 * p.error)
+    if last < up:
+        return None
+    since = t - last
+    tol = 0.001 + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
+    if since < -tol or abs(since) <= _ECHO_SLACK_S + 2 * p.error:
+        return None  # a command as the MSG1 went out: which came first is within the bench's error
+    if since < cat.COMM_LOSS_TIMEOUT_S - tol:
+        return False
+    if since > cat.COMM_LOSS_TIMEOUT_S + state.intervals["msg1"] + tol:
+        return True
+    return None
 
 
 def _state_at(oracle: Oracle, t: float) -> State:
