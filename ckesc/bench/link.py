@@ -250,8 +250,8 @@ class Link:
             held_up = self.lane.host_send_error + 2 * frame_bits(8) / self.lane.bitrate
             while True:
                 self.read_until(deadline, stop=lambda f: pending.response is not None)
-                if pending.response is None and sent.bus_time is None:  # past the deadline before the echo was read
-                    self.await_echo(sent)
+                if pending.response is None and sent.bus_time is None and self.now() > deadline + held_up:
+                    self.await_echo(sent)  # the host was held up past the deadline before it read the echo
                 left_at = sent.bus_time if sent.bus_time is not None else sent.host_time
                 if pending.response is not None or left_at - sent.host_time <= held_up or left_at + timeout <= deadline:
                     break
