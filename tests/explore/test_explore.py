@@ -50,7 +50,7 @@ def _found_fault(fault: str, max_programs: int) -> None:
 
 
 # fault -> programs within which seed 1 finds it (found after: suspend_persisted 4, comm_loss_sticky 17,
-# intervals_not_persisted 34, settings_while_suspended 46, set_id_after_window 160, can_test_off_resumes_reporting 473)
+# intervals_not_persisted 34, settings_while_suspended 46, set_id_after_window 160, can_test_off_resumes_reporting 447)
 FAST = {"suspend_persisted": 40, "comm_loss_sticky": 60, "intervals_not_persisted": 80}
 SLOW = {"settings_while_suspended": 150, "set_id_after_window": 300, "can_test_off_resumes_reporting": 800}
 
