@@ -96,8 +96,11 @@ def selftest_command(args: argparse.Namespace, out: TextIO) -> int:
 
     def progress(row) -> None:
         if not args.quiet:
-            print(f"{row.fault:<34} {'found' if row.found else 'NOT found'} after {row.programs} programs, "
-                  f"{row.seconds} s", file=out, flush=True)
+            if row.programs is not None:
+                print(f"{row.fault:<34} {'found' if row.found else 'NOT found (a finding citing other rules)'} after "
+                      f"{row.programs} programs, {row.seconds} s", file=out, flush=True)
+            else:
+                print(f"{row.fault:<34} NOT found within the budget: {row.explored}", file=out, flush=True)
 
     rows = find_faults(names, budget_s=args.budget, seed=args.seed, max_programs=getattr(args, "max_programs", None),
                        options=options, progress=progress)
