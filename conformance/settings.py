@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ckesc.bench.verdict import Inconclusive
+from ckesc.protocol import catalogue as cat
 
 
 def listed(values: Mapping[str, Any]) -> str:
@@ -60,12 +61,34 @@ class Setting:
         """The next legal value after ``value`` (the first, for one that is not legal)."""
         return self.values[(self.values.index(value) + 1) % len(self.values)] if value in self.values else self.values[0]
 
+    def write(self, dut, value: int) -> None:
+        """Send the request that sets ``value`` (nothing checked)."""
+        dut.request(self.request, {self.field: value})
+
     def ensure(self, dut, value: int) -> None:
         """Set-up: the DUT at ``value``; INCONCLUSIVE when the write does not take (:attr:`judged_by` judges that)."""
-        dut.request(self.request, {self.field: value})
+        self.write(dut, value)
         if self.current(dut) != value:
             raise Inconclusive(f"{self.title} {value} did not take {self.conditions} (see {self.judged_by}): this test "
                                "cannot be judged")
+
+    def check_save_keeps_neighbours(self, dut) -> None:
+        """The neighbour check (R13 across settings) of this setting's own save: the others moved
+        (:func:`neighbours_moved`), this one set to another value, all read back at once and after a proven power
+        cycle (:func:`check_neighbours_kept`)."""
+        with neighbours_moved(dut, but=self.key) as moved:
+            value = self.other(moved[self.key])
+            self.ensure(dut, value)
+            check_neighbours_kept(dut, moved, f"{self.title} {value}", {self.key: value})
+
+
+#: Set Rotation's direction and Throttle Select's source: the persisted settings with one field each
+ROTATION = Setting("set_rotation", "rotation", "rotation", "Set Rotation",
+                   tuple(sorted(cat.spec("set_rotation").response.field("rotation").codes)),  # 0 forward, 1 reverse
+                   "test_direction_is_set", "with reporting on and the motor stopped")
+SOURCE = Setting("throttle_select", "source", "throttle_source", "Throttle Select",
+                 tuple(sorted(cat.spec("throttle_select").request.field("source").codes)),  # 0 CAN, 1 PWM+CAN
+                 "test_source_is_selected", "at zero throttle with reporting on")
 
 
 # ------------------------------------------------------------------------------------------ neighbours (R13)
@@ -110,8 +133,8 @@ def neighbours_moved(dut, but: str = "") -> Iterator[dict[str, int]]:
     try:
         yield _move(dut, s, but)
     finally:  # the section's own setting too: all of them as read before
-        dut.request("set_rotation", {"rotation": s["rotation"]})
-        dut.request("throttle_select", {"source": s["throttle_source"]})
+        ROTATION.write(dut, s["rotation"])
+        SOURCE.write(dut, s["throttle_source"])
         if dut.profile.has("led"):
             dut.request("set_led", {"option": 1, "color": s["led_color"], "blink": s["led_blink"]})
         dut.request("set_freq", {"option": 1, **{k: s[k] for k in NEIGHBOURS["intervals"][0]}})
@@ -119,12 +142,10 @@ def neighbours_moved(dut, but: str = "") -> Iterator[dict[str, int]]:
 
 def _move(dut, s: Mapping[str, int], but: str) -> dict[str, int]:
     want: dict[str, int] = {}
-    if but != "rotation":
-        want["rotation"] = 0 if s["rotation"] else 1
-        dut.request("set_rotation", {"rotation": want["rotation"]})
-    if but != "throttle_source":
-        want["throttle_source"] = 0 if s["throttle_source"] else 1
-        dut.request("throttle_select", {"source": want["throttle_source"]})
+    for setting in (ROTATION, SOURCE):
+        if but != setting.key:
+            want[setting.key] = setting.other(s[setting.key])
+            setting.write(dut, want[setting.key])
     if but != "led" and dut.profile.has("led"):
         want.update(led := _other(s, _LEDS))
         dut.request("set_led", {"option": 1, "color": led["led_color"], "blink": led["led_blink"]})

@@ -12,16 +12,14 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from . import throttle
-from .settings import Setting, change, changes, check_neighbours_kept, listed, neighbours_moved
+from .settings import ROTATION, change, changes, listed
 
 SECTION = "4.4.21"
 SPEC = cat.spec("set_rotation")
-DIRECTIONS = sorted(SPEC.response.field("rotation").codes)  # 0 forward, 1 reverse
+DIRECTIONS = list(ROTATION.values)  # 0 forward, 1 reverse
 QUERY = next(v for v, name in SPEC.request.field("rotation").codes.items() if name == "query")  # 0xFF
 ILLEGAL = illegal_cases(SPEC)  # R10: anything but 0, 1 and 0xFF
 motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
-ROTATION = Setting("set_rotation", "rotation", "rotation", "Set Rotation", tuple(DIRECTIONS), "test_direction_is_set",
-                   "with reporting on and the motor stopped")
 
 
 def _name(direction):
@@ -165,7 +163,4 @@ def test_observe_current_direction(dut):
 def test_setting_leaves_the_other_settings(dut):
     """Set Rotation rewrites nothing else: the other persisted settings, moved since this power-up, are as they
     were, at once and after a power cycle (a save rewriting a whole flash block can clobber them)."""
-    with neighbours_moved(dut, but="rotation") as moved:
-        direction = ROTATION.other(moved["rotation"])
-        ROTATION.ensure(dut, direction)
-        check_neighbours_kept(dut, moved, f"Set Rotation {direction}", {"rotation": direction})
+    ROTATION.check_save_keeps_neighbours(dut)

@@ -15,16 +15,14 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from . import throttle
-from .settings import Setting, change, check_neighbours_kept, listed, neighbours_moved
+from .settings import SOURCE, change, listed
 
 SECTION = "4.4.23"
 SPEC = cat.spec("throttle_select")
-SOURCES = sorted(SPEC.request.field("source").codes)  # 0 CAN, 1 PWM+CAN
+SOURCES = list(SOURCE.values)  # 0 CAN, 1 PWM+CAN
 CAN, PWM_CAN = (next(v for v, n in SPEC.request.field("source").codes.items() if n == name) for name in ("CAN", "PWM+CAN"))
 ILLEGAL = illegal_cases(SPEC)  # R10: anything but 0 and 1
 motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
-SOURCE = Setting("throttle_select", "source", "throttle_source", "Throttle Select", tuple(SOURCES), "test_source_is_selected",
-                 "at zero throttle with reporting on")
 
 
 def _name(source):
@@ -191,7 +189,4 @@ def test_observe_current_source(dut):
 def test_select_leaves_the_other_settings(dut):
     """Throttle Select rewrites nothing else: the other persisted settings, moved since this power-up, are as they
     were, at once and after a power cycle (a save rewriting a whole flash block can clobber them)."""
-    with neighbours_moved(dut, but="throttle_source") as moved:
-        source = SOURCE.other(moved["throttle_source"])
-        SOURCE.ensure(dut, source)
-        check_neighbours_kept(dut, moved, f"Throttle Select {source}", {"throttle_source": source})
+    SOURCE.check_save_keeps_neighbours(dut)
