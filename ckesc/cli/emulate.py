@@ -14,7 +14,10 @@ from .common import EXIT_FRAMES_FAILED, EXIT_OK, UsageError, int_arg
 
 
 def _node_ids(text: str) -> list[int]:
-    """"1,2,3" or "1-20" or a mix; each 1..0x7D (F7) and given once."""
+    """"1,2,3" or "1-20" or a mix; each 1..0x7D (F7) and given once. "none": no ESC at all, a bare socketcand
+    hub that other processes (an ESC of another make, a second host) join as clients."""
+    if text.strip().lower() == "none":
+        return []
     nodes: list[int] = []
     for part in text.split(","):
         part = part.strip()
@@ -177,7 +180,7 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
         "          ckesc control --port 29536 power cycle --off-time 1.0",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--nodes", type=_node_ids, default=[1], metavar="IDS", help="node ids of factory-fresh ESCs: 1,2,3 or 1-20 (default 1)")
+    p.add_argument("--nodes", type=_node_ids, default=[1], metavar="IDS", help="node ids of factory-fresh ESCs: 1,2,3 or 1-20 (default 1); none: a bare hub for other clients")
     p.add_argument("--faults", metavar="NAMES", help="faults for every ESC, name@node for one (see ckesc.emulator.faults)")
     p.add_argument("--flash-path", metavar="FILE", help="flash file: settings and counters persist across runs (default: none)")
     p.add_argument("--seed", type=int_arg, default=0, metavar="N", help="seed of the models' noise (default 0)")

@@ -39,9 +39,7 @@ class Bench:
         ``config``: extra :class:`EscConfig` fields for every ESC (e.g. ``boot_time``)."""
         self.flash = FlashStore(flash) if isinstance(flash, (str, bytes)) or hasattr(flash, "__fspath__") else flash
         stored = self.flash.load() if self.flash is not None else {}
-        node_list = list(nodes)
-        if not node_list:
-            raise ValueError("a bench needs at least one ESC")
+        node_list = list(nodes)  # none: a bench with no ESC (``ckesc emulate --nodes none``, a bare hub)
         self.escs: list[EscModel] = []
         for slot, node in enumerate(node_list):
             names = _faults.check(faults.get(node, ()) if isinstance(faults, Mapping) else (faults or ()))

@@ -465,6 +465,24 @@ def test_socketcand_hub_echoes_to_every_client(virtual):
             assert got, f"{client} did not hear the frame"
 
 
+def test_a_bench_of_no_esc_is_a_bare_hub_between_clients(virtual):
+    """``ckesc emulate --nodes none``: no ESC of ours, only the hub, so that an ESC of another make (a process on
+    python-can's socketcand client, as ``tools/clean-room-esc``) and the suite meet on it as two clients."""
+    emu, _ = virtual((), socketcand_port=0)
+    port = emu.socketcand_address[1]
+    with can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="can0") as esc, \
+            can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="can0") as host:
+        wire = encode("get_esc_id", {"option": 0}, source=0)
+        heard: list[can.Message] = []
+        for _ in range(40):  # past the 50 ms after rawmode in which a client gets no frames: send until heard
+            host.send(msg_of(wire))
+            heard = [m for m in collect(esc, 0.1, lambda fs: bool(fs)) if m.arbitration_id == wire.arbitration_id]
+            if heard:
+                break
+        assert heard and bytes(heard[0].data) == wire.data, "the other client did not hear the host's frame"
+        assert emu.bench.escs == []
+
+
 # ---------------------------------------------------------------------------------------------------
 # pieces
 
