@@ -126,6 +126,12 @@ class Lane(ABC):
     def reopen(self, bitrate: int) -> None:
         """Reopen the host's bus at another bit rate (after Set Baud)."""
 
+    def stop_streams(self) -> None:
+        """Stop every throttle stream on this lane, whichever host (a test's :class:`.link.Link`, a helper's)
+        started it: python-can keeps a bus's periodic tasks (``stop_all_periodic_tasks``). The exit paths'
+        zero throttle calls it, so that no stream outlives a Ctrl-C that cut its owner's teardown short."""
+        self.bus.stop_all_periodic_tasks()
+
     def close(self) -> None:
         self.bus.shutdown()
 
@@ -450,10 +456,14 @@ class BusLane(Lane):
         while (left := end - time.monotonic()) > 0:
             self.heard(self.bus.recv(timeout=left))  # drain whatever a powered-off bus still shows
 
-    def close(self) -> None:
-        for task in self._tasks:
+    def stop_streams(self) -> None:
+        for task in list(self._tasks):  # the tap's thread-based tasks (a native task is the bus's own)
             _stop_task(task)
         self._tasks.clear()
+        super().stop_streams()
+
+    def close(self) -> None:
+        self.stop_streams()
         super().close()
 
     def reopen(self, bitrate: int) -> None:

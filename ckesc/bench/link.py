@@ -422,8 +422,10 @@ class Link:
         self._tasks.clear()
 
     def zero_throttle(self) -> None:
-        """Stop every stream and command zero on every channel in all three formats."""
+        """Stop every stream on the lane (this host's and any other's) and command zero on every channel in
+        all three formats."""
         self.stop_throttle()
+        self.lane.stop_streams()
         self.send_wire(self.proto.message("raw_command_14b", {"channels": [0] * 4}))
         for group in cat.THROTTLE_GROUPS:
             self.send_wire(self.proto.message("raw_command_12b", {"channels": [0] * 4, "group": group}))

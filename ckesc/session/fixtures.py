@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import signal
+import sys
 
 import pytest
 
@@ -22,6 +23,7 @@ from .bus_rules import watch_lane
 from .cold_boots import restore_point
 from .collection import check_claims, lacking
 from .lane_setup import echo_info, emulator_options, make_lane, make_multi_lane
+from .safety import zero_throttle_now
 from .state import EXIT_ABORTED, state
 from .tracing import trace_lane
 
@@ -253,17 +255,27 @@ def _abort(config: pytest.Config, why: str) -> None:
 
 def _install_signal_guard(config: pytest.Config) -> None:
     """Ctrl-C / SIGTERM: stop throttle before anything else happens, then stop the run (pytest
-    tears the fixtures down, zero throttle again, and the reports say INTERRUPTED)."""
+    tears the fixtures down, zero throttle again, and the reports say INTERRUPTED).
+
+    Only the first signal stops the run. A later one (a second Ctrl-C, or a batch worker's second SIGINT: its
+    terminal's process group and then the batch controller) zeroes the throttle again and lets the teardown
+    that is under way finish: raising again would cut a fixture's teardown before its own zero throttle and
+    its settings restore."""
+
+    signals: list[int] = []
 
     def handler(signum, frame):  # noqa: ARG001
         st = state(config)
+        first = not signals
+        signals.append(signum)
         st.stopped = st.stopped or f"interrupted ({signal.Signals(signum).name})"
-        if st.lane is not None and st.profile is not None and st.node_id is not None:
-            try:
-                Link(st.lane, st.profile, node_id=st.node_id).zero_throttle()
-            except Exception:  # noqa: BLE001 - best effort on the way out
-                pass
-        raise KeyboardInterrupt
+        zero_throttle_now(config)  # no read here: the test's trace gets the zero as the test unwinds (tracing)
+        if first and st.shield:  # a trace file being written out: raised when it is (safety.shielded)
+            st.interrupt_held = True
+        elif first:
+            raise KeyboardInterrupt
+        print(f"ckesc: {signal.Signals(signum).name} again: zero throttle sent; finishing the teardown (settings "
+              "restore) and the reports (kill -9 abandons them)", file=sys.stderr, flush=True)
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         try:

@@ -42,6 +42,10 @@ class RunState:
     #: why the run stopped early: "aborted: ..." (the DUT did not answer, the bench went away) or
     #: "interrupted" (Ctrl-C, SIGTERM); None while it runs or when it ran to its end
     stopped: str | None = None
+    #: inside :func:`.safety.shielded` (a trace file being written out): the first Ctrl-C / SIGTERM is held
+    #: until it ends (``interrupt_held``) rather than raised into it
+    shield: int = 0
+    interrupt_held: bool = False
 
 
 _STATE = pytest.StashKey[RunState]()

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import hashlib
 import re
+from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 
 import can
@@ -47,7 +49,10 @@ class TestTraces:
 
     __test__ = False  # not a pytest test class, whatever its name
 
-    def __init__(self, directory: Path, fmt: str = "blf") -> None:
+    def __init__(self, directory: Path, fmt: str = "blf",
+                 shield: Callable[[], AbstractContextManager] = nullcontext) -> None:
+        """``shield``: what each write to a file runs inside, so that a Ctrl-C is not raised into python-can's
+        writer half-way through a block (the session's :func:`.safety.shielded`)."""
         if fmt not in WRITERS:
             raise ValueError(f"trace format must be one of {', '.join(WRITERS)}, not {fmt!r}")
         self.directory = Path(directory)
@@ -55,6 +60,7 @@ class TestTraces:
         self._stem: str | None = None
         self._writers: dict[str, tuple[Path, can.io.generic.MessageWriter]] = {}
         self._stems: set[str] = set()
+        self._shield = shield
 
     def listener(self, lane: str = "") -> can.Listener:
         """The listener for one lane (``lane.listeners``); ``lane`` names its file:
@@ -78,7 +84,8 @@ class TestTraces:
             self.directory.mkdir(parents=True, exist_ok=True)
             path = self.directory / ".".join(filter(None, (self._stem, lane, self.fmt)))
             entry = self._writers[lane] = (path, WRITERS[self.fmt](path))
-        entry[1].on_message_received(msg)
+        with self._shield():
+            entry[1].on_message_received(msg)
 
     def end(self) -> dict[str, Path]:
         """Close the current test's files; returns them by lane (a lane that heard no frame has none)."""
