@@ -267,7 +267,7 @@ class BusRules(Tracker):
                 period = node.periods[st.interval]
             if period is None and st.periodic and st.min_gap < math.inf:
                 period = st.min_gap
-            if advance != 1:
+            if advance != 1 and st.moved == node.moved:  # after a Set ID: maybe another ESC, or one back (F3)
                 out = self._transfer_ids(out, st, info, node, data, ts, gap, advance, period)
             if st.reset == node.reset:
                 st.nth += 1
@@ -288,7 +288,7 @@ class BusRules(Tracker):
                 if st.interval is not None and node.event_ts is not None:
                     out = self._first_report(out, st, info, node, data, ts, start, busy_from)
         st.ts, st.start, st.busy_from, st.tid, st.data, st.can_id = ts, start, busy_from, tid, data, info.can_id
-        st.chain, st.reset = node.chain, node.reset
+        st.chain, st.reset, st.moved = node.chain, node.reset, node.moved
         return out
 
     def _pair(self, st: Stream, info: FrameId, data, ts: float) -> tuple[str, str]:

@@ -131,7 +131,7 @@ class Heard:
 class Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
                  "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
-                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until")
+                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until", "moved")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -141,6 +141,10 @@ class Node:
         self.last_ts = -math.inf
         self.chain = 0  # +1 at every silence long enough for a power cycle
         self.reset = 0  # +1 whenever this node's report cadence may restart (suspend/resume, Set Freq, ...)
+        #: +1 at every Set ID (it may re-address any ESC): the ESC sending from this id next may have sent from
+        #: another id meanwhile, its transfer ids counting on there (F3 counts at the sender), so the first frame
+        #: of each stream after it is not held to the one before
+        self.moved = 0
         # R9a: the reset an event started after which the reports come back (a resume, CAN Test off, a Set Freq
         # write), its time and name (None: the first report's delay cannot be judged, e.g. after a power cycle)
         self.event_reset = -1
@@ -175,7 +179,7 @@ class Stream:
     """One (node, message type) of an ESC: transfer ids (F3) and intervals (R9)."""
 
     __slots__ = ("node", "type_id", "name", "interval", "periodic", "ts", "start", "busy_from", "tid", "data", "can_id",
-                 "chain", "reset", "min_gap", "stats", "nth", "grace", "event")
+                 "chain", "reset", "min_gap", "stats", "nth", "grace", "event", "moved")
 
     def __init__(self, node: Node, type_id: int, name: str, periodic: bool) -> None:
         self.node = node
@@ -189,6 +193,7 @@ class Stream:
         self.data = b""
         self.can_id = 0
         self.chain = self.reset = -1
+        self.moved = 0  # the node's Set ID count at this stream's last frame
         self.min_gap = math.inf
         self.stats = Intervals()
         self.nth = 0  # reports in this stretch (since the chain or the reset changed)
@@ -374,6 +379,7 @@ class Tracker(Findings):
             for node in self._nodes.values():  # may re-address any ESC: nobody's intervals are known now
                 node.periods = [None] * len(INTERVAL_FIELDS)
                 node.reset += 1
+                node.moved += 1
                 node.shared = False  # ... nor whether two of them share an id
             self._set_id_shared(data, ts)
         else:

@@ -241,6 +241,25 @@ def test_set_id_makes_every_interval_unknown():
     assert stream(rules, 1, [t + 0.001, t + 0.021, t + 0.041]) == []  # 20 ms is legal; 30 ms was only said before
 
 
+def test_an_esc_moved_away_and_back_by_set_id_counts_its_transfer_ids_on():
+    """F3 counts transfer ids at the sender: an ESC at node 1 moved to node 2 and back by two Set IDs sent MSG1
+    from node 2 meanwhile, so node 1's next MSG1 skips a transfer id (found by ``ckesc explore``: a false FAIL).
+    After the next frame the stream is held to F3 again."""
+    rules = BusRules(bitrate=BITRATE, complete=True)
+    t = stated(rules, 1, 0.0)
+    assert stream(rules, 1, [t, t + 0.02], start_tid=15) == []  # tids 15, 16
+    feed(rules, encode("set_id", {"node_id": 2, "throttle_channel": 1}, source=0, destination=1, transfer_id=1), t + 0.021)
+    feed(rules, encode("set_id", {"node_id": 2, "throttle_channel": 1}, kind="response", source=2, destination=0,
+                       transfer_id=1), t + 0.022)
+    assert stream(rules, 2, [t + 0.04], start_tid=17) == []
+    feed(rules, encode("set_id", {"node_id": 1, "throttle_channel": 1}, source=0, destination=2, transfer_id=2), t + 0.041)
+    feed(rules, encode("set_id", {"node_id": 1, "throttle_channel": 1}, kind="response", source=1, destination=0,
+                       transfer_id=2), t + 0.042)
+    assert stream(rules, 1, [t + 0.06, t + 0.08], start_tid=18) == []  # 18 after node 1's 16: the ESC's own count
+    (v,) = stream(rules, 1, [t + 0.10], tids=[21])  # 21 after 19, no Set ID between: caught
+    assert v.check == "transfer-id"
+
+
 def test_reports_between_a_set_freq_write_and_its_late_answer_are_not_judged_on_the_old_interval():
     """A service answer may come up to 64 ms after the request (a conforming variant, service_delay): an ESC that
     applies the write on receipt reports on the new interval before its answer says what it is."""
