@@ -10,8 +10,9 @@ What is left out, and why (safety and what the oracle can follow):
 - non-zero throttle (the explorer never spins a motor; ``allow_motor_spin`` is not used yet);
 - Expand Set Part (222) and Clear Rec (224): they change motor settings or erase the temperature records,
   which no restore can put back; Get Rec (223): its payload and answer are OBSERVE (R15);
-- Set Baud to another legal code: the DUT would leave the host's bit rate at the next power-up (only the
-  current code, an illegal one, in and after the window, are sent);
+- Set Baud to another legal code where the host cannot follow the DUT to it (real time: the bench's bit rate
+  is the adapter's); in the simulated lane it is sent, and the runner moves the host to the DUT's new rate at
+  the power-up that brings it into force (and back before the next program);
 - LED blink codes other than 0/1/2/5 and 242 with a non-zero option: what the ESC does is a freedom
   (``led_blink_other``, ``major_config_option``), never a finding.
 """
@@ -110,6 +111,10 @@ class Bench:
     node_id: int = 1
     baud_code: int = cat.DEFAULT_BAUD_CODE
     window_waits: bool = True
+    #: whether Set Baud may change the bit rate (the runner follows the DUT to it): the simulated lane
+    bitrates: bool = False
+    #: the DUT's settings every program starts from (Dut.settings()), as (key, value) pairs
+    settings: tuple[tuple[str, int], ...] = ()
     absent: frozenset[str] = frozenset()
     waits: tuple[float, ...] = (0.05, 0.25, 0.6, 1.5, 3.0)
 
@@ -119,9 +124,9 @@ def _request_fields(name: str, bench: Bench):
     from hypothesis import strategies as st
 
     spec = cat.spec(name)
-    if name == "set_baud":  # the current code (a no-op write) or an illegal one: never another bit rate
+    if name == "set_baud":  # the current code (a no-op write), an illegal one, another bit rate where allowed
         illegal = [v for v in field_values(name, "baud") if v not in cat.BAUD_RATES]
-        return st.fixed_dictionaries({"baud": st.sampled_from([bench.baud_code, *illegal])})
+        return st.fixed_dictionaries({"baud": st.sampled_from([bench.baud_code, *illegal, *_other_bauds(bench)])})
     if name == "set_id":
         ids = sorted({bench.node_id, bench.node_id % 0x7C + 1, *field_values(name, "node_id")} - {DEFAULT_ESC_NODE_ID})
         return st.fixed_dictionaries({"node_id": st.sampled_from(ids),
@@ -142,28 +147,54 @@ def _request_fields(name: str, bench: Bench):
     return st.fixed_dictionaries(out)
 
 
-def legal_write(name: str, bench: Bench):
-    """A write the document says takes effect (every field legal; Set ID to the baseline node or its neighbour):
-    the settings a program changes, so that what clobbers or forgets them can show."""
+def _other_bauds(bench: Bench) -> list[int]:
+    """The legal Set Baud codes other than the bench's, where the runner can follow the DUT to them."""
+    return [c for c in cat.BAUD_RATES if c != bench.baud_code] if bench.bitrates else []
+
+
+#: request field -> the setting it writes (Dut.settings() keys): a write that takes effect moves it off the baseline
+_WRITES = {("set_rotation", "rotation"): "rotation", ("throttle_select", "source"): "throttle_source",
+           ("set_led", "color"): "led_color", ("set_led", "blink"): "led_blink", ("set_id", "throttle_channel"): "throttle_channel"}
+#: codes of those fields that query instead of write (4.4.21: 0xFF queries the direction)
+_QUERIES = {("set_rotation", "rotation"): 0xFF}
+
+
+def legal_write(name: str, bench: Bench, *, save: bool = False):
+    """A write the document says takes effect (every field legal; Set ID to the baseline node or its neighbour),
+    to a value other than the baseline's where there is one: the settings a program changes, so that what clobbers
+    or forgets them can show. ``save``: Set Led with option 1 (saved in flash, R13)."""
     from hypothesis import strategies as st
 
     spec = cat.spec(name)
+    baseline = dict(bench.settings)
     fields = {}
     for f in spec.request.fields:
         legal = [v for v in field_values(name, f.name) if f.is_legal(v)]
+        if (name, f.name) in _WRITES:
+            other = [v for v in legal if v != baseline.get(_WRITES[name, f.name]) and v != _QUERIES.get((name, f.name))]
+            legal = other or legal
+        if name == "set_led" and f.name == "option" and save:
+            legal = [1]
         if name == "set_id" and f.name == "node_id":
             legal = [bench.node_id, bench.node_id % 0x7C + 1]
+        elif name == "set_baud":
+            legal = _other_bauds(bench) or [bench.baud_code]
         elif name == "set_freq" and f.name == "option":
             legal = [1]
-        if f.legal is not None and name != "set_id":
+        if f.legal is not None and name not in ("set_id", "set_baud") and (name, f.name) not in _WRITES:
             fields[f.name] = st.one_of(st.sampled_from(legal), st.integers(*f.legal))
         else:
             fields[f.name] = st.sampled_from(legal)
     return st.fixed_dictionaries(fields).map(lambda v: Action("send", name, v))
 
 
-def actions(bench: Bench):
-    """A Hypothesis strategy of one action on ``bench``."""
+#: The families of actions a program draws from (swarm testing, Groce et al. 2012: each program uses a random
+#: subset of them, so that one feature comes many times in one program, as a second suspend needs)
+FAMILIES = ("reads", "modes", "writes", "streams", "waits", "power", "episodes")
+
+
+def families(bench: Bench) -> dict[str, Any]:
+    """A Hypothesis strategy per family: of single actions (``[action]``) or of whole episodes."""
     from hypothesis import strategies as st
 
     from ..protocol import functions
@@ -174,32 +205,77 @@ def actions(bench: Bench):
     def claimed(a: Action) -> bool:
         return a.op != "send" or not bench.absent or functions.of_request(a.name, a.fields, bench.absent) is None
 
-    # weights (an alternative listed n times is drawn n times as often): the mode changes and power cycles are
-    # where features meet, so they come often; a read-back shows a clobbered setting; the 120 s window is dear
-    reads = [send("get_major_configuration"), send("maintenance_information"),
-             st.just(Action("send", "set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0})),
-             send("get_esc_id")]
-    modes = [st.sampled_from([cat.MSG_CONTROL_SUSPEND, cat.MSG_CONTROL_RESUME, cat.MSG_CONTROL_RESUME_EXP]).map(
-                 lambda c: Action("send", "msg_control", {"option": 0, "command": c})),
-             st.sampled_from([cat.CAN_TEST_ON, cat.CAN_TEST_OFF]).map(
-                 lambda o: Action("send", "can_test", {"option": o, "count": 0}))] * 3
+    def one(*strategies):
+        return st.one_of(*strategies).filter(claimed).map(lambda a: [a])
+
+    mode_changes = [
+        st.sampled_from([cat.MSG_CONTROL_SUSPEND, cat.MSG_CONTROL_RESUME, cat.MSG_CONTROL_RESUME_EXP]).map(
+            lambda c: Action("send", "msg_control", {"option": 0, "command": c})),
+        st.sampled_from([cat.CAN_TEST_ON, cat.CAN_TEST_OFF]).map(lambda o: Action("send", "can_test", {"option": o, "count": 0})),
+        send("msg_control"), send("can_test")]
     writes = [send(n) for n in SERVICES if n not in ("esc_information", "maintenance_information", "get_major_configuration")]
     writes += [legal_write(n, bench) for n in ("set_freq", "set_rotation", "set_led", "throttle_select", "set_id")] * 2
-    others = [send("msg_control"), send("can_test"), send("esc_information"),
-              st.sampled_from(STREAMS).map(lambda n: Action("stream", n)), st.just(Action("stop")),
-              st.sampled_from(bench.waits).map(lambda s: Action("wait", seconds=s))] + [st.just(Action("wait", seconds=0.6))] * 2
+    out = {
+        # a read-back shows a clobbered setting
+        "reads": one(send("get_major_configuration"), send("maintenance_information"), send("esc_information"),
+                     st.just(Action("send", "set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0})),
+                     send("get_esc_id")),
+        "modes": one(*mode_changes),
+        "writes": one(*writes),
+        "streams": one(st.sampled_from(STREAMS).map(lambda n: Action("stream", n)), st.just(Action("stop"))),
+        "waits": one(st.sampled_from(bench.waits).map(lambda s: Action("wait", seconds=s))),
+        "episodes": st.one_of(*episodes(bench)).filter(lambda ep: all(claimed(a) for a in ep)),
+    }
     if bench.power:
-        others += [st.just(Action("power"))] * 3
-        if bench.window_waits:
-            others.append(st.just(Action("window")))
-    return st.one_of(*reads, *modes, *writes, *others).filter(claimed)
+        out["power"] = one(st.just(Action("power")), *([st.just(Action("window"))] if bench.window_waits else []))
+    return out
+
+
+def episodes(bench: Bench) -> list[Any]:
+    """Strategies of short action sequences that take one feature through a whole round trip (on, effect, off,
+    effect): two of them in one program meet where one's state change is the other's context (a comm loss after a
+    resume, a save before a bit rate change), which single steps drawn at random rarely line up."""
+    from hypothesis import strategies as st
+
+    def msg_control(command: int) -> Action:
+        return Action("send", "msg_control", {"option": 0, "command": command})
+
+    comm_loss = st.sampled_from(STREAMS).map(lambda n: [Action("stream", n), Action("wait", seconds=0.25), Action("stop"),
+                                                         Action("wait", seconds=0.6), Action("stream", n),
+                                                         Action("wait", seconds=0.6), Action("stop")])
+    def round_trip(on: Action, off: Action):
+        """``on`` once or repeated (a handler that is not idempotent: the second suspend that latches), then ``off``."""
+        return st.integers(1, 2).map(lambda n: [on] * n + [Action("wait", seconds=0.25), off, Action("wait", seconds=0.6)])
+
+    resume = msg_control(cat.MSG_CONTROL_RESUME)
+    suspend = round_trip(msg_control(cat.MSG_CONTROL_SUSPEND), resume)
+    exp = round_trip(msg_control(cat.MSG_CONTROL_RESUME_EXP), resume)
+    can_test = round_trip(Action("send", "can_test", {"option": cat.CAN_TEST_ON, "count": 0}),
+                          Action("send", "can_test", {"option": cat.CAN_TEST_OFF, "count": 0}))
+    out = [comm_loss, suspend, exp, can_test]
+    if bench.power:
+        counters = Action("send", "maintenance_information", {"option": 2})
+        saves = ["set_freq", "set_rotation", "set_led", "throttle_select", "set_id"] + (["set_baud"] if bench.bitrates else [])
+        # one or two saves, then a power-up: a save that clobbers the other's flash word shows after it
+        save = st.sampled_from(saves).flatmap(lambda n: legal_write(n, bench, save=True))
+        out.append(st.lists(save, min_size=1, max_size=2).map(lambda writes: [*writes, Action("power"), counters]))
+    return out
 
 
 def programs(bench: Bench, max_size: int = 12):
-    """A Hypothesis strategy of whole programs (the state they start from: :mod:`ckesc.explore.runner`)."""
+    """A Hypothesis strategy of whole programs (the state they start from: :mod:`ckesc.explore.runner`): a random
+    subset of the action families (swarm testing), then up to ``max_size`` items from them, an episode counting as
+    one item (its steps are flattened into the program)."""
     from hypothesis import strategies as st
 
-    return st.lists(actions(bench), min_size=1, max_size=max_size)
+    strategies = families(bench)
+    names = sorted(strategies)
+
+    def from_subset(chosen: frozenset[str]):
+        return st.lists(st.one_of(*[strategies[n] for n in names if n in chosen]), min_size=1, max_size=max_size)
+
+    swarm = st.frozensets(st.sampled_from(names), min_size=1)
+    return swarm.flatmap(from_subset).map(lambda items: [a for item in items for a in item])
 
 
 def stream_fields(name: str) -> dict[str, Any]:

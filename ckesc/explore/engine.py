@@ -150,6 +150,8 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
         except Exception as exc:  # noqa: BLE001 - a flaky DUT (the shrunk program passed once): keep what showed it
             if not current or type(exc).__name__ not in ("Flaky", "FlakyFailure", "FlakyReplay"):
                 raise
+        for f in current.values():  # Hypothesis deletes whole items (an episode is one): now single steps
+            _one_minimal(session, f, stats, lambda: bool(broken) or clock() - start >= hard)
         known.update(current)
         found.extend(fold(list(current.values())))
         current.clear()
@@ -159,6 +161,25 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
     if broken:
         raise broken[0]
     return found, stats
+
+
+def _one_minimal(session: Session, f: Found, stats: Stats, spent: Callable[[], bool]) -> None:
+    """Delete single steps of ``f``'s program, on the DUT, while what it shows still shows (delta debugging's
+    1-minimal program: no one step can go). Hypothesis shrinks the choices that drew the program, and an episode
+    (several steps drawn as one item) goes whole or not at all; a firmware engineer reads the steps."""
+    i = 0
+    while i < len(f.program) and len(f.program) > 1 and not spent():
+        candidate = f.program[:i] + f.program[i + 1:]
+        try:
+            outcome = session.run(candidate)
+        except RestoreError:
+            return
+        stats.add(outcome)
+        f.shrink_runs += 1
+        if any(g.key == f.key for g in outcome.findings):
+            f.program, f.outcome = candidate, outcome
+        else:
+            i += 1
 
 
 def _past(database: str | None) -> list[list[Action]]:

@@ -39,6 +39,16 @@ ANSWER_REQ = {
 }
 #: settings whose read-back after a power cycle R13 covers
 _PERSISTED = {"get_major_configuration", "set_freq", "get_esc_id"}
+#: per setting field read back (242, 214, GET_ESC_ID) or shown (MSG1's direction bit): the clause of its own section
+#: that says a written value is kept ("saved in FLASH ... not lost"); a value that changed where the model's did not
+#: (a neighbour's save clobbered it, a power cycle lost it) breaks it
+KEPT = {"direction": "4.4.21-4", "rotation": "4.4.21-4", "throttle_source": "4.4.23-4", "led_color": "4.4.20-5",
+        "led_blink": "4.4.20-5", "throttle_channel": "4.4.18-7", "node_id": "4.4.18-7", "msg1_interval": "R13",
+        "msg2_interval": "R13", "msg3_interval": "R13"}
+#: parameter changes R12 holds back while reporting is suspended
+_WRITES_HELD = frozenset({"set_led", "set_rotation", "set_freq", "throttle_select", "set_id", "set_baud"})
+#: MSG1 status bits that show a setting (R7): bit 15 the direction of rotation
+_STATUS_SETTING = {0x8000: "direction"}
 #: fields compared per answer (None: all); () presence only
 _COMPARED = {"esc_information": (), "maintenance_information": ("power_ups", "stops")}
 _EXP = frozenset(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp") and s.name != "msg_exp12")
@@ -191,10 +201,14 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
         a = {k: v for k, v in got.fields.items() if keys is None or k in keys}
         b = {k: v for k, v in want.fields.items() if keys is None or k in keys}
         rids = reqs[:1] + (["R13"] if powered and req.name in _PERSISTED else [])
+        query = (req.name == "set_freq" and req.fields.get("option") != 1) or (req.name == "set_rotation" and req.fields.get("rotation") == 0xFF)
+        if req.name in _WRITES_HELD and not query and _state_at(oracle, req.timestamp).mode == "suspended":
+            rids.append("R12")  # the model's answer tells the setting it kept: R12 holds the change back
         rids += list(dict.fromkeys(rule for t, rule in refused if t < req.timestamp and rule not in rids))
         for k in b:
             if a.get(k) != b[k]:
-                out.append(Finding("answer", rids, f"{req.name} {_fields(req)} answered {k}={a.get(k)}, the model {b[k]}",
+                kept = [KEPT[k]] if req.name in _PERSISTED and k in KEPT and KEPT[k] not in rids else []
+                out.append(Finding("answer", rids + kept, f"{req.name} {_fields(req)} answered {k}={a.get(k)}, the model {b[k]}",
                                    _fields(got), _fields(want), req.timestamp - t0, step, subject=f"{req.name}.{k}"))
     return out
 
@@ -347,6 +361,9 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
             continue  # one finding per kind of wrong bit
         seen.add(bits)
         rids = ["R8", "R7"] if bits & 0x2000 else ["R7"]
+        for bit, setting in _STATUS_SETTING.items():  # a bit showing a setting: the setting's own keeping, and R13's
+            if bits & bit:                            # after a power cycle in the program
+                rids += [KEPT[setting]] + (["R13"] if any(u > t0 for u in ups if u <= t) else [])
         out.append(Finding("status", rids, f"MSG1 status bits {bits:#06x} differ ({state.mode} since {state.cause})",
                            f"status {f.fields['status']:#06x}", f"status {want:#06x} (bits {STATUS_MASK:#06x} compared)",
                            t - t0, _state_at(oracle, t).step, subject=f"status {bits:#06x}"))

@@ -40,6 +40,8 @@ POWER_SETTLE_S = 0.3  # read after a power-up: the reports that should flow (or 
 SETTLE_S = 0.6  # read after the last step, so that what it did shows (MSG1 and MSG2 judged after the settle)
 #: after settings were restored: twice the longest report interval (a restart allowance, R9a, and a late one), and a little
 RESTORE_SETTLE_S = 2 * cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S + 0.1
+#: restores (each followed by a power cycle where the bench has power control) until the settings hold
+RESTORE_TRIES = 3
 
 
 class _Options:
@@ -120,8 +122,11 @@ class Session:
 
     @property
     def bench(self) -> Bench:
+        simulated = self.lane.clock == "simulated"
         return Bench(power=self.lane.power.available, node_id=self.baseline_node, baud_code=self.baud_code,
-                     window_waits=self.lane.clock == "simulated", absent=frozenset(self.profile.absent))
+                     window_waits=simulated, bitrates=simulated and self.lane.can_change_bitrate,
+                     settings=tuple(sorted(self.baseline.items())),
+                     absent=frozenset(self.profile.absent))
 
     def close(self) -> None:
         try:
@@ -140,6 +145,7 @@ class Session:
         try:
             if self.lane.power.available:
                 powered_at = dut.switch_power(self.profile.off_s, self.profile.boot_s)
+            powered_at = self._back_to_baseline_rate() or powered_at
             if not dut.frames("msg1", since=self.lane.now() - 1.0, source=dut.node_id):
                 dut.broadcast("can_test", {"option": cat.CAN_TEST_OFF, "count": 0})
                 dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
@@ -153,15 +159,56 @@ class Session:
                                        "opens a Set ID window to move it back")
                 dut.ask("set_id", {"node_id": self.baseline_node, "throttle_channel": self.baseline["throttle_channel"]})
                 dut.node_id = self.baseline_node
-            changed = dut.settings() != self.baseline
-            left = dut.restore(self.baseline)
-            if changed:  # a Set Freq write restarts the report timers (R9a): let that pass before the program starts
-                dut.wait(RESTORE_SETTLE_S)
+            for attempt in range(RESTORE_TRIES + 1):
+                if (now := dut.settings()) == self.baseline:
+                    break
+                if attempt == RESTORE_TRIES:
+                    raise RestoreError(f"the DUT's settings restored did not hold across {RESTORE_TRIES} power cycles "
+                                       f"(R13): {now} against {self.baseline}")
+                left = dut.restore(self.baseline)
+                if left:
+                    raise RestoreError(f"could not restore the DUT's settings: {'; '.join(left)}")
+                if not self.lane.power.available:  # a Set Freq write restarts the report timers (R9a): let that pass
+                    dut.wait(RESTORE_SETTLE_S)
+                    break
+                # the program starts on a power-up whose flash holds the baseline: a restore one save undid in flash
+                # (a save that clobbers its neighbour) would otherwise show in the next program's power cycle, a
+                # finding its own steps cannot reproduce
+                powered_at = dut.switch_power(self.profile.off_s, self.profile.boot_s)
         except (DutError, Inconclusive, AssertionError) as exc:
             raise RestoreError(f"could not put the DUT back into its starting state: {exc}") from None
-        if left:
-            raise RestoreError(f"could not restore the DUT's settings: {'; '.join(left)}")
         return powered_at
+
+    def _back_to_baseline_rate(self) -> float | None:
+        """After a program that moved the DUT to another bit rate (Set Baud, then a power-up): find it at its rate
+        (the host's, the baseline's, then every legal one), and if that is not the baseline's, Set Baud back in the
+        window of the power-up just made and power-cycle into it. Returns that power-up's time (the 120 s window
+        the program starts in), or None when the DUT was not moved."""
+        baseline = cat.BAUD_RATES[self.baud_code]
+        if not self.lane.can_change_bitrate or (self.lane.bitrate == baseline and self._answering() is not None):
+            return None
+        for rate in dict.fromkeys([self.lane.bitrate, baseline, *cat.BAUD_RATES.values()]):
+            self.lane.reopen(rate)
+            if (node := self._answering()) is not None:
+                break
+        else:
+            self.lane.reopen(baseline)
+            return None  # nobody answers at any rate: discovery says so next
+        if rate == baseline:
+            return None
+        self.dut.node_id = node
+        self.dut.ask("set_baud", {"baud": self.baud_code})
+        self.lane.reopen(baseline)  # before the power-up, as a program's power step does: heard from its boot on
+        on = self.dut.switch_power(self.profile.off_s, self.profile.boot_s)
+        self.dut.wait(POWER_SETTLE_S)
+        return on
+
+    def _answering(self) -> int | None:
+        """The node id of the first ESC answering GET_ESC_ID at the host's current bit rate, if any."""
+        sent = self.dut.broadcast("get_esc_id", {"option": 0}, layout="query")
+        self.dut.wait(cat.ANSWER_DELAY_MAX_S * 2)
+        return next((f.source for f in self.dut.frames("get_esc_id", since=sent.host_time)
+                     if f.layout is not None and f.layout.name == "reply"), None)
 
     def _oracle(self, powered_at: float, t0: float) -> Oracle:
         counters = self.dut.ask("maintenance_information", {"option": 2})
@@ -251,6 +298,11 @@ class Session:
             dut.wait(0.01)
         elif action.op == "power":
             if self.lane.power.available:
+                # a Set Baud write comes into force at this power-up (4.4.19): the host moves with the DUT as it
+                # goes off, so that it hears the DUT from its boot on (the model's stored code: the document's)
+                rate = cat.BAUD_RATES.get(oracle.model.nvm["baud"], self.lane.bitrate)
+                if self.lane.can_change_bitrate and rate != self.lane.bitrate:
+                    self.lane.reopen(rate)
                 dut.switch_power(self.profile.off_s, self.profile.boot_s)
         elif action.op == "wait":
             dut.wait(action.seconds)

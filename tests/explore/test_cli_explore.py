@@ -16,13 +16,13 @@ def test_budget(text, seconds):
 
 
 def test_a_finding_is_exit_1_with_a_report(tmp_path, capsys):
-    code = main(["explore", "--emulator-faults", "suspend_persisted", "--budget", "60s", "--max-programs", "40",
+    code = main(["explore", "--emulator-faults", "second_suspend_latches", "--budget", "60s", "--max-programs", "40",
                  "--seed", "1", "--first", "--reports", str(tmp_path), "--database", "none", "-q"])
     assert code == 1
     (run,) = [p for p in tmp_path.iterdir() if p.name.endswith("-explore")]
     results = json.loads((run / "results.json").read_text())
-    assert results["findings"][0]["requirements"] == ["R13"]
-    assert results["info"]["bench"]["emulator_faults"] == "suspend_persisted"
+    assert results["findings"][0]["requirements"] == ["4.4.2-1", "4.4.2-T"]
+    assert results["info"]["bench"]["emulator_faults"] == "second_suspend_latches"
     assert "finding 1" in capsys.readouterr().out
 
 
