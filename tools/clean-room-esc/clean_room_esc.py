@@ -45,6 +45,7 @@ SERVICE_PRIORITY = {
 }
 
 DEFAULT_NODE = 0x7D
+BAUD_RATES = [1000000, 500000, 250000, 200000, 125000, 100000, 50000]   # Set Baud codes (4.4.19)
 WINDOW_S = 120.0          # Set ID / Set Baud window after power-up (4.3.2, R11)
 COMM_LOSS_S = 0.200       # 4.4.4-3
 SERVICE_DELAY_S = 0.0042  # this vendor's answer delay for ordinary services
@@ -157,6 +158,9 @@ class Esc:
         self.seq = 0
         self.tids: dict = {}
         self.stop_requested = False
+        self._rate_checked = -1.0
+        self._bus_rate = 0
+        self.baud_now = self.flash["baud"]
         self.pending_power: list[str] = []
 
     # ----- flash -----------------------------------------------------------------------------
@@ -219,8 +223,26 @@ class Esc:
         self.seq += 1
         heapq.heappush(self.events, (t, self.seq, self.epoch, fn, a))
 
+    def on_our_rate(self) -> bool:
+        """With --bus-bitrate-file, the ESC hears and is heard only when the bus runs at its own rate."""
+        path = self.args.bus_bitrate_file
+        if not path:
+            return True
+        try:
+            st = os.stat(path).st_mtime_ns
+        except OSError:
+            st = None
+        if st != self._rate_checked:
+            self._rate_checked = st
+            try:
+                with open(path) as f:
+                    self._bus_rate = int(f.read().strip() or 0)
+            except (OSError, ValueError):
+                self._bus_rate = 0
+        return not self._bus_rate or self._bus_rate == BAUD_RATES[self.baud_now]
+
     def send(self, arb_id: int, data: bytes):
-        if not self.powered or self.bus is None:
+        if not self.powered or self.bus is None or not self.on_our_rate():
             return
         try:
             self.bus.send(can.Message(arbitration_id=arb_id, is_extended_id=True, data=data))
@@ -254,6 +276,7 @@ class Esc:
         self.ram = copy.deepcopy({k: v for k, v in self.flash.items() if k not in ("counters", "records")})
         self.boot_cfg = copy.deepcopy(self.ram)
         self.boot_node = self.ram["node_id"]
+        self.baud_now = self.ram["baud"]   # Set Baud takes effect at power-up (4.4.19-1)
         self.led_ram = (self.ram["led_color"], self.ram["led_blink"])
         self.suspended = bool(self.flash.get("reporting_suspended")) and "rotation_query_saves_suspend" in self.defects
         self.exp_mode = False
@@ -455,6 +478,8 @@ class Esc:
     def on_frame(self, m: can.Message, rx_mono: float):
         if not self.powered or rx_mono < self.boot_until or not m.is_extended_id or m.is_remote_frame:
             return
+        if not self.on_our_rate():
+            return
         if m.is_error_frame:
             return
         cid = m.arbitration_id
@@ -567,6 +592,8 @@ class Esc:
             if changes_ok:
                 r["node_id"], r["channel"] = node, ch
                 self.save("set_id")
+                if node == DEFAULT_NODE:
+                    self.reporting_on = False   # at 0x7D nothing is reported on its own (4.4.18-4)
             answer([r["node_id"], r["channel"]])
         elif service == SRV_SET_BAUD:
             if len(p) < 1 or now > self.window_end or p[0] > 6:
@@ -753,6 +780,9 @@ def main(argv=None):
     ap.add_argument("--defect", action="append", metavar="NAME")
     ap.add_argument("--list-defects", action="store_true")
     ap.add_argument("--unpowered", action="store_true")
+    ap.add_argument("--bus-bitrate-file", default=None,
+                    help="bench stand-in for the physical bit rate: a file holding the bus's bit rate; the ESC "
+                         "is deaf and mute while it differs from the rate of the ESC's Set Baud code")
     ap.add_argument("--boot-time", type=float, default=0.3)
     args = ap.parse_args(argv)
     if args.list_defects:
