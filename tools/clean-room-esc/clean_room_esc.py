@@ -360,8 +360,8 @@ class Esc:
         s = 0
         if self.ram["rotation"]:
             s |= 1 << 15
-        if self.ram["throttle_src"]:
-            s |= 1 << 14
+        if self.ram["throttle_src"] and self.args.source_bit == "configured":
+            s |= 1 << 14   # this vendor: bit 14 shows the configured source (PWM+CAN), see README
         if self.comm_fault:
             s |= 1 << 13
         if self.running:
@@ -783,6 +783,9 @@ def main(argv=None):
     ap.add_argument("--bus-bitrate-file", default=None,
                     help="bench stand-in for the physical bit rate: a file holding the bus's bit rate; the ESC "
                          "is deaf and mute while it differs from the rate of the ESC's Set Baud code")
+    ap.add_argument("--source-bit", choices=("configured", "in-use"), default="configured",
+                    help="MSG1 status bit 14: the configured throttle source (default) or the source in use "
+                         "(CAN: this ESC has no PWM input)")
     ap.add_argument("--boot-time", type=float, default=0.3)
     args = ap.parse_args(argv)
     if args.list_defects:
