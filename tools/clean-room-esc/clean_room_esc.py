@@ -626,8 +626,8 @@ class Esc:
                 self.save("query")
             answer([r["rotation"]])
         elif service == SRV_FREQ:
-            if len(p) < 4 or p[0] > 1:
-                return
+            if len(p) < 4 or (p[0] > 1 and self.args.freq_other_option == "ignore"):
+                return   # this vendor: an option other than 0 (read) / 1 (write) is not answered
             if p[0] == 1 and changes_ok and all(10 <= x <= 250 for x in p[1:4]):
                 # the report already scheduled on the old interval goes out first (R9a); the one
                 # after it comes on the new interval
@@ -786,6 +786,8 @@ def main(argv=None):
     ap.add_argument("--source-bit", choices=("configured", "in-use"), default="configured",
                     help="MSG1 status bit 14: the configured throttle source (default) or the source in use "
                          "(CAN: this ESC has no PWM input)")
+    ap.add_argument("--freq-other-option", choices=("ignore", "read"), default="ignore",
+                    help="Set/Get Freq with an option other than 0/1: not answered (default) or taken as a read")
     ap.add_argument("--boot-time", type=float, default=0.3)
     args = ap.parse_args(argv)
     if args.list_defects:
