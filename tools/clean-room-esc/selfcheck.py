@@ -86,7 +86,7 @@ def main():
         check(r is not None and len(r.data) == 8 and r.data[7] == 0xC5, f"240 answered {r}")
         p0 = service(241, [2]).data
         esc.send_signal(signal.SIGUSR1)
-        time.sleep(0.4)
+        listen(0.4)   # drain what was sent before the switch-off
         check(not of(listen(0.3), 20050), "silent while powered off")
         esc.send_signal(signal.SIGUSR2)
         time.sleep(0.6)
