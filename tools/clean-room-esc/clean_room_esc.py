@@ -605,16 +605,22 @@ class Esc:
                 self._write_flash_file()
             answer([r["baud"]])
         elif service == SRV_SET_LED:
-            if len(p) < 3 or p[0] > 1:
+            if len(p) < 3:
                 return
-            if changes_ok:
+            if p[0] > 1:
+                if self.args.led_other_option == "ignore":
+                    return   # this vendor: an option other than 0/1 is not answered
+                answer([p[0], self.led_ram[0], self.led_ram[1]])   # answered, nothing changed
+                p = b""
+            if p and changes_ok:
                 color = p[1] & 0x07
                 blink = p[2] if p[2] in (0, 1, 2, 5) else 0
                 self.led_ram = (color, blink)
                 if p[0] == 1:
                     r["led_color"], r["led_blink"] = color, blink
                     self.save("led")
-            answer([p[0], self.led_ram[0], self.led_ram[1]])
+            if p:
+                answer([p[0], self.led_ram[0], self.led_ram[1]])
         elif service == SRV_SET_ROT:
             if len(p) < 1:
                 return
@@ -788,6 +794,8 @@ def main(argv=None):
                          "(CAN: this ESC has no PWM input)")
     ap.add_argument("--freq-other-option", choices=("ignore", "read"), default="ignore",
                     help="Set/Get Freq with an option other than 0/1: not answered (default) or taken as a read")
+    ap.add_argument("--led-other-option", choices=("ignore", "answer"), default="ignore",
+                    help="Set LED with an option other than 0/1: not answered (default) or answered, nothing changed")
     ap.add_argument("--boot-time", type=float, default=0.3)
     args = ap.parse_args(argv)
     if args.list_defects:
