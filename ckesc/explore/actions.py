@@ -14,7 +14,10 @@ What is left out, and why (safety and what the oracle can follow):
   is the adapter's); in the simulated lane it is sent, and the runner moves the host to the DUT's new rate at
   the power-up that brings it into force (and back before the next program);
 - LED blink codes other than 0/1/2/5 and 242 with a non-zero option: what the ESC does is a freedom
-  (``led_blink_other``, ``major_config_option``), never a finding.
+  (``led_blink_other``, ``major_config_option``), never a finding; likewise every undefined code of a field no
+  rule rejects (Set Freq or Set Led option 2, colour 8, throttle channel 21, 241 option 3): illegal values are
+  sent only where R10 says what the ESC does with them (found against an ESC of another make, which leaves such
+  a request unanswered: the document allows it).
 """
 
 from __future__ import annotations
@@ -98,6 +101,10 @@ def field_values(name: str, field_name: str) -> list[int]:
     layout = spec.request if spec.service else next(lay for lay in spec.layouts if lay.sender == "any" or lay.name in ("query", "command"))
     f = next(f for f in layout.fields if f.name == field_name)
     values = sorted({c.value for c in field_cases(spec, f)})
+    if getattr(f, "rejected_by", None) is None:
+        # an undefined code of a field no rule rejects (Set Freq / Set Led option 2, a colour above 7, channel 21):
+        # what the ESC does with it the document does not say, so no answer or state after it is a finding
+        values = [v for v in values if f.is_legal(v)]
     return [v for v in values if v in _ONLY[(name, field_name)]] if (name, field_name) in _ONLY else values
 
 

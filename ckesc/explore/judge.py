@@ -11,7 +11,7 @@ Observations compared (each a :class:`Finding` when they differ):
   power-up's boot time); which MSG_EXP frames come is OBSERVE (R9-exp), only that some do.
 - **intervals** (R9): from the third report after the event (R9a: the gaps before are OBSERVE), the mean gap
   of MSG1/2/3 against the model's interval, held to 1 ms plus the bench's error and jitter over the gaps.
-- **status** (R7, R8): each MSG1's bits 15, 14, 13 and 8 against the model's MSG1s within one interval
+- **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only), 13 and 8 against the model's MSG1s within one interval
   (R8's window for bit 13: the flag may come up to one MSG1 interval after the model's).
 The live bus rules (``evidence/live.py``) run beside this and are findings of their own (runner).
 """
@@ -342,6 +342,10 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         if not near:
             continue
         mask = STATUS_MASK & ~0x2000  # bit 13 is judged on R8's own clock below
+        if state.source != 0:
+            # bit 14 under PWM+CAN: 4.4.4 names it "throttle signal source" without saying configured or in use
+            # (4.2: PWM+CAN falls back to CAN by itself), and ESCs of other makes show either: not compared
+            mask &= ~0x4000
         comm = _comm_fault_expected(t, commands, ups, state, p)
         if comm is not None and bool(f.fields["status"] & 0x2000) != comm:
             bits = 0x2000

@@ -65,7 +65,7 @@ def _found_fault(fault: str, max_programs: int) -> None:
 # second_suspend_latches 3, comm_loss_sticky 0, intervals_not_persisted 9, comm_loss_sticky_after_resume 56,
 # resume_reloads_default_intervals 74, baud_change_counts_power_up_twice 79; set_id_resets_source 34,
 # rotation_save_resets_intervals 74, freq_save_resets_led 79, suspend_persisted 130, led_save_reverts_rotation 228,
-# source_save_reverts_led 428, throttle_select_drops_10b 604, set_freq_moves_other_stream 621). FAST: the four
+# source_save_reverts_led 143, throttle_select_drops_10b 604, set_freq_moves_other_stream 621). FAST: the four
 # interaction faults the suite's tests do not catch, and two more kinds (a comm loss, a save and a power-up)
 FAST = {"second_suspend_latches": 40, "comm_loss_sticky_after_resume": 120, "resume_reloads_default_intervals": 150,
         "baud_change_counts_power_up_twice": 150, "comm_loss_sticky": 40, "intervals_not_persisted": 40}
