@@ -122,10 +122,14 @@ def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) 
 
 
 # ------------------------------------------------------------------------------------------ answers
-def _answer_of(frames: Iterable[Frame], req: Frame, until: float, since: float | None = None) -> Frame | None:
+def _answer_of(frames: Iterable[Frame], req: Frame, until: float, since: float | None = None,
+               taken: set[int] | None = None) -> Frame | None:
+    """The first answer to ``req`` in ``frames`` between ``since`` and ``until``, not one of ``taken`` (the ids of
+    answers an earlier request got: with a look-back for late echoes, an earlier request's answer to another node
+    with the same transfer id, F3 counting per destination, would otherwise pass for this one's)."""
     since = req.timestamp if since is None else since
     for f in frames:
-        if f.timestamp < since:
+        if f.timestamp < since or (taken is not None and id(f) in taken):
             continue
         if f.timestamp > until:
             return None
@@ -176,6 +180,7 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
     refused = _refusals(oracle)
     model = [f for f in oracle.out if f.source != p.host_node]
     powered = False  # a power cycle came before (a read-back is then also R13's)
+    taken: set[int] = set()  # the DUT's answers an earlier request got
     for req, step in oracle.host:
         if req.name in ("raw_command_14b", "raw_command_12b", "raw_command_10b"):
             continue
@@ -183,13 +188,15 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
             continue
         if any(s.label == "power on" and s.t <= req.timestamp and s.t > t0 for s in oracle.states):
             powered = True
+        got = _answer_of(dut, req, req.timestamp + ANSWER_WAIT_S + 2 * p.error,
+                         since=req.timestamp - (_ECHO_SLACK_S + 2 * p.error if p.error else 0.0), taken=taken)
+        if got is not None and req.kind is Kind.REQUEST:  # the DUT's answer to this request, judged or not
+            taken.add(id(got))
         if not _answered(req) or (req.name, req.transfer_id or 0) in oracle.free:
             continue
         want = _answer_of(model, req, req.timestamp + ANSWER_WAIT_S)
         if want is None:  # the model's ESC does not answer it (not addressed to it, off, booting): nothing to compare
             continue
-        got = _answer_of(dut, req, req.timestamp + ANSWER_WAIT_S + 2 * p.error,
-                         since=req.timestamp - (_ECHO_SLACK_S + 2 * p.error if p.error else 0.0))
         reqs = [ANSWER_REQ.get(req.name, cat.spec(req.name).section)]
         if req.kind is Kind.REQUEST and req.name not in ("get_esc_id", "msg_control"):
             reqs.append("4.1.1-2")
