@@ -36,16 +36,16 @@ def _ckesc(tmp: Path, *args: str, timeout: float = 300) -> subprocess.CompletedP
     return subprocess.run([*CKESC, *args], cwd=tmp, env=_env(tmp), capture_output=True, text=True, timeout=timeout)
 
 
-def _profile(tmp: Path) -> Path:
+def _profile(tmp: Path, off_s: float = 0.5) -> Path:
     profile = tmp / "bench.toml"
     profile.write_text('[dut]\nname = "bench"\n[capabilities]\nled = true\nmotor = true\n'
-                       "[timing]\nerror_s = 0.002\nboot_s = 0.5\noff_s = 0.5\n")
+                       f"[timing]\nerror_s = 0.002\nboot_s = 0.5\noff_s = {off_s}\n")
     return profile
 
 
-def _bus_args(tmp: Path, can_port: int) -> list[str]:
+def _bus_args(tmp: Path, can_port: int, off_s: float = 0.5) -> list[str]:
     return ["--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0", "--can-config", "host=127.0.0.1",
-            "--can-config", f"port={can_port}", "--profile", str(_profile(tmp)), "--reports", str(tmp / "reports")]
+            "--can-config", f"port={can_port}", "--profile", str(_profile(tmp, off_s)), "--reports", str(tmp / "reports")]
 
 
 def _results(tmp: Path) -> dict:
@@ -280,15 +280,19 @@ def test_a_run_interrupted_while_the_dut_is_off_releases_the_place(tmp_path, ben
     """Ctrl-C while labgrid holds the DUT's power off (mid power cycle): the run ends INTERRUPTED (exit 130), says the
     settings it could not restore on a DUT that is off, and releases the place on the way out."""
     emu, switch = bench
-    proc = subprocess.Popen([*CKESC, "run", *_bus_args(tmp_path, emu.port), "--power", "labgrid", "--labgrid-env",
-                             str(_place_env(tmp_path)), "--labgrid-coordinator", lab.address, "4.4.27", "--", "-k",
-                             POWER_CYCLE_TEST], cwd=tmp_path, env=_env(tmp_path), stdout=subprocess.PIPE,
+    # a long off time (3 s): the switch says "off" while the run may still be inside labgrid's call, where an
+    # interrupt may be taken up by the RPC; the Ctrl-C comes 0.3 s later, well inside the run's wait for the DUT
+    proc = subprocess.Popen([*CKESC, "run", *_bus_args(tmp_path, emu.port, off_s=3.0), "--power", "labgrid",
+                             "--labgrid-env", str(_place_env(tmp_path)), "--labgrid-coordinator", lab.address, "4.4.27",
+                             "--", "-k", POWER_CYCLE_TEST], cwd=tmp_path, env=_env(tmp_path), stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:
         deadline = time.monotonic() + 120
         while switch.switched[-1:] != ["off"]:
             assert proc.poll() is None and time.monotonic() < deadline, "the run never switched the power off"
             time.sleep(0.01)
+        time.sleep(0.3)
+        assert switch.switched[-1:] == ["off"], switch.switched
         os.killpg(proc.pid, signal.SIGINT)
         text, _ = proc.communicate(timeout=120)
     finally:
