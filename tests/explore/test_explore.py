@@ -66,10 +66,10 @@ def _found_fault(fault: str, max_programs: int) -> None:
 # resume_reloads_default_intervals 74, baud_change_counts_power_up_twice 79; set_id_resets_source 34,
 # rotation_save_resets_intervals 74, freq_save_resets_led 79, suspend_persisted 130, led_save_reverts_rotation 228,
 # source_save_reverts_led 143, throttle_select_drops_10b 604, set_freq_moves_other_stream 621). FAST: the four
-# interaction faults the suite's tests do not catch, and two more kinds (a comm loss, a save and a power-up)
+# interaction faults the suite's tests do not catch
 FAST = {"second_suspend_latches": 40, "comm_loss_sticky_after_resume": 120, "resume_reloads_default_intervals": 150,
-        "baud_change_counts_power_up_twice": 150, "comm_loss_sticky": 40, "intervals_not_persisted": 40}
-SLOW = {"set_id_resets_source": 100, "rotation_save_resets_intervals": 150, "freq_save_resets_led": 150,
+        "baud_change_counts_power_up_twice": 150}
+SLOW = {"comm_loss_sticky": 40, "intervals_not_persisted": 40, "set_id_resets_source": 100, "rotation_save_resets_intervals": 150, "freq_save_resets_led": 150,
         "suspend_persisted": 260, "led_save_reverts_rotation": 450, "source_save_reverts_led": 850,
         "throttle_select_drops_10b": 1200, "set_freq_moves_other_stream": 1250,
         # faults that are not interaction faults, found in a sequence (found after: report_restart_late 3,
