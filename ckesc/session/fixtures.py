@@ -270,8 +270,8 @@ def _install_signal_guard(config: pytest.Config) -> None:
         signals.append(signum)
         st.stopped = st.stopped or f"interrupted ({signal.Signals(signum).name})"
         zero_throttle_now(config)  # no read here: the test's trace gets the zero as the test unwinds (tracing)
-        if first and st.shield:  # a trace file being written out: raised when it is (safety.shielded)
-            st.interrupt_held = True
+        if first and st.shield.depth:  # a trace file being written out: raised when it is (state.Shield)
+            st.shield.held = True
         elif first:
             raise KeyboardInterrupt
         print(f"ckesc: {signal.Signals(signum).name} again: zero throttle sent; finishing the teardown (settings "

@@ -3,12 +3,8 @@ exit paths zero the DUT from outside a test's own :class:`~ckesc.bench.dut.Dut`.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
-
 import pytest
 
-from ..bench.lanes import BenchGone
 from ..bench.link import Link
 from .state import state
 
@@ -26,29 +22,13 @@ def zero_throttle_now(config: pytest.Config, *, read_s: float = 0.0) -> None:
     if lane is None:
         return
     try:
-        lane.stop_streams()
         if st.profile is not None and st.node_id is not None:
-            Link(lane, st.profile, node_id=st.node_id).zero_throttle()
+            Link(lane, st.profile, node_id=st.node_id).zero_throttle()  # it stops the lane's streams first
+        else:
+            lane.stop_streams()
         end = lane.now() + read_s
         while read_s > 0 and (left := end - lane.now()) > 0:
             lane.recv(left)
-    except BenchGone:  # the run was aborted for it already (and says so): nothing reaches the DUT now
-        pass
-    except Exception:  # noqa: BLE001 - best effort on the way out
+    except Exception:  # noqa: BLE001 - best effort on the way out (BenchGone: the run says so already)
         pass
 
-
-@contextmanager
-def shielded(config: pytest.Config) -> Iterator[None]:
-    """A stretch that Ctrl-C / SIGTERM must not cut in the middle (writing a test's trace file out: a
-    KeyboardInterrupt inside python-can's BLF writer leaves the file a bare header and the test's evidence
-    lost). The signal guard holds the interrupt while inside and it is raised here once the stretch ends."""
-    st = state(config)
-    st.shield += 1
-    try:
-        yield
-    finally:
-        st.shield -= 1
-        if not st.shield and st.interrupt_held:
-            st.interrupt_held = False
-            raise KeyboardInterrupt

@@ -23,6 +23,26 @@ from ..reporting.results import Result
 EXIT_ABORTED = 3
 
 
+class Shield:
+    """A stretch that Ctrl-C / SIGTERM must not cut in the middle (writing a test's trace file out: a
+    KeyboardInterrupt inside python-can's BLF writer leaves the file a bare header and the test's evidence lost).
+    A context manager, re-entrant and reused for every frame written: the session's signal guard sets ``held``
+    instead of raising while ``depth`` is non-zero, and the interrupt is raised here once the stretch ends."""
+
+    def __init__(self) -> None:
+        self.depth = 0
+        self.held = False
+
+    def __enter__(self) -> None:
+        self.depth += 1
+
+    def __exit__(self, *exc: object) -> None:
+        self.depth -= 1
+        if not self.depth and self.held:
+            self.held = False
+            raise KeyboardInterrupt
+
+
 @dataclass
 class RunState:
     results: dict[str, Result] = field(default_factory=dict)
@@ -42,10 +62,8 @@ class RunState:
     #: why the run stopped early: "aborted: ..." (the DUT did not answer, the bench went away) or
     #: "interrupted" (Ctrl-C, SIGTERM); None while it runs or when it ran to its end
     stopped: str | None = None
-    #: inside :func:`.safety.shielded` (a trace file being written out): the first Ctrl-C / SIGTERM is held
-    #: until it ends (``interrupt_held``) rather than raised into it
-    shield: int = 0
-    interrupt_held: bool = False
+    #: held while a trace file is written out: the first Ctrl-C / SIGTERM waits for it to end
+    shield: Shield = field(default_factory=Shield)
 
 
 _STATE = pytest.StashKey[RunState]()

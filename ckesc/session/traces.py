@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import re
-from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 
@@ -41,6 +40,10 @@ def trace_name(nodeid: str, fmt: str) -> str:
     return f"{stem}.{fmt}"
 
 
+#: the default shield: none (a trace writer outside a pytest session)
+_UNSHIELDED = nullcontext()
+
+
 class TestTraces:
     """One trace file per test and lane under ``directory`` (see the module docstring).
 
@@ -49,10 +52,9 @@ class TestTraces:
 
     __test__ = False  # not a pytest test class, whatever its name
 
-    def __init__(self, directory: Path, fmt: str = "blf",
-                 shield: Callable[[], AbstractContextManager] = nullcontext) -> None:
-        """``shield``: what each write to a file runs inside, so that a Ctrl-C is not raised into python-can's
-        writer half-way through a block (the session's :func:`.safety.shielded`)."""
+    def __init__(self, directory: Path, fmt: str = "blf", shield: AbstractContextManager = _UNSHIELDED) -> None:
+        """``shield``: a reusable context manager each write to a file runs inside, so that a Ctrl-C is not raised
+        into python-can's writer half-way through a block (the session's :class:`.state.Shield`)."""
         if fmt not in WRITERS:
             raise ValueError(f"trace format must be one of {', '.join(WRITERS)}, not {fmt!r}")
         self.directory = Path(directory)
@@ -84,7 +86,7 @@ class TestTraces:
             self.directory.mkdir(parents=True, exist_ok=True)
             path = self.directory / ".".join(filter(None, (self._stem, lane, self.fmt)))
             entry = self._writers[lane] = (path, WRITERS[self.fmt](path))
-        with self._shield():
+        with self._shield:
             entry[1].on_message_received(msg)
 
     def end(self) -> dict[str, Path]:

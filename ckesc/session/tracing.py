@@ -7,7 +7,7 @@ import pytest
 
 from ..bench.lanes import Lane
 from .collection import is_conformance
-from .safety import EXIT_READ_S, shielded, zero_throttle_now
+from .safety import EXIT_READ_S, zero_throttle_now
 from .state import report_dir, state
 from .traces import TestTraces
 
@@ -24,7 +24,7 @@ def writer(config: pytest.Config) -> TestTraces | None:
 def _open(config: pytest.Config) -> TestTraces | None:
     if _WRITER not in config.stash and config.getoption("ckesc_trace_format") != "none" and (out := report_dir(config)):
         config.stash[_WRITER] = TestTraces(out / "traces", config.getoption("ckesc_trace_format"),
-                                           shield=lambda: shielded(config))
+                                           shield=state(config).shield)
     return writer(config)
 
 
@@ -50,7 +50,7 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
             # Ctrl-C / SIGTERM cut this test short, and pytest tears its fixtures down only at the session's end,
             # after this trace closes: zero throttle now, read into this trace, so that it ends on the zero
             zero_throttle_now(item.config, read_s=EXIT_READ_S)
-        with shielded(item.config):  # a Ctrl-C now is raised once the files are whole and the result names them
+        with state(item.config).shield:  # a Ctrl-C now is raised once the files are whole and the result names them
             paths = traces.end_relative()
             res = state(item.config).results.get(item.nodeid)
             if res is not None:
