@@ -16,7 +16,7 @@ from typing import Any, Mapping, Sequence
 
 import can
 
-from ..bench.dut import Dut, DutError, echo_probe
+from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
 from ..bench.lanes import BusLane, Lane
 from ..bench.verdict import Inconclusive
 from ..emulator import variants
@@ -117,14 +117,15 @@ class Session:
         self.baseline_node = self.dut.node_id
         self.baseline = self.dut.settings()
         self.baud_code = next((c for c, r in cat.BAUD_RATES.items() if r == self.lane.bitrate), cat.DEFAULT_BAUD_CODE)
+        #: programs may move the DUT to another bit rate (Set Baud) and the host follows it: the simulated lane only
+        self.bitrates = self.lane.clock == "simulated" and self.lane.can_change_bitrate
         self.params = Params(error=self.lane.timing_error, jitter=profile.jitter_s, boot_s=profile.boot_s,
                              bitrate=self.lane.bitrate, host_node=self.dut.host_node)
 
     @property
     def bench(self) -> Bench:
-        simulated = self.lane.clock == "simulated"
         return Bench(power=self.lane.power.available, node_id=self.baseline_node, baud_code=self.baud_code,
-                     window_waits=simulated, bitrates=simulated and self.lane.can_change_bitrate,
+                     window_waits=self.lane.clock == "simulated", bitrates=self.bitrates,
                      settings=tuple(sorted(self.baseline.items())),
                      absent=frozenset(self.profile.absent))
 
@@ -185,8 +186,8 @@ class Session:
         window of the power-up just made and power-cycle into it. Returns that power-up's time (the 120 s window
         the program starts in), or None when the DUT was not moved."""
         baseline = cat.BAUD_RATES[self.baud_code]
-        if not self.lane.can_change_bitrate or (self.lane.bitrate == baseline and self._answering() is not None):
-            return None
+        if not self.bitrates or (self.lane.bitrate == baseline and self._answering() is not None):
+            return None  # no program can have moved it (real time), or it answers where it should
         for rate in dict.fromkeys([self.lane.bitrate, baseline, *cat.BAUD_RATES.values()]):
             self.lane.reopen(rate)
             if (node := self._answering()) is not None:
@@ -204,11 +205,11 @@ class Session:
         return on
 
     def _answering(self) -> int | None:
-        """The node id of the first ESC answering GET_ESC_ID at the host's current bit rate, if any."""
-        sent = self.dut.broadcast("get_esc_id", {"option": 0}, layout="query")
-        self.dut.wait(cat.ANSWER_DELAY_MAX_S * 2)
-        return next((f.source for f in self.dut.frames("get_esc_id", since=sent.host_time)
-                     if f.layout is not None and f.layout.name == "reply"), None)
+        """The node id the DUT answers GET_ESC_ID from at the host's current bit rate (discovery), or None."""
+        try:
+            return self.dut.discover()
+        except DutUnreachable:
+            return None
 
     def _oracle(self, powered_at: float, t0: float) -> Oracle:
         counters = self.dut.ask("maintenance_information", {"option": 2})
@@ -301,7 +302,7 @@ class Session:
                 # a Set Baud write comes into force at this power-up (4.4.19): the host moves with the DUT as it
                 # goes off, so that it hears the DUT from its boot on (the model's stored code: the document's)
                 rate = cat.BAUD_RATES.get(oracle.model.nvm["baud"], self.lane.bitrate)
-                if self.lane.can_change_bitrate and rate != self.lane.bitrate:
+                if self.bitrates and rate != self.lane.bitrate:
                     self.lane.reopen(rate)
                 dut.switch_power(self.profile.off_s, self.profile.boot_s)
         elif action.op == "wait":
