@@ -162,8 +162,18 @@ def _other_bauds(bench: Bench) -> list[int]:
 #: request field -> the setting it writes (Dut.settings() keys): a write that takes effect moves it off the baseline
 _WRITES = {("set_rotation", "rotation"): "rotation", ("throttle_select", "source"): "throttle_source",
            ("set_led", "color"): "led_color", ("set_led", "blink"): "led_blink", ("set_id", "throttle_channel"): "throttle_channel"}
-#: codes of those fields that query instead of write (4.4.21: 0xFF queries the direction)
-_QUERIES = {("set_rotation", "rotation"): 0xFF}
+
+
+def asks_only(name: str, fields: dict[str, Any]) -> bool:
+    """Whether a settings request only asks, writing nothing: a field at the code the catalogue names "query"
+    (Set Rotation 0xFF), or an option other than the one it names "write" (Set Freq)."""
+    spec = cat.spec(name)
+    for f in spec.request.fields if spec.request is not None else ():
+        codes = f.codes or {}
+        meaning = codes.get(fields.get(f.name))
+        if meaning == "query" or ("write" in codes.values() and meaning != "write"):
+            return True
+    return False
 
 
 def legal_write(name: str, bench: Bench, *, save: bool = False):
@@ -178,10 +188,10 @@ def legal_write(name: str, bench: Bench, *, save: bool = False):
     for f in spec.request.fields:
         legal = [v for v in field_values(name, f.name) if f.is_legal(v)]
         if (name, f.name) in _WRITES:
-            other = [v for v in legal if v != baseline.get(_WRITES[name, f.name]) and v != _QUERIES.get((name, f.name))]
+            other = [v for v in legal if v != baseline.get(_WRITES[name, f.name]) and not asks_only(name, {f.name: v})]
             legal = other or legal
         if name == "set_led" and f.name == "option" and save:
-            legal = [1]
+            legal = [code for code, meaning in (f.codes or {}).items() if meaning == "save"]
         if name == "set_id" and f.name == "node_id":
             legal = [bench.node_id, bench.node_id % 0x7C + 1]
         elif name == "set_baud":
@@ -195,13 +205,10 @@ def legal_write(name: str, bench: Bench, *, save: bool = False):
     return st.fixed_dictionaries(fields).map(lambda v: Action("send", name, v))
 
 
-#: The families of actions a program draws from (swarm testing, Groce et al. 2012: each program uses a random
-#: subset of them, so that one feature comes many times in one program, as a second suspend needs)
-FAMILIES = ("reads", "modes", "writes", "streams", "waits", "power", "episodes")
-
-
 def families(bench: Bench) -> dict[str, Any]:
-    """A Hypothesis strategy per family: of single actions (``[action]``) or of whole episodes."""
+    """A Hypothesis strategy per family of actions (reads, modes, writes, streams, waits, power, episodes): of single
+    actions (``[action]``) or of whole episodes. A program draws from a random subset of them (swarm testing, Groce
+    et al. 2012), so that one feature comes many times in one program, as a second suspend needs."""
     from hypothesis import strategies as st
 
     from ..protocol import functions

@@ -26,6 +26,7 @@ from ..protocol import catalogue as cat
 from ..protocol.frame import Frame, frame_bits
 from ..protocol.ids import Kind
 from ..protocol.requirements import requirement
+from .actions import asks_only
 from .oracle import Oracle, State
 
 #: MSG1 status bits compared (R7): direction, throttle source, comm fault (R8), running
@@ -208,8 +209,7 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
         a = {k: v for k, v in got.fields.items() if keys is None or k in keys}
         b = {k: v for k, v in want.fields.items() if keys is None or k in keys}
         rids = reqs[:1] + (["R13"] if powered and req.name in _PERSISTED else [])
-        query = (req.name == "set_freq" and req.fields.get("option") != 1) or (req.name == "set_rotation" and req.fields.get("rotation") == 0xFF)
-        if req.name in _WRITES_HELD and not query and _state_at(oracle, req.timestamp).mode == "suspended":
+        if req.name in _WRITES_HELD and not asks_only(req.name, req.fields) and _state_at(oracle, req.timestamp).mode == "suspended":
             rids.append("R12")  # the model's answer tells the setting it kept: R12 holds the change back
         rids += list(dict.fromkeys(rule for t, rule in refused if t < req.timestamp and rule not in rids))
         for k in b:
