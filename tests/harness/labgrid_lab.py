@@ -12,6 +12,8 @@ import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
+from procs import end
+
 from ckesc.emulator.control import control_request
 
 LOCALHOST = "127.0.0.1"
@@ -118,9 +120,4 @@ class Lab:
 
     def close(self) -> None:
         for proc in reversed(self.procs):
-            proc.terminate()
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=30)
+            end(proc)

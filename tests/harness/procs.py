@@ -38,18 +38,25 @@ class Emulator:
         self.port, self.control = ports["socketcand"], ports["control"]
 
     def close(self) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(timeout=30)
-        for pipe in (self.proc.stdout, self.proc.stderr):
-            if pipe is not None:
-                pipe.close()
+        end(self.proc)
 
     def __enter__(self) -> Emulator:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def end(proc: subprocess.Popen) -> None:
+    """Stop a process: SIGTERM (its clean stop), SIGKILL if it has not
+    ended within 30 s; then close its pipes."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=30)
+    for pipe in (proc.stdout, proc.stderr):
+        if pipe is not None:
+            pipe.close()

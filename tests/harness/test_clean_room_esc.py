@@ -12,13 +12,12 @@ from __future__ import annotations
 
 import json
 import re
-import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from procs import CKESC, Emulator
+from procs import CKESC, Emulator, end
 from procs import env as _env
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -55,16 +54,7 @@ class CleanRoom:
                       "--can-bitrate-cmd", f"sh -c 'echo {{bitrate}} > {rate}'"]
 
     def close(self) -> None:
-        if self.esc.poll() is None:
-            self.esc.send_signal(signal.SIGTERM)
-            try:
-                self.esc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.esc.kill()
-                self.esc.wait(timeout=30)
-        for pipe in (self.esc.stdout, self.esc.stderr):
-            if pipe is not None:
-                pipe.close()
+        end(self.esc)  # SIGTERM: the ESC writes its flash file and exits
         self.hub.close()
 
     def __enter__(self) -> CleanRoom:
