@@ -169,6 +169,9 @@ _FAULTS = (
           "command (until the next power-up)", INTERACTION),
     Fault("baud_change_counts_power_up_twice", ("4.4.27-T", "4.4.10-T"),
           "the power-up that brings a new Set Baud bit rate into force counts two power-ups", INTERACTION),
+    Fault("answer_slot_from_boot_node", ("R2", "4.4.2-4", "4.4.3-4"),
+          "MSG Control and GET_ESC_ID answers wait for the slot of the node id the ESC booted with: after a Set ID "
+          "(until the next power-up) they come in the old node's slot, not the current one's", INTERACTION),
     Fault("throttle_select_drops_10b", ("4.4.17-1", "R5", "R8"),
           "after a Throttle Select (until the next power-up) RawCommand_10b is ignored: the parser table is rebuilt "
           "with the 14-bit and 12-bit formats only", INTERACTION),

@@ -129,6 +129,7 @@ class EscModel(Output, Motor, Reporting, Settings, Answers):
         self._timer_from: dict[str, str] = {}  # set_freq_moves_other_stream: report -> the report whose interval it takes
         self._resumed = False  # comm_loss_sticky_after_resume: reporting was suspended and resumed
         self._selected = False  # throttle_select_drops_10b: a Throttle Select was taken
+        self._boot_node = self.nvm["node_id"]  # answer_slot_from_boot_node: the node id it booted with
 
     def power_on(self, now: float) -> None:
         if self.powered:

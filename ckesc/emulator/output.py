@@ -87,7 +87,8 @@ class Output:
             return 0.010
         if "answer_at_once" in self.faults:
             return 0.001
-        start = (self.node_id % 32) * ANSWER_SLOT_S  # R2
+        node = self._boot_node if "answer_slot_from_boot_node" in self.faults else self.node_id
+        start = (node % 32) * ANSWER_SLOT_S  # R2
         if self.config.answer_place == "start":
             return start
         # the latest start that still ends inside the slot with one longest frame on the bus ahead of it (the

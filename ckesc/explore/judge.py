@@ -5,6 +5,8 @@ Observations compared (each a :class:`Finding` when they differ):
   GET_ESC_ID), with the model's payload: read-backs (214 read, 242, 241 option 2's counters, GET_ESC_ID) and the
   answers to accepted writes. A request the model rejects (R10-R12) is free: answered or not, with anything
   (``rejected_answer``). 240's identity and 241's run times and temperatures are the DUT's own: presence only.
+- **answer slots** (R2, 4.4.2-4 / 4.4.3-4 "related to the current ESC ID"): a MSG Control or GET_ESC_ID answer
+  starts no earlier than the slot of the node id the model has now (after a Set ID, the new one's).
 - **streams**: per stretch between two events (a host frame other than throttle, a power switch) and per
   report (MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test), whether it flows, judged only after the
   stretch has settled (R9a's restart allowance of the longer interval, answer delay and the bench's error; a
@@ -52,6 +54,8 @@ _WRITES_HELD = frozenset({"set_led", "set_rotation", "set_freq", "throttle_selec
 _STATUS_SETTING = {0x8000: "direction"}
 #: fields compared per answer (None: all); () presence only
 _COMPARED = {"esc_information": (), "maintenance_information": ("power_ups", "stops")}
+#: R2: the answer slots, (node_id % _SLOTS) x ANSWER_SLOT_S, tiling the 64 ms
+_SLOTS = round(cat.ANSWER_DELAY_MAX_S / cat.ANSWER_SLOT_S)
 _EXP = frozenset(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp") and s.name != "msg_exp12")
 STREAMS = ("msg1", "msg2", "msg3", "exp", "can_test")
 #: what flows in each mode of the model's ESC (4.4.2's table, R16; R9-exp: which MSG_EXP frames is OBSERVE)
@@ -107,6 +111,7 @@ def _known(rid: str) -> bool:
 @dataclass
 class Params:
     error: float = 0.0  # the bench's timing error (s)
+    own_error: float = 0.0  # the error of the host's own frames' times (the request an answer's delay counts from)
     jitter: float = 0.0  # the DUT's declared report jitter (profile jitter_s)
     boot_s: float = 0.5  # power-on to first report (profile)
     bitrate: int = cat.DEFAULT_BITRATE
@@ -201,23 +206,45 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
         reqs = [ANSWER_REQ.get(req.name, cat.spec(req.name).section)]
         if req.kind is Kind.REQUEST and req.name not in ("get_esc_id", "msg_control"):
             reqs.append("4.1.1-2")
-        if got is None:
-            out.append(Finding("answer", reqs, f"{req.name} {_fields(req)} not answered", "no answer",
+        earlier = list(dict.fromkeys(rule for t, rule in refused if t < req.timestamp))
+        if got is None:  # (after a write the model refused and the DUT took, a Set ID, it answers at another id)
+            out.append(Finding("answer", reqs + [r for r in earlier if r not in reqs], f"{req.name} {_fields(req)} not answered", "no answer",
                                f"{_fields(want)}", req.timestamp - t0, step, subject=f"{req.name} not answered"))
             continue
+        if req.kind is Kind.MESSAGE:
+            out += _slot(req, got, want, step, t0, p, _state_at(oracle, req.timestamp).bitrate)
         keys = _COMPARED.get(req.name)
         a = {k: v for k, v in got.fields.items() if keys is None or k in keys}
         b = {k: v for k, v in want.fields.items() if keys is None or k in keys}
         rids = reqs[:1] + (["R13"] if powered and req.name in _PERSISTED else [])
         if req.name in _WRITES_HELD and not asks_only(req.name, req.fields) and _state_at(oracle, req.timestamp).mode == "suspended":
             rids.append("R12")  # the model's answer tells the setting it kept: R12 holds the change back
-        rids += list(dict.fromkeys(rule for t, rule in refused if t < req.timestamp and rule not in rids))
+        rids += [rule for rule in earlier if rule not in rids]
         for k in b:
             if a.get(k) != b[k]:
                 kept = [KEPT[k]] if req.name in _PERSISTED and k in KEPT and KEPT[k] not in rids else []
                 out.append(Finding("answer", rids + kept, f"{req.name} {_fields(req)} answered {k}={a.get(k)}, the model {b[k]}",
                                    _fields(got), _fields(want), req.timestamp - t0, step, subject=f"{req.name}.{k}"))
     return out
+
+
+def _slot(req: Frame, got: Frame, want: Frame, step: int | None, t0: float, p: Params, bitrate: int) -> list[Finding]:
+    """R2: a broadcast's answer (MSG Control, GET_ESC_ID) starts no earlier than its node's slot, (node_id % 32) x
+    2 ms after the request, for the node id the model says the DUT has now (after a Set ID, its new one). Judged
+    with the bench's error given to the DUT, as the suite's slot tests do; only the early side: an answer late in
+    its slot is the 64 ms bound's (a real-time bench's stall makes one late, never early)."""
+    node = want.source
+    slot = (node % _SLOTS) * cat.ANSWER_SLOT_S
+    error = max(p.error, p.own_error)
+    start = got.timestamp - frame_bits(len(got.data)) / bitrate - req.timestamp  # (its timestamp is its end)
+    if start >= slot - error - 1e-9:
+        return []
+    reqs = ["R2", "4.4.2-4" if req.name == "msg_control" else "4.4.3-4"]
+    return [Finding("answer", reqs, f"{req.name} answered {start * 1000:.1f} ms after the request, before node {node}'s "
+                    "slot", f"answer from node {got.source} starting {start * 1000:.2f} ms after the request",
+                    f"node {node}: slot {slot * 1000:g}..{(slot + cat.ANSWER_SLOT_S) * 1000:g} ms (bench error "
+                    f"+-{error * 1000:g} ms)", req.timestamp - t0, step, strength="READING",
+                    subject=f"{req.name} answer before its slot")]
 
 
 def _fields(f: Frame) -> str:

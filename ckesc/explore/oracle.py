@@ -47,6 +47,7 @@ class State:
     step: int | None = None
     cause: str = ""  # the event that put the model's ESC into this mode (the label of the state it changed at)
     source: int = 0  # the throttle source (242): comm loss (R8) is judged under CAN throttle (0) only
+    bitrate: int = cat.DEFAULT_BITRATE  # the bus's bit rate in force (Set Baud's, from the last power-up)
 
 
 @dataclass
@@ -155,4 +156,4 @@ class Oracle:
         mode = self.mode()
         prev = self.states[-1] if self.states else None
         cause = prev.cause if prev is not None and prev.mode == mode and label not in ("power on", "ready") else label
-        self.states.append(State(t, label, mode, intervals, step, cause, nvm["throttle_source"]))
+        self.states.append(State(t, label, mode, intervals, step, cause, nvm["throttle_source"], self.model.bitrate))

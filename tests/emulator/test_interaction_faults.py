@@ -211,6 +211,20 @@ def _(esc: Esc):
     return plain, counted()
 
 
+@scenario("answer_slot_from_boot_node", off=(2, 34), on=(2, 2))
+def _(esc: Esc):
+    """GET_ESC_ID's answer starts in node 1's slot (2 ms); after Set ID to node 17 in node 17's (34 ms), or with the
+    fault still in node 1's (the ms from the request to the answer's start, at the model's place: the slot's start)."""
+    def slot_ms() -> int:
+        sent = esc.now
+        esc.model.receive(encode("get_esc_id", {"option": 0}, source=0, layout="query"), sent)
+        [reply] = [f for f in esc.wait(0.07) if f.name == "get_esc_id"]
+        return round((reply.timestamp - sent) * 1000)
+    plain = slot_ms()
+    assert esc.call("set_id", {"node_id": 17, "throttle_channel": 1})["node_id"] == 17
+    return plain, slot_ms()
+
+
 @scenario("throttle_select_drops_10b", off=(1000, 1000), on=(1000, 0))
 def _(esc: Esc):
     """RawCommand_10b 500 (doubled: 1000) is followed; after Throttle Select to CAN it is ignored with the fault."""

@@ -29,3 +29,32 @@ def test_an_answer_an_earlier_request_got_is_not_this_one_s():
     assert _answer_of(dut, req2, 0.1, since=look_back) is ans1  # the mistake the taken set prevents
     taken = {id(_answer_of(dut, req1, 0.1))}
     assert _answer_of(dut, req2, 0.1, since=look_back, taken=taken) is ans2
+
+
+def _slot_case(answer_at: float, node: int = 17, error: float = 0.002):
+    """GET_ESC_ID at t=0 to an ESC the model has at ``node`` (moved there by Set ID); the DUT's reply ending at
+    ``answer_at`` and the model's ending at its slot's start plus the frame's time."""
+    from ckesc.explore.judge import Params, _slot
+    from ckesc.protocol import catalogue as cat
+    from ckesc.protocol.frame import frame_bits
+
+    frame_s = frame_bits(3) / cat.DEFAULT_BITRATE
+    reply = {"node_id": node, "throttle_channel": 1}
+    req, got, want = _frames(
+        (encode("get_esc_id", {"option": 0}, source=0, layout="query"), 0.0),
+        (encode("get_esc_id", reply, source=node, layout="reply"), answer_at),
+        (encode("get_esc_id", reply, source=node, layout="reply"), (node % 32) * cat.ANSWER_SLOT_S + frame_s))
+    return _slot(req, got, want, 0, 0.0, Params(error=error), cat.DEFAULT_BITRATE), frame_s
+
+
+def test_an_answer_before_the_current_node_s_slot_is_a_finding():
+    """R2 / 4.4.3-4 ("related to the current ESC ID"): an ESC moved from node 1 to 17 that still answers in node 1's
+    slot (the clean-room ESC's answer_slot_from_boot_node) starts 30 ms early; the slot's start passes, and so does
+    an answer up to the bench's error early or late in its slot (the late side is the 64 ms bound's)."""
+    found, frame_s = _slot_case(0.003)
+    assert [f.requirements for f in found] == [["R2", "4.4.3-4"]]
+    assert found[0].strength == "READING" and "before node 17's slot" in found[0].what
+    for ok in (0.034 + frame_s, 0.034 + frame_s - 0.0019, 0.0359, 0.050):
+        assert _slot_case(ok)[0] == [], ok
+    assert _slot_case(0.034 + frame_s - 0.0021)[0] != []
+    assert _slot_case(0.034 + frame_s - 0.0001, error=0.0)[0] != []  # the simulated lane: exact
