@@ -35,6 +35,13 @@ def open_session(options: dict[str, Any]) -> Session:
         raise BenchProblem(f"cannot use the bench: {exc}") from None
 
 
+def _close(session: Session, out: TextIO) -> None:
+    session.close()
+    if session.left:
+        print(f"WARNING: the DUT was not put back into the state the exploration found it in: {session.left}",
+              file=out, flush=True)
+
+
 def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
     """``ckesc explore``: 0 nothing found, 1 a finding (or a replay that still shows one)."""
     if getattr(args, "selftest", None):
@@ -49,7 +56,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         except (RestoreError, DutError, BenchGone) as exc:
             raise BenchProblem(str(exc)) from None
         finally:
-            session.close()
+            _close(session, out)
         print(f"replayed {len(program)} steps in {outcome.seconds:.3f} s of lane time", file=out)
         for f in outcome.findings:
             print(f.text(), file=out)
@@ -73,7 +80,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
     except (RestoreError, DutError, BenchGone) as exc:
         raise BenchProblem(str(exc)) from None
     finally:
-        session.close()
+        _close(session, out)
     where = run_dir(args.reports)
     info = {"bench": options, "seed": args.seed, "budget_s": args.budget, "lane": session.lane.name,
             "clock": session.lane.clock, "profile": session.profile.name, "faults": options.get("emulator_faults") or "",

@@ -117,9 +117,16 @@ class Session:
         self.baseline_node = self.dut.node_id
         self.baseline = self.dut.settings()
         self.baud_code = next((c for c, r in cat.BAUD_RATES.items() if r == self.lane.bitrate), cat.DEFAULT_BAUD_CODE)
-        #: programs may move the DUT to another bit rate (Set Baud) and the host follows it: the simulated lane only
-        self.bitrates = self.lane.clock == "simulated" and self.lane.can_change_bitrate
-        self.params = Params(error=self.lane.timing_error, jitter=profile.jitter_s, boot_s=profile.boot_s,
+        #: programs may move the DUT to another bit rate (Set Baud, into force at a power-up) and the host follows it:
+        #: where the host can change its own bit rate (the simulated lane; a real one with --can-bitrate-cmd) and a
+        #: power cycle moves the DUT back inside a program's reset (never left at another rate for a later power-up)
+        self.bitrates = self.lane.can_change_bitrate and self.lane.power.available
+        #: the last program sent Set Baud: the reset looks for the DUT at every rate before anything else
+        self._baud_sent = False
+        self._dirty = False  # a program ran since the last reset: close() puts the DUT back
+        #: why close() could not put the DUT back into its starting state (None: it did, or nothing ran)
+        self.left: str | None = None
+        self.params = Params(error=self.lane.timing_error, own_error=self.lane.own_error, jitter=profile.jitter_s, boot_s=profile.boot_s,
                              bitrate=self.lane.bitrate, host_node=self.dut.host_node)
 
     @property
@@ -130,8 +137,18 @@ class Session:
                      absent=frozenset(self.profile.absent))
 
     def close(self) -> None:
+        """Zero throttle, then, after any program, the DUT back into the state the exploration found it in (its
+        bit rate, node id and settings, as every program's start puts it: an exploration leaves the bench as it
+        found it). What could not be put back is kept in :attr:`left` (the command says so) rather than raised:
+        the lane is closed either way."""
         try:
             self.dut.zero_throttle()
+            if self._dirty:
+                try:
+                    self._reset()
+                    self._dirty = False
+                except RestoreError as exc:
+                    self.left = str(exc)
         finally:
             self.lane.close()
 
@@ -147,11 +164,16 @@ class Session:
             if self.lane.power.available:
                 powered_at = dut.switch_power(self.profile.off_s, self.profile.boot_s)
             powered_at = self._back_to_baseline_rate() or powered_at
-            if not dut.frames("msg1", since=self.lane.now() - 1.0, source=dut.node_id):
-                dut.broadcast("can_test", {"option": cat.CAN_TEST_OFF, "count": 0})
-                dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
-                dut.wait(cat.ANSWER_DELAY_MAX_S * 2)
-            node = dut.discover()
+            self._leave_modes()
+            try:
+                node = dut.discover()
+            except DutUnreachable:
+                if not self.bitrates:
+                    raise
+                # not at the baseline's rate though the last program sent no Set Baud (a DUT that moved by itself)
+                powered_at = self._back_to_baseline_rate(force=True) or powered_at
+                self._leave_modes()
+                node = dut.discover()
             dut.node_id = node
             if node != self.baseline_node or dut.settings()["throttle_channel"] != self.baseline["throttle_channel"]:
                 # a program moved it (Set ID): back, inside this power-up's window
@@ -160,6 +182,9 @@ class Session:
                                        "opens a Set ID window to move it back")
                 dut.ask("set_id", {"node_id": self.baseline_node, "throttle_channel": self.baseline["throttle_channel"]})
                 dut.node_id = self.baseline_node
+                if self.lane.power.available:  # the program starts on a power-up at the baseline's node id: what the
+                    # DUT took from the id it booted with (an answer slot) is then the same in every program
+                    powered_at = dut.switch_power(self.profile.off_s, self.profile.boot_s)
             for attempt in range(RESTORE_TRIES + 1):
                 if (now := dut.settings()) == self.baseline:
                     break
@@ -180,14 +205,22 @@ class Session:
             raise RestoreError(f"could not put the DUT back into its starting state: {exc}") from None
         return powered_at
 
-    def _back_to_baseline_rate(self) -> float | None:
+    def _leave_modes(self) -> None:
+        """CAN Test off and resume, where the DUT does not report (a mode a program left it in, or one it kept
+        across the power cycle): a suspended DUT refuses the settings the reset writes (R12)."""
+        if not self.dut.frames("msg1", since=self.lane.now() - 1.0, source=self.dut.node_id):
+            self.dut.broadcast("can_test", {"option": cat.CAN_TEST_OFF, "count": 0})
+            self.dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
+            self.dut.wait(cat.ANSWER_DELAY_MAX_S * 2)
+
+    def _back_to_baseline_rate(self, force: bool = False) -> float | None:
         """After a program that moved the DUT to another bit rate (Set Baud, then a power-up): find it at its rate
         (the host's, the baseline's, then every legal one), and if that is not the baseline's, Set Baud back in the
         window of the power-up just made and power-cycle into it. Returns that power-up's time (the 120 s window
         the program starts in), or None when the DUT was not moved."""
         baseline = cat.BAUD_RATES[self.baud_code]
-        if not self.bitrates or (self.lane.bitrate == baseline and self._answering() is not None):
-            return None  # no program can have moved it (real time), or it answers where it should
+        if not self.bitrates or not (self._baud_sent or force) or (self.lane.bitrate == baseline and self._answering() is not None):
+            return None  # no program can have moved it, the last one sent no Set Baud, or it answers where it should
         for rate in dict.fromkeys([self.lane.bitrate, baseline, *cat.BAUD_RATES.values()]):
             self.lane.reopen(rate)
             if (node := self._answering()) is not None:
@@ -198,6 +231,7 @@ class Session:
         if rate == baseline:
             return None
         self.dut.node_id = node
+        self._leave_modes()  # (a DUT that booted suspended refuses Set Baud, R12)
         self.dut.ask("set_baud", {"baud": self.baud_code})
         self.lane.reopen(baseline)  # before the power-up, as a program's power step does: heard from its boot on
         on = self.dut.switch_power(self.profile.off_s, self.profile.boot_s)
@@ -223,6 +257,8 @@ class Session:
             powered_at = self._reset()
         except RestoreError:  # once more (a real-time bench may lose a frame under load, issue #21); then it stands
             powered_at = self._reset()
+        self._baud_sent = any(a.op == "send" and a.name == "set_baud" for a in program)
+        self._dirty = True
         oracle = self._oracle(powered_at, self.lane.now())
         dut, rec = self.dut, self.recorder
         rec.messages.clear()
