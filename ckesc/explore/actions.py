@@ -10,9 +10,10 @@ What is left out, and why (safety and what the oracle can follow):
 - non-zero throttle (the explorer never spins a motor; ``allow_motor_spin`` is not used yet);
 - Expand Set Part (222) and Clear Rec (224): they change motor settings or erase the temperature records,
   which no restore can put back; Get Rec (223): its payload and answer are OBSERVE (R15);
-- Set Baud to another legal code where the host cannot follow the DUT to it (real time: the bench's bit rate
-  is the adapter's); in the simulated lane it is sent, and the runner moves the host to the DUT's new rate at
-  the power-up that brings it into force (and back before the next program);
+- Set Baud to another legal code where the host cannot follow the DUT to it (a real bus without
+  ``--can-bitrate-cmd``, or no power control to bring it back); where it can (the simulated lane, a bit-rate
+  command), it is sent, and the runner moves the host to the DUT's new rate at the power-up that brings it into
+  force, and the next program's reset moves the DUT back;
 - LED blink codes other than 0/1/2/5 and 242 with a non-zero option: what the ESC does is a freedom
   (``led_blink_other``, ``major_config_option``), never a finding; likewise every undefined code of a field no
   rule rejects (Set Freq or Set Led option 2, colour 8, throttle channel 21, 241 option 3): illegal values are
@@ -118,7 +119,7 @@ class Bench:
     node_id: int = 1
     baud_code: int = cat.DEFAULT_BAUD_CODE
     window_waits: bool = True
-    #: whether Set Baud may change the bit rate (the runner follows the DUT to it): the simulated lane
+    #: whether Set Baud may change the bit rate (the runner follows the DUT to it and moves it back)
     bitrates: bool = False
     #: the DUT's settings every program starts from (Dut.settings()), as (key, value) pairs
     settings: tuple[tuple[str, int], ...] = ()
@@ -135,7 +136,7 @@ def _request_fields(name: str, bench: Bench):
         illegal = [v for v in field_values(name, "baud") if v not in cat.BAUD_RATES]
         return st.fixed_dictionaries({"baud": st.sampled_from([bench.baud_code, *illegal, *_other_bauds(bench)])})
     if name == "set_id":
-        ids = sorted({bench.node_id, bench.node_id % 0x7C + 1, *field_values(name, "node_id")} - {DEFAULT_ESC_NODE_ID})
+        ids = sorted({*node_moves(bench), *field_values(name, "node_id")} - {DEFAULT_ESC_NODE_ID})
         return st.fixed_dictionaries({"node_id": st.sampled_from(ids),
                                       "throttle_channel": st.sampled_from(field_values(name, "throttle_channel"))})
     layout = spec.request if spec.service else next(lay for lay in spec.layouts if lay.sender == "any" or lay.name in ("query", "command"))
@@ -152,6 +153,14 @@ def _request_fields(name: str, bench: Bench):
         else:
             out[f.name] = st.one_of(st.sampled_from(legal), st.sampled_from(legal), illegal)
     return st.fixed_dictionaries(out)
+
+
+def node_moves(bench: Bench) -> list[int]:
+    """The node ids a legal Set ID moves the DUT to: its own (a no-op write), its neighbour, and the one half the
+    answer slots away (R2: (node_id % 32) x 2 ms), whose slot tells an ESC that kept its old one on any bench."""
+    half = round(cat.ANSWER_DELAY_MAX_S / cat.ANSWER_SLOT_S) // 2
+    far = bench.node_id + half if bench.node_id + half < DEFAULT_ESC_NODE_ID else bench.node_id - half
+    return [bench.node_id, bench.node_id % (DEFAULT_ESC_NODE_ID - 1) + 1, far]
 
 
 def _other_bauds(bench: Bench) -> list[int]:
@@ -176,10 +185,26 @@ def asks_only(name: str, fields: dict[str, Any]) -> bool:
     return False
 
 
-def legal_write(name: str, bench: Bench, *, save: bool = False):
-    """A write the document says takes effect (every field legal; Set ID to the baseline node or its neighbour),
-    to a value other than the baseline's where there is one: the settings a program changes, so that what clobbers
-    or forgets them can show. ``save``: Set Led with option 1 (saved in flash, R13)."""
+def asking() -> list[Action]:
+    """The settings requests that only ask, one each (:func:`asks_only`; every other field 0): Set Rotation's query,
+    Set Freq's read, 240's and 242's query, from the catalogue's code names. An ESC may handle one as a write (save
+    its state block, restart its timers), which only its effect on what follows shows."""
+    out = []
+    for name in SERVICES:
+        fields = cat.spec(name).request.fields
+        for f in fields:
+            for code, meaning in (f.codes or {}).items():
+                if meaning in ("query", "read"):
+                    out.append(Action("send", name, {g.name: code if g is f else 0 for g in fields}))
+    return out
+
+
+def legal_write(name: str, bench: Bench, *, save: bool = False, same: bool = False):
+    """A write the document says takes effect (every field legal; Set ID to one of :func:`node_moves`),
+    to a value other than the baseline's where there is one (now and then the baseline's): the settings a program
+    changes, so that what clobbers or forgets them can show. ``save``: Set Led with option 1 (saved in flash,
+    R13); ``same``: the baseline's value of the settings read back by name (rotation, source, LED, channel): a write that
+    changes nothing, which a firmware may still act on."""
     from hypothesis import strategies as st
 
     spec = cat.spec(name)
@@ -187,19 +212,27 @@ def legal_write(name: str, bench: Bench, *, save: bool = False):
     fields = {}
     for f in spec.request.fields:
         legal = [v for v in field_values(name, f.name) if f.is_legal(v)]
+        rewrite = None
         if (name, f.name) in _WRITES:
-            other = [v for v in legal if v != baseline.get(_WRITES[name, f.name]) and not asks_only(name, {f.name: v})]
-            legal = other or legal
+            legal = [v for v in legal if not asks_only(name, {f.name: v})]
+            other = [v for v in legal if v != baseline.get(_WRITES[name, f.name])]
+            # now and then the value it has: a write that changes nothing may still re-initialise what it touches
+            rewrite, legal = legal, other or legal
+            if same and baseline.get(_WRITES[name, f.name]) is not None and f.is_legal(baseline[_WRITES[name, f.name]]):
+                legal = [baseline[_WRITES[name, f.name]]]
         if name == "set_led" and f.name == "option" and save:
             legal = [code for code, meaning in (f.codes or {}).items() if meaning == "save"]
         if name == "set_id" and f.name == "node_id":
-            legal = [bench.node_id, bench.node_id % 0x7C + 1]
+            legal = node_moves(bench)
         elif name == "set_baud":
             legal = _other_bauds(bench) or [bench.baud_code]
         elif name == "set_freq" and f.name == "option":
             legal = [1]
         if f.legal is not None and name not in ("set_id", "set_baud") and (name, f.name) not in _WRITES:
             fields[f.name] = st.one_of(st.sampled_from(legal), st.integers(*f.legal))
+        elif rewrite is not None and rewrite != legal and not same:
+            fields[f.name] = st.one_of(st.sampled_from(legal), st.sampled_from(legal), st.sampled_from(legal),
+                                       st.sampled_from(rewrite))
         else:
             fields[f.name] = st.sampled_from(legal)
     return st.fixed_dictionaries(fields).map(lambda v: Action("send", name, v))
@@ -231,9 +264,7 @@ def families(bench: Bench) -> dict[str, Any]:
     writes += [legal_write(n, bench) for n in ("set_freq", "set_rotation", "set_led", "throttle_select", "set_id")] * 2
     out = {
         # a read-back shows a clobbered setting
-        "reads": one(send("get_major_configuration"), send("maintenance_information"), send("esc_information"),
-                     st.just(Action("send", "set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0})),
-                     send("get_esc_id")),
+        "reads": one(send("maintenance_information"), st.sampled_from(asking()), send("get_esc_id")),
         "modes": one(*mode_changes),
         "writes": one(*writes),
         "streams": one(st.sampled_from(STREAMS).map(lambda n: Action("stream", n)), st.just(Action("stop"))),
@@ -257,19 +288,38 @@ def episodes(bench: Bench) -> list[Any]:
     comm_loss = st.sampled_from(STREAMS).map(lambda n: [Action("stream", n), Action("wait", seconds=0.25), Action("stop"),
                                                          Action("wait", seconds=0.6), Action("stream", n),
                                                          Action("wait", seconds=0.6), Action("stop")])
+    settings = ["set_freq", "set_rotation", "set_led", "throttle_select", "set_id"]
+    write = st.sampled_from(settings).flatmap(lambda n: legal_write(n, bench))
+    # a settings request: one that only asks, a legal write, or any (boundaries, illegal values)
+    request = st.one_of(st.sampled_from(asking()), write,
+                        st.sampled_from(settings).flatmap(lambda n: _request_fields(n, bench).map(lambda f: Action("send", n, f))))
+    ends = [st.just(False), st.just(True)] if bench.power else [st.just(False)]
+
     def round_trip(on: Action, off: Action):
-        """``on`` once or repeated (a handler that is not idempotent: the second suspend that latches), then ``off``."""
-        return st.integers(1, 2).map(lambda n: [on] * n + [Action("wait", seconds=0.25), off, Action("wait", seconds=0.6)])
+        """``on`` once or repeated (a handler that is not idempotent: the second suspend that latches), up to two
+        settings requests in the mode (R12 holds writes back while suspended; a query may be handled as a save),
+        then ``off``, or a power cycle where the bench has one (the mode is not kept, R13: what the requests in it
+        did to flash shows after it)."""
+        def trip(n: int, inside: list[Action], power: bool) -> list[Action]:
+            end = [Action("power")] if power else [Action("wait", seconds=0.25), off, Action("wait", seconds=0.6)]
+            return [on] * n + inside + end
+        return st.builds(trip, st.integers(1, 2), st.lists(request, min_size=1, max_size=2), st.one_of(*ends))
 
     resume = msg_control(cat.MSG_CONTROL_RESUME)
     suspend = round_trip(msg_control(cat.MSG_CONTROL_SUSPEND), resume)
     exp = round_trip(msg_control(cat.MSG_CONTROL_RESUME_EXP), resume)
     can_test = round_trip(Action("send", "can_test", {"option": cat.CAN_TEST_ON, "count": 0}),
                           Action("send", "can_test", {"option": cat.CAN_TEST_OFF, "count": 0}))
-    out = [comm_loss, suspend, exp, can_test]
+    # a settings write, then RawCommands of every format in turn (the decoder after a write: a table rebuilt without
+    # one format shows as a comm loss under it, R8); half the time a write of the value the setting has, which
+    # changes nothing a read-back could show, so that only what it re-initialises shows
+    formats = [step for n in STREAMS for step in (Action("stream", n), Action("wait", seconds=0.3))]
+    same = st.sampled_from(settings).flatmap(lambda n: legal_write(n, bench, same=True))
+    decode = st.one_of(write, same).map(lambda w: [w, *formats, Action("stop")])
+    out = [comm_loss, suspend, exp, can_test, decode]
     if bench.power:
         counters = Action("send", "maintenance_information", {"option": 2})
-        saves = ["set_freq", "set_rotation", "set_led", "throttle_select", "set_id"] + (["set_baud"] if bench.bitrates else [])
+        saves = settings + (["set_baud"] if bench.bitrates else [])
         # one or two saves, then a power-up: a save that clobbers the other's flash word shows after it
         save = st.sampled_from(saves).flatmap(lambda n: legal_write(n, bench, save=True))
         out.append(st.lists(save, min_size=1, max_size=2).map(lambda writes: [*writes, Action("power"), counters]))
@@ -286,7 +336,9 @@ def programs(bench: Bench, max_size: int = 12):
     names = sorted(strategies)
 
     def from_subset(chosen: frozenset[str]):
-        return st.lists(st.one_of(*[strategies[n] for n in names if n in chosen]), min_size=1, max_size=max_size)
+        # an episode is a whole round trip where a single step is one action: drawn twice as often as one family
+        weighted = [strategies[n] for n in names if n in chosen] + ([strategies["episodes"]] if "episodes" in chosen else [])
+        return st.lists(st.one_of(*weighted), min_size=1, max_size=max_size)
 
     swarm = st.frozensets(st.sampled_from(names), min_size=1)
     return swarm.flatmap(from_subset).map(lambda items: [a for item in items for a in item])

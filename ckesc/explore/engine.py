@@ -167,19 +167,21 @@ def _one_minimal(session: Session, f: Found, stats: Stats, spent: Callable[[], b
     """Delete single steps of ``f``'s program, on the DUT, while what it shows still shows (delta debugging's
     1-minimal program: no one step can go). Hypothesis shrinks the choices that drew the program, and an episode
     (several steps drawn as one item) goes whole or not at all; a firmware engineer reads the steps."""
-    i = 0
-    while i < len(f.program) and len(f.program) > 1 and not spent():
-        candidate = f.program[:i] + f.program[i + 1:]
-        try:
-            outcome = session.run(candidate)
-        except RestoreError:
-            return
-        stats.add(outcome)
-        f.shrink_runs += 1
-        if any(g.key == f.key for g in outcome.findings):
-            f.program, f.outcome = candidate, outcome
-        else:
-            i += 1
+    deleted = True
+    while deleted:  # passes until one deletes nothing: a step needed beside a later one may go once that one went
+        deleted, i = False, 0
+        while i < len(f.program) and len(f.program) > 1 and not spent():
+            candidate = f.program[:i] + f.program[i + 1:]
+            try:
+                outcome = session.run(candidate)
+            except RestoreError:
+                return
+            stats.add(outcome)
+            f.shrink_runs += 1
+            if any(g.key == f.key for g in outcome.findings):
+                f.program, f.outcome, deleted = candidate, outcome, True
+            else:
+                i += 1
 
 
 def _past(database: str | None) -> list[list[Action]]:
