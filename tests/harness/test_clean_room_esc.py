@@ -3,8 +3,9 @@ independent CKESC 2.1 ESC written from the document alone (its README says how, 
 the document is free), on a bare socketcand hub (``ckesc emulate --nodes none``), its power switched by signals
 through ``--power command``: a third-party DUT as a bench meets one, every part a real process.
 
-In every CI run: a handful of sections in real time pass it (no FAIL, no ERROR), and the suite catches one of its
-interaction defects (about 40 s together). ``slow``: the whole suite passes it, ``ckesc explore`` finds nothing on
+In every CI run: a handful of sections in real time pass it (no FAIL, no ERROR), the suite catches one of its
+interaction defects (about 40 s together), and the explorer's shrunk programs of four others show them and
+nothing on the correct ESC (about 40 s). ``slow``: the whole suite passes it, ``ckesc explore`` finds nothing on
 it, and explores each of its defects.
 """
 
@@ -113,6 +114,56 @@ def test_explore_finds_nothing_on_an_esc_of_another_make(tmp_path):
                                "--reports", str(tmp_path / "reports"), "-q"], capture_output=True, text=True,
                               timeout=1200, env=_env(tmp_path), cwd=tmp_path)
     assert done.returncode == 0, done.stdout[-5000:]
+
+
+def _session(cr: CleanRoom):
+    """An exploration session on the clean-room bench (the bench options ``ckesc explore`` is given)."""
+    from ckesc.explore.runner import Session
+
+    b = cr.bench
+    return Session({"dut": "bus", "can_interface": "socketcand", "can_channel": "can0",
+                    "can_config": [b[i + 1] for i, x in enumerate(b) if x == "--can-config"], "profile": str(PROFILE),
+                    "power": "command", "power_off_cmd": b[b.index("--power-off-cmd") + 1],
+                    "power_on_cmd": b[b.index("--power-on-cmd") + 1], "can_bitrate_cmd": b[b.index("--can-bitrate-cmd") + 1]})
+
+
+def _shrunk():
+    """What ``ckesc explore`` shrank each of these defects to in real time (seed 1), and the problem it showed."""
+    from ckesc.explore.actions import Action
+
+    def send(name, **fields):
+        return Action("send", name, fields)
+    return {
+        "rotation_query_saves_suspend": ([send("msg_control", option=0, command=0x55555555),
+                                          send("set_rotation", rotation=0xFF), Action("power")], "stream|msg1 stopped, normal"),
+        "answer_slot_from_boot_node": ([send("set_id", node_id=17, throttle_channel=1)],
+                                       "answer|get_esc_id answer before its slot"),
+        "powerup_counted_twice_after_baud": ([send("set_baud", baud=0), Action("power"), send("maintenance_information", option=2)],
+                                             "answer|maintenance_information.power_ups"),
+        "throttle_select_breaks_10b": ([send("throttle_select", source=0), Action("stream", "raw_command_10b"),
+                                        Action("wait", seconds=0.3)], "status|status 0x2000"),
+    }
+
+
+def test_explore_s_shrunk_programs_show_the_defects_and_nothing_on_the_correct_esc(tmp_path):
+    """The four defects the explorer reached only with this issue's second pass (a mode's requests then a power-up,
+    the answer slot after Set ID, Set Baud on a real bus, a write then every throttle format): their shrunk
+    programs show them in real time, and show nothing on the correct ESC (about 40 s)."""
+    shrunk = _shrunk()
+    for defects, tmp in ((tuple(shrunk), tmp_path / "defects"), ((), tmp_path / "correct")):
+        tmp.mkdir()
+        with CleanRoom(tmp, *defects) as cr:
+            session = _session(cr)
+            try:
+                for name, (program, key) in shrunk.items():
+                    findings = session.run(program).findings
+                    if defects:
+                        assert key in {f.key for f in findings}, f"{name}: " + "\n".join(f.text() for f in findings)
+                    else:
+                        assert not findings, f"{name} on the correct ESC: " + "\n".join(f.text() for f in findings)
+            finally:
+                session.close()
+            assert session.left is None
 
 
 #: the clean-room ESC's interaction defects (``--list-defects``; its README says what each breaks)
