@@ -296,7 +296,7 @@ def episodes(bench: Bench) -> list[Any]:
     ends = [st.just(False), st.just(True)] if bench.power else [st.just(False)]
 
     def round_trip(on: Action, off: Action):
-        """``on`` once or repeated (a handler that is not idempotent: the second suspend that latches), up to two
+        """``on`` once or repeated (a handler that is not idempotent: the second suspend that latches), one or two
         settings requests in the mode (R12 holds writes back while suspended; a query may be handled as a save),
         then ``off``, or a power cycle where the bench has one (the mode is not kept, R13: what the requests in it
         did to flash shows after it)."""
