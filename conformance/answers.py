@@ -20,8 +20,6 @@ from ckesc.protocol.requirements import Verdict
 
 from .reports import frame_start, ms
 
-#: R2: the answer slots, (node_id % SLOTS) x ANSWER_SLOT_S, the last one ending at ANSWER_DELAY_MAX_S
-SLOTS = round(cat.ANSWER_DELAY_MAX_S / cat.ANSWER_SLOT_S)
 #: Every ESC answers a broadcast within 64 ms (R2); the harness's discovery reads twice that
 BROADCAST_WINDOW_S = 2 * cat.ANSWER_DELAY_MAX_S
 
@@ -47,11 +45,6 @@ def reference(dut, name: str, fields: dict | None = None, *, need: tuple[str, ..
     return ex.response.fields
 
 
-def slot_s(node: int) -> float:
-    """R2: when node ``node``'s answer slot starts after the request."""
-    return (node % SLOTS) * cat.ANSWER_SLOT_S
-
-
 def delay_error(dut, sent=None) -> float:
     """The error (s) of an answer's delay from the request: the bench's stated error, or the larger error of
     the request's own time where it is the host clock at send (an adapter without echo; ``sent.error``)."""
@@ -62,7 +55,7 @@ def tells(node: int, error: float) -> bool:
     """Whether, on a bench with ``error``, node ``node``'s slot tells an answer that waits for it from one sent at
     once (inside the first 2 ms slot after the request, whatever the node id): the slot's start less the error
     is not before the first slot's end plus the error."""
-    return slot_s(node) - 2 * error >= cat.ANSWER_SLOT_S - 1e-12
+    return cat.answer_slot_s(node) - 2 * error >= cat.ANSWER_SLOT_S - 1e-12
 
 
 def wide_node(error: float) -> int | None:
@@ -71,7 +64,7 @@ def wide_node(error: float) -> int | None:
     so that an ESC that ignores the stagger and answers at any fixed delay up to that slot's start less twice the
     error (at once, after 10 ms, ...) answers decisively before it. None: no node id below 32 does both."""
     n = math.floor(round((cat.ANSWER_DELAY_MAX_S - cat.ANSWER_SLOT_S - 2 * error) / cat.ANSWER_SLOT_S, 9))
-    n = min(n, SLOTS - 1)
+    n = min(n, cat.ANSWER_SLOTS - 1)
     return n if n >= 2 and tells(n, error) and n != DEFAULT_ESC_NODE_ID else None
 
 
@@ -87,7 +80,7 @@ def check_answer_slot(dut, answer, sent, node: int, what: str, max_requirement: 
     on any bench. Where the slot does not tell an answer sent at once from one in the slot at that error
     (:func:`tells`; :func:`slot_node` moves the DUT to one that does), a start that passes is INCONCLUSIVE,
     saying so. The 64 ms bound (a SHALL) is measured with the error as usual."""
-    slot = slot_s(node)
+    slot = cat.answer_slot_s(node)
     error = delay_error(dut, sent)
     err = error * 1000
     start, end = frame_start(dut, answer) - sent.time, answer.timestamp - sent.time
@@ -163,7 +156,7 @@ def slot_node(dut):
         yield dut.node_id
         return
     target = wide_node(error)
-    why = (f"at the bench's stated error +-{ms(error):g} ms node {dut.node_id}'s answer slot ({ms(slot_s(dut.node_id)):g} ms "
+    why = (f"at the bench's stated error +-{ms(error):g} ms node {dut.node_id}'s answer slot ({ms(cat.answer_slot_s(dut.node_id)):g} ms "
            "after the request) cannot tell an answer in it from one sent at once: whether its answers wait for their "
            f"slot (R2) shows only at a node id whose slot starts at least {ms(2 * error + cat.ANSWER_SLOT_S):g} ms after "
            "it; the latest slot that keeps 64 ms decisively tells the most")

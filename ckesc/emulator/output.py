@@ -6,7 +6,7 @@ from __future__ import annotations
 import heapq
 
 from ..protocol import catalogue as cat
-from ..protocol.catalogue import ANSWER_SLOT_S
+from ..protocol.catalogue import ANSWER_SLOT_S, answer_slot_s
 from ..protocol.codecs import codec_for
 from ..protocol.frame import Frame, WireFrame, encode, frame_bits
 from ..protocol.ids import Kind, Priority, message_id, service_id
@@ -88,7 +88,7 @@ class Output:
         if "answer_at_once" in self.faults:
             return 0.001
         node = self._boot_node if "answer_slot_from_boot_node" in self.faults else self.node_id
-        start = (node % 32) * ANSWER_SLOT_S  # R2
+        start = answer_slot_s(node)  # R2
         if self.config.answer_place == "start":
             return start
         # the latest start that still ends inside the slot with one longest frame on the bus ahead of it (the

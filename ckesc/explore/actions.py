@@ -158,7 +158,7 @@ def _request_fields(name: str, bench: Bench):
 def node_moves(bench: Bench) -> list[int]:
     """The node ids a legal Set ID moves the DUT to: its own (a no-op write), its neighbour, and the one half the
     answer slots away (R2: (node_id % 32) x 2 ms), whose slot tells an ESC that kept its old one on any bench."""
-    half = round(cat.ANSWER_DELAY_MAX_S / cat.ANSWER_SLOT_S) // 2
+    half = cat.ANSWER_SLOTS // 2
     far = bench.node_id + half if bench.node_id + half < DEFAULT_ESC_NODE_ID else bench.node_id - half
     return [bench.node_id, bench.node_id % (DEFAULT_ESC_NODE_ID - 1) + 1, far]
 

@@ -54,8 +54,6 @@ _WRITES_HELD = frozenset({"set_led", "set_rotation", "set_freq", "throttle_selec
 _STATUS_SETTING = {0x8000: "direction"}
 #: fields compared per answer (None: all); () presence only
 _COMPARED = {"esc_information": (), "maintenance_information": ("power_ups", "stops")}
-#: R2: the answer slots, (node_id % _SLOTS) x ANSWER_SLOT_S, tiling the 64 ms
-_SLOTS = round(cat.ANSWER_DELAY_MAX_S / cat.ANSWER_SLOT_S)
 _EXP = frozenset(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp") and s.name != "msg_exp12")
 STREAMS = ("msg1", "msg2", "msg3", "exp", "can_test")
 #: what flows in each mode of the model's ESC (4.4.2's table, R16; R9-exp: which MSG_EXP frames is OBSERVE)
@@ -234,7 +232,7 @@ def _slot(req: Frame, got: Frame, want: Frame, step: int | None, t0: float, p: P
     with the bench's error given to the DUT, as the suite's slot tests do; only the early side: an answer late in
     its slot is the 64 ms bound's (a real-time bench's stall makes one late, never early)."""
     node = want.source
-    slot = (node % _SLOTS) * cat.ANSWER_SLOT_S
+    slot = cat.answer_slot_s(node)
     error = max(p.error, p.own_error)
     start = got.timestamp - frame_bits(len(got.data)) / bitrate - req.timestamp  # (its timestamp is its end)
     if start >= slot - error - 1e-9:

@@ -228,6 +228,14 @@ CAN_TEST_OFF = 0x55
 #: Timing facts.
 ANSWER_SLOT_S = 0.002  # R2: answer after (node_id % 32) x 2 ms
 ANSWER_DELAY_MAX_S = 0.064  # 4.4.2 clarification 4, 4.4.3 clarification 4
+ANSWER_SLOTS = round(ANSWER_DELAY_MAX_S / ANSWER_SLOT_S)  # R2: the slots (node_id % 32) tile the 64 ms
+
+
+def answer_slot_s(node_id: int) -> float:
+    """R2: when node ``node_id``'s answer slot (MSG Control, GET_ESC_ID) starts after the request."""
+    return (node_id % ANSWER_SLOTS) * ANSWER_SLOT_S
+
+
 COMM_LOSS_TIMEOUT_S = 0.200  # 4.4.4 clarification 3 (R8)
 CONFIG_WINDOW_S = 120.0  # 4.3.2 table, R11: Set ID / Set Baud valid 120 s after power-up
 RESTART_SLACK_MIN_S = 0.003  # R9a: the first report after a restart within one interval + max(3 ms, interval / 4)

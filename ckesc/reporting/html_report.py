@@ -268,7 +268,7 @@ def _answer_plot(answers: dict[int, dict[str, list[float]]], err: float) -> tupl
     late = 0
     top = limit
     for i, node in enumerate(nodes):
-        start = (node % round(cat.ANSWER_DELAY_MAX_S / cat.ANSWER_SLOT_S)) * slot_w
+        start = (node % cat.ANSWER_SLOTS) * slot_w
         band = ax.fill_between([i - 0.42, i + 0.42], start, start + slot_w, color="#1a7f37", alpha=0.25, linewidth=0)
         band.set_gid(f"slot-node-{node}")
         worst: tuple[float, str] | None = None
