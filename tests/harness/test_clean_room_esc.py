@@ -117,14 +117,11 @@ def test_explore_finds_nothing_on_an_esc_of_another_make(tmp_path):
 
 
 def _session(cr: CleanRoom):
-    """An exploration session on the clean-room bench (the bench options ``ckesc explore`` is given)."""
-    from ckesc.explore.runner import Session
+    """An exploration session on the clean-room bench, from the bench options as ``ckesc explore`` parses them."""
+    from ckesc.cli import build_parser
+    from ckesc.explore.command import bench_options, open_session
 
-    b = cr.bench
-    return Session({"dut": "bus", "can_interface": "socketcand", "can_channel": "can0",
-                    "can_config": [b[i + 1] for i, x in enumerate(b) if x == "--can-config"], "profile": str(PROFILE),
-                    "power": "command", "power_off_cmd": b[b.index("--power-off-cmd") + 1],
-                    "power_on_cmd": b[b.index("--power-on-cmd") + 1], "can_bitrate_cmd": b[b.index("--can-bitrate-cmd") + 1]})
+    return open_session(bench_options(build_parser().parse_args(["explore", *cr.bench])))
 
 
 def _shrunk():
