@@ -269,7 +269,7 @@ def test_a_record_of_another_suite_fails_the_build(tmp_path, monkeypatch):
 
 
 # ----------------------------------------------------------------------------------------- angle brackets survive
-_CODE_SPAN = re.compile(r"(`+)(?:(?!\1).)+?\1", re.S)
+_CODE_SPAN = re.compile(r"(?<!`)(`+)(?!`).+?(?<!`)\1(?!`)", re.S)  # closed by a run of as many backticks, no more
 _PLACEHOLDER = re.compile(r"<(?![a-z]+://)[A-Za-z/][^<>\n]*>")
 
 
@@ -286,3 +286,4 @@ def test_angle_bracket_text_is_in_code():
     assert not problems, "\n".join(problems)
     assert swallowed_placeholders("x.md", 'SKIPPED as "not claimed: <function> (R9b)", `<test>` and <https://a.b>') == [
         'x.md:1: <function> outside code is swallowed as HTML: write it in backticks']
+    assert swallowed_placeholders("x.md", "a fence ` ```{x} NAME ` and `` a`b <c> ``, then `<test>`") == []
