@@ -357,7 +357,8 @@ def figure(name: str) -> tuple[str, bool]:
     recorded benchmark's ``FILE:PATH[ FORMAT]`` (``suite.json:simulated.overlap.protocol_s .0f``: that JSON file of
     ``bench/results/``, a dotted path in it, list items by index); or a constant of the code,
     ``code:MODULE.NAME[ FORMAT]``. FORMAT: a Python format spec (``.0f``), ``verdicts`` (a {verdict: count} table
-    as "291 PASS, 5 INCONCLUSIVE"), ``yes`` (a truth as yes / no) or ``sum`` (of a table's or a list's numbers)."""
+    as "291 PASS, 5 INCONCLUSIVE"), ``yes`` (a truth as yes / no), ``sum``
+    (of a table's or a list's numbers) or ``ms`` and a format spec (microseconds shown in milliseconds: ``ms.1f``)."""
     name = name.strip()
     if name in FIGURES:
         return FIGURES[name](), False
@@ -380,6 +381,8 @@ def figure(name: str) -> tuple[str, bool]:
     if fmt == "verdicts":  # a {verdict: count} table, in the reports' order of verdicts
         order = ("PASS", "FAIL", "ERROR", "OBSERVED", "INCONCLUSIVE", "SKIPPED")
         return ", ".join(f"{value[v]} {v}" for v in sorted(value, key=lambda v: order.index(v) if v in order else 9)), False
+    if fmt.startswith("ms"):  # microseconds shown in milliseconds: "ms.1f"
+        value, fmt = float(value) / 1000, fmt[2:]
     if fmt == "yes":
         return ("yes" if value else "no"), False
     if fmt == "sum":
