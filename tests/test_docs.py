@@ -1,5 +1,7 @@
 """The documentation site (docs/): it builds with warnings as errors, its generated tables hold what the code
-holds, every shell example says whether it runs here, and the ones that do are run for real and checked.
+holds, its figures are made at build time (no count or run time written by hand, none from a stale record), angle
+brackets outside code are not swallowed, every shell example says whether it runs here, and the ones that do are
+run for real and checked.
 
 A shell example (a fence of ``sh``, ``bash``, ``shell`` or ``console``) follows a MyST comment line, which the site
 does not show:
@@ -9,8 +11,10 @@ does not show:
     % example: not run (a CAN adapter)       needs what this machine has not: the reason is required
 
 The runnable ones of a page run in order, each with ``bash -e`` in one temporary directory per page (with the
-repository's ``fixtures/*`` linked into it) and this interpreter's ``ckesc`` first on PATH. Cost: about 5 s for the
-build, 40-50 s for the examples (each a few sections of the suite in the simulated lane).
+repository's ``fixtures/*`` linked into it) and this interpreter's ``ckesc`` first on PATH. Cost: about 10 s for the
+build (its figures collect the suite), 40-50 s for the examples (each a few sections of the suite in the simulated
+lane) and about 20 s for the stand-in page's (a few tests in real time against ``ckesc emulate`` started in the
+background, which the example stops on its way out).
 """
 
 from __future__ import annotations
@@ -186,3 +190,100 @@ def test_readme_is_one_screen_and_points_at_the_docs():
     installs = re.findall(r'pip install --quiet -e "(\.\[[\w,]+\])"', ci)
     assert installs and f'pip install -e "{installs[0]}" && python -m pytest' in readme, (
         f"README's test command does not install what .ci/run installs ({installs})")
+
+
+# ----------------------------------------------------------------------------------------- figures that cannot go stale
+#: a figure written through the role: ``{ckesc-figure}`NAME``` (docs/_ext/ckesc_docs.py)
+FIGURE_ROLE = re.compile(r"\{ckesc-figure\}`[^`]*`")
+#: a count of tests or verdicts, and a time in seconds, written by hand
+COUNT = re.compile(r"(?<![\w.])\d[\d,.]*\s*(?:tests?|PASS|FAIL|ERROR|OBSERVED|INCONCLUSIVE|SKIPPED|passed|failed|observed)\b")
+SECONDS = re.compile(r"(?<![\w.:])~?\d[\d,.]*(?: s\b| ?s wall\b)")
+#: the pages whose times are figures of runs and benchmarks (elsewhere a time is a protocol's or a tool's setting)
+TIMED = {"docs/reports.md", "docs/batches.md", "docs/benchmarks.md", "README.md"}
+#: what is written by hand on purpose, each with why it is no figure a generator owns
+BY_HAND = {
+    ("docs/reports.md", "301 tests"): "an invented card's heading, showing how a cause is grouped",
+    ("docs/explore.md", "291 PASS"): "the suite against the clean-room ESC, a run of which no record is kept",
+    ("docs/explore.md", "0 FAIL"): "the same run",
+    ("docs/explore.md", "0 ERROR"): "the same run",
+    ("docs/benchmarks.md", "291 PASS"): "the same run",
+    ("docs/benchmarks.md", "0 FAIL"): "the same run",
+    ("docs/benchmarks.md", "0 ERROR"): "the same run",
+    ("docs/benchmarks.md", "120 s"): "the explorer's self-test budget, a setting of the measurement",
+    ("docs/benchmarks.md", "58 s"): "history: a figure before a change, not measured again",
+    ("docs/benchmarks.md", "30 s"): "history: measured in the morning of 2026-11-26, before the changes measured since",
+}
+
+
+def hand_written_figures(where: str, text: str) -> list[str]:
+    """Counts of tests or verdicts (any page) and times (the pages of runs and benchmarks) not written through the
+    ``{ckesc-figure}`` role: the figures a generator owns, copied by hand, which go stale."""
+    text = FIGURE_ROLE.sub("FIGURE", text)
+    text = re.sub(r"^ *% example: .*$", "", text, flags=re.M)  # what an example prints: checked by running it
+    text = re.sub(r"^ *```.*?^ *```", lambda m: "\n" * m.group().count("\n"), text, flags=re.S | re.M)  # code blocks
+    found = [m for m in COUNT.finditer(text)] + ([m for m in SECONDS.finditer(text)] if where in TIMED else [])
+    return [f"{where}:{text[:m.start()].count(chr(10)) + 1}: {m.group().strip()!r} written by hand (write it as "
+            "{ckesc-figure}`NAME`: docs/_ext/ckesc_docs.py)" for m in found
+            if (where, m.group().strip().lstrip("~")) not in BY_HAND]
+
+
+def test_no_page_writes_a_figure_by_hand():
+    """Test counts, verdict counts and run times come from the code or a recorded run when the site is built; the
+    README, which Sphinx does not build, writes none."""
+    problems = []
+    for path in [*PAGES, ROOT / "README.md"]:
+        problems += hand_written_figures(str(path.relative_to(ROOT)), path.read_text(encoding="utf-8"))
+    assert not problems, "\n".join(problems)
+    # the check sees what it is for: the figures this issue found stale, in prose and in a sample line
+    stale = ("the whole suite, 327 tests; 299 PASS, 28 OBSERVED (566 s)\n"
+             "`time: [4.4.22 Set/Get Freq] protocol time 212 s of ~566 s, 3:32 elapsed, ~5:54 left (180 of 327 tests)`\n")
+    assert len(hand_written_figures("docs/reports.md", stale)) == 7
+    assert hand_written_figures("docs/reports.md", "the {ckesc-figure}`suite.tests` tests, {ckesc-figure}`run.protocol_s` s") == []
+
+
+def test_a_record_of_another_suite_fails_the_build(tmp_path, monkeypatch):
+    """The recorded faultless run is refused, with the command that re-records it, when it is not a run of the suite
+    the code has now: the pages would cite a stale run."""
+    import json
+
+    sys.path.insert(0, str(DOCS / "_ext"))
+    try:
+        import ckesc_docs
+    finally:
+        sys.path.remove(str(DOCS / "_ext"))
+    from sphinx.errors import ExtensionError
+
+    ckesc_docs.recorded_run.cache_clear()
+    assert ckesc_docs.figure("run.tests")[0] == ckesc_docs.figure("suite.tests")[0]  # the committed record is current
+    stale = json.loads(ckesc_docs.RECORD.read_text(encoding="utf-8"))
+    stale.update(tests=327, test_ids_sha256="0" * 16)
+    record = tmp_path / "faultless-run.json"
+    record.write_text(json.dumps(stale), encoding="utf-8")
+    monkeypatch.setattr(ckesc_docs, "RECORD", record)
+    ckesc_docs.recorded_run.cache_clear()
+    try:
+        with pytest.raises(ExtensionError, match=r"327 tests.*record_run\.py"):
+            ckesc_docs.figure("run.PASS")
+    finally:
+        ckesc_docs.recorded_run.cache_clear()
+
+
+# ----------------------------------------------------------------------------------------- angle brackets survive
+_CODE_SPAN = re.compile(r"(?<!`)(`+)(?!`).+?(?<!`)\1(?!`)", re.S)  # closed by a run of as many backticks, no more
+_PLACEHOLDER = re.compile(r"<(?![a-z]+://)[A-Za-z/][^<>\n]*>")
+
+
+def swallowed_placeholders(where: str, text: str) -> list[str]:
+    """``<test>``, ``<name>=<value>`` outside code: MyST takes them for raw HTML and the built page drops them."""
+    text = re.sub(r"^ *(```|~~~).*?^ *\1", lambda m: "\n" * m.group().count("\n"), text, flags=re.S | re.M)
+    text = _CODE_SPAN.sub(lambda m: "x" * len(m.group()), text)
+    return [f"{where}:{text[:m.start()].count(chr(10)) + 1}: {m.group()} outside code is swallowed as HTML: write it "
+            "in backticks" for m in _PLACEHOLDER.finditer(text)]
+
+
+def test_angle_bracket_text_is_in_code():
+    problems = [p for page in PAGES for p in swallowed_placeholders(str(page.relative_to(ROOT)), page.read_text(encoding="utf-8"))]
+    assert not problems, "\n".join(problems)
+    assert swallowed_placeholders("x.md", 'SKIPPED as "not claimed: <function> (R9b)", `<test>` and <https://a.b>') == [
+        'x.md:1: <function> outside code is swallowed as HTML: write it in backticks']
+    assert swallowed_placeholders("x.md", "a fence ` ```{x} NAME ` and `` a`b <c> ``, then `<test>`") == []

@@ -9,19 +9,31 @@ Before Sphinx parses the page (its ``source-read`` event) each such fence is rep
 that :data:`GENERATORS` makes for the name: tables, and for the catalogue whole sections with headings,
 which a directive could not add. An unknown name is an error; a fence this extension did not replace
 (the extension not loaded) is an unknown directive, which ``-W`` makes an error too.
+
+A figure in prose is a role: ``{ckesc-figure}`suite.tests``` is the number of tests pytest collects now,
+``{ckesc-figure}`run.PASS``` the PASS count of the recorded faultless run (``docs/recorded/faultless-run.json``,
+refused when it is not a run of the suite the code has now), ``{ckesc-figure}`suite.json:simulated.overlap.protocol_s .0f```
+a recorded benchmark's figure (``bench/results/``), ``{ckesc-figure}`code:MODULE.NAME``` a constant of the code; a
+line the suite prints (``sample.progress``) is made by the code that prints it. ``tests/test_docs.py`` fails a page
+that writes such a figure by hand.
 """
 
 from __future__ import annotations
 
 import argparse
 import ast
+import functools
+import json
 import re
+import subprocess
+import sys
 import tomllib
 import types
 import typing
 from collections.abc import Callable
 from pathlib import Path
 
+from docutils import nodes
 from sphinx.application import Sphinx
 from sphinx.errors import ExtensionError
 
@@ -213,6 +225,184 @@ def cli() -> str:
     return "\n".join(out)
 
 
+# ------------------------------------------------------------------------------------ figures in prose
+#: the faultless simulated run the pages cite (``python docs/recorded/record_run.py`` re-records it)
+RECORD = ROOT / "docs" / "recorded" / "faultless-run.json"
+#: the benchmarks' recorded results (``python bench/<name>.py`` writes them)
+BENCH_RESULTS = ROOT / "bench" / "results"
+ROLE = "ckesc-figure"
+
+
+@functools.cache
+def collected() -> tuple[str, ...]:
+    """The conformance suite's test ids, as pytest collects them now (about 2 s)."""
+    proc = subprocess.run([sys.executable, "-m", "pytest", "--pyargs", "conformance", "-p", "no:cacheprovider",
+                           "--collect-only", "-q"], cwd=ROOT, capture_output=True, text=True, timeout=300,
+                          stdin=subprocess.DEVNULL)
+    ids = tuple(line for line in proc.stdout.splitlines() if "::" in line)
+    if proc.returncode != 0 or not ids:
+        raise ExtensionError(f"{ROLE}: collecting the conformance tests failed (exit {proc.returncode}):\n"
+                             f"{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
+    return ids
+
+
+@functools.cache
+def recorded_run() -> dict:
+    """The recorded faultless run, refused when it is not a run of the suite the code has now."""
+    recorder = ROOT / "docs" / "recorded"
+    sys.path.insert(0, str(recorder))
+    try:
+        from record_run import ids_digest
+    finally:
+        sys.path.remove(str(recorder))
+    doc = json.loads(RECORD.read_text(encoding="utf-8"))
+    ids = collected()
+    if doc["test_ids_sha256"] != ids_digest(list(ids)):
+        raise ExtensionError(
+            f"{ROLE}: {RECORD} (recorded {doc['recorded']}, {doc['tests']} tests) is not a run of the "
+            f"suite the code has now ({len(ids)} tests collected, other test ids): the pages would cite a stale run. "
+            f"Re-record it: python docs/recorded/record_run.py")
+    return doc
+
+
+def _replay(section: str = "4.4.22"):
+    """The run's time as a real-time run at the planned pace says it on entering ``section``: the suite's own
+    table (``conformance/durations.json``, in the order of the run that made it) replayed through ``RunClock``."""
+    from ckesc.session.progress import RunClock, expected_for, read_table, section_of_id
+
+    ids = collected()
+    table = read_table()
+    order = [i for i in table if i in set(ids)] + [i for i in ids if i not in table]
+    clock = RunClock(expected_for(list(ids)))
+    clock.start(0.0, 0.0)
+    now = 0.0
+    for nodeid in order:
+        heading = section_of_id(nodeid)
+        if heading.split()[0] == section:
+            return clock, heading
+        now += clock.expected[nodeid]
+        clock.finished(nodeid, now, now)
+    raise ExtensionError(f"{ROLE}: no test of section {section} in the suite")
+
+
+def _bench_line() -> str:
+    from ckesc.rigs.batch_report import progress_line
+
+    run = recorded_run()
+    rec = {"name": "esc-17", "status": "PASS", "counts": run["verdicts"], "why": None, "report_dir": "esc-17"}
+    return progress_line(rec, run["protocol_s"], Path("reports/2026-11-27T10-00-00Z"))
+
+
+def _verdict_count(key: str) -> Callable[[], str]:
+    return lambda: str(recorded_run()["verdicts"].get(key, 0))
+
+
+#: figures by name: (what it is, its text)
+FIGURES: dict[str, Callable[[], str]] = {
+    "suite.tests": lambda: str(len(collected())),
+    "plan.protocol_s": lambda: f"{_replay()[0].planned:.0f}",
+    "run.tests": lambda: str(recorded_run()["tests"]),
+    **{f"run.{v}": _verdict_count(v) for v in ("PASS", "OBSERVED", "INCONCLUSIVE", "SKIPPED", "FAIL", "ERROR")},
+    "run.protocol_s": lambda: f"{recorded_run()['protocol_s']:.0f}",
+    "run.wall_s": lambda: f"{recorded_run()['wall_s']:.0f}",
+    "run.recorded": lambda: recorded_run()["recorded"],
+}
+def _plugtest(what: str) -> str:
+    """The plugtest's figures (``bench/results/plugtest-explore.json``): when each defect was first seen."""
+    doc = json.loads((BENCH_RESULTS / "plugtest-explore.json").read_text(encoding="utf-8"))
+    first = sorted((min(f["seconds_before"] for f in r["found"]), r["defect"]) for r in doc["runs"] if r["defect"] and r["found"])
+    if what == "found":
+        return ", ".join(f"`{name}` {seconds:.0f} s" for seconds, name in first)
+    return f"{600 - first[-1][0]:.0f}"  # the slowest defect's time to spare of its 10-minute budget
+
+
+FIGURES.update({
+    "plugtest.found": lambda: _plugtest("found"),
+    "plugtest.spare_s": lambda: _plugtest("spare"),
+})
+#: figures shown as code: a line the suite prints, made by the code that prints it
+SAMPLES: dict[str, Callable[[], str]] = {
+    "sample.progress": lambda: "time: " + _replay()[0].line(_replay()[1]),
+    "sample.counter": lambda: f"[{len(_replay()[0].done) + 1}/{len(collected())}{_replay()[0].suffix()}]",
+    "sample.batch-progress": lambda: f"time: esc-17: {_replay()[0].wall_line(_replay()[1])}",
+    "sample.bench-done": _bench_line,
+    "sample.closing": lambda: _closing_counts(),
+}
+
+
+def _closing_counts() -> str:
+    """pytest's closing line's counts of the recorded run, in the words the suite gives pytest for each verdict."""
+    from ckesc.session.verdicts import _CONSOLE
+
+    words = {str(v): c[0] for v, c in _CONSOLE.items()}
+    pytest_order = ("failed", "passed", "skipped", "error")  # pytest's known categories first, then the others
+    counts = sorted(((n, words[v]) for v, n in recorded_run()["verdicts"].items()),
+                    key=lambda nw: pytest_order.index(nw[1]) if nw[1] in pytest_order else len(pytest_order))
+    return ", ".join(f"{n} {w}" for n, w in counts)
+
+
+def _json_path(doc: object, path: str) -> object:
+    for part in path.split("."):
+        if isinstance(doc, list):
+            doc = doc[int(part)]
+        elif isinstance(doc, dict) and part in doc:
+            doc = doc[part]
+        else:
+            raise KeyError(part)
+    return doc
+
+
+def figure(name: str) -> tuple[str, bool]:
+    """A figure's text and whether it is shown as code. ``name``: one of :data:`FIGURES` / :data:`SAMPLES`; a
+    recorded benchmark's ``FILE:PATH[ FORMAT]`` (``suite.json:simulated.overlap.protocol_s .0f``: that JSON file of
+    ``bench/results/``, a dotted path in it, list items by index); or a constant of the code,
+    ``code:MODULE.NAME[ FORMAT]``. FORMAT: a Python format spec (``.0f``), ``verdicts`` (a {verdict: count} table
+    as "291 PASS, 5 INCONCLUSIVE"), ``yes`` (a truth as yes / no), ``sum``
+    (of a table's or a list's numbers) or ``ms`` and a format spec (microseconds shown in milliseconds: ``ms.1f``)."""
+    name = name.strip()
+    if name in FIGURES:
+        return FIGURES[name](), False
+    if name in SAMPLES:
+        return SAMPLES[name](), True
+    where, colon, rest = name.partition(":")
+    if not colon:
+        raise KeyError(f"unknown figure {name!r} (known: {', '.join([*FIGURES, *SAMPLES])}, FILE.json:PATH, code:MODULE.NAME)")
+    path, _, fmt = rest.partition(" ")
+    if where == "code":
+        import importlib
+
+        module, _, attr = path.rpartition(".")
+        value = getattr(importlib.import_module(module), attr)
+    else:
+        file = BENCH_RESULTS / where
+        if file.parent != BENCH_RESULTS or not file.is_file():
+            raise KeyError(f"no recorded benchmark {where!r} in bench/results/")
+        value = _json_path(json.loads(file.read_text(encoding="utf-8")), path)
+    if fmt == "verdicts":  # a {verdict: count} table, in the reports' order of verdicts
+        order = ("PASS", "FAIL", "ERROR", "OBSERVED", "INCONCLUSIVE", "SKIPPED")
+        return ", ".join(f"{value[v]} {v}" for v in sorted(value, key=lambda v: order.index(v) if v in order else 9)), False
+    if fmt.startswith("ms"):  # microseconds shown in milliseconds: "ms.1f"
+        value, fmt = float(value) / 1000, fmt[2:]
+    if fmt == "yes":
+        return ("yes" if value else "no"), False
+    if fmt == "sum":
+        return str(sum(value.values() if isinstance(value, dict) else value)), False
+    return (format(value, fmt) if fmt else str(value)), False
+
+
+def figure_role(name, rawtext, text, lineno, inliner, options=None, content=None):
+    """``{ckesc-figure}`suite.tests```: the figure's text in the page, made at build time."""
+    try:
+        value, as_code = figure(text)
+    except (KeyError, IndexError, ValueError, AttributeError, ImportError) as exc:
+        msg = inliner.reporter.error(f"{ROLE} {text!r}: {exc}", line=lineno)
+        return [inliner.problematic(rawtext, rawtext, msg)], [msg]
+    if as_code:
+        return [nodes.literal(rawtext, value)], []
+    # a figure that names things (`name`) shows them as code, as a page would
+    return [nodes.literal(part, part) if i % 2 else nodes.Text(part) for i, part in enumerate(value.split("`")) if part], []
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
     "profile-keys": profile_keys,
     "optional-functions": optional_functions,
@@ -243,4 +433,5 @@ def _source_read(app: Sphinx, docname: str, source: list[str]) -> None:
 
 def setup(app: Sphinx) -> dict:
     app.connect("source-read", _source_read)
+    app.add_role(ROLE, figure_role)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
