@@ -61,20 +61,31 @@ class Observed:
 
 def probe_link(link: Link) -> Link:
     """A link to the same DUT whose profile declares nothing absent: a function declared absent is asked too."""
-    return Link(link.lane, replace(link.profile, absent=()), node_id=link.node_id, host_node=link.host_node)
+    probe = Link(link.lane, replace(link.profile, absent=()), node_id=link.node_id, host_node=link.host_node)
+    if hasattr(link, "discovered"):
+        probe.discovered = link.discovered
+    return probe
 
 
-def observe(link: Link, *, modes: bool = False) -> Observed:
+def observe(link: Link, *, modes: bool = False, full: bool = True) -> Observed:
     """Ask the DUT at ``link.node_id`` (reads only; with ``modes`` also MSG_EXP mode and CAN Test, each left at once).
-    ``link``'s profile must declare nothing absent (:func:`probe_link`)."""
+    ``link``'s profile must declare nothing absent (:func:`probe_link`). Without ``full`` only which nodes answer
+    and the optional functions (what ``ckesc run`` checks at its start: it reads 240 itself, and MSG3's Motor_T is
+    section 4.4.6's business)."""
     node = link.node_id
-    obs = Observed(node_id=node, nodes=_answering(link))
-    obs.esc_information = _fields(link, "esc_information", {"option": 0})
-    obs.maintenance = {option: _fields(link, "maintenance_information", {"option": option}) for option in (0, 1, 2)}
-    obs.major_configuration = _fields(link, "get_major_configuration", {"option": 0})
-    longest = _longest_interval(obs.major_configuration)
-    msg3 = link.frames("msg3", source=node) or [link.wait_for("msg3", 2 * longest + 2 * link.lane.timing_error)]
-    obs.motor_t = msg3[-1].fields["motor_t"] if msg3[-1] is not None else None
+    discovered = getattr(link, "discovered", None)  # the link found the DUT by GET_ESC_ID: who answered is known
+    obs = Observed(node_id=node, nodes=sorted(discovered) if discovered else _answering(link))
+    if node not in obs.nodes:  # nothing it does not answer says anything of its functions
+        heard = f"nodes {', '.join(map(str, obs.nodes))} answer" if obs.nodes else "no node answers"
+        raise DutError(f"node {node} does not answer GET_ESC_ID ({heard})")
+    longest = _longest_interval(None)
+    if full:
+        obs.esc_information = _fields(link, "esc_information", {"option": 0})
+        obs.maintenance = {option: _fields(link, "maintenance_information", {"option": option}) for option in (0, 1, 2)}
+        obs.major_configuration = _fields(link, "get_major_configuration", {"option": 0})
+        longest = _longest_interval(obs.major_configuration)
+        msg3 = link.frames("msg3", source=node) or [link.wait_for("msg3", 2 * longest + 2 * link.lane.timing_error)]
+        obs.motor_t = msg3[-1].fields["motor_t"] if msg3[-1] is not None else None
 
     records = _get_rec(link)
     obs.functions["get_rec"] = records
@@ -84,7 +95,7 @@ def observe(link: Link, *, modes: bool = False) -> Observed:
         obs.functions["can_test"] = _can_test(link, longest)
     else:
         for name, what in (("msg_exp_mode", "MSG Control 0xEEEEEEEE"), ("can_test", "CAN Test 0xAA")):
-            obs.functions[name] = Seen(None, f"not asked: {what} switches a mode, not a read (give --modes)")
+            obs.functions[name] = Seen(None, f"not asked: {what} switches a mode, not a read (`ckesc profile check --modes` asks it)")
     return obs
 
 
@@ -92,7 +103,7 @@ def _answering(link: Link) -> list[int]:
     sent = link.broadcast("get_esc_id", {"option": 0}, layout="query")
     link.wait(2 * cat.ANSWER_DELAY_MAX_S + 2 * link.lane.timing_error)
     return sorted({f.source for f in link.frames("get_esc_id", since=sent.host_time)
-                   if f.layout is not None and f.layout.name == "reply"} | {link.node_id})
+                   if f.layout is not None and f.layout.name == "reply"})
 
 
 def _fields(link: Link, name: str, fields: dict[str, Any]) -> dict[str, Any] | None:
