@@ -26,8 +26,16 @@ from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_key
 from .causes import groups
 from .htmlkit import CSS, anchor, badge, e, figure, new_figure, svg
-from .results import (WORST_FIRST, Result, RunInfo, RunRecord, claim_text, incomplete_banner, profile_warnings,
-                      requirement_result)
+from .results import (
+    WORST_FIRST,
+    Result,
+    RunInfo,
+    RunRecord,
+    claim_text,
+    incomplete_banner,
+    profile_warnings,
+    requirement_result,
+)
 
 
 def build(out: Path) -> Path:

@@ -16,11 +16,10 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from procs import CKESC, Emulator, env
 
 from ckesc.bench.profile import SHIPPED, DutProfile
 from ckesc.bench.statement import Observed, Seen, contradictions
-
-from procs import CKESC, Emulator, env
 
 
 def ckesc(tmp: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
