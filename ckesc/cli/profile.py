@@ -18,7 +18,8 @@ EXIT_CONTRADICTED = 1  # check --strict: a claim the DUT contradicts
 EXIT_BENCH = 3  # the bench could not be used (as ckesc explore's): nothing was asked
 
 READS_ONLY = ("The DUT is asked with reads only: GET_ESC_ID, ESC Information (240), Maintenance Information (241), "
-              "Get Major Configuration (242), Get Rec (223) and Expand Set Part's record read (222 0xFFFB part 1); "
+              "Get Major Configuration (242), Set/Get Freq option 0 (214, the read), Get Rec (223) and Expand Set "
+              "Part's record read (222 0xFFFB part 1); "
               "MSG3 is listened to. No setting is written and no throttle but zero is sent. MSG_EXP mode and CAN Test "
               "are modes, not reads: they are tried only with --modes (each switched on and off again at once; "
               "neither survives a power cycle, R13, R16). The bench options are ckesc run's.")
