@@ -191,7 +191,7 @@ class DutProfile:
 
     @classmethod
     def load(cls, name_or_path: str) -> DutProfile:
-        path = _find(name_or_path)
+        path = find_profile(name_or_path)
         try:
             text = path.read_text(encoding="utf-8")
         except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
@@ -208,7 +208,7 @@ class DutProfile:
                    absent=tuple(doc.functions.absent))
 
 
-def _find(name_or_path: str) -> Any:
+def find_profile(name_or_path: str) -> Any:
     """A path as given; a bare name (no suffix, no directory) in :func:`profile_dirs`."""
     path = Path(name_or_path)
     if path.suffix or len(path.parts) > 1:

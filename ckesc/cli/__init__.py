@@ -11,7 +11,8 @@ Exit codes: 0 success; 1 the input had frames that do not decode (``decode``), t
 answered a control request with an error (``control``) or could not write its flash file at the end
 (``emulate``), or a run regressed (``compare``); 2 usage or input the wire format cannot carry (``encode``), or the emulator cannot start
 (``emulate``: port in use, unreadable flash file, bus that does not open); 3 no emulator answers on
-the control port (``control``); 130 interrupted; 141 stdout closed early (``| head``).
+the control port (``control``), or the bench could not be used (``explore``, ``profile init`` / ``check``); 1 also
+a profile the DUT contradicts (``profile check --strict``); 130 interrupted; 141 stdout closed early (``| head``).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from .emulate import add_emulate_command
 from .encode import add_encode_command
 from .explore import add_explore_command
 from .frames import add_frames_command
+from .profile import add_profile_command
 from .report import add_report_command
 from .run import add_run_command
 from .selftest import add_selftest_command
@@ -41,6 +43,7 @@ COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
     add_run_command,
     add_selftest_command,
     add_explore_command,
+    add_profile_command,
     add_report_command,
     add_compare_command,
     add_decode_command,

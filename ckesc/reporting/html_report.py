@@ -26,7 +26,16 @@ from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_key
 from .causes import groups
 from .htmlkit import CSS, anchor, badge, e, figure, new_figure, svg
-from .results import WORST_FIRST, Result, RunInfo, RunRecord, claim_text, incomplete_banner, requirement_result
+from .results import (
+    WORST_FIRST,
+    Result,
+    RunInfo,
+    RunRecord,
+    claim_text,
+    incomplete_banner,
+    profile_warnings,
+    requirement_result,
+)
 
 
 def build(out: Path) -> Path:
@@ -53,7 +62,8 @@ def render(doc: RunRecord | dict[str, Any], *, run: str = "") -> str:
         + ", ".join(f"{counts[v]} {v}" for v in VERDICTS if counts[v])
         + (f", {info.get('not_run', 0)} not run" if info.get("not_run") else "") + "</p>"
         + (f'<p class=banner role=alert>{e(banner)}</p>' if banner else "")
-        + (f"<p class=claim>{e(claim_text(info))}</p>" if info.get("not_claimed") else "") + "</header>",
+        + (f"<p class=claim>{e(claim_text(info))}</p>" if info.get("not_claimed") else "")
+        + "".join(f"<p class=claim>{e(w)}</p>" for w in profile_warnings(info)) + "</header>",
         _causes(results),
         _identity(info),
         _matrix(results),

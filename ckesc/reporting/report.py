@@ -27,7 +27,7 @@ from .. import __version__
 from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_heading, section_key
 from . import causes, html_report
-from .results import RunRecord, claim_text, incomplete_banner
+from .results import RunRecord, claim_text, incomplete_banner, profile_warnings
 
 
 def _properties(r) -> dict[str, str]:
@@ -192,6 +192,7 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
                      f"(the bench's), report-interval jitter allowance {(info.get('jitter_s') or 0.0) * 1000:g} ms (the DUT's)")
     if "not_claimed" in info:
         lines.append(claim_text(info))
+    lines += profile_warnings(info)
     if info.get("echo") is not None:  # whether the bench echoes the host's own frames, and so what times them
         own = f"{info.get('own_frames_clock')}, error +-{(info.get('own_frames_error_s') or 0.0) * 1000:g} ms"
         lines.append(f"echo: {'yes' if info['echo'] else 'NO'} ({info.get('echo_note', '')}); the host's own frames "

@@ -92,7 +92,8 @@ class RunInfo(TypedDict, total=False):
     The DUT and bench: ``dut`` (emulator / bus), ``lane``, ``clock`` (simulated, bus timestamp, host clock),
     ``profile``, ``node_id``, ``bitrate``, ``power``, ``power_labgrid``, ``faults`` and ``emulator_variants``
     (``emulator_variants_seed``) of an emulator, ``esc_information`` (ESC Information 240's fields; None: no
-    answer), ``not_claimed`` (the functions the profile declares absent, R9b). Timing: ``timing_error_s`` (the
+    answer), ``not_claimed`` (the functions the profile declares absent, R9b), ``profile_warnings`` (its claims the DUT
+    contradicted at the run's start) and ``profile_check`` (what the DUT was asked for them). Timing: ``timing_error_s`` (the
     bench's stated error), ``jitter_s`` (the DUT's allowance), ``interval_tolerance_ms`` (what the plots band),
     ``echo``, ``echo_note``, ``own_frames_clock``, ``own_frames_error_s`` (what times the host's own frames),
     ``first_reports_s``, ``readiness``. The run: ``order``, ``epochs``, ``cold_boots``, ``lane_seconds``,
@@ -114,6 +115,8 @@ class RunInfo(TypedDict, total=False):
     emulator_variants_seed: int | None
     esc_information: dict[str, Any] | None
     not_claimed: str
+    profile_warnings: list[str]
+    profile_check: str
     timing_error_s: float
     jitter_s: float
     interval_tolerance_ms: float
@@ -198,3 +201,9 @@ def claim_text(info: Mapping[str, Any]) -> str:
     if not left_out:
         return "claim: every function of the document (the DUT profile declares none absent, R9b)"
     return f"claim: leaves out (declared absent by the DUT profile, R9b; their tests SKIPPED): {left_out}"
+
+
+def profile_warnings(info: Mapping[str, Any]) -> list[str]:
+    """One line per claim of the DUT profile the DUT contradicted at the run's start (``profile_warnings``: the
+    profile checked as a conformance statement, ckesc/bench/statement.py); warnings, never a verdict."""
+    return [f"WARNING: the DUT profile: {w}" for w in info.get("profile_warnings") or []]

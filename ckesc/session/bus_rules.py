@@ -21,12 +21,13 @@ def _watchers(config: pytest.Config) -> list[LaneRules]:
     return config.stash.setdefault(_WATCHERS, [])
 
 
-def watch_lane(config: pytest.Config, lane: Lane) -> None:
-    """The bus rules that hold at all times (ckesc/evidence/rules.py) over every frame the lane reads."""
+def watch_lane(config: pytest.Config, lane: Lane) -> LaneRules:
+    """The bus rules that hold at all times (ckesc/evidence/rules.py) over every frame the lane reads (returned)."""
     profile = state(config).profile
     watcher = LaneRules(lane, jitter=profile.jitter_s if profile is not None else 0.0)
     lane.listeners.append(watcher)
     _watchers(config).append(watcher)
+    return watcher
 
 
 @pytest.hookimpl(tryfirst=True)

@@ -10,6 +10,7 @@ import pytest
 
 from ..reporting import report
 from ..reporting.causes import broken_outside_a_fail
+from ..reporting.results import profile_warnings
 from . import tracing
 from .collection import conformance_dir, item_requirements, section_of
 from .state import EXIT_ABORTED, report_dir, state
@@ -82,6 +83,8 @@ def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Co
     for left in st.info.get("not_restored", []):  # always said, summary or not: the bench needs a look
         terminalreporter.write_line(f"WARNING: the DUT's settings were not restored after {left['test']}: {left['why']}")
     if not st.conformance or not st.selected or not config.getoption("ckesc_summary"):
+        for line in profile_warnings(st.info):  # (the summary says them otherwise)
+            terminalreporter.write_line(line)
         return
     terminalreporter.write_sep("=", "CKESC conformance summary")
     terminalreporter.write_line(report.summary_text(list(st.results.values()), st.info))

@@ -10,6 +10,7 @@ import sys
 
 import pytest
 
+from ..bench import statement
 from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
 from ..bench.lanes import BenchGone, BusLane, Lane
 from ..bench.link import Link
@@ -52,9 +53,11 @@ def ckesc_lane(request: pytest.FixtureRequest):
     lane = make_lane(config, profile)
     st.lane, st.profile = lane, profile
     trace_lane(config, lane, "")
-    watch_lane(config, lane)
+    watcher = watch_lane(config, lane)
     if isinstance(lane, BusLane):  # do the host's own frames come back? (the frames it reads go to the listeners)
         lane.find_echo(echo_probe(nibble_order=profile.nibble_order))
+    _check_profile(config, lane, profile)
+    watcher.begin()  # what the set-up provoked (the echo probe's answers, the profile check's) is no test's
     st.info.update(dut=config.getoption("dut"), lane=lane.name, clock=lane.clock, profile=profile.name,
                    bitrate=lane.bitrate, power=lane.power.name, timing_error_s=lane.timing_error,
                    jitter_s=profile.jitter_s, not_claimed=functions.not_claimed_text(profile.absent),
@@ -74,6 +77,21 @@ def ckesc_lane(request: pytest.FixtureRequest):
         if isinstance(lane, BusLane):
             st.info["bus_recoveries"] = list(lane.recoveries)
         lane.close()
+
+
+def _check_profile(config: pytest.Config, lane: Lane, profile: DutProfile) -> None:
+    """The profile as a conformance statement, checked against the DUT before the first test with reads only
+    (:mod:`ckesc.bench.statement`): a claim the DUT contradicts is a WARNING on the console and in the reports
+    (``profile_warnings``), never a verdict. A DUT that does not answer is left to the ``dut`` fixture (it aborts)."""
+    st = state(config)
+    try:
+        link = Link(lane, dataclasses.replace(profile, absent=()), node_id=config.getoption("node_id"))
+        observed = statement.observe(link, full=False)
+    except (DutError, BenchGone) as exc:
+        st.info["profile_check"] = f"not made: {exc}"
+        return
+    st.info["profile_check"] = "; ".join(f"{name}: {seen.how}" for name, seen in observed.functions.items())
+    st.info["profile_warnings"] = statement.contradictions(profile, observed, bus=config.getoption("dut") == "bus")
 
 
 def _allow_spin(config: pytest.Config) -> bool:

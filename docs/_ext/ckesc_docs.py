@@ -204,7 +204,8 @@ def packages() -> str:
 
 
 def cli() -> str:
-    """Every ``ckesc`` command's ``--help``, as argparse prints it on an 100-column terminal."""
+    """Every ``ckesc`` command's ``--help`` (and its own commands', e.g. ``ckesc profile init``), as argparse prints
+    it on an 100-column terminal."""
     import os
 
     from ckesc.cli import build_parser
@@ -217,6 +218,9 @@ def cli() -> str:
         out = []
         for name, command in sub.choices.items():
             out += [f"## ckesc {name}", "", "```text", command.format_help().rstrip(), "```", ""]
+            actions = next((a for a in command._actions if isinstance(a, argparse._SubParsersAction)), None)
+            for action, parser in (actions.choices.items() if actions else ()):  # a command of its own commands
+                out += [f"### ckesc {name} {action}", "", "```text", parser.format_help().rstrip(), "```", ""]
     finally:
         if columns is None:
             del os.environ["COLUMNS"]
