@@ -71,8 +71,9 @@ class Result:
         return measurements(self.properties)
 
     def to_json(self) -> dict[str, Any]:
-        """As results.json holds it (its fields, in order)."""
-        return dict(self.__dict__)
+        """As results.json holds it: its fields, in order, and its ``measurements`` (read from ``properties``,
+        where JUnit has them too; :meth:`from_json` leaves them out again)."""
+        return {**self.__dict__, "measurements": self.measurements}
 
     @classmethod
     def from_json(cls, record: Mapping[str, Any]) -> Result:
