@@ -99,8 +99,11 @@ def resolve_selection(selectors: list[str], cwd: Path | None = None) -> list[str
 
 def targets_of(args: argparse.Namespace) -> list[str]:
     """What pytest collects for ``args``' selection (the whole suite without one); raises :class:`SelectionError`
-    for a selection of nothing."""
-    return resolve_selection(list(args.selection)) or ["--pyargs", "conformance"]
+    for a selection of nothing. Always paths under :func:`_suite_root` (resolved, as the rootdir is): pytest names a
+    test by its path relative to the rootdir only when it is under it, so the whole suite by ``--pyargs conformance``
+    (found through ``sys.path``, e.g. a venv's ``lib64`` symlink) had ids ``test_s4_1_framing.py::...`` that
+    ``ckesc run`` cannot select."""
+    return resolve_selection(list(args.selection)) or [str(Path(_suite_root()) / "conformance")]
 
 
 def pytest_argv(args: argparse.Namespace) -> list[str]:
@@ -127,7 +130,7 @@ class _AfterDashes:
         self.targets, self.args = targets, args
 
     def pytest_cmdline_main(self, config) -> int | None:  # (registered after pytest's own: before its session)
-        extra = [a for a in config.args if a not in self.targets]  # (targets: ``--pyargs`` and the paths)
+        extra = [a for a in config.args if a not in self.targets]  # (targets: the paths)
         if not extra:
             return None
         rest = [a for a in self.args.pytest_args if a not in extra]

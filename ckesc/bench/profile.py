@@ -197,8 +197,8 @@ class DutProfile:
         except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
             known = sorted({p.name.removesuffix(".toml") for d in profile_dirs() if d.is_dir()
                             for p in d.iterdir() if p.name.endswith(".toml")})
-            raise ProfileError(f"no DUT profile {name_or_path!r} (looked for {path}); known by name: {', '.join(known)}; "
-                               "or give the path of a .toml file") from None
+            raise ProfileError(f"no DUT profile {name_or_path!r} (looked for {_looked_in(name_or_path)}); known by name: "
+                               f"{', '.join(known)}; or give the path of a .toml file") from None
         except (OSError, UnicodeDecodeError) as exc:
             raise ProfileError(f"{path}: cannot read the DUT profile: {exc}") from None
         doc = validated(_ProfileDoc, text, path, ProfileError, lambda errors: "; ".join(_describe(path, e) for e in errors))
@@ -208,10 +208,24 @@ class DutProfile:
                    absent=tuple(doc.functions.absent))
 
 
+def _is_name(name_or_path: str) -> bool:
+    """Whether ``--profile`` gave a bare name (looked up in :func:`profile_dirs`), not a path."""
+    path = Path(name_or_path)
+    return not (path.suffix or len(path.parts) > 1)
+
+
+def _looked_in(name_or_path: str) -> str:
+    """Every place :func:`find_profile` looked, as a missing profile's message names them."""
+    if not _is_name(name_or_path):
+        return str(Path(name_or_path).resolve())
+    bench, shipped = profile_dirs()
+    return (f"{bench / name_or_path}.toml (a bench's own profiles: fixtures/duts of the current directory), then "
+            f"{shipped.joinpath(name_or_path + '.toml')} (the shipped ones)")
+
+
 def find_profile(name_or_path: str) -> Any:
     """A path as given; a bare name (no suffix, no directory) in :func:`profile_dirs`."""
-    path = Path(name_or_path)
-    if path.suffix or len(path.parts) > 1:
-        return path
+    if not _is_name(name_or_path):
+        return Path(name_or_path)
     candidates = [d.joinpath(f"{name_or_path}.toml") for d in profile_dirs()]
     return next((c for c in candidates if c.is_file()), candidates[-1])

@@ -35,8 +35,8 @@ def add_explore_command(sub: argparse._SubParsersAction) -> None:
     add_bench_options(p)
     x = p.add_argument_group("exploration")
     x.add_argument("--budget", type=parse_budget, default=600.0, metavar="DURATION",
-                   help="how long to explore, wall time (90s, 10m, 1h; default 10m); shrinking a finding may take up "
-                        "to half as long again")
+                   help="how long the exploration takes, wall time, shrinking what it finds included (90s, 10m, 1h; "
+                        "default 10m): a finding shown late is shrunk for what is left, and says so")
     x.add_argument("--seed", type=int, default=0, help="same seed, same programs (default 0)")
     x.add_argument("--replay", metavar="FILE", help="run the program of a replay file once (a finding's "
                    "findings/finding_N.replay.json) on the bench it names, or on the bench options given")

@@ -35,7 +35,9 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
         description=run_lib.__doc__.split("\n\n")[1] if run_lib.__doc__ else None,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="Before `--`: ckesc run's options and the selection, sections by number or test modules by name or "
-               "path, with ::test (`ckesc run 4.4.22 4.4.3`, `ckesc run conformance/test_s4_4_22_set_freq.py`); a "
+               "path, with ::test (`ckesc run 4.4.22 4.4.3`, `ckesc run conformance/test_s4_4_22_set_freq.py`), or a test's "
+               "id as the console and every report print it, from any directory "
+               "(`ckesc run 'conformance/test_s4_1_framing.py::test_source_is_an_esc_node_id[provoked]'`); a "
                "selection that matches nothing is an error (exit 2). After `--`: pytest's options, handed on untouched "
                "(`ckesc run 4.4.22 -- -k read -x`); a selection there is an error that says where it goes.",
     )

@@ -80,7 +80,8 @@ def failure_text(found: list[Violation], count: int) -> tuple[str, list[str]]:
 
 
 _PARENS = re.compile(r"\s*\([^()]*\)")
-_DECIMAL = re.compile(r"\d+\.\d+")
+#: a decimal number on its own (not a part of 127.0.0.1 or of a version 2.1.3)
+_DECIMAL = re.compile(r"(?<![\d.])\d+\.\d+(?!\.?\d)")
 #: a number on its own (a transfer id, a time, a count; not the 1 of msg1 or the 14 of raw_command_14b)
 _VARYING = re.compile(r"(?<![A-Za-z_\d.])(?:0x[0-9A-Fa-f]+|\d+(?:\.\d+)?)(?=(?:ms|us|s|V|A|Hz|rpm)?(?![A-Za-z_\d]))")
 _LIST = re.compile(r"\[[^\]]*\]")

@@ -73,10 +73,14 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         if not args.quiet:
             print(stats.line(), file=out, flush=True)
 
+    def say(line: str) -> None:
+        print(line, file=out, flush=True)
+
+    say(f"explore: a budget of {_duration(args.budget)} wall time, shrinking what it finds included")
     try:
         found, stats = explore(session, budget_s=args.budget, seed=args.seed, database=database,
                                max_size=args.max_steps, stop_at_first=args.first, progress=progress,
-                               max_programs=getattr(args, "max_programs", None))
+                               max_programs=getattr(args, "max_programs", None), say=say)
     except (RestoreError, DutError, BenchGone) as exc:
         raise BenchProblem(str(exc)) from None
     finally:
@@ -88,6 +92,13 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
     write_reports(where, found, stats, info)
     print(summary_text(found, stats, where), file=out)
     return 1 if found else 0
+
+
+def _duration(seconds: float) -> str:
+    """``90`` -> ``1 min 30 s``, as a person reads a budget."""
+    minutes, secs = divmod(round(seconds), 60)
+    return " ".join(part for part in (f"{minutes} min" if minutes else "", f"{secs} s" if secs or not minutes else "")
+                    if part)
 
 
 def selftest_command(args: argparse.Namespace, out: TextIO) -> int:

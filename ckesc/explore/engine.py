@@ -6,7 +6,9 @@ the same seed gives the same programs, round after round. The database (``databa
 finding's shrunk program, and the next exploration runs those first (ours: Hypothesis's own example database
 stores choice sequences, which a change of the action strategy reinterprets; a program is what a person reads). A problem already found (its
 :attr:`Finding.key`) is not found again: a later program that shows only known problems passes, so each round
-looks for something new. Shrinking stops with the budget (the program found so far is kept, shrunk or not).
+looks for something new. The budget bounds the whole exploration, shrinking included: a problem shown late is
+shrunk for what is left of it (the program found so far is kept, shrunk or not, and :attr:`Found.cut` says so), and
+``say`` is told when shrinking starts. The problems are returned in the order they were first seen.
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ class Found:
     lane_seconds_before: float
     shrink_runs: int = 0
     also: list[str] = field(default_factory=list)  # problems seen only beside this one, in a longer program (folded in)
+    #: shrinking was cut short by the budget: a shorter program may show it too
+    cut: bool = False
 
     @property
     def finding(self):
@@ -72,11 +76,13 @@ class _Shows(Exception):
 
 def explore(session: Session, *, budget_s: float, seed: int = 0, database: str | None = None, shrink_s: float | None = None,
             max_size: int = 12, stop_at_first: bool = False, max_programs: int | None = None, progress: Callable[[Stats], None] | None = None,
-            clock: Callable[[], float] = time.monotonic) -> tuple[list[Found], Stats]:
-    """Explore until ``budget_s`` wall seconds have passed; returns the problems found (shrunk) and the stats.
-    A problem found is shrunk for at most ``shrink_s`` more (default: half the budget, at least 30 s).
-    ``max_programs``: also stop generating after that many programs (a budget that does not depend on the machine).
-    ``clock``: the wall clock the budget is measured on (a budget is a person's time, not the lane's)."""
+            clock: Callable[[], float] = time.monotonic, say: Callable[[str], None] | None = None) -> tuple[list[Found], Stats]:
+    """Explore for ``budget_s`` wall seconds, shrinking included (a program running when it ends is finished);
+    returns the problems found (shrunk), in the order first seen, and the stats. A round's problems are shrunk for
+    at most ``shrink_s`` (default: whatever is left of the budget). ``max_programs``: also stop generating after that
+    many programs (a budget that does not depend on the machine). ``clock``: the wall clock the budget is measured on
+    (a budget is a person's time, not the lane's). ``say``: told, in one line, when a problem shows and its
+    shrinking starts."""
     from hypothesis import HealthCheck, Phase, given, settings
     from hypothesis import seed as hseed
 
@@ -87,10 +93,16 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
     strategy = programs(session.bench, max_size=max_size)
     last_progress = [start]
 
-    hard = budget_s + (max(30.0, budget_s / 2) if shrink_s is None else shrink_s)
+    shrinking_since: list[float] = []  # when this round's first problem showed
 
     def over() -> bool:
         return clock() - start >= budget_s or (max_programs is not None and stats.programs >= max_programs)
+
+    def spent() -> bool:
+        """No more shrinking: the budget is spent (or the round's shrinking time, ``shrink_s``)."""
+        now = clock()
+        return bool(broken) or now - start >= budget_s or (
+            shrink_s is not None and bool(shrinking_since) and now - shrinking_since[0] >= shrink_s)
 
     broken: list[RestoreError] = []
     for program in _past(database):  # the findings of earlier explorations first, as they were shrunk
@@ -109,7 +121,7 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
     while not over() and not (stop_at_first and found) and not broken:
 
         def check(program: list[Action]) -> None:
-            if broken or (clock() - start >= hard if current else over()):
+            if spent() if current else (broken or over()):
                 return  # the budget is spent: what is being shrunk stays as found so far
             try:
                 outcome = session.run(program)
@@ -131,6 +143,13 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
             if f is None:
                 current[key] = Found(list(program), outcome, key, stats.programs - 1, stats.steps - len(program),
                                      stats.wall, stats.lane - outcome.seconds)
+                shrinking_since[:] = shrinking_since or [clock()]
+                if say is not None:
+                    left = budget_s - (clock() - start)
+                    if shrink_s is not None:
+                        left = min(left, shrink_s - (clock() - shrinking_since[0]))
+                    say(f"explore: {key} shows after {stats.programs - 1} programs, {stats.wall:.0f} s: shrinking its "
+                        f"{len(program)}-step program on the DUT, for at most {max(left, 0.0):.0f} s (the rest of the budget)")
             else:
                 f.shrink_runs += 1
                 if (len(program), _cost(program)) <= (len(f.program), _cost(f.program)):
@@ -151,10 +170,11 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
             if not current or type(exc).__name__ not in ("Flaky", "FlakyFailure", "FlakyReplay"):
                 raise
         for f in current.values():  # Hypothesis deletes whole items (an episode is one): now single steps
-            _one_minimal(session, f, stats, lambda: bool(broken) or clock() - start >= hard)
+            f.cut = not _one_minimal(session, f, stats, spent)
         known.update(current)
-        found.extend(fold(list(current.values())))
+        found.extend(sorted(fold(list(current.values())), key=lambda f: f.programs_before))  # in the order first seen
         current.clear()
+        shrinking_since.clear()
         round_no += 1
     stats.wall = clock() - start
     _remember(database, found)
@@ -163,10 +183,11 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
     return found, stats
 
 
-def _one_minimal(session: Session, f: Found, stats: Stats, spent: Callable[[], bool]) -> None:
+def _one_minimal(session: Session, f: Found, stats: Stats, spent: Callable[[], bool]) -> bool:
     """Delete single steps of ``f``'s program, on the DUT, while what it shows still shows (delta debugging's
     1-minimal program: no one step can go). Hypothesis shrinks the choices that drew the program, and an episode
-    (several steps drawn as one item) goes whole or not at all; a firmware engineer reads the steps."""
+    (several steps drawn as one item) goes whole or not at all; a firmware engineer reads the steps. Returns
+    whether it got there (False: ``spent`` or the bench stopped it)."""
     deleted = True
     while deleted:  # passes until one deletes nothing: a step needed beside a later one may go once that one went
         deleted, i = False, 0
@@ -175,13 +196,16 @@ def _one_minimal(session: Session, f: Found, stats: Stats, spent: Callable[[], b
             try:
                 outcome = session.run(candidate)
             except RestoreError:
-                return
+                return False
             stats.add(outcome)
             f.shrink_runs += 1
             if any(g.key == f.key for g in outcome.findings):
                 f.program, f.outcome, deleted = candidate, outcome, True
             else:
                 i += 1
+        if spent() and i < len(f.program) and len(f.program) > 1:
+            return False
+    return True
 
 
 def _past(database: str | None) -> list[list[Action]]:

@@ -127,7 +127,7 @@ def write_reports(out: Path, found: list[Found], stats: Stats, info: Mapping[str
                         "found_after": {"programs": fd.programs_before, "steps": fd.steps_before,
                                         "seconds": round(fd.seconds_before, 3),
                                         "lane_seconds": round(fd.lane_seconds_before, 3)},
-                        "shrink_runs": fd.shrink_runs, "also": list(fd.also), "all": [g.to_json() for g in fd.outcome.findings]})
+                        "shrink_runs": fd.shrink_runs, "shrinking_cut": fd.cut, "also": list(fd.also), "all": [g.to_json() for g in fd.outcome.findings]})
     results = {"info": {**info, "programs": stats.programs, "steps": stats.steps, "wall_seconds": round(stats.wall, 3),
                         "lane_seconds": round(stats.lane, 3),
                         "steps_per_second": round(stats.steps / stats.wall, 2) if stats.wall else None,
@@ -173,7 +173,8 @@ def _html(records: list[dict], info: Mapping[str, Any]) -> str:
             f"<tr><td>model</td><td>{e(r['model'])}</td></tr></table>"
             f"<p>replay: <code>ckesc explore --replay {e(r['replay'])}</code>; test: <code>{e(r['test'])}</code>; "
             f"trace: <code>{e(r['trace'])}</code>; found after {r['found_after']['programs']} programs "
-            f"({r['found_after']['seconds']} s), shrunk in {r['shrink_runs']} runs</p></section>")
+            f"({r['found_after']['seconds']} s), shrunk in {r['shrink_runs']} runs"
+            f"{' (cut short by the budget: a shorter program may show it too)' if r['shrinking_cut'] else ''}</p></section>")
     style = ("body{font-family:sans-serif;margin:2em}table{border-collapse:collapse;margin:.5em 0}"
              "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}code{font-size:90%}")
     return (f"<!doctype html><html><head><meta charset='utf-8'><title>ckesc explore</title><style>{style}</style></head>"
@@ -182,11 +183,21 @@ def _html(records: list[dict], info: Mapping[str, Any]) -> str:
 
 def summary_text(found: list[Found], stats: Stats, out: Path | None) -> str:
     lines = [stats.line()]
+    if found:
+        lines.append(f"{len(found)} finding{'s' if len(found) != 1 else ''}, in the order first seen (a problem seen only "
+                     "beside a shorter one of the same round is listed under it):")
+    else:
+        lines.append("nothing found")
     for i, fd in enumerate(found, 1):
         f: Finding = fd.finding
-        lines.append(f"finding {i} (after {fd.programs_before} programs, {fd.seconds_before:.1f} s; "
-                     f"{len(fd.program)} steps after shrinking):")
+        steps = f"{len(fd.program)} step{'s' if len(fd.program) != 1 else ''}"
+        shrunk = (f"{steps}, shrinking cut short by the budget: a shorter program may show it too" if fd.cut
+                  else f"{steps} after shrinking")
+        lines.append(f"finding {i} (after {fd.programs_before} programs, {fd.seconds_before:.1f} s; {shrunk}):")
         lines.append(textwrap.indent(f.text(), "  "))
+        keys = {g.key for g in fd.outcome.findings}
+        if earlier := [str(j) for j, e in enumerate(found[:i - 1], 1) if e.key in keys]:
+            lines.append(f"  its program also shows the problem of finding {', '.join(earlier)} (perhaps its cause)")
         if fd.also:
             lines.append(f"  also seen beside it (consequences, not shrunk): {'; '.join(fd.also)}")
         lines.extend(f"    {n:>2}. {s}" for n, s, _ in steps_table(fd))

@@ -3,8 +3,9 @@
 One broken bus rule fails every test during which it shows (ckesc/evidence/live.py): 303 tests with
 one violation. A group is one problem - a bus rule's violation by its stable key (leading rule id,
 node, check, what was wrong: ``evidence.live.cause_key``, recorded per test in ``bus_causes``), or a
-test's own failure by its message's first line with the measured values made ``#`` - with every test
-it showed in and its first occurrence (message, frames, traces). Groups of FAIL come before ERROR (the
+test's own failure by its message's first line with the measured values made ``#`` (the key only: the group's
+heading is that line as its first test wrote it, never edited) - with every test it showed in and its first
+occurrence (message, frames, traces). Groups of FAIL come before ERROR (the
 suite's problems), SHALL before READING, then the most widespread first.
 
 A bus rule broken while a test ran whose own verdict is not a FAIL (a test SKIPPED "not claimed", R9b,
@@ -21,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..evidence.live import causes as violation_causes
-from ..evidence.live import generalise, shorten, without_context
+from ..evidence.live import generalise, without_context
 from ..evidence.rules import Violation
 from ..protocol.requirements import STRENGTHS as STRENGTH_ORDER
 from ..protocol.requirements import Verdict
@@ -30,7 +31,8 @@ from .results import Result
 #: a violation quoted in a bus-rule failure message (read back from records without ``bus_causes``)
 _QUOTED = re.compile(r"^\[(?P<rules>.+?) (?P<strength>SHALL|READING)\] t=(?P<t>\S+) (?:node (?P<node>\d+)|bus): (?P<what>.*)$")
 _TAG = re.compile(r"^\[(?P<rules>[^\]]+?) (?P<strength>SHALL|READING|OBSERVE)\]\s*")
-_LIMIT = re.compile(r"\(limit ([^,)]+)")
+#: the longest heading: a longer first line is cut, and says so ("...")
+_HEADING = 300
 _OUTCOMES = (Verdict.FAIL, Verdict.ERROR)
 
 
@@ -79,7 +81,10 @@ def rule_failures(results: list) -> list[dict[str, Any]]:
 
 
 def _own_cause(r: Result) -> tuple[str, str, str, list[str]] | None:
-    """(key, what, strength, rules) of a test's own failure (not the bus rules'), or None."""
+    """(key, what, strength, rules) of a test's own failure (not the bus rules'), or None. The key groups (its
+    context and the values that vary made ``#``); ``what``, the heading, is the message's first line as the test
+    wrote it, only its ``[rules strength]`` tag (shown beside it) left out: ``127.0.0.1:40594`` and ``failed (3)``
+    stay as they are."""
     message = (r.message or "").strip()
     if not message or message.startswith("[bus rules"):
         return None
@@ -89,8 +94,8 @@ def _own_cause(r: Result) -> tuple[str, str, str, list[str]] | None:
     rules = tag["rules"].split() if tag else []
     text = line[tag.end():] if tag else line
     key = f"{r.outcome}|{' '.join(rules)}|{strength}|{generalise(without_context(text)).strip()}"
-    limit = _LIMIT.search(text)
-    return key, (shorten(text) + (f" (limit {limit[1]})" if limit else ""))[:300], strength, rules
+    what = text if len(text) <= _HEADING else text[:_HEADING - 3] + "..."
+    return key, what, strength, rules
 
 
 def _bus_causes(r: Result) -> list[dict[str, Any]]:

@@ -5,7 +5,8 @@ Runs are given oldest first; each is compared with the one before it. For each s
 
 * **regressed**: a test or requirement that passed (PASS, OBSERVED) and now FAILs, ERRORs or is
   INCONCLUSIVE; **fixed**: the other way; other verdict changes (PASS -> SKIPPED, FAIL -> ERROR, a
-  requirement first checked, ...) are listed apart;
+  requirement first checked, ...) are listed apart; a requirement's verdict is its evidence's
+  (:func:`requirement_results`: a FAIL counts against the requirements it broke, not every one its test cites);
 * tests **added** or **removed** (in neither the results nor the not-run list of the other run), and tests
   one of the two runs did not run (a subset, an aborted run);
 * timing **margins that shrank**: per timing measurement (unit ms or s) of a test, both margins and values, when the
@@ -33,7 +34,7 @@ from typing import Any
 from ..protocol.catalogue import firmware_date
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_key
 from .htmlkit import CSS, badge, e, new_figure, svg
-from .results import NotRun, Result, RunInfo, RunRecord, incomplete_banner, requirement_result
+from .results import NotRun, Result, RunInfo, RunRecord, broken_requirements, incomplete_banner, requirement_result
 
 GOOD = (Verdict.PASS, Verdict.OBSERVED)
 BAD = (Verdict.FAIL, Verdict.ERROR, Verdict.INCONCLUSIVE)
@@ -125,11 +126,19 @@ def identity(info: dict[str, Any], label: str = "") -> dict[str, str]:
 
 
 def requirement_results(run: Run) -> dict[str, str]:
-    """Each requirement's result in the run: the worst verdict of the tests citing it, or NOT CHECKED."""
+    """Each requirement's result in the run: the worst verdict of its evidence, or NOT CHECKED. A test's verdict is
+    the evidence for every requirement it cites, except a FAIL's: that is a FAIL of the requirements it broke
+    (:func:`~ckesc.reporting.results.broken_requirements`) and no verdict on the others it cites (it may have
+    stopped before their checks), so a requirement never FAILs for sharing a test with a broken one. A bus rule
+    broken while a test ran is a FAIL of that rule."""
     by_req: dict[str, list[str]] = defaultdict(list)
     for r in run.results.values():
-        for rid in r.requirements:
-            by_req[rid].append(r.outcome)
+        broken = broken_requirements(r)
+        for rid in broken:
+            by_req[rid].append(Verdict.FAIL)
+        if r.outcome != Verdict.FAIL:
+            for rid in r.requirements:
+                by_req[rid].append(r.outcome)
     return {rid: requirement_result(outcomes) for rid, outcomes in by_req.items()}
 
 
@@ -186,7 +195,8 @@ def diff(a: Run, b: Run, *, threshold: float = DEFAULT_THRESHOLD) -> dict[str, A
         before = a.results[nodeid].outcome if nodeid in a.results else NOT_RUN
         after = b.results[nodeid].outcome if nodeid in b.results else NOT_RUN
         row = {"test": nodeid, "section": _section(a, b, nodeid), "before": str(before), "after": str(after),
-               "message": b.results[nodeid].message.split("\n")[0][:300] if nodeid in b.results else ""}
+               "message": b.results[nodeid].message.split("\n")[0][:300] if nodeid in b.results else "",
+               "broke": broken_requirements(b.results[nodeid]) if nodeid in b.results else []}
         if nodeid not in known_a:
             tests["added"].append(row)
         elif nodeid not in known_b:
@@ -340,8 +350,9 @@ def text(doc: dict[str, Any]) -> str:
             rows = p["tests"][key]
             if rows:
                 lines.append(f"  {title} tests ({len(rows)}):")
-                lines += [f"    {r['test']}: {r['before']} -> {r['after']}" + (f": {r['message'][:160]}" if r["message"] and
-                                                                                r["after"] in BAD else "")
+                lines += [f"    {r['test']}: {r['before']} -> {r['after']}"
+                          + (f" (broke {' '.join(r['broke'])})" if r.get("broke") and r["after"] == Verdict.FAIL else "")
+                          + (f": {r['message'][:160]}" if r["message"] and r["after"] in BAD else "")
                           for r in rows[:_LISTED]]
                 if len(rows) > _LISTED:
                     lines.append(f"    ... {len(rows) - _LISTED} more")
@@ -429,7 +440,14 @@ def _change_rows(rows: list[dict[str, Any]], key: str) -> str:
     return "".join(f'<tr data-{key}="{e(r[key])}"><td>{e(r[key])}</td>'
                    + (f"<td>{e(r.get('strength', ''))}</td>" if key == "requirement" else f"<td>{e(r['section'])}</td>")
                    + f"<td class=vv>{badge(r['before'])} &rarr; {badge(r['after'])}</td>"
-                   + (f"<td>{e(r.get('message', ''))}</td>" if key == "test" else "") + "</tr>" for r in rows)
+                   + (f"<td>{_broke(r)}{e(r.get('message', ''))}</td>" if key == "test" else "") + "</tr>" for r in rows)
+
+
+def _broke(row: dict[str, Any]) -> str:
+    """A test row's requirements its FAIL broke, as HTML (none for another verdict)."""
+    if not row.get("broke") or row["after"] != Verdict.FAIL:
+        return ""
+    return f"<span class=broke>broke {e(' '.join(row['broke']))}</span> "
 
 
 def _pair_section(doc: dict[str, Any], p: dict[str, Any]) -> str:

@@ -31,7 +31,7 @@ from .results import RunRecord, claim_text, incomplete_banner, profile_warnings
 
 
 def _properties(r) -> dict[str, str]:
-    props = {"requirements": " ".join(r.requirements), "strength": r.strength, "verdict": r.outcome,
+    props = {"nodeid": r.nodeid, "requirements": " ".join(r.requirements), "strength": r.strength, "verdict": r.outcome,
              "section": r.section}
     for lane, path in r.traces.items():
         props[f"trace.{lane}" if lane else "trace"] = path

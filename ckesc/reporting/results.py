@@ -4,13 +4,14 @@ test, the run's :class:`RunInfo`, and :class:`RunRecord`, the whole file, which 
 from __future__ import annotations
 
 import json
+import re
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, TypedDict
 
-from ..protocol.requirements import Verdict
+from ..protocol.requirements import REQUIREMENTS, Verdict
 
 #: how a requirement's result is drawn from its tests' verdicts: the first that occurs
 WORST_FIRST = (Verdict.FAIL, Verdict.ERROR, Verdict.INCONCLUSIVE, Verdict.PASS, Verdict.OBSERVED, Verdict.SKIPPED)
@@ -23,6 +24,32 @@ def requirement_result(outcomes: Iterable[str]) -> str:
     :data:`NOT_CHECKED` when there are none."""
     outcomes = set(outcomes)
     return next((v for v in WORST_FIRST if v in outcomes), NOT_CHECKED)
+
+
+#: a broken requirement's tag at the start of a failure message's line: ``[4.4.3-4 SHALL] ...``, ``- [R2 READING] ...``,
+#: ``[bus rules R9 R13] ...``
+_TAG = re.compile(r"^(?:- )?\[(?:bus rules (?P<rules>[^\]]+)|(?:(?P<ids>[^\]]+) )?(?P<strength>SHALL|READING|OBSERVE))\]",
+                  re.M)
+
+
+def broken_requirements(r: Result) -> list[str]:
+    """The requirements a test's evidence broke, as its record names them: for a FAIL, the ids its message tags
+    (the failed assert's and every failed limit's, ``also broken``) and the bus rules it broke; for any other
+    verdict, the bus rules broken while it ran. A failure whose tag names no id (``[SHALL] ...``) or a record
+    whose message has no tag at all cannot say which it broke: then every requirement the test cites of that
+    strength (all of them without a tag)."""
+    broken = list(r.bus_rules)
+    if r.outcome != Verdict.FAIL:
+        return list(dict.fromkeys(broken))
+    tags = list(_TAG.finditer(r.message or ""))
+    for tag in tags:
+        ids = (tag["rules"] or tag["ids"] or "").split()
+        if not ids:
+            ids = [i for i in r.requirements if i in REQUIREMENTS and REQUIREMENTS[i].strength == tag["strength"]]
+        broken += ids or r.requirements
+    if not tags:
+        broken += r.requirements
+    return list(dict.fromkeys(broken))
 
 
 def measurements(properties: Mapping[str, str]) -> list[dict[str, str]]:
@@ -71,8 +98,10 @@ class Result:
         return measurements(self.properties)
 
     def to_json(self) -> dict[str, Any]:
-        """As results.json holds it (its fields, in order)."""
-        return dict(self.__dict__)
+        """As results.json holds it: its fields, in order, its ``measurements`` (read from ``properties``,
+        where JUnit has them too) and ``broken_requirements`` (:func:`broken_requirements`); :meth:`from_json`
+        leaves those two out again."""
+        return {**self.__dict__, "measurements": self.measurements, "broken_requirements": broken_requirements(self)}
 
     @classmethod
     def from_json(cls, record: Mapping[str, Any]) -> Result:

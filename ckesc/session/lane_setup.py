@@ -41,11 +41,54 @@ def bus_kwargs(config: pytest.Config) -> dict[str, Any]:
     try:
         resolved = can.util.load_config(config=kwargs)  # explicit options, then CAN_* and can.conf
     except (can.CanInterfaceNotImplementedError, ValueError, TypeError) as exc:
+        if not kwargs.get("interface") and '"None"' in str(exc):  # none given anywhere: python-can's 'Unknown ... "None"'
+            raise preflight.PreflightError(no_interface()) from None
         raise preflight.PreflightError(f"the CAN bus configuration {kwargs}: {exc} (known interfaces: "
                                        f"{', '.join(sorted(can.interfaces.VALID_INTERFACES))})") from None
     if not resolved.get("interface"):
-        raise preflight.PreflightError("--dut bus needs --can-interface (or CAN_INTERFACE / can.conf)")
+        raise preflight.PreflightError(no_interface())
     return dict(resolved)
+
+
+#: interfaces that need no adapter (a daemon over TCP/IP, a process's own buses) or whose detection lists
+#: every serial port (serial): not probed, named as always there
+_NO_ADAPTER = ("socketcand", "udp_multicast", "virtual")
+_NOT_PROBED = (*_NO_ADAPTER, "serial", "ckesc-sim")
+#: how long the adapters are looked for (python-can asks each driver in turn)
+_PROBE_S = 5.0
+
+
+def adapters_here() -> list[str]:
+    """The CAN adapters python-can finds on this machine (``interface channel``), looked for at most
+    :data:`_PROBE_S`; the drivers' complaints about what they lack stay off the console."""
+    import logging
+    import threading
+
+    import can
+
+    found: list[dict[str, Any]] = []
+    names = [n for n in sorted(can.interfaces.VALID_INTERFACES) if n not in _NOT_PROBED]
+
+    def probe() -> None:
+        found.extend(can.detect_available_configs(interfaces=names))
+
+    level = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    try:
+        t = threading.Thread(target=probe, name="ckesc-adapters", daemon=True)
+        t.start()
+        t.join(_PROBE_S)
+    finally:
+        logging.disable(level)
+    return [f"{c.get('interface')} {c.get('channel')}" for c in list(found)]
+
+
+def no_interface() -> str:
+    """The one line for ``--dut bus`` with no interface given anywhere: what to give, and what there is."""
+    found = adapters_here()
+    return ("--dut bus needs --can-interface NAME (with its --can-channel / --can-config; or CAN_INTERFACE / can.conf): "
+            f"adapters python-can finds here: {', '.join(found) if found else 'none'}; needing no adapter: "
+            f"{', '.join(_NO_ADAPTER)} (socketcand: a socketcand daemon, e.g. ckesc emulate --socketcand 0)")
 
 
 def open_labgrid(config: pytest.Config) -> None:

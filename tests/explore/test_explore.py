@@ -237,3 +237,31 @@ def test_a_dut_that_boots_suspended_at_another_bit_rate_is_put_back():
     finally:
         session.close()
     assert session.left is None
+
+
+def test_the_budget_bounds_shrinking_too():
+    """Issue #29: ``--budget 5m`` ran 7.6 min, shrinking after the budget unannounced. Measured here in programs run
+    (a clock that ticks once per program: deterministic, whatever the machine's load): a finding shown early
+    in a budget too short to shrink it is kept as found so far and says so, the run ends within the budget (and
+    the program running when it ran out), and the shrinking was announced with the time it has (~2 s)."""
+    session = Session({"emulator_faults": "second_suspend_latches"})
+    ran = [0]
+    run = session.run
+
+    def counted(program):
+        ran[0] += 1
+        return run(program)
+
+    session.run = counted  # type: ignore[method-assign]
+    said: list[str] = []
+    budget = 12
+    try:
+        found, stats = explore(session, seed=SEED, database=None, budget_s=budget, clock=lambda: float(ran[0]),
+                               say=said.append)
+    finally:
+        session.close()
+    assert ran[0] <= budget + 1, f"{ran[0]} programs run on a budget of {budget}"
+    assert len(found) == 1 and found[0].cut, [(f.key, f.cut, len(f.program)) for f in found]
+    (line,) = said
+    before = found[0].programs_before
+    assert f"{found[0].key} shows after {before} programs" in line and f"for at most {budget - before - 1} s" in line, line

@@ -6,6 +6,7 @@ under it - in report.html (rendered in headless Chromium), summary.txt and the c
 
 from __future__ import annotations
 
+import html
 import json
 import re
 import shutil
@@ -16,6 +17,8 @@ from pathlib import Path
 import pytest
 
 from ckesc.reporting.causes import groups, summary_lines
+from ckesc.reporting.report import summary_text
+from ckesc.reporting.results import Result
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FAULTS = "report_interval_wrong,answer_late"
@@ -98,3 +101,36 @@ def test_ckesc_report_rebuilds_the_groups_from_older_records(run, tmp_path):
                           timeout=300)
     assert done.returncode == 0
     assert 'id="cause-1"' in (tmp_path / "report.html").read_text()
+
+
+def _record(nodeid: str, outcome: str, message: str) -> dict:
+    return {"nodeid": nodeid, "name": nodeid.split("::")[-1], "section": "4.4.3", "requirements": ["4.4.3-1"],
+            "strength": "SHALL", "outcome": outcome, "message": message}
+
+
+def test_a_causes_heading_is_its_first_tests_own_text(tmp_path):
+    """Issue #29: grouping made "127.0.0.1:40594" "127.0.1:40594" and "failed (3)" "failed" in summary.txt and
+    report.html's headings. The numbers are left out of the key that groups (the second of each pair joins the
+    first's group), never out of the heading: the first test's own line."""
+    mod = "conformance/test_s4_4_3_get_esc_id.py"
+    refused = "OSError: socketcand at 127.0.0.1:40594 refused the connection"
+    power = "RuntimeError: power command ['sh', '-c', 'exit 3'] failed (3)"
+    results = [_record(f"{mod}::test_a", "ERROR", refused), _record(f"{mod}::test_b", "ERROR", power),
+               _record(f"{mod}::test_c", "ERROR", refused.replace("40594", "40611")),
+               _record(f"{mod}::test_d", "ERROR", power.replace("3", "4")),
+               _record(f"{mod}::test_e", "FAIL", "[4.4.3-1 SHALL] node 1.0.0.2 answered 3.000 ms late (limit <= 2 ms)")]
+    gs = groups(results)
+    assert [(g.what, g.tests) for g in gs] == [
+        ("node 1.0.0.2 answered 3.000 ms late (limit <= 2 ms)", [f"{mod}::test_e"]),
+        (refused, [f"{mod}::test_a", f"{mod}::test_c"]), (power, [f"{mod}::test_b", f"{mod}::test_d"])]
+    summary = summary_text([Result.from_json(r) for r in results], {})
+    for g in gs:
+        assert f"{g.what} - in {len(g.tests)} test" in summary
+    (tmp_path / "results.json").write_text(json.dumps({"info": {}, "results": results}))
+    done = subprocess.run([sys.executable, "-m", "ckesc", "report", str(tmp_path)], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    headings = re.findall(r'<article class="cause".*?<h3>(.*?)</h3>', (tmp_path / "report.html").read_text(), re.S)
+    assert len(headings) == 3
+    for g, heading in zip(gs, headings):
+        assert g.what in html.unescape(heading), heading

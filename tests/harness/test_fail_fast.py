@@ -61,8 +61,12 @@ SETUP_MISTAKES = [
                  id="emulator-option-value"),
     pytest.param(["--emulator-option", "boot_tim=1"], ["--emulator-option: unknown emulator option 'boot_tim'", "boot_time"],
                  id="emulator-option-key"),
-    pytest.param(["--profile", "no-such-profile"], ["no DUT profile 'no-such-profile'", "ckesc-generic"], id="profile-missing"),
+    pytest.param(["--profile", "no-such-profile"], ["no DUT profile 'no-such-profile'", "ckesc-generic",
+                                                    # every place looked in, the bench's own first (issue #29)
+                                                    "fixtures/duts/no-such-profile.toml (a bench's own",
+                                                    "profiles/no-such-profile.toml (the shipped"], id="profile-missing"),
     *[pytest.param(["--profile", name], list(expect), id=f"profile-{name}") for name, (_, *expect) in BAD_PROFILES.items()],
+    pytest.param(["--dut", "bus"], ["--dut bus needs --can-interface", "socketcand"], id="no-interface"),
     pytest.param(["--dut", "bus", "--can-interface", "no-such-adapter"], ["Unknown interface", "socketcan"], id="interface"),
     pytest.param(["--dut", "bus", "--can-interface", "socketcan", "--can-channel", "vcan0"],
                  ["cannot open the CAN bus", "interface=socketcan", "channel=vcan0"], id="socketcan"),

@@ -7,6 +7,7 @@ import json
 import re
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -77,3 +78,20 @@ def test_git_revision_is_none_outside_a_checkout_never_an_error(tmp_path, monkey
 def test_unknown_identity_reads_as_none_or_no_answer():
     props = suite_properties({"git_revision": None, "esc_information": None, "complete": True})
     assert props == {"git_revision": "none", "esc_information": "no answer", "complete": "True"}
+
+
+def test_results_json_has_each_tests_measurements_as_junit_does(run):
+    """docs/reports.md promises results.json's ``measurements`` (issue #29: it had only the ``measurement.<n>.<key>``
+    properties): a list per test, in order, the same as JUnit's properties of that test case."""
+    results = json.loads((run / "results.json").read_text())["results"]
+    cases = [{p.get("name"): p.get("value") for p in case.iter("property")}
+             for case in ET.parse(run / "junit.xml").getroot().iter("testcase")]
+    junit = {props["nodeid"]: props for props in cases if "nodeid" in props}
+    measured = [r for r in results if r["measurements"]]
+    assert measured, "4.4.2's tests measure answer delays"
+    for r in results:
+        props = junit[r["nodeid"]]
+        assert r["measurements"] == [{key: props[f"measurement.{n}.{key}"] for key in m}
+                                     for n, m in enumerate(r["measurements"])]
+        assert len(r["measurements"]) == len({k.split(".")[1] for k in props if k.startswith("measurement.")})
+    assert {"name", "value", "limit", "verdict"} <= set(measured[0]["measurements"][0])
