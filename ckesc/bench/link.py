@@ -9,7 +9,7 @@ from typing import Any, Callable, Mapping
 
 import can
 
-from ..evidence.tracker import timing_tolerance
+from ..protocol.judgements import timing_tolerance
 from ..protocol import catalogue as cat
 from ..protocol import functions
 from ..protocol.errors import TailError
@@ -119,7 +119,7 @@ class Link:
         """How far one report interval may stray from its target. In the simulated lane: bus access
         only, two of the longest frames at the lane's bit rate (a report due while a frame is on the
         bus waits for it, and for one that wins arbitration); in real time: one report-scheduling tick
-        (1 ms) plus the lane's error (``evidence.tracker.timing_tolerance``, as the bus rules judge). The
+        (1 ms) plus the lane's error (``protocol.judgements.timing_tolerance``, as the bus rules judge). The
         profile's ``jitter_s`` (the DUT's own allowance) on top of either; the lane's error
         (``timing_error``) decides INCONCLUSIVE around it."""
         jitter = self.profile.jitter_s * 1000

@@ -26,18 +26,6 @@ from ..protocol.frame import classify, frame_bits
 from ..protocol.ids import ESC_NODE_IDS, HOST_NODE_ID, MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind
 from .findings import KEEP, Findings, Intervals, quote
 
-#: One report-scheduling tick: how far from its grid a real-time bench's report may come on top of the lane's
-#: stated error (the simulated lane is exact).
-SCHEDULING_TICK_S = 0.001
-
-
-def timing_tolerance(clock: str, timing_error: float) -> float:
-    """The timing tolerance of a lane: exact (0) in simulated time; elsewhere the lane's stated error plus one
-    report-scheduling tick. The bus rules judge with it, and ``Dut.interval_tolerance_ms`` allows it a report
-    interval."""
-    return 0.0 if clock == "simulated" else timing_error + SCHEDULING_TICK_S
-
-
 # ------------------------------------------------------------------------------------------ facts, derived
 #: The reports whose interval Set/Get Freq sets (R9), by type id, with their interval field.
 INTERVAL_FIELDS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
