@@ -11,8 +11,9 @@ Observations compared (each a :class:`Finding` when they differ):
   report (MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test), whether it flows, judged only after the
   stretch has settled (R9a's restart allowance of the longer interval, answer delay and the bench's error; a
   power-up's boot time); which MSG_EXP frames come is OBSERVE (R9-exp), only that some do.
-- **intervals** (R9): from the third report after the event (R9a: the gaps before are OBSERVE), the mean gap
-  of MSG1/2/3 against the model's interval, held to 1 ms plus the bench's error and jitter over the gaps.
+- **intervals** (R9): from the gap to the third report after the event on (R9a: the gaps before are OBSERVE), the
+  mean gap of MSG1/2/3 against the model's interval, held to R9's tolerance (1 ms plus twice the bench's error, here
+  with a frame's bus access, over the gaps; the DUT's jitter never widens the mean).
 - **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only), 13 and 8 against the model's MSG1s within one interval
   (R8's window for bit 13: the flag may come up to one MSG1 interval after the model's).
 The live bus rules (``evidence/live.py``) run beside this and are findings of their own (runner).
@@ -27,6 +28,17 @@ from typing import Any, Iterable
 from ..protocol import catalogue as cat
 from ..protocol.frame import Frame, frame_bits
 from ..protocol.ids import Kind
+from ..protocol.judgements import (
+    SCHEDULING_TOLERANCE_S,
+    asked_node,
+    f4_mismatches,
+    f4_pairs,
+    r2_slot_start,
+    r8_flag_due,
+    r9_judged,
+    r9_mean,
+    r9a_limit_s,
+)
 from ..protocol.requirements import requirement
 from .actions import asks_only
 from .oracle import Oracle, State
@@ -65,6 +77,8 @@ ANSWER_WAIT_S = cat.ANSWER_DELAY_MAX_S + 0.036  # what the runner reads for an a
 #: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
 #: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
 _ECHO_SLACK_S = 0.005
+#: R9 on a stretch's mean interval only from this many gaps judged: fewer say little on a real bench
+_MIN_GAPS = 3
 
 
 @dataclass
@@ -137,8 +151,10 @@ def _answer_of(frames: Iterable[Frame], req: Frame, until: float, since: float |
             continue
         if f.timestamp > until:
             return None
-        if req.kind is Kind.REQUEST:
-            if f.kind is Kind.RESPONSE and f.type_id == req.type_id and f.transfer_id == req.transfer_id:
+        if req.kind is Kind.REQUEST:  # paired as the host pairs it (F4): the service, and at most one field off
+            if f.type_id == req.type_id and f4_pairs(f4_mismatches(
+                    f, service=req.type_id, transfer_id=req.transfer_id, requester=req.source,
+                    asked=asked_node(req.name, req.destination))):  # type: ignore[arg-type]
                 return f
         elif f.kind is Kind.MESSAGE and f.type_id == req.type_id:  # (only the ESC's frames are given)
             return f
@@ -235,7 +251,7 @@ def _slot(req: Frame, got: Frame, want: Frame, step: int | None, t0: float, p: P
     slot = cat.answer_slot_s(node)
     error = max(p.error, p.own_error)
     start = got.timestamp - frame_bits(len(got.data)) / bitrate - req.timestamp  # (its timestamp is its end)
-    if start >= slot - error - 1e-9:
+    if r2_slot_start(start, node, error=error).ok:
         return []
     reqs = ["R2", "4.4.2-4" if req.name == "msg_control" else "4.4.3-4"]
     return [Finding("answer", reqs, f"{req.name} answered {start * 1000:.1f} ms after the request, before node {node}'s "
@@ -288,11 +304,11 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
         for stream in STREAMS:
             iv = _interval(state, stream)
             old = _interval(before, stream) if before is not None else iv
-            settle = 1.25 * max(iv, old) + cat.RESTART_SLACK_MIN_S + cat.ANSWER_DELAY_MAX_S + 2 * p.error + p.jitter
-            lo = state.t + settle + (p.boot_s if state.label == "power on" else 0.0)
+            late = cat.ANSWER_DELAY_MAX_S + 2 * p.error  # the command may be answered first, stamps off by the error
+            lo = state.t + r9a_limit_s(iv, old, jitter=p.jitter) + late + (p.boot_s if state.label == "power on" else 0.0)
             if restart is not None:  # R9a's allowance counts from the restart, over the longer of its old and new interval
                 r_old = _interval(restart_before, stream) if restart_before is not None else iv
-                lo = max(lo, restart.t + settle - 1.25 * max(iv, old) + 1.25 * max(iv, r_old)
+                lo = max(lo, restart.t + r9a_limit_s(iv, r_old, jitter=p.jitter) + late
                          + (p.boot_s if restart.label == "power on" else 0.0))
             hi = end - 2 * p.error - frame_s
             if hi <= lo:
@@ -318,15 +334,18 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
 
 def _interval_finding(state: State, stream: str, stamps: list[float], end: float, iv: float, t0: float, p: Params,
                       frame_s: float) -> list[Finding]:
-    """R9 on the DUT's reports of one stretch from its third report on (R9a: the gaps before are OBSERVE)."""
-    seen = _between(stamps, state.t, end - 2 * p.error)[2:]
-    if len(seen) < 4:
+    """R9 on the DUT's reports of one stretch, the gap to its third report and on (R9a: the gaps before are
+    OBSERVE), on the mean of their gaps (:func:`~ckesc.protocol.judgements.r9_mean`): its stamps are the frames'
+    ends, each late by up to a frame's bus access besides the bench's error."""
+    seen = r9_judged(_between(stamps, state.t, end - 2 * p.error))
+    if len(seen) <= _MIN_GAPS:
+        return []
+    j = r9_mean(seen, iv, error=p.error + frame_s)
+    if j is None or j.ok:
         return []
     gaps = len(seen) - 1
     mean = (seen[-1] - seen[0]) / gaps
-    tol = 0.001 + (2 * p.error + 2 * frame_s + p.jitter) / gaps
-    if abs(mean - iv) <= tol:
-        return []
+    tol = j.limit + j.error
     return [Finding("interval", ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, not {iv * 1000:g} ms "
                     f"({state.mode} since {state.cause})", f"mean of {gaps} gaps {mean * 1000:.2f} ms",
                     f"{iv * 1000:g} ms (+-{tol * 1000:.2f})", seen[0] - t0, state.step, subject=f"{stream} interval")]
@@ -369,7 +388,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         if _between(host_times, t - cat.ANSWER_DELAY_MAX_S - 2 * p.error, t + _ECHO_SLACK_S + 2 * p.error):
             continue  # a setting just sent (its echo may be stamped late): when within its answer time it shows is not written
         state = _state_at(oracle, t)
-        reach = state.intervals["msg1"] + 0.001 + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
+        reach = state.intervals["msg1"] + SCHEDULING_TOLERANCE_S + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
         near = model[bisect.bisect_left(stamps, t - reach):bisect.bisect_right(stamps, t + reach)]
         if not near:
             continue
@@ -421,14 +440,10 @@ def _comm_fault_expected(t: float, commands: list[float], ups: list[float], stat
     if last < up:
         return None
     since = t - last
-    tol = 0.001 + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
-    if since < -tol or abs(since) <= _ECHO_SLACK_S + 2 * p.error:
+    error = SCHEDULING_TOLERANCE_S + 2 * p.error + frame_bits(8) / p.bitrate  # MSG1's stamp is its end
+    if since < -(error + p.jitter) or abs(since) <= _ECHO_SLACK_S + 2 * p.error:
         return None  # a command as the MSG1 went out: which came first is within the bench's error
-    if since < cat.COMM_LOSS_TIMEOUT_S - tol:
-        return False
-    if since > cat.COMM_LOSS_TIMEOUT_S + state.intervals["msg1"] + tol:
-        return True
-    return None
+    return r8_flag_due(since, state.intervals["msg1"], jitter=p.jitter, error=error)
 
 
 def _state_at(oracle: Oracle, t: float) -> State:

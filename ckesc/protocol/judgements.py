@@ -173,7 +173,18 @@ def answer_bound(end: float, *, error: float = 0.0, rule: str = "4.4.2-4") -> Ju
 
 
 # ------------------------------------------------------------------------------------------ F4
-def f4_mismatches(frame: Frame, *, service: int, transfer_id: int | None, requester: int, asked: int | None) -> list[str]:
+@dataclass(frozen=True)
+class Addressed:
+    """What F4 reads of a frame (a :class:`~.frame.Frame` has all of it): for a frame known only by its raw id."""
+
+    kind: Kind
+    type_id: int
+    transfer_id: int | None
+    destination: int | None
+    source: int
+
+
+def f4_mismatches(frame: Frame | Addressed, *, service: int, transfer_id: int | None, requester: int, asked: int | None) -> list[str]:
     """F4: what of ``frame`` differs from an answer to a request (``service``, ``transfer_id``) that ``requester`` sent
     to node ``asked`` (None: any node may answer, Set ID being a pseudo-broadcast, R11). Empty: it is that answer."""
     out = []
