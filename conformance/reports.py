@@ -22,7 +22,15 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.errors import TailError
 from ckesc.protocol.frame import classify, frame_bits
 from ckesc.protocol.ids import Kind
-from ckesc.protocol.judgements import R9_GAPS, R9A_UNJUDGED, SCHEDULING_TOLERANCE_S, r9_judged, r9_mean, r9a_limit_s
+from ckesc.protocol.judgements import (
+    R9_GAPS,
+    R9A_UNJUDGED,
+    SCHEDULING_TOLERANCE_S,
+    r9_judged,
+    r9_mean,
+    r9a_first,
+    r9a_limit_s,
+)
 
 from .codes import code
 
@@ -302,9 +310,10 @@ def check_restart(dut, event: float, settings: dict, what: str, names=REPORTS, g
             broken.append(f"[R9a READING] no {w} within {ms(dut.now() - event)} ms of {what} (R9a: within {longer} "
                           f"plus a slack, {ms(limit[which])} ms)")
             continue
-        dut.record.measure(f"first {w} after {what}", ms(stamps[0] - event), limit=ms(limit[which]), unit="ms",
+        first_report = r9a_first(stamps[0] - event, limit[which])
+        dut.record.measure(f"first {w} after {what}", ms(first_report.measured), limit=ms(first_report.limit), unit="ms",
                            clock=clock or dut.clock, error=err if error_ms is None else max(err, error_ms),
-                           requirement="R9a", strength="READING")
+                           requirement=first_report.rule, strength="READING")
         if len(stamps) > 1:
             dut.record.observe(f"{w} gaps up to the second after {what} (R9a-gaps)",
                                f"{ms(stamps[0] - event)} ms, {ms(stamps[1] - stamps[0])} ms")
