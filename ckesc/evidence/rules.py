@@ -65,7 +65,7 @@ from typing import Any
 
 from ..protocol import catalogue as cat
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, priority_name
-from ..protocol.judgements import r9_gap, r9a_first, r9a_limit_s
+from ..protocol.judgements import Addressed, f4_mismatches, r9_gap, r9a_first, r9a_limit_s
 from ..protocol.transfer import SINGLE_FRAME, TRANSFER_ID_MODULO, parse_tail
 from .findings import Intervals, Violation, ms, quote
 from .tracker import (
@@ -384,11 +384,13 @@ class BusRules(Tracker):
         service = info.type_id
         requester = info.dest
         key = (requester, None if service in PSEUDO_BROADCAST else info.source, service)
-        requests = self._asked(key, ts)
+        requests = self._asked(key, ts)  # the requests of this requester, service and node asked (F4's key) ...
         asked = [t for t, _ in requests]
         if service in PSEUDO_BROADCAST:
             self._answer(node, ts)
-        if tid in asked:
+        this = Addressed(info.kind, service, tid, requester, info.source)
+        if any(not f4_mismatches(this, service=service, transfer_id=t, requester=requester, asked=key[1])
+               for t in asked):  # ... one of which this response answers (F4)
             if self.heard is not None:
                 self._paired_answer(info, key, tid, requests, ts)  # type: ignore[arg-type]
             if service == SET_FREQ.type_id:
