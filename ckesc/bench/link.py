@@ -9,13 +9,13 @@ from typing import Any, Callable, Mapping
 
 import can
 
-from ..protocol.judgements import timing_tolerance
 from ..protocol import catalogue as cat
 from ..protocol import functions
 from ..protocol.errors import TailError
 from ..protocol.frame import Frame, WireFrame, classify, frame_bits
 from ..protocol.host import Garbled, HostProtocol, Pending, Response
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind
+from ..protocol.judgements import timing_tolerance
 from ..protocol.transfer import TRANSFER_ID_MODULO
 from .epochs import WINDOW_REQUESTS
 from .lanes import Lane, OwnFrame

@@ -13,8 +13,8 @@ from collections import Counter
 
 import can
 
-from .rules import BusRules, Violation
 from ..protocol.judgements import timing_tolerance
+from .rules import BusRules, Violation
 
 #: Violations quoted in a failure message; the rest are counted.
 QUOTED = 3

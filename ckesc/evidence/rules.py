@@ -63,7 +63,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..protocol import catalogue as cat
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, priority_name
 from ..protocol.judgements import Addressed, f4_mismatches, r9_gap, r9a_first, r9a_limit_s
 from ..protocol.transfer import SINGLE_FRAME, TRANSFER_ID_MODULO, parse_tail

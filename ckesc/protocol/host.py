@@ -7,10 +7,11 @@
         ...Response(pending, frame) / Heard(frame) / Garbled(msg, error)...
     for event in host.expire(now): ...             # TimedOut(pending) once a deadline passes
 
-A response matches a request (F4, judged by :func:`.judgements.f4_mismatches`) when it carries the same service id and transfer id, comes from the
-node the request went to and is addressed to this host (F4). A response that matches in all but one
-of those is still reported as :class:`Response` with ``mismatch`` naming what differs, so a suite
-can fail it with a clear message instead of timing out.
+A response matches a request when it carries the same service id and transfer id, comes from the
+node the request went to and is addressed to this host (F4, :func:`.judgements.f4_mismatches`). A
+response that matches in all but one of those is still reported as :class:`Response` with
+``mismatch`` naming what differs (:func:`.judgements.f4_pairs`), so a suite can fail it with a
+clear message instead of timing out.
 """
 
 from __future__ import annotations
