@@ -33,7 +33,7 @@ TARGETS = sorted({c.value for c in field_cases(SPEC, NODE_FIELD) if c.legal and 
                  | {(ID_MIN + ID_MAX) // 2, ID_MAX - 1})
 ARDUPILOT_NODE = 10  # F6: the node id ArduPilot sends from (INTERPRETATIONS.md), not a protocol constant
 WINDOW_TEST_TIMEOUT_S = int(3 * cat.CONFIG_WINDOW_S)  # they wait the window out: in real time, minutes
-REPORT_NAMES = frozenset(s.name for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
+REPORT_NAMES = frozenset(cat.ESC_REPORT_FRAMES)
 REPORT_IDS = frozenset(cat.spec(name).type_id for name in REPORT_NAMES)
 
 

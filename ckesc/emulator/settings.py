@@ -109,7 +109,7 @@ class Settings:
     def _on_set_freq(self, f: Frame, now: float) -> None:
         if not self._addressed(f):
             return
-        names = ("msg1_interval", "msg2_interval", "msg3_interval")
+        names = cat.INTERVAL_FIELDS
         lo, hi = cat.REPORT_INTERVAL_RANGE
         applied = f.fields["option"] != 1
         if f.fields["option"] == 1 and not self._settings_locked():

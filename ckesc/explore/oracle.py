@@ -115,7 +115,7 @@ class Oracle:
         self._keep(self.model.poll(t))
         if frame is not None:
             self.host.append((frame, step))
-            if frame.name not in ("raw_command_14b", "raw_command_12b", "raw_command_10b"):
+            if frame.name not in cat.THROTTLE_FRAMES:
                 self._note(t, frame.name, step)
 
     def power(self, on: bool, t: float, step: int | None = None) -> None:
@@ -152,7 +152,7 @@ class Oracle:
 
     def _note(self, t: float, label: str, step: int | None = None) -> None:
         nvm = self.model.nvm
-        intervals = {k: nvm[f"{k}_interval"] * cat.INTERVAL_UNIT_S for k in ("msg1", "msg2", "msg3")}
+        intervals = {k: nvm[f"{k}_interval"] * cat.INTERVAL_UNIT_S for k in cat.REPORT_FRAMES}
         mode = self.mode()
         prev = self.states[-1] if self.states else None
         cause = prev.cause if prev is not None and prev.mode == mode and label not in ("power on", "ready") else label
