@@ -23,8 +23,7 @@ from ..protocol.errors import DecodeError
 from ..protocol.frame import Decoder, Frame
 
 #: DUT settings (Dut.settings() keys, 242 / 214) -> the model's flash keys: the same names
-SETTING_KEYS = ("rotation", "throttle_source", "throttle_channel", "led_color", "led_blink",
-                "msg1_interval", "msg2_interval", "msg3_interval")
+SETTING_KEYS = ("rotation", "throttle_source", "throttle_channel", "led_color", "led_blink", *cat.INTERVAL_FIELDS)
 
 
 class _OracleModel(EscModel):
