@@ -34,8 +34,8 @@ from ckesc.protocol.judgements import (
 
 from .codes import code
 
-INTERVALS = ("msg1_interval", "msg2_interval", "msg3_interval")
-REPORTS = ("msg1", "msg2", "msg3")
+INTERVALS = cat.INTERVAL_FIELDS
+REPORTS = cat.REPORT_FRAMES
 EXP_FRAMES = tuple(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp"))
 #: A test allowance, not a protocol fact: a frame that starts within this time of a command may
 #: have been queued before the DUT could act on the command, and is not held against it. On a lane
@@ -65,7 +65,7 @@ def interval_s(settings: dict, which: str) -> float:
 
 def node_settings(dut, node: int) -> dict:
     """Report intervals of any node on the bus (Set/Get Freq read)."""
-    return dut.ask("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0},
+    return dut.ask("set_freq", cat.FREQ_READ,
                    destination=node)
 
 

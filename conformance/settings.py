@@ -101,12 +101,10 @@ _LEDS = ({"led_color": 4, "led_blink": 1}, {"led_color": 1, "led_blink": 2})  # 
 #: The persisted settings (R13) a test can move at once, outside the 120 s window and with the motor stopped: what
 #: a settings section's save must leave as it is (``neighbours_moved``'s ``but`` names the one a section saves), with
 #: the settings each is read back as and the request that saves it.
-NEIGHBOURS = {
-    "rotation": (("rotation",), "Set Rotation"),
-    "throttle_source": (("throttle_source",), "Throttle Select"),
-    "led": (("led_color", "led_blink"), "Set Led option 1"),
-    "intervals": (("msg1_interval", "msg2_interval", "msg3_interval"), "Set Freq"),
-}
+NEIGHBOURS = {s.name: (s.keys, s.label) for s in cat.PERSISTED_SETTINGS if not s.window}
+#: how each is moved (:func:`_move`) and put back (:func:`neighbours_moved`): a setting the catalogue adds needs its way here
+_MOVED = ("rotation", "throttle_source", "led", "intervals")
+assert tuple(NEIGHBOURS) == _MOVED, f"persisted settings {sorted(set(NEIGHBOURS) ^ set(_MOVED))}: say how to move them"
 
 
 def _other(current: Mapping[str, Any], choices: tuple[dict[str, int], ...]) -> dict[str, int]:

@@ -42,9 +42,9 @@ from .wire import QUERIES, SCOPES, Heard, check_each, describe, in_scope, run_he
 SECTION = "4.1"
 traffic = wire.traffic  # fixture: the provoked traffic, once per module
 
-INTERVALS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
+INTERVALS = cat.INTERVAL_FIELDS
 #: The reports whose interval Set/Get Freq sets (R9): MSG1, MSG2, MSG3
-REPORTS = tuple(k.removesuffix("_interval") for k in INTERVALS)
+REPORTS = cat.REPORT_FRAMES
 SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
 #: ArduPilot's default node id, from which it sends GET_ESC_ID and RawCommand (INTERPRETATIONS, F6)
 ARDUPILOT_NODE = 10

@@ -373,7 +373,7 @@ class Link:
 
     # ------------------------------------------------------------------ reports heard
     #: MSG1..MSG3: a reporting DUT has sent each once within the longest legal interval
-    READY_REPORTS = ("msg1", "msg2", "msg3")
+    READY_REPORTS = cat.REPORT_FRAMES
     #: ... or it reports in another mode (MSG_EXP mode, CAN Test): the first such frame will do
     OTHER_MODE_REPORTS = frozenset({s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp")} | {"can_test"})
 
@@ -450,4 +450,4 @@ class DutUnreachable(DutError):
     plugin aborts the run on it."""
 
 
-_THROTTLE_FRAMES = frozenset({"raw_command_14b", "raw_command_12b", "raw_command_10b"})
+_THROTTLE_FRAMES = frozenset(cat.THROTTLE_FRAMES)

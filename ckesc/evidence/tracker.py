@@ -28,7 +28,7 @@ from .findings import KEEP, Findings, Intervals, quote
 
 # ------------------------------------------------------------------------------------------ facts, derived
 #: The reports whose interval Set/Get Freq sets (R9), by type id, with their interval field.
-INTERVAL_FIELDS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
+INTERVAL_FIELDS = cat.INTERVAL_FIELDS
 REPORT_INTERVAL = {cat.BY_NAME[k.removesuffix("_interval")].type_id: i for i, k in enumerate(INTERVAL_FIELDS)}
 SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
 LONGEST_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
@@ -47,7 +47,7 @@ MSG1 = cat.spec("msg1")
 STATUS = MSG1.layouts[0].field("status")
 COMM_BIT = int(cat.Status.COMM_FAULT).bit_length() - 1
 COMM_BYTE, COMM_MASK = STATUS.offset + COMM_BIT // 8, 1 << (COMM_BIT % 8)
-THROTTLE = frozenset(s.type_id for s in cat.CATALOGUE if not s.service and s.layouts[0].codec.startswith("throttle"))
+THROTTLE = frozenset(cat.spec(name).type_id for name in cat.THROTTLE_FRAMES)
 #: Periodic ESC reports (they come on their own; F7: none at 0x7D): the catalogue's "report" layouts,
 #: except MSG_EXP12 (one per Get Rec, its transfer id names the record, R15).
 REPORTS = frozenset(s.type_id for s in cat.CATALOGUE if not s.service and s.layouts[0].name == "report" and s.tail_tag is None)

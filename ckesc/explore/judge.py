@@ -44,7 +44,7 @@ from .actions import asks_only
 from .oracle import Oracle, State
 
 #: MSG1 status bits compared (R7): direction, throttle source, comm fault (R8), running
-STATUS_MASK = 0x8000 | 0x4000 | 0x2000 | 0x0100
+STATUS_MASK = int(cat.STATUS_STATE_BITS)
 #: the requirement an answer's payload comes from, per request
 ANSWER_REQ = {
     "get_major_configuration": "4.4.28-1", "set_freq": "4.4.22-2", "maintenance_information": "4.4.27-T",
@@ -52,25 +52,25 @@ ANSWER_REQ = {
     "set_id": "4.4.18-1", "set_baud": "4.4.19-T", "throttle_select": "4.4.23-1", "self_test": "4.4.24-1",
     "esc_information": "4.4.26-T",
 }
-#: settings whose read-back after a power cycle R13 covers
-_PERSISTED = {"get_major_configuration", "set_freq", "get_esc_id"}
+#: settings whose read-back after a power cycle R13 covers (where the persisted settings are read back)
+_PERSISTED = {s.reader for s in cat.PERSISTED_SETTINGS if s.reader}
 #: per setting field read back (242, 214, GET_ESC_ID) or shown (MSG1's direction bit): the clause of its own section
 #: that says a written value is kept ("saved in FLASH ... not lost"); a value that changed where the model's did not
 #: (a neighbour's save clobbered it, a power cycle lost it) breaks it
-KEPT = {"direction": "4.4.21-4", "rotation": "4.4.21-4", "throttle_source": "4.4.23-4", "led_color": "4.4.20-5",
-        "led_blink": "4.4.20-5", "throttle_channel": "4.4.18-7", "node_id": "4.4.18-7", "msg1_interval": "R13",
-        "msg2_interval": "R13", "msg3_interval": "R13"}
+KEPT = {"direction": cat.PERSISTED["rotation"].clause,
+        **{k: s.clause for s in cat.PERSISTED_SETTINGS if s.reader for k in s.keys}}
 #: parameter changes R12 holds back while reporting is suspended
-_WRITES_HELD = frozenset({"set_led", "set_rotation", "set_freq", "throttle_select", "set_id", "set_baud"})
+_WRITES_HELD = cat.SETTING_WRITERS
 #: MSG1 status bits that show a setting (R7): bit 15 the direction of rotation
-_STATUS_SETTING = {0x8000: "direction"}
+_STATUS_SETTING = {int(cat.Status.DIRECTION_CCW): "direction"}
+_COMM = int(cat.Status.COMM_FAULT)  # R8's bit, judged on its own clock
 #: fields compared per answer (None: all); () presence only
 _COMPARED = {"esc_information": (), "maintenance_information": ("power_ups", "stops")}
-_EXP = frozenset(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp") and s.name != "msg_exp12")
-STREAMS = ("msg1", "msg2", "msg3", "exp", "can_test")
+_EXP = frozenset(cat.EXP_REPORT_FRAMES)
+STREAMS = (*cat.REPORT_FRAMES, "exp", "can_test")
 #: what flows in each mode of the model's ESC (4.4.2's table, R16; R9-exp: which MSG_EXP frames is OBSERVE)
-_FLOWING = {"normal": ("msg1", "msg2", "msg3"), "exp": ("exp",), "can_test": ("can_test",)}
-_THROTTLE = ("raw_command_14b", "raw_command_12b", "raw_command_10b")
+_FLOWING = {"normal": cat.REPORT_FRAMES, "exp": ("exp",), "can_test": ("can_test",)}
+_THROTTLE = cat.THROTTLE_FRAMES
 #: events after which reporting restarts (R9a: power-up, resume, leaving MSG_EXP mode or CAN Test, a Set Freq write)
 _RESTARTS = frozenset({"start", "power on", "ready", "msg_control", "can_test", "set_freq"})
 ANSWER_WAIT_S = cat.ANSWER_DELAY_MAX_S + 0.036  # what the runner reads for an answer, plus its error below
@@ -202,7 +202,7 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
     powered = False  # a power cycle came before (a read-back is then also R13's)
     taken: set[int] = set()  # the DUT's answers an earlier request got
     for req, step in oracle.host:
-        if req.name in ("raw_command_14b", "raw_command_12b", "raw_command_10b"):
+        if req.name in _THROTTLE:
             continue
         if req.kind is Kind.MESSAGE and req.name not in ("msg_control", "get_esc_id"):
             continue
@@ -269,7 +269,7 @@ def _fields(f: Frame) -> str:
 # ------------------------------------------------------------------------------------------ streams
 def _stream_of(f: Frame) -> str | None:
     n = f.name
-    if n in ("msg1", "msg2", "msg3", "can_test"):
+    if n in (*cat.REPORT_FRAMES, "can_test"):
         return n if f.kind is Kind.MESSAGE else None
     return "exp" if n in _EXP else None
 
@@ -327,7 +327,7 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
                 out.append(Finding("stream", rids, f"{_label(stream)} sent ({state.mode} since {state.cause})",
                                    f"{len(d)} frames, the first at t={d[0] - t0:.3f} s", "none", d[0] - t0, state.step,
                                    subject=f"{stream} sent, {state.mode}"))
-            elif stream in ("msg1", "msg2", "msg3") and len(m) >= 2:
+            elif stream in cat.REPORT_FRAMES and len(m) >= 2:
                 out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, frame_s)
     return out
 
@@ -392,14 +392,14 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         near = model[bisect.bisect_left(stamps, t - reach):bisect.bisect_right(stamps, t + reach)]
         if not near:
             continue
-        mask = STATUS_MASK & ~0x2000  # bit 13 is judged on R8's own clock below
+        mask = STATUS_MASK & ~_COMM  # bit 13 is judged on R8's own clock below
         if state.source != 0:
             # bit 14 under PWM+CAN: 4.4.4 names it "throttle signal source" without saying configured or in use
             # (4.2: PWM+CAN falls back to CAN by itself), and ESCs of other makes show either: not compared
-            mask &= ~0x4000
+            mask &= ~int(cat.Status.THROTTLE_PWM)
         comm = _comm_fault_expected(t, commands, ups, state, p)
-        if comm is not None and bool(f.fields["status"] & 0x2000) != comm:
-            bits = 0x2000
+        if comm is not None and bool(f.fields["status"] & _COMM) != comm:
+            bits = _COMM
             if bits not in seen:
                 seen.add(bits)
                 out.append(Finding("status", ["R8", "R7"], f"MSG1 comm-loss bit {'clear' if comm else 'set'} "
@@ -415,7 +415,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         if bits in seen:
             continue  # one finding per kind of wrong bit
         seen.add(bits)
-        rids = ["R8", "R7"] if bits & 0x2000 else ["R7"]
+        rids = ["R8", "R7"] if bits & _COMM else ["R7"]
         for bit, setting in _STATUS_SETTING.items():  # a bit showing a setting: the setting's own keeping, and R13's
             if bits & bit:                            # after a power cycle in the program
                 rids += [KEPT[setting]] + (["R13"] if any(u > t0 for u in ups if u <= t) else [])
