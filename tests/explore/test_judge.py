@@ -110,3 +110,23 @@ def test_a_refused_set_led_answered_with_the_request_s_values_is_no_finding():
         answers = [(f.fields["color"], f.fields["blink"]) for f in frames if f.name == "set_led"]
         assert answers == {"current": [(int(cat.DEFAULT_LED_COLOR), 0)], "none": [], "echo": [(int(cat.LedColor.RED), 1)]}[choice]
         assert [f.text() for f in found] == [], choice
+
+
+def test_an_unknown_requirement_id_is_an_error_not_a_dropped_finding(monkeypatch):
+    """A typo in a judge table's requirement id raises when the module is imported (its tables are checked then),
+    and a finding citing one raises: before, it was read as OBSERVE and the finding silently dropped."""
+    import pytest
+
+    from ckesc.explore import judge
+
+    judge._check_tables()  # the module's own tables pass
+    monkeypatch.setitem(judge.ANSWER_REQ, "set_led", "4.4.20-Tx")
+    with pytest.raises(KeyError, match="4.4.20-Tx"):
+        judge._check_tables()
+    monkeypatch.setitem(judge.ANSWER_REQ, "set_led", "4.4.20-T")
+    monkeypatch.delitem(judge.ANSWER_REQ, "get_rec")
+    with pytest.raises(KeyError, match="get_rec"):
+        judge._check_tables()
+    with pytest.raises(KeyError, match="R9x"):
+        judge.Finding("interval", ["R9x"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0)
+    assert judge.Finding("interval", ["R9"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0).strength == "SHALL"
