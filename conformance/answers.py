@@ -16,6 +16,7 @@ from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, Kind
+from ckesc.protocol.judgements import answer_bound, r2_slot_end, r2_slot_start
 from ckesc.protocol.requirements import Verdict
 
 from .reports import frame_start, ms
@@ -85,7 +86,8 @@ def check_answer_slot(dut, answer, sent, node: int, what: str, max_requirement: 
     err = error * 1000
     start, end = frame_start(dut, answer) - sent.time, answer.timestamp - sent.time
     rec = dut.record
-    lo, hi = slot - error, slot + cat.ANSWER_SLOT_S + error
+    first, last = r2_slot_start(start, node, error=error), r2_slot_end(end, node, error=error)
+    lo, hi = first.limit - first.error, last.limit + last.error  # (the DUT is given the error: judged on these)
     if error:
         rec.observe(f"{what} node {node}: slot judged", f"{ms(lo):g}..{ms(hi):g} ms: the 2 ms slot {ms(slot):g}.."
                     f"{ms(slot + cat.ANSWER_SLOT_S):g} ms widened by the bench's stated error +-{err:g} ms on each side "
@@ -98,8 +100,9 @@ def check_answer_slot(dut, answer, sent, node: int, what: str, max_requirement: 
         rec.inconclusive.append(f"the bench's stated error +-{err:g} ms: at node {node} (slot {ms(slot):g} ms) it cannot "
                                 "tell an answer in its slot from one sent at once, whatever the node id (the DUT's own "
                                 "slot tests move it to a slot that tells)")
-    rec.measure(f"{what} node {node}: answer delay", ms(end), limit=ms(cat.ANSWER_DELAY_MAX_S), unit="ms",
-                clock=sent.clock, error=err, requirement=max_requirement)
+    bound = answer_bound(end, error=error, rule=max_requirement)
+    rec.measure(f"{what} node {node}: answer delay", ms(bound.measured), limit=ms(bound.limit), unit="ms",
+                clock=sent.clock, error=err, requirement=bound.rule)
 
 
 def esc_id_replies(dut) -> list[tuple[int, int]]:

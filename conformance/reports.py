@@ -22,11 +22,20 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.errors import TailError
 from ckesc.protocol.frame import classify, frame_bits
 from ckesc.protocol.ids import Kind
+from ckesc.protocol.judgements import (
+    R9_GAPS,
+    R9A_UNJUDGED,
+    SCHEDULING_TOLERANCE_S,
+    r9_judged,
+    r9_mean,
+    r9a_first,
+    r9a_limit_s,
+)
 
 from .codes import code
 
-INTERVALS = ("msg1_interval", "msg2_interval", "msg3_interval")
-REPORTS = ("msg1", "msg2", "msg3")
+INTERVALS = cat.INTERVAL_FIELDS
+REPORTS = cat.REPORT_FRAMES
 EXP_FRAMES = tuple(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp"))
 #: A test allowance, not a protocol fact: a frame that starts within this time of a command may
 #: have been queued before the DUT could act on the command, and is not held against it. On a lane
@@ -56,7 +65,7 @@ def interval_s(settings: dict, which: str) -> float:
 
 def node_settings(dut, node: int) -> dict:
     """Report intervals of any node on the bus (Set/Get Freq read)."""
-    return dut.ask("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0},
+    return dut.ask("set_freq", cat.FREQ_READ,
                    destination=node)
 
 
@@ -209,12 +218,7 @@ def check_interval_follows_set_freq(dut, report: str, interval: int) -> None:
                   clock=ex.sent.clock, error_ms=ex.sent.error * 1000)
 
 
-#: R9a: the gaps up to and including this report after a restart are OBSERVE; from the next one on, R9
-R9A_UNJUDGED = 2
-#: R9: a test whose purpose is a report's interval judges the mean of at least this many gaps
-R9_GAPS = 10
-#: R9: how far a report interval's mean may stray from its target besides the bench's error (scheduling)
-R9_MEAN_TOLERANCE_MS = 1.0
+# R9A_UNJUDGED (R9a-gaps), R9_GAPS (a test whose purpose is R9) and R9's tolerance: ckesc.protocol.judgements
 
 
 def bus_access_s(dut) -> float:
@@ -225,10 +229,8 @@ def bus_access_s(dut) -> float:
 def restart_limit_s(dut, settings: dict, which: str, old: dict | None = None) -> float:
     """R9a: how long after a restart ``which``'s first report may start: its interval (after a Set Freq write,
     the longer of its ``old`` and new one) plus the slack, bus access and the DUT's declared jitter on top."""
-    interval = interval_s(settings, which)
-    if old is not None:
-        interval = max(interval, interval_s(old, which))
-    return cat.restart_limit_s(interval) + bus_access_s(dut) + dut.profile.jitter_s
+    return r9a_limit_s(interval_s(settings, which), None if old is None else interval_s(old, which),
+                       jitter=dut.profile.jitter_s) + bus_access_s(dut)
 
 
 def mean_gaps(dut, gaps: int | None) -> int:
@@ -237,7 +239,7 @@ def mean_gaps(dut, gaps: int | None) -> int:
     n gaps by up to jitter / n: enough gaps that this stays within half the scheduling tolerance."""
     if gaps is not None:
         return gaps
-    return max(2, math.ceil(2 * dut.profile.jitter_s * 1000 / R9_MEAN_TOLERANCE_MS))
+    return max(2, math.ceil(round(2 * dut.profile.jitter_s / SCHEDULING_TOLERANCE_S, 9)))
 
 
 def at_report_phase(dut, which: str, settings: dict, fraction: float = 0.5, last: float | None = None) -> None:
@@ -308,13 +310,14 @@ def check_restart(dut, event: float, settings: dict, what: str, names=REPORTS, g
             broken.append(f"[R9a READING] no {w} within {ms(dut.now() - event)} ms of {what} (R9a: within {longer} "
                           f"plus a slack, {ms(limit[which])} ms)")
             continue
-        dut.record.measure(f"first {w} after {what}", ms(stamps[0] - event), limit=ms(limit[which]), unit="ms",
+        first_report = r9a_first(stamps[0] - event, limit[which])
+        dut.record.measure(f"first {w} after {what}", ms(first_report.measured), limit=ms(first_report.limit), unit="ms",
                            clock=clock or dut.clock, error=err if error_ms is None else max(err, error_ms),
-                           requirement="R9a", strength="READING")
+                           requirement=first_report.rule, strength="READING")
         if len(stamps) > 1:
             dut.record.observe(f"{w} gaps up to the second after {what} (R9a-gaps)",
                                f"{ms(stamps[0] - event)} ms, {ms(stamps[1] - stamps[0])} ms")
-        judged = stamps[R9A_UNJUDGED - 1:R9A_UNJUDGED + n]
+        judged = r9_judged(stamps)[:n + 1]
         if len(judged) < 2:
             broken.insert(0, f"[R9 SHALL] only {len(stamps)} {w} in {ms(dut.now() - event)} ms after {what}, the first "
                              f"{ms(stamps[0] - event)} ms after it: every {ms(target)} ms there would be {R9A_UNJUDGED + n}")
@@ -324,8 +327,9 @@ def check_restart(dut, event: float, settings: dict, what: str, names=REPORTS, g
         single = [b - a for a, b in zip(judged, judged[1:])]
         dut.record.observe(f"{w} gaps from the third after {what} (single gaps: the bus rules')",
                            f"{k} gaps, {ms(min(single))} .. {ms(max(single))} ms, mean {ms(mean)} ms")
-        dut.record.measure(f"{w} mean interval error over {k} gaps from the third after {what}", ms(abs(mean - target)),
-                           limit=R9_MEAN_TOLERANCE_MS + 2 * err / k, unit="ms", clock=dut.clock, error=2 * err / k,
+        j = r9_mean(judged, target, error=dut.lane.timing_error)
+        dut.record.measure(f"{w} mean interval error over {k} gaps from the third after {what}", ms(j.measured),  # type: ignore[union-attr]
+                           limit=ms(j.limit + j.error), unit="ms", clock=dut.clock, error=ms(j.error),  # type: ignore[union-attr]
                            requirement="R9")
     assert not broken, "; ".join(broken)
 

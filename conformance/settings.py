@@ -101,12 +101,9 @@ _LEDS = ({"led_color": 4, "led_blink": 1}, {"led_color": 1, "led_blink": 2})  # 
 #: The persisted settings (R13) a test can move at once, outside the 120 s window and with the motor stopped: what
 #: a settings section's save must leave as it is (``neighbours_moved``'s ``but`` names the one a section saves), with
 #: the settings each is read back as and the request that saves it.
-NEIGHBOURS = {
-    "rotation": (("rotation",), "Set Rotation"),
-    "throttle_source": (("throttle_source",), "Throttle Select"),
-    "led": (("led_color", "led_blink"), "Set Led option 1"),
-    "intervals": (("msg1_interval", "msg2_interval", "msg3_interval"), "Set Freq"),
-}
+NEIGHBOURS = {s.name: (s.keys, s.label) for s in cat.PERSISTED_SETTINGS if not s.window}
+#: the DUT capability a neighbour needs (without it, it is neither moved nor checked)
+_NEEDS = {"led": "led"}
 
 
 def _other(current: Mapping[str, Any], choices: tuple[dict[str, int], ...]) -> dict[str, int]:
@@ -116,6 +113,29 @@ def _other(current: Mapping[str, Any], choices: tuple[dict[str, int], ...]) -> d
 def other_intervals(current: Mapping[str, Any]) -> dict[str, int]:
     """Report intervals none of which is ``current``'s or a default (for a Set Freq write that must show)."""
     return _other(current, _INTERVALS)
+
+
+#: where each neighbour moves to from the settings read (its read-back names and values): a setting the catalogue's
+#: table adds without its way here fails at import
+_TARGETS = {
+    "rotation": lambda s: {"rotation": ROTATION.other(s["rotation"])},
+    "throttle_source": lambda s: {"throttle_source": SOURCE.other(s["throttle_source"])},
+    "led": lambda s: _other(s, _LEDS),
+    "intervals": other_intervals,
+}
+if missing := sorted(set(NEIGHBOURS) ^ set(_TARGETS)):
+    raise KeyError(f"persisted settings {missing}: say in conformance/settings.py where a neighbour check moves them")
+
+
+def _has(dut, name: str) -> bool:
+    return name not in _NEEDS or dut.profile.has(_NEEDS[name])
+
+
+def _save(dut, name: str, values: Mapping[str, int]) -> None:
+    """Write and save ``values`` (read-back names) of persisted setting ``name`` with its own request (nothing checked)."""
+    setting = cat.PERSISTED[name]
+    field_of = {key: f for f, key in setting.fields.items()}
+    dut.request(setting.writer, {**setting.save, **{field_of[k]: v for k, v in values.items()}})
 
 
 @contextmanager
@@ -133,25 +153,17 @@ def neighbours_moved(dut, but: str = "") -> Iterator[dict[str, int]]:
     try:
         yield _move(dut, s, but)
     finally:  # the section's own setting too: all of them as read before
-        ROTATION.write(dut, s["rotation"])
-        SOURCE.write(dut, s["throttle_source"])
-        if dut.profile.has("led"):
-            dut.request("set_led", {"option": 1, "color": s["led_color"], "blink": s["led_blink"]})
-        dut.request("set_freq", {"option": 1, **{k: s[k] for k in NEIGHBOURS["intervals"][0]}})
+        for name, (keys, _) in NEIGHBOURS.items():
+            if _has(dut, name):
+                _save(dut, name, {k: s[k] for k in keys})
 
 
 def _move(dut, s: Mapping[str, int], but: str) -> dict[str, int]:
     want: dict[str, int] = {}
-    for setting in (ROTATION, SOURCE):
-        if but != setting.key:
-            want[setting.key] = setting.other(s[setting.key])
-            setting.write(dut, want[setting.key])
-    if but != "led" and dut.profile.has("led"):
-        want.update(led := _other(s, _LEDS))
-        dut.request("set_led", {"option": 1, "color": led["led_color"], "blink": led["led_blink"]})
-    if but != "intervals":
-        want.update(intervals := other_intervals(s))
-        dut.request("set_freq", {"option": 1, **intervals})
+    for name in NEIGHBOURS:
+        if name != but and _has(dut, name):
+            want.update(values := _TARGETS[name](s))
+            _save(dut, name, values)
     after = dut.settings()
     if missed := changes(want, {k: after[k] for k in want}):
         raise Inconclusive(f"moving the other persisted settings did not take ({missed}, set -> read): their own "
@@ -165,8 +177,8 @@ def check_neighbours_kept(dut, moved: Mapping[str, int], save: str, saved: Mappi
     Freq read) is as moved and saved - at once and after a proven power cycle: the save left its neighbours, in
     RAM and in flash, as it found them (a save rewriting a whole flash block from stale or default values does not)."""
     expected = {**moved, **saved}
-    moves = ", ".join(request for keys, request in NEIGHBOURS.values()
-                      if not set(keys) & set(saved) and (request != "Set Led option 1" or dut.profile.has("led")))
+    moves = ", ".join(request for name, (keys, request) in NEIGHBOURS.items()
+                      if not set(keys) & set(saved) and _has(dut, name))
     at_once = changes(expected, dut.settings())
     dut.power_cycle(dut.profile.off_s, dut.profile.boot_s)
     after = changes(expected, dut.settings())

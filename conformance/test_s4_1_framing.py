@@ -29,6 +29,7 @@ from ckesc.bench.verdict import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import Frame, classify, encode
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, Kind
+from ckesc.protocol.judgements import Addressed, asked_node, f4_mismatches
 from ckesc.protocol.transfer import TRANSFER_ID_MODULO, TransferIdCounter, parse_tail
 
 from . import wire
@@ -41,9 +42,9 @@ from .wire import QUERIES, SCOPES, Heard, check_each, describe, in_scope, run_he
 SECTION = "4.1"
 traffic = wire.traffic  # fixture: the provoked traffic, once per module
 
-INTERVALS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
+INTERVALS = cat.INTERVAL_FIELDS
 #: The reports whose interval Set/Get Freq sets (R9): MSG1, MSG2, MSG3
-REPORTS = tuple(k.removesuffix("_interval") for k in INTERVALS)
+REPORTS = cat.REPORT_FRAMES
 SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
 #: ArduPilot's default node id, from which it sends GET_ESC_ID and RawCommand (INTERPRETATIONS, F6)
 ARDUPILOT_NODE = 10
@@ -226,15 +227,9 @@ def test_answer_matches_its_request(traffic, label):
         raise Inconclusive(f"{label}: no answer to check (4.1.1-2 fails that)")
     h = a.answers[0]
     cid = h.cid
-    problems = []
-    if cid.kind is not Kind.RESPONSE:
-        problems.append("request bit set")
-    if h.transfer_id != a.transfer_id:
-        problems.append(f"transfer id {h.transfer_id}, the request's is {a.transfer_id}")
-    if cid.destination != traffic.host:
-        problems.append(f"destination {cid.destination}, the requester is node {traffic.host}")
-    if cid.source != traffic.node:
-        problems.append(f"source {cid.source}, the ESC is node {traffic.node}")
+    problems = f4_mismatches(Addressed(cid.kind, cid.type_id, h.transfer_id, cid.destination, cid.source),
+                             service=cat.spec(a.name).type_id, transfer_id=a.transfer_id, requester=traffic.host,
+                             asked=asked_node(a.name, traffic.node))
     assert not problems, f"answer to {label}: {'; '.join(problems)}: {h}"
     assert len(a.answers) == 1, f"{len(a.answers)} answers to one {label} request: {'; '.join(map(str, a.answers))}"
 

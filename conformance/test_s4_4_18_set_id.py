@@ -17,6 +17,7 @@ from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, HOST_NODE_ID, RESERVED_NODE_
 from ckesc.protocol.legality import field_cases, illegal_cases
 
 from .answers import esc_id_replies, esc_ids, put_back
+from .reports import msg_control
 from .raw_command_12b import FORMAT as RAW_12B
 from .raw_command_12b import VALUES as RAW_12B_VALUES
 from .settings import check_neighbours_kept, neighbours_moved
@@ -33,7 +34,7 @@ TARGETS = sorted({c.value for c in field_cases(SPEC, NODE_FIELD) if c.legal and 
                  | {(ID_MIN + ID_MAX) // 2, ID_MAX - 1})
 ARDUPILOT_NODE = 10  # F6: the node id ArduPilot sends from (INTERPRETATIONS.md), not a protocol constant
 WINDOW_TEST_TIMEOUT_S = int(3 * cat.CONFIG_WINDOW_S)  # they wait the window out: in real time, minutes
-REPORT_NAMES = frozenset(s.name for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
+REPORT_NAMES = frozenset(cat.ESC_REPORT_FRAMES)
 REPORT_IDS = frozenset(cat.spec(name).type_id for name in REPORT_NAMES)
 
 
@@ -310,3 +311,35 @@ def test_set_id_leaves_the_other_settings(dut, original):
             raise Inconclusive(f"Set ID ({node}, {new_channel}) inside the window did not take (see "
                                "test_set_id_gives_the_dut_its_id_and_channel): this test cannot be judged")
         check_neighbours_kept(dut, moved, f"Set ID (node id {node}, channel {new_channel})", {"throttle_channel": new_channel})
+
+
+@pytest.mark.requirement("4.4.2-3", "R12", "R11")
+@pytest.mark.power_cycle
+def test_set_id_while_suspended_changes_nothing(dut, original):
+    """'Parameter changes do not take effect when ... suspended' (4.4.2-3, R12): a Set ID inside the 120 s window
+    (R11) while reporting is suspended moves the DUT neither then nor on resume (GET_ESC_ID, R1); the same Set ID
+    after the resume, still inside the window, does (else the DUT ignores it anyway and nothing is shown:
+    INCONCLUSIVE)."""
+    node, channel = original
+    target, new_channel = _other_id(node), _other_channel(channel)
+    fields = {"node_id": target, "throttle_channel": new_channel}
+    _open_window(dut)
+    try:
+        msg_control(dut, cat.MSG_CONTROL_SUSPEND)
+        ex = dut.request("set_id", fields)
+        dut.record.observe("answer to Set ID while suspended", ex.response.fields if ex.response else "none")
+        during = esc_ids(dut)
+        dut.record.observe("GET_ESC_ID while suspended", during)
+    finally:  # a broadcast, obeyed at whatever id the DUT has now (``original`` puts the id back)
+        msg_control(dut, cat.MSG_CONTROL_RESUME)
+        dut.wait(cat.ANSWER_DELAY_MAX_S)
+    assert (target, new_channel) not in during, (f"Set ID ({target}, {new_channel}) took effect while suspended: "
+                                                 f"GET_ESC_ID answers {during}")
+    after = esc_ids(dut)
+    assert after == [(node, channel)], (f"Set ID ({target}, {new_channel}) sent while suspended took effect on "
+                                        f"resume: GET_ESC_ID answers {after}, was {[(node, channel)]}")
+    dut.request("set_id", fields)
+    dut.node_id = target
+    if (control := esc_ids(dut)) != [(target, new_channel)]:
+        raise Inconclusive(f"Set ID ({target}, {new_channel}) does not take effect with reporting on either "
+                           f"(GET_ESC_ID answers {control}): that it is ignored while suspended shows nothing")

@@ -16,6 +16,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from .answers import RESTORE_IN_WINDOW_S
+from .reports import msg_control, resume
 
 SECTION = "4.4.19"
 SPEC = cat.spec("set_baud")
@@ -218,6 +219,30 @@ def test_set_baud_after_the_window_is_ignored(dut, rate0):
     dut.record.observe("answer to the late Set Baud", ex.response.fields if ex.response else "none")
     rate = _cycle(dut, rate0)
     assert rate == rate0, f"Set Baud {code} after the window: after a power-up the DUT answers at {rate}, not {rate0}"
+
+
+@pytest.mark.requirement("4.4.2-3", "R12", "R11", "R13")
+@pytest.mark.power_cycle
+def test_set_baud_while_suspended_changes_nothing(dut, rate0):
+    """'Parameter changes do not take effect when ... suspended' (4.4.2-3, R12): a Set Baud inside the 120 s window
+    (R11) while reporting is suspended is not stored: after the resume and the next power-up the DUT answers at its
+    rate. The same Set Baud with reporting on, inside the window of that power-up, takes effect at the next one
+    (else the DUT ignores it anyway and nothing is shown: INCONCLUSIVE)."""
+    code = _other_code(rate0)
+    dut.open_window()
+    try:
+        msg_control(dut, cat.MSG_CONTROL_SUSPEND)
+        ex = _set_baud(dut, code)
+        dut.record.observe("answer to Set Baud while suspended", ex.response.fields if ex.response else "none")
+    finally:
+        resume(dut)
+    rate = _cycle(dut, rate0)
+    assert rate == rate0, (f"Set Baud {code} sent while suspended took effect: after the resume and a power-up the "
+                           f"DUT answers at {rate} bit/s, not {rate0}")
+    _set_baud(dut, code)
+    if (rate := _cycle(dut, RATES[code])) != RATES[code]:
+        raise Inconclusive(f"Set Baud {code} with reporting on does not take effect either (after a power-up the DUT "
+                           f"answers at {rate} bit/s): that it is ignored while suspended shows nothing")
 
 
 @pytest.mark.requirement("4.4.19-2")

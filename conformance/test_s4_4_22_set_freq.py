@@ -9,12 +9,12 @@ from .reports import R9_GAPS, at_report_phase, check_restart, settle_reports
 from .settings import changes, check_neighbours_kept, listed, neighbours_moved, other_intervals
 
 SECTION = "4.4.22"
-INTERVALS = ("msg1_interval", "msg2_interval", "msg3_interval")
-REPORTS = {"msg1_interval": "msg1", "msg2_interval": "msg2", "msg3_interval": "msg3"}
+INTERVALS = cat.INTERVAL_FIELDS
+REPORTS = {v: k for k, v in cat.REPORT_INTERVAL_FIELDS.items()}
 
 
 def _read(dut):
-    return dut.request("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0})
+    return dut.request("set_freq", cat.FREQ_READ)
 
 
 @pytest.mark.requirement("4.4.22-2", "F4")

@@ -27,7 +27,7 @@ from ckesc.protocol.ids import Kind
 #: a modest throttle whose 12-bit packing is the same in both nibble orders (bits 11..8 and 3..0 zero),
 #: so that running the motor does not depend on R4
 RUN_VALUE = 0xF0
-REPORTS = frozenset(s.name for s in cat.CATALOGUE if any(lay.name == "report" for lay in s.layouts))
+REPORTS = frozenset(cat.ESC_REPORT_FRAMES)
 #: what an ESC sends on its own or to answer the broadcasts of 4.4.1 - 4.4.3 (judged there, and such
 #: an answer may come late into the window): not an answer to a RawCommand
 NOT_ANSWERS = REPORTS | {"can_test", "msg_control", "get_esc_id"}

@@ -40,7 +40,7 @@ class Dut(Link):
     def settings(self) -> dict[str, int]:
         """The settings tests may change (242 and Set/Get Freq read)."""
         cfg = self.ask("get_major_configuration", {"option": 0})
-        freq = self.ask("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0})
+        freq = self.ask("set_freq", cat.FREQ_READ)
         return {
             "rotation": cfg["direction"],
             "throttle_source": cfg["throttle_source"],
@@ -61,8 +61,8 @@ class Dut(Link):
             self.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
             self.wait(cat.ANSWER_DELAY_MAX_S)
         now = self.settings()
-        if any(now[k] != snapshot[k] for k in ("msg1_interval", "msg2_interval", "msg3_interval")):
-            self.ask("set_freq", {"option": 1, **{k: snapshot[k] for k in ("msg1_interval", "msg2_interval", "msg3_interval")}})
+        if any(now[k] != snapshot[k] for k in cat.INTERVAL_FIELDS):
+            self.ask("set_freq", {"option": 1, **{k: snapshot[k] for k in cat.INTERVAL_FIELDS}})
         if now["rotation"] != snapshot["rotation"]:
             self.ask("set_rotation", {"rotation": snapshot["rotation"]})
         if now["throttle_source"] != snapshot["throttle_source"]:
@@ -165,7 +165,7 @@ class Dut(Link):
 
     def msg1_interval(self, node: int | None = None) -> float:
         """The MSG1 report interval (s) of ``node`` (default: the DUT), read with Set/Get Freq."""
-        freq = self.ask("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0},
+        freq = self.ask("set_freq", cat.FREQ_READ,
                         destination=self.node_id if node is None else node)
         return freq["msg1_interval"] * cat.INTERVAL_UNIT_S
 

@@ -9,13 +9,13 @@ from typing import Any, Callable, Mapping
 
 import can
 
-from ..evidence.tracker import timing_tolerance
 from ..protocol import catalogue as cat
 from ..protocol import functions
 from ..protocol.errors import TailError
 from ..protocol.frame import Frame, WireFrame, classify, frame_bits
 from ..protocol.host import Garbled, HostProtocol, Pending, Response
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind
+from ..protocol.judgements import timing_tolerance
 from ..protocol.transfer import TRANSFER_ID_MODULO
 from .epochs import WINDOW_REQUESTS
 from .lanes import Lane, OwnFrame
@@ -119,7 +119,7 @@ class Link:
         """How far one report interval may stray from its target. In the simulated lane: bus access
         only, two of the longest frames at the lane's bit rate (a report due while a frame is on the
         bus waits for it, and for one that wins arbitration); in real time: one report-scheduling tick
-        (1 ms) plus the lane's error (``evidence.tracker.timing_tolerance``, as the bus rules judge). The
+        (1 ms) plus the lane's error (``protocol.judgements.timing_tolerance``, as the bus rules judge). The
         profile's ``jitter_s`` (the DUT's own allowance) on top of either; the lane's error
         (``timing_error``) decides INCONCLUSIVE around it."""
         jitter = self.profile.jitter_s * 1000
@@ -373,7 +373,7 @@ class Link:
 
     # ------------------------------------------------------------------ reports heard
     #: MSG1..MSG3: a reporting DUT has sent each once within the longest legal interval
-    READY_REPORTS = ("msg1", "msg2", "msg3")
+    READY_REPORTS = cat.REPORT_FRAMES
     #: ... or it reports in another mode (MSG_EXP mode, CAN Test): the first such frame will do
     OTHER_MODE_REPORTS = frozenset({s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp")} | {"can_test"})
 
@@ -450,4 +450,4 @@ class DutUnreachable(DutError):
     plugin aborts the run on it."""
 
 
-_THROTTLE_FRAMES = frozenset({"raw_command_14b", "raw_command_12b", "raw_command_10b"})
+_THROTTLE_FRAMES = frozenset(cat.THROTTLE_FRAMES)

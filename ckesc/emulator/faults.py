@@ -102,6 +102,10 @@ _FAULTS = (
     Fault("rotation_ignored", ("4.4.21-1", "4.4.21-T"), "Set Rotation 0 / 1 is answered but never changes the direction"),
     Fault("throttle_select_ignored", ("4.4.23-1",), "Throttle Select is answered but never changes the source"),
     Fault("settings_while_suspended", ("R12",), "Set Led, Set Rotation and Set Freq take effect while reporting is suspended"),
+    Fault("set_id_while_suspended", ("R12", "4.4.2-3"), "Set ID (inside the 120 s window) takes effect while reporting "
+          "is suspended; the other settings are held back"),
+    Fault("set_baud_while_suspended", ("R12", "4.4.2-3"), "Set Baud (inside the 120 s window) is stored while "
+          "reporting is suspended: the next power-up brings its bit rate; the other settings are held back"),
     Fault("rotation_while_running", ("R12",), "Set Rotation and Throttle Select take effect while the motor runs"),
     Fault("intervals_not_persisted", ("R13",), "report intervals are lost at power-off"),
     Fault("node_id_not_persisted", ("R13",), "node id and throttle channel are lost at power-off"),

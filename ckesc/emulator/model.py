@@ -259,5 +259,5 @@ _HANDLERS = {
     (Kind.REQUEST, "get_major_configuration"): EscModel._on_major_config,
 }
 
-THROTTLE_FRAMES = frozenset({"raw_command_14b", "raw_command_12b", "raw_command_10b"})
+THROTTLE_FRAMES = frozenset(cat.THROTTLE_FRAMES)
 HANDLED = frozenset(_HANDLERS)

@@ -25,7 +25,7 @@ REPORTING = "normal"
 SUSPENDED = "suspended"
 EXP_MODE = "exp"
 
-REPORT_NAMES = ("msg1", "msg2", "msg3")
+REPORT_NAMES = cat.REPORT_FRAMES
 
 _PWM, _CCW, _COMM_FAULT, _RUNNING = (int(Status.THROTTLE_PWM), int(Status.DIRECTION_CCW), int(Status.COMM_FAULT),
                                      int(Status.RUNNING))

@@ -19,9 +19,10 @@ class Settings:
     def _addressed(self, f: Frame) -> bool:
         return f.destination == self.node_id
 
-    def _settings_locked(self) -> bool:
-        """R12: parameter changes do not take effect while reporting is suspended."""
-        return self.reporting == SUSPENDED and "settings_while_suspended" not in self.faults
+    def _settings_locked(self, fault: str = "") -> bool:
+        """R12: parameter changes do not take effect while reporting is suspended (unless ``fault``, the request's
+        own fault of taking it then, or ``settings_while_suspended`` is on)."""
+        return self.reporting == SUSPENDED and "settings_while_suspended" not in self.faults and fault not in self.faults
 
     def _in_window(self, now: float, fault: str) -> bool:
         window = CONFIG_WINDOW_S / 2 if "config_window_short" in self.faults else CONFIG_WINDOW_S
@@ -46,7 +47,7 @@ class Settings:
         legal = 1 <= node <= 0x7D or ("set_id_accepts_illegal" in self.faults and node <= 0x7F)
         legal = legal and 1 <= channel <= 20
         current = {"node_id": self.node_id, "throttle_channel": self.nvm["throttle_channel"]}
-        if not (legal and self._in_window(now, "set_id_after_window") and not self._settings_locked()):
+        if not (legal and self._in_window(now, "set_id_after_window") and not self._settings_locked("set_id_while_suspended")):
             self._respond_rejected(f, now, current)
             return
         if "set_id_channel_ignored" in self.faults:
@@ -61,7 +62,8 @@ class Settings:
             return
         code = f.fields["baud"]
         legal = code in BAUD_RATES or "set_baud_accepts_illegal" in self.faults
-        if not (legal and self._in_window(now, "set_baud_after_window") and not self._settings_locked()):
+        if not (legal and self._in_window(now, "set_baud_after_window")
+                and not self._settings_locked("set_baud_while_suspended")):
             self._respond_rejected(f, now, {"baud": self.nvm["baud"]})
             return
         self._set_nvm(baud=code)
@@ -74,6 +76,9 @@ class Settings:
             return
         option, color, blink = f.fields["option"], f.fields["color"], f.fields["blink"]
         no_operation = blink not in cat.LED_BLINK and self.config.led_blink_other == "no_operation"
+        if option in (0, 1) and self._settings_locked():  # R12: refused, and its answer free like every refusal's
+            self._respond_rejected(f, now, {"option": option, "color": self.led_color, "blink": self.led_blink})
+            return
         if self.config.has_led and option in (0, 1) and not self._settings_locked() and not no_operation:
             color &= 0x07  # "the lower three bits of Color are valid"
             blink = blink if blink in cat.LED_BLINK else 0  # "other: no operation is performed, no blinking"
@@ -109,7 +114,7 @@ class Settings:
     def _on_set_freq(self, f: Frame, now: float) -> None:
         if not self._addressed(f):
             return
-        names = ("msg1_interval", "msg2_interval", "msg3_interval")
+        names = cat.INTERVAL_FIELDS
         lo, hi = cat.REPORT_INTERVAL_RANGE
         applied = f.fields["option"] != 1
         if f.fields["option"] == 1 and not self._settings_locked():

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, Iterable, Mapping
 
+from ..protocol import catalogue as cat
+
 
 class VariantError(ValueError):
     """A variant name or value the emulator cannot play (a usage error, said in one line)."""
@@ -128,7 +130,7 @@ _FREEDOMS = (
     Freedom("foreign_host", ("F6",), "commands and requests from a host node other than 0: obeyed, or ignored",
             choices=("accept", "ignore")),
     # service answers (4.4.2-4's 64 ms bound is the longest delay the document names; services name none)
-    Freedom("service_delay", ("4.4.2-4",), "request to answer for services (Set ID .. 242)", span=(0.0002, 0.064)),
+    Freedom("service_delay", ("4.4.2-4",), "request to answer for services (Set ID .. 242)", span=(0.0002, cat.ANSWER_DELAY_MAX_S)),
     # illegal or refused requests (R10: answered or not, and with what, is OBSERVE; R11/R12 refuse without saying
     # what is answered)
     Freedom("rejected_answer", ("R10", "R11", "R12"),

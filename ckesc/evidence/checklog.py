@@ -15,11 +15,15 @@ import html
 from typing import Any
 
 from ..protocol import catalogue as cat
+from ..protocol.judgements import timing_tolerance
 from .logs import capture_format, read_capture
 from .rules import BusRules
 
 _BAD_KEPT = 100  # damaged records listed; the rest counted
-DEFAULT_TOLERANCE_S = 0.002  # a USB adapter's timestamps: about 1 ms of jitter, plus an ESC's 1 ms scheduling tick
+#: a USB adapter's timestamps: about 1 ms of jitter (the capturing bench's error, not a protocol tolerance)
+USB_ADAPTER_ERROR_S = 0.001
+#: ... plus an ESC's report-scheduling tick, as a real-time lane's tolerance is (judgements.timing_tolerance)
+DEFAULT_TOLERANCE_S = timing_tolerance("bus timestamp", USB_ADAPTER_ERROR_S)
 
 
 def check_capture(path: str, *, bitrate: int = cat.DEFAULT_BITRATE, tolerance: float = DEFAULT_TOLERANCE_S,

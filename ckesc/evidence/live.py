@@ -13,8 +13,8 @@ from collections import Counter
 
 import can
 
+from ..protocol.judgements import timing_tolerance
 from .rules import BusRules, Violation
-from .tracker import timing_tolerance
 
 #: Violations quoted in a failure message; the rest are counted.
 QUOTED = 3
@@ -22,7 +22,7 @@ _KEPT = 50
 
 
 def tolerance_for(lane) -> float:
-    """The timing tolerance of a lane (:func:`.tracker.timing_tolerance`)."""
+    """The timing tolerance of a lane (:func:`ckesc.protocol.judgements.timing_tolerance`)."""
     return timing_tolerance(lane.clock, lane.timing_error)
 
 

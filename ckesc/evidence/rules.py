@@ -63,8 +63,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..protocol import catalogue as cat
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, priority_name
+from ..protocol.judgements import Addressed, f4_mismatches, r9_gap, r9a_first, r9a_limit_s
 from ..protocol.transfer import SINGLE_FRAME, TRANSFER_ID_MODULO, parse_tail
 from .findings import Intervals, Violation, ms, quote
 from .tracker import (
@@ -319,15 +319,18 @@ class BusRules(Tracker):
         # due times lie in [start of the busy stretch, start]: the due-to-due gap lies in [lo, hi]
         lo, hi = busy_from - st.start, start - st.busy_from
         period = node.periods[st.interval]  # type: ignore[index]
+        gap = r9_gap(lo, hi, SHORTEST_S if period is None else period, tolerance=self.tolerance, jitter=self.jitter)
+        if gap.ok:
+            return out
         if period is None:
-            if not node.floor or hi >= SHORTEST_S - tol:
+            if not node.floor or gap.op != ">=":
                 return out
             rules: tuple[str, ...] = ("R9",)
             expected = f"never closer than the shortest legal interval, {ms(SHORTEST_S)}"
-        elif hi < period - tol:
+        elif gap.op == ">=":
             rules = ("R9",) + self._period_rules(node)
             expected = f"expected {ms(period)} +- {ms(tol)} ({node.period_note})"
-        elif lo > period + tol:
+        else:
             k_lo, k_hi = math.ceil((lo - tol) / period), math.floor((hi + tol) / period)
             if k_hi >= max(k_lo, 2) and not self.complete:
                 self._observe(("R9",), ts, node.id, "lost-frames",
@@ -338,8 +341,6 @@ class BusRules(Tracker):
                                    f"{st.name} {ms(start - st.start)} after the previous one (bus queueing allows no less "
                                    f"than {ms(lo)}), expected {ms(period)} +- {ms(tol)} ({node.period_note})",
                                    self._pair(st, info, data, ts))
-        else:
-            return out
         return self._violation(out, rules, ts, node.id, "report-interval",
                                f"{st.name} {ms(start - st.start)} after the previous one (bus queueing allows up to "
                                f"{ms(hi)}), {expected}", self._pair(st, info, data, ts))
@@ -353,13 +354,13 @@ class BusRules(Tracker):
         period, which = self._restart_period(node, st.interval)  # type: ignore[arg-type]
         if period is None:
             return out
-        limit = cat.restart_limit_s(period)
+        limit = r9a_limit_s(period)
         carried = node.pending[st.interval]  # type: ignore[index]
         if carried is not None and carried - node.event_ts > limit:  # type: ignore[operator]
             limit, which = carried - node.event_ts, "what an earlier restart still allowed"  # type: ignore[operator]
         tol = self.tolerance + self.jitter
         since = busy_from - node.event_ts  # type: ignore[operator]
-        if since <= limit + tol:
+        if r9a_first(since, limit, error=tol).ok:
             return out
         if not self.power_known and since > limit + period + RESTART_SILENCE_S + self.tolerance:
             self._observe(("R9a",), ts, node.id, "first-report-unjudged",
@@ -382,11 +383,13 @@ class BusRules(Tracker):
         service = info.type_id
         requester = info.dest
         key = (requester, None if service in PSEUDO_BROADCAST else info.source, service)
-        requests = self._asked(key, ts)
+        requests = self._asked(key, ts)  # the requests of this requester, service and node asked (F4's key) ...
         asked = [t for t, _ in requests]
         if service in PSEUDO_BROADCAST:
             self._answer(node, ts)
-        if tid in asked:
+        this = Addressed(info.kind, service, tid, requester, info.source)
+        if any(not f4_mismatches(this, service=service, transfer_id=t, requester=requester, asked=key[1])
+               for t in asked):  # ... one of which this response answers (F4)
             if self.heard is not None:
                 self._paired_answer(info, key, tid, requests, ts)  # type: ignore[arg-type]
             if service == SET_FREQ.type_id:

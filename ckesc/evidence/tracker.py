@@ -26,21 +26,9 @@ from ..protocol.frame import classify, frame_bits
 from ..protocol.ids import ESC_NODE_IDS, HOST_NODE_ID, MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind
 from .findings import KEEP, Findings, Intervals, quote
 
-#: One report-scheduling tick: how far from its grid a real-time bench's report may come on top of the lane's
-#: stated error (the simulated lane is exact).
-SCHEDULING_TICK_S = 0.001
-
-
-def timing_tolerance(clock: str, timing_error: float) -> float:
-    """The timing tolerance of a lane: exact (0) in simulated time; elsewhere the lane's stated error plus one
-    report-scheduling tick. The bus rules judge with it, and ``Dut.interval_tolerance_ms`` allows it a report
-    interval."""
-    return 0.0 if clock == "simulated" else timing_error + SCHEDULING_TICK_S
-
-
 # ------------------------------------------------------------------------------------------ facts, derived
 #: The reports whose interval Set/Get Freq sets (R9), by type id, with their interval field.
-INTERVAL_FIELDS = tuple(cat.DEFAULT_REPORT_INTERVALS)  # msg1_interval, msg2_interval, msg3_interval
+INTERVAL_FIELDS = cat.INTERVAL_FIELDS
 REPORT_INTERVAL = {cat.BY_NAME[k.removesuffix("_interval")].type_id: i for i, k in enumerate(INTERVAL_FIELDS)}
 SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
 LONGEST_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
@@ -59,7 +47,7 @@ MSG1 = cat.spec("msg1")
 STATUS = MSG1.layouts[0].field("status")
 COMM_BIT = int(cat.Status.COMM_FAULT).bit_length() - 1
 COMM_BYTE, COMM_MASK = STATUS.offset + COMM_BIT // 8, 1 << (COMM_BIT % 8)
-THROTTLE = frozenset(s.type_id for s in cat.CATALOGUE if not s.service and s.layouts[0].codec.startswith("throttle"))
+THROTTLE = frozenset(cat.spec(name).type_id for name in cat.THROTTLE_FRAMES)
 #: Periodic ESC reports (they come on their own; F7: none at 0x7D): the catalogue's "report" layouts,
 #: except MSG_EXP12 (one per Get Rec, its transfer id names the record, R15).
 REPORTS = frozenset(s.type_id for s in cat.CATALOGUE if not s.service and s.layouts[0].name == "report" and s.tail_tag is None)

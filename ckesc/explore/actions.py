@@ -31,7 +31,7 @@ from ..protocol.ids import DEFAULT_ESC_NODE_ID
 from ..protocol.legality import field_cases
 
 #: The streams a program may start (zero on every channel; a stopped stream is a comm loss, R8)
-STREAMS = ("raw_command_14b", "raw_command_12b", "raw_command_10b")
+STREAMS = cat.THROTTLE_FRAMES
 #: Services a program may request of the DUT (addressed to the node id the oracle says it has)
 SERVICES = ("set_id", "set_baud", "set_led", "set_rotation", "set_freq", "throttle_select", "self_test",
             "esc_information", "maintenance_information", "get_major_configuration")

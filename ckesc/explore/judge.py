@@ -11,8 +11,9 @@ Observations compared (each a :class:`Finding` when they differ):
   report (MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test), whether it flows, judged only after the
   stretch has settled (R9a's restart allowance of the longer interval, answer delay and the bench's error; a
   power-up's boot time); which MSG_EXP frames come is OBSERVE (R9-exp), only that some do.
-- **intervals** (R9): from the third report after the event (R9a: the gaps before are OBSERVE), the mean gap
-  of MSG1/2/3 against the model's interval, held to 1 ms plus the bench's error and jitter over the gaps.
+- **intervals** (R9): from the gap to the third report after the event on (R9a: the gaps before are OBSERVE), the
+  mean gap of MSG1/2/3 against the model's interval, held to R9's tolerance (1 ms plus twice the bench's error, here
+  with a frame's bus access, over the gaps; the DUT's jitter never widens the mean).
 - **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only), 13 and 8 against the model's MSG1s within one interval
   (R8's window for bit 13: the flag may come up to one MSG1 interval after the model's).
 The live bus rules (``evidence/live.py``) run beside this and are findings of their own (runner).
@@ -27,44 +28,57 @@ from typing import Any, Iterable
 from ..protocol import catalogue as cat
 from ..protocol.frame import Frame, frame_bits
 from ..protocol.ids import Kind
+from ..protocol.judgements import (
+    SCHEDULING_TOLERANCE_S,
+    asked_node,
+    f4_mismatches,
+    f4_pairs,
+    r2_slot_start,
+    r8_flag_due,
+    r9_judged,
+    r9_mean,
+    r9a_limit_s,
+)
 from ..protocol.requirements import requirement
 from .actions import asks_only
 from .oracle import Oracle, State
 
 #: MSG1 status bits compared (R7): direction, throttle source, comm fault (R8), running
-STATUS_MASK = 0x8000 | 0x4000 | 0x2000 | 0x0100
+STATUS_MASK = int(cat.STATUS_STATE_BITS)
 #: the requirement an answer's payload comes from, per request
 ANSWER_REQ = {
     "get_major_configuration": "4.4.28-1", "set_freq": "4.4.22-2", "maintenance_information": "4.4.27-T",
     "get_esc_id": "R1", "msg_control": "4.4.2-T", "set_led": "4.4.20-T", "set_rotation": "4.4.21-T",
     "set_id": "4.4.18-1", "set_baud": "4.4.19-T", "throttle_select": "4.4.23-1", "self_test": "4.4.24-1",
-    "esc_information": "4.4.26-T",
+    "esc_information": "4.4.26-T", "get_rec": "R15-payload", "clear_rec": "R15-payload",
 }
-#: settings whose read-back after a power cycle R13 covers
-_PERSISTED = {"get_major_configuration", "set_freq", "get_esc_id"}
+#: settings whose read-back after a power cycle R13 covers (where the persisted settings are read back)
+_PERSISTED = {s.reader for s in cat.PERSISTED_SETTINGS if s.reader}
 #: per setting field read back (242, 214, GET_ESC_ID) or shown (MSG1's direction bit): the clause of its own section
 #: that says a written value is kept ("saved in FLASH ... not lost"); a value that changed where the model's did not
 #: (a neighbour's save clobbered it, a power cycle lost it) breaks it
-KEPT = {"direction": "4.4.21-4", "rotation": "4.4.21-4", "throttle_source": "4.4.23-4", "led_color": "4.4.20-5",
-        "led_blink": "4.4.20-5", "throttle_channel": "4.4.18-7", "node_id": "4.4.18-7", "msg1_interval": "R13",
-        "msg2_interval": "R13", "msg3_interval": "R13"}
+KEPT = {"direction": cat.PERSISTED["rotation"].clause,
+        **{k: s.clause for s in cat.PERSISTED_SETTINGS if s.reader for k in s.keys}}
 #: parameter changes R12 holds back while reporting is suspended
-_WRITES_HELD = frozenset({"set_led", "set_rotation", "set_freq", "throttle_select", "set_id", "set_baud"})
+_WRITES_HELD = cat.SETTING_WRITERS
 #: MSG1 status bits that show a setting (R7): bit 15 the direction of rotation
-_STATUS_SETTING = {0x8000: "direction"}
+_STATUS_SETTING = {int(cat.Status.DIRECTION_CCW): "direction"}
+_COMM = int(cat.Status.COMM_FAULT)  # R8's bit, judged on its own clock
 #: fields compared per answer (None: all); () presence only
 _COMPARED = {"esc_information": (), "maintenance_information": ("power_ups", "stops")}
-_EXP = frozenset(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp") and s.name != "msg_exp12")
-STREAMS = ("msg1", "msg2", "msg3", "exp", "can_test")
+_EXP = frozenset(cat.EXP_REPORT_FRAMES)
+STREAMS = (*cat.REPORT_FRAMES, "exp", "can_test")
 #: what flows in each mode of the model's ESC (4.4.2's table, R16; R9-exp: which MSG_EXP frames is OBSERVE)
-_FLOWING = {"normal": ("msg1", "msg2", "msg3"), "exp": ("exp",), "can_test": ("can_test",)}
-_THROTTLE = ("raw_command_14b", "raw_command_12b", "raw_command_10b")
+_FLOWING = {"normal": cat.REPORT_FRAMES, "exp": ("exp",), "can_test": ("can_test",)}
+_THROTTLE = cat.THROTTLE_FRAMES
 #: events after which reporting restarts (R9a: power-up, resume, leaving MSG_EXP mode or CAN Test, a Set Freq write)
 _RESTARTS = frozenset({"start", "power on", "ready", "msg_control", "can_test", "set_freq"})
 ANSWER_WAIT_S = cat.ANSWER_DELAY_MAX_S + 0.036  # what the runner reads for an answer, plus its error below
 #: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
 #: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
 _ECHO_SLACK_S = 0.005
+#: R9 on a stretch's mean interval only from this many gaps judged: fewer say little on a real bench
+_MIN_GAPS = 3
 
 
 @dataclass
@@ -81,7 +95,7 @@ class Finding:
 
     def __post_init__(self) -> None:
         if not self.strength:
-            strengths = [requirement(r).strength for r in self.requirements if _known(r)]
+            strengths = [requirement(r).strength for r in self.requirements]  # an unknown id raises: never dropped
             self.strength = "SHALL" if "SHALL" in strengths else ("READING" if "READING" in strengths else "OBSERVE")
 
     @property
@@ -98,12 +112,17 @@ class Finding:
                 f"  DUT:   {self.dut}\n  model: {self.model}")
 
 
-def _known(rid: str) -> bool:
-    try:
+def _check_tables() -> None:
+    """At import: every requirement id of the judge's tables is known (a typo raises here, rather than read as
+    OBSERVE and its findings dropped), and every answered request has the requirement its answer comes from."""
+    for rid in [*ANSWER_REQ.values(), *KEPT.values()]:
         requirement(rid)
-    except KeyError:
-        return False
-    return True
+    answered = {s.name for s in cat.CATALOGUE if s.service and s.responses} | {"msg_control", "get_esc_id"}
+    if missing := sorted(answered - ANSWER_REQ.keys()):
+        raise KeyError(f"ANSWER_REQ names no requirement for the answers to {missing}")
+
+
+_check_tables()
 
 
 @dataclass
@@ -137,8 +156,10 @@ def _answer_of(frames: Iterable[Frame], req: Frame, until: float, since: float |
             continue
         if f.timestamp > until:
             return None
-        if req.kind is Kind.REQUEST:
-            if f.kind is Kind.RESPONSE and f.type_id == req.type_id and f.transfer_id == req.transfer_id:
+        if req.kind is Kind.REQUEST:  # paired as the host pairs it (F4): the service, and at most one field off
+            if f.type_id == req.type_id and f4_pairs(f4_mismatches(
+                    f, service=req.type_id, transfer_id=req.transfer_id, requester=req.source,
+                    asked=asked_node(req.name, req.destination))):  # type: ignore[arg-type]
                 return f
         elif f.kind is Kind.MESSAGE and f.type_id == req.type_id:  # (only the ESC's frames are given)
             return f
@@ -186,7 +207,7 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
     powered = False  # a power cycle came before (a read-back is then also R13's)
     taken: set[int] = set()  # the DUT's answers an earlier request got
     for req, step in oracle.host:
-        if req.name in ("raw_command_14b", "raw_command_12b", "raw_command_10b"):
+        if req.name in _THROTTLE:
             continue
         if req.kind is Kind.MESSAGE and req.name not in ("msg_control", "get_esc_id"):
             continue
@@ -201,7 +222,7 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
         want = _answer_of(model, req, req.timestamp + ANSWER_WAIT_S)
         if want is None:  # the model's ESC does not answer it (not addressed to it, off, booting): nothing to compare
             continue
-        reqs = [ANSWER_REQ.get(req.name, cat.spec(req.name).section)]
+        reqs = [ANSWER_REQ[req.name]]
         if req.kind is Kind.REQUEST and req.name not in ("get_esc_id", "msg_control"):
             reqs.append("4.1.1-2")
         earlier = list(dict.fromkeys(rule for t, rule in refused if t < req.timestamp))
@@ -235,7 +256,7 @@ def _slot(req: Frame, got: Frame, want: Frame, step: int | None, t0: float, p: P
     slot = cat.answer_slot_s(node)
     error = max(p.error, p.own_error)
     start = got.timestamp - frame_bits(len(got.data)) / bitrate - req.timestamp  # (its timestamp is its end)
-    if start >= slot - error - 1e-9:
+    if r2_slot_start(start, node, error=error).ok:
         return []
     reqs = ["R2", "4.4.2-4" if req.name == "msg_control" else "4.4.3-4"]
     return [Finding("answer", reqs, f"{req.name} answered {start * 1000:.1f} ms after the request, before node {node}'s "
@@ -253,7 +274,7 @@ def _fields(f: Frame) -> str:
 # ------------------------------------------------------------------------------------------ streams
 def _stream_of(f: Frame) -> str | None:
     n = f.name
-    if n in ("msg1", "msg2", "msg3", "can_test"):
+    if n in (*cat.REPORT_FRAMES, "can_test"):
         return n if f.kind is Kind.MESSAGE else None
     return "exp" if n in _EXP else None
 
@@ -288,11 +309,11 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
         for stream in STREAMS:
             iv = _interval(state, stream)
             old = _interval(before, stream) if before is not None else iv
-            settle = 1.25 * max(iv, old) + cat.RESTART_SLACK_MIN_S + cat.ANSWER_DELAY_MAX_S + 2 * p.error + p.jitter
-            lo = state.t + settle + (p.boot_s if state.label == "power on" else 0.0)
+            late = cat.ANSWER_DELAY_MAX_S + 2 * p.error  # the command may be answered first, stamps off by the error
+            lo = state.t + r9a_limit_s(iv, old, jitter=p.jitter) + late + (p.boot_s if state.label == "power on" else 0.0)
             if restart is not None:  # R9a's allowance counts from the restart, over the longer of its old and new interval
                 r_old = _interval(restart_before, stream) if restart_before is not None else iv
-                lo = max(lo, restart.t + settle - 1.25 * max(iv, old) + 1.25 * max(iv, r_old)
+                lo = max(lo, restart.t + r9a_limit_s(iv, r_old, jitter=p.jitter) + late
                          + (p.boot_s if restart.label == "power on" else 0.0))
             hi = end - 2 * p.error - frame_s
             if hi <= lo:
@@ -311,22 +332,25 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
                 out.append(Finding("stream", rids, f"{_label(stream)} sent ({state.mode} since {state.cause})",
                                    f"{len(d)} frames, the first at t={d[0] - t0:.3f} s", "none", d[0] - t0, state.step,
                                    subject=f"{stream} sent, {state.mode}"))
-            elif stream in ("msg1", "msg2", "msg3") and len(m) >= 2:
+            elif stream in cat.REPORT_FRAMES and len(m) >= 2:
                 out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, frame_s)
     return out
 
 
 def _interval_finding(state: State, stream: str, stamps: list[float], end: float, iv: float, t0: float, p: Params,
                       frame_s: float) -> list[Finding]:
-    """R9 on the DUT's reports of one stretch from its third report on (R9a: the gaps before are OBSERVE)."""
-    seen = _between(stamps, state.t, end - 2 * p.error)[2:]
-    if len(seen) < 4:
+    """R9 on the DUT's reports of one stretch, the gap to its third report and on (R9a: the gaps before are
+    OBSERVE), on the mean of their gaps (:func:`~ckesc.protocol.judgements.r9_mean`): its stamps are the frames'
+    ends, each late by up to a frame's bus access besides the bench's error."""
+    seen = r9_judged(_between(stamps, state.t, end - 2 * p.error))
+    if len(seen) <= _MIN_GAPS:
+        return []
+    j = r9_mean(seen, iv, error=p.error + frame_s)
+    if j is None or j.ok:
         return []
     gaps = len(seen) - 1
     mean = (seen[-1] - seen[0]) / gaps
-    tol = 0.001 + (2 * p.error + 2 * frame_s + p.jitter) / gaps
-    if abs(mean - iv) <= tol:
-        return []
+    tol = j.limit + j.error
     return [Finding("interval", ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, not {iv * 1000:g} ms "
                     f"({state.mode} since {state.cause})", f"mean of {gaps} gaps {mean * 1000:.2f} ms",
                     f"{iv * 1000:g} ms (+-{tol * 1000:.2f})", seen[0] - t0, state.step, subject=f"{stream} interval")]
@@ -369,18 +393,18 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         if _between(host_times, t - cat.ANSWER_DELAY_MAX_S - 2 * p.error, t + _ECHO_SLACK_S + 2 * p.error):
             continue  # a setting just sent (its echo may be stamped late): when within its answer time it shows is not written
         state = _state_at(oracle, t)
-        reach = state.intervals["msg1"] + 0.001 + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
+        reach = state.intervals["msg1"] + SCHEDULING_TOLERANCE_S + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
         near = model[bisect.bisect_left(stamps, t - reach):bisect.bisect_right(stamps, t + reach)]
         if not near:
             continue
-        mask = STATUS_MASK & ~0x2000  # bit 13 is judged on R8's own clock below
+        mask = STATUS_MASK & ~_COMM  # bit 13 is judged on R8's own clock below
         if state.source != 0:
             # bit 14 under PWM+CAN: 4.4.4 names it "throttle signal source" without saying configured or in use
             # (4.2: PWM+CAN falls back to CAN by itself), and ESCs of other makes show either: not compared
-            mask &= ~0x4000
+            mask &= ~int(cat.Status.THROTTLE_PWM)
         comm = _comm_fault_expected(t, commands, ups, state, p)
-        if comm is not None and bool(f.fields["status"] & 0x2000) != comm:
-            bits = 0x2000
+        if comm is not None and bool(f.fields["status"] & _COMM) != comm:
+            bits = _COMM
             if bits not in seen:
                 seen.add(bits)
                 out.append(Finding("status", ["R8", "R7"], f"MSG1 comm-loss bit {'clear' if comm else 'set'} "
@@ -396,7 +420,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         if bits in seen:
             continue  # one finding per kind of wrong bit
         seen.add(bits)
-        rids = ["R8", "R7"] if bits & 0x2000 else ["R7"]
+        rids = ["R8", "R7"] if bits & _COMM else ["R7"]
         for bit, setting in _STATUS_SETTING.items():  # a bit showing a setting: the setting's own keeping, and R13's
             if bits & bit:                            # after a power cycle in the program
                 rids += [KEPT[setting]] + (["R13"] if any(u > t0 for u in ups if u <= t) else [])
@@ -421,14 +445,10 @@ def _comm_fault_expected(t: float, commands: list[float], ups: list[float], stat
     if last < up:
         return None
     since = t - last
-    tol = 0.001 + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
-    if since < -tol or abs(since) <= _ECHO_SLACK_S + 2 * p.error:
+    error = SCHEDULING_TOLERANCE_S + 2 * p.error + frame_bits(8) / p.bitrate  # MSG1's stamp is its end
+    if since < -(error + p.jitter) or abs(since) <= _ECHO_SLACK_S + 2 * p.error:
         return None  # a command as the MSG1 went out: which came first is within the bench's error
-    if since < cat.COMM_LOSS_TIMEOUT_S - tol:
-        return False
-    if since > cat.COMM_LOSS_TIMEOUT_S + state.intervals["msg1"] + tol:
-        return True
-    return None
+    return r8_flag_due(since, state.intervals["msg1"], jitter=p.jitter, error=error)
 
 
 def _state_at(oracle: Oracle, t: float) -> State:

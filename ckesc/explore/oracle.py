@@ -23,8 +23,7 @@ from ..protocol.errors import DecodeError
 from ..protocol.frame import Decoder, Frame
 
 #: DUT settings (Dut.settings() keys, 242 / 214) -> the model's flash keys: the same names
-SETTING_KEYS = ("rotation", "throttle_source", "throttle_channel", "led_color", "led_blink",
-                "msg1_interval", "msg2_interval", "msg3_interval")
+SETTING_KEYS = ("rotation", "throttle_source", "throttle_channel", "led_color", "led_blink", *cat.INTERVAL_FIELDS)
 
 
 class _OracleModel(EscModel):
@@ -115,7 +114,7 @@ class Oracle:
         self._keep(self.model.poll(t))
         if frame is not None:
             self.host.append((frame, step))
-            if frame.name not in ("raw_command_14b", "raw_command_12b", "raw_command_10b"):
+            if frame.name not in cat.THROTTLE_FRAMES:
                 self._note(t, frame.name, step)
 
     def power(self, on: bool, t: float, step: int | None = None) -> None:
@@ -152,7 +151,7 @@ class Oracle:
 
     def _note(self, t: float, label: str, step: int | None = None) -> None:
         nvm = self.model.nvm
-        intervals = {k: nvm[f"{k}_interval"] * cat.INTERVAL_UNIT_S for k in ("msg1", "msg2", "msg3")}
+        intervals = {k: nvm[f"{k}_interval"] * cat.INTERVAL_UNIT_S for k in cat.REPORT_FRAMES}
         mode = self.mode()
         prev = self.states[-1] if self.states else None
         cause = prev.cause if prev is not None and prev.mode == mode and label not in ("power on", "ready") else label

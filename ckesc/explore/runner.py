@@ -33,7 +33,7 @@ from .oracle import SETTING_KEYS, Oracle
 DEFAULTS: dict[str, Any] = {o.dest: o.default for o in options.bench_options()}
 #: The read-back every program ends with: a setting clobbered anywhere in it shows here (242, 214, GET_ESC_ID)
 PROBE = (Action("send", "get_major_configuration", {"option": 0}),
-         Action("send", "set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}),
+         Action("send", "set_freq", dict(cat.FREQ_READ)),
          Action("send", "get_esc_id", {"option": 0}))
 STREAM_PERIOD_S = 0.01
 POWER_SETTLE_S = 0.3  # read after a power-up: the reports that should flow (or not) show before the next step

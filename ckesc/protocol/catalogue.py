@@ -11,7 +11,7 @@ All multi-byte fields are little-endian (F2).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntFlag
 from types import MappingProxyType
 from typing import Any, Mapping
@@ -820,6 +820,79 @@ SERVICES: Mapping[int, FrameSpec] = MappingProxyType({s.type_id: s for s in CATA
 BY_NAME: Mapping[str, FrameSpec] = MappingProxyType({s.name: s for s in CATALOGUE})
 
 
+# --------------------------------------------------------------------------------------------------
+# Families: the frames and settings the suites, the emulator, the explorer and the bus rules range over.
+# A consumer that enumerates one imports it from here, so an entry added here is covered everywhere.
+
+#: The throttle frames, RawCommand 14b/12b/10b (4.4.15-4.4.17, R3-R5), in the document's order.
+THROTTLE_FRAMES: tuple[str, ...] = tuple(s.name for s in CATALOGUE if any(lay.codec.startswith("throttle") for lay in s.layouts))
+#: The reports of normal reporting, MSG1..MSG3 (4.4.4-4.4.6), each with the Set/Get Freq field that holds its
+#: interval (4.4.22, R9).
+REPORT_INTERVAL_FIELDS: Mapping[str, str] = MappingProxyType({k.removesuffix("_interval"): k for k in DEFAULT_REPORT_INTERVALS})
+REPORT_FRAMES: tuple[str, ...] = tuple(REPORT_INTERVAL_FIELDS)
+INTERVAL_FIELDS: tuple[str, ...] = tuple(REPORT_INTERVAL_FIELDS.values())
+#: Set/Get Freq's read (option 0; the intervals sent are ignored, 4.4.22).
+FREQ_READ: Mapping[str, int] = MappingProxyType({"option": 0, **{k: 0 for k in INTERVAL_FIELDS}})
+#: MSG_EXP mode's periodic reports (4.4.7-4.4.13); MSG_EXP12 comes once per Get Rec instead (R15).
+EXP_REPORT_FRAMES: tuple[str, ...] = tuple(s.name for s in CATALOGUE if s.name.startswith("msg_exp") and s.tail_tag is None)
+#: Every frame the ESC sends as a report (a ``report`` layout): MSG1..MSG3, MSG_EXP1..MSG_EXP12.
+ESC_REPORT_FRAMES: tuple[str, ...] = tuple(s.name for s in CATALOGUE if any(lay.name == "report" for lay in s.layouts))
+
+#: MSG1 status bits that follow the ESC's state and settings (R7, R8): direction, throttle source, comm loss, running.
+STATUS_STATE_BITS = Status.DIRECTION_CCW | Status.THROTTLE_PWM | Status.COMM_FAULT | Status.RUNNING
+
+
+@dataclass(frozen=True)
+class PersistedSetting:
+    """One setting R13 keeps across power-off, with the request that writes it and where it is read back.
+
+    ``fields`` maps the writer's request fields to the names the setting is read back as (the host's settings
+    read: 242 and Set/Get Freq read; GET_ESC_ID for the node id); ``save`` are the writer's fixed fields of a
+    write that saves (Set LED and Set Freq option 1). ``clause`` is the requirement of its own section that says
+    a written value is kept. ``window``: written only within the 120 s after power-up (R11); ``at_power_up``: a
+    write takes effect only after the next power-up (Set Baud). Every one of them is a parameter change R12 holds
+    back while reporting is suspended (4.4.2-3). Expand Set Part's settings are :data:`EXPAND_COMMANDS`'s."""
+
+    name: str
+    writer: str
+    fields: Mapping[str, str]
+    reader: str | None  # the frame it is read back with; None: only the bit rate it answers at after a power-up
+    clause: str
+    label: str  # the write that saves it, as a message says it: "Set Led option 1"
+    save: Mapping[str, int] = field(default_factory=dict)
+    window: bool = False
+    at_power_up: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "fields", MappingProxyType(dict(self.fields)))
+        object.__setattr__(self, "save", MappingProxyType(dict(self.save)))
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        """The names it is read back as."""
+        return tuple(self.fields.values())
+
+
+#: R13's persisted settings (4.4.18-4.4.23): the ones a test can write at any time first, then the two of the window.
+PERSISTED_SETTINGS: tuple[PersistedSetting, ...] = (
+    PersistedSetting("rotation", "set_rotation", {"rotation": "rotation"}, "get_major_configuration", "4.4.21-4",
+                     "Set Rotation"),
+    PersistedSetting("throttle_source", "throttle_select", {"source": "throttle_source"}, "get_major_configuration",
+                     "4.4.23-4", "Throttle Select"),
+    PersistedSetting("led", "set_led", {"color": "led_color", "blink": "led_blink"}, "get_major_configuration",
+                     "4.4.20-5", "Set Led option 1", save={"option": 1}),
+    PersistedSetting("intervals", "set_freq", dict(zip(INTERVAL_FIELDS, INTERVAL_FIELDS)), "set_freq", "R13",
+                     "Set Freq", save={"option": 1}),
+    PersistedSetting("node_id", "set_id", {"node_id": "node_id", "throttle_channel": "throttle_channel"}, "get_esc_id",
+                     "4.4.18-7", "Set Id", window=True),
+    PersistedSetting("baud", "set_baud", {"baud": "baud"}, None, "4.4.19-3", "Set Baud", window=True,
+                     at_power_up=True),
+)
+PERSISTED: Mapping[str, PersistedSetting] = MappingProxyType({s.name: s for s in PERSISTED_SETTINGS})
+#: The requests that write a persisted setting: the parameter changes R12 holds back while reporting is suspended.
+SETTING_WRITERS: frozenset[str] = frozenset(s.writer for s in PERSISTED_SETTINGS)
+
+
 def spec(name: str) -> FrameSpec:
     """The catalogue entry named ``name`` (``'set_freq'``); also accepts a type id or the document's title."""
     if name in BY_NAME:
@@ -850,6 +923,11 @@ def _self_check() -> None:
         sizes = [lay.size for lay in s.layouts]
         assert len(sizes) == len(set(sizes)), f"{s.name}: message layouts must differ in length"
     assert len(BY_NAME) == len(CATALOGUE)
+    for p in PERSISTED_SETTINGS:
+        writer = spec(p.writer)
+        assert writer.request is not None and set(p.fields) | set(p.save) <= set(writer.request.field_names), p.name
+        assert p.reader is None or p.reader in BY_NAME, p.name
+    assert len(THROTTLE_FRAMES) == 3 and len(REPORT_FRAMES) == 3, (THROTTLE_FRAMES, REPORT_FRAMES)
 
 
 _self_check()

@@ -8,9 +8,10 @@
     for event in host.expire(now): ...             # TimedOut(pending) once a deadline passes
 
 A response matches a request when it carries the same service id and transfer id, comes from the
-node the request went to and is addressed to this host (F4). A response that matches in all but one
-of those is still reported as :class:`Response` with ``mismatch`` naming what differs, so a suite
-can fail it with a clear message instead of timing out.
+node the request went to and is addressed to this host (F4, :func:`.judgements.f4_mismatches`). A
+response that matches in all but one of those is still reported as :class:`Response` with
+``mismatch`` naming what differs (:func:`.judgements.f4_pairs`), so a suite can fail it with a
+clear message instead of timing out.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from typing import Any, Mapping
 from .errors import DecodeError
 from .frame import Decoder, Frame, WireFrame, encode
 from .ids import Kind
+from .judgements import asked_node, f4_mismatches, f4_pairs
 from .transfer import TransferIdCounter
 
 
@@ -110,18 +112,11 @@ class HostProtocol:
         for p in self.pending:
             if p.service != frame.type_id:
                 continue
-            mismatch = []
-            if frame.kind is not Kind.RESPONSE:
-                mismatch.append("request bit set in a response (F1/F4)")
-            if frame.transfer_id != p.transfer_id:
-                mismatch.append(f"transfer id {frame.transfer_id} != request's {p.transfer_id} (F4)")
-            if frame.destination != self.node_id:
-                mismatch.append(f"destination {frame.destination} != requester {self.node_id} (F4)")
-            if frame.source != p.destination and p.name != "set_id":  # Set ID may answer from its new id
-                mismatch.append(f"source {frame.source} != the node asked, {p.destination} (F4)")
+            mismatch = f4_mismatches(frame, service=p.service, transfer_id=p.transfer_id, requester=self.node_id,
+                                     asked=asked_node(p.name, p.destination))
             if best is None or len(mismatch) < best[0]:
                 best = (len(mismatch), p, mismatch)
-        if best is None or best[0] > 1:
+        if best is None or not f4_pairs(best[2]):
             return None
         _, p, mismatch = best
         self.pending.remove(p)

@@ -1,13 +1,18 @@
 """Verdicts: each phase report of a conformance test made into the test's one :class:`~ckesc.reporting.results.Result`
 (PASS, FAIL, OBSERVED, INCONCLUSIVE, SKIPPED, ERROR), its message saying what the DUT did, the bus rules' say in it,
 and the console counting each test once by that verdict. Also the run's stop when the bench goes away or the DUT
-falls silent."""
+falls silent.
+
+A phase's verdict is decided in one place, :func:`_outcome`, from the type of what ended it (as pytest decides
+passed, failed or skipped from the exception's type in one hook): :class:`~ckesc.bench.verdict.Inconclusive` is
+INCONCLUSIVE (a measurement inside the bench's error is one too), any other skip SKIPPED, a harness or bus error
+(``DutError``, ``BusFault``, ``BenchGone``) ERROR; never a word in the message."""
 
 from __future__ import annotations
 
 import pytest
 
-from ..bench.dut import Dut
+from ..bench.dut import Dut, DutError
 from ..bench.lanes import BenchGone, BusFault
 from ..bench.verdict import Inconclusive, NotClaimed
 from ..evidence.timing import evidence
@@ -37,6 +42,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     d = dut_of(item)
     # the bus or the bench failed under the test, not the DUT: an ERROR whatever the requirement's strength
     harness = call.excinfo is not None and isinstance(call.excinfo.value, (BusFault, BenchGone))
+    raised = call.excinfo.value if call.excinfo is not None else None  # what ended the phase: decides its verdict
     if rep.when == "call" and not harness:
         asserted = call.excinfo is not None and isinstance(call.excinfo.value, AssertionError)
         if rep.failed and strength == "OBSERVE":
@@ -46,13 +52,14 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
                 d.record.observe("observed deviation", msg)
         elif (rep.failed and asserted) or (not rep.failed and d is not None and d.record.failed):  # INCONCLUSIVE after a failed limit: FAIL
             _judged(item, rep, call, ids, strength, d)
-        elif rep.passed and d is not None and d.record.inconclusive:
+        elif rep.passed and d is not None and d.record.inconclusive:  # a margin inside the bench's error
+            raised = Inconclusive("; ".join(d.record.inconclusive))
             rep.outcome = "skipped"
-            rep.longrepr = (str(item.path), item.location[1] or 0, "INCONCLUSIVE: " + "; ".join(d.record.inconclusive))
-    bus_rules.judge(item, rep, skipped=_skipped(item, rep))
+            rep.longrepr = (str(item.path), item.location[1] or 0, raised.msg)
+    bus_rules.judge(item, rep, skipped=_skipped(item, rep, raised))
     if not rep.passed and _DECISIVE not in item.stash:
         item.stash[_DECISIVE] = rep
-    _collect(item, rep, ids, strength, d)
+    _collect(item, rep, raised, ids, strength, d)
     if call.excinfo is not None and isinstance(call.excinfo.value, BenchGone):
         _stop(item, f"aborted: {call.excinfo.value}")
     if rep.when == "teardown":
@@ -61,11 +68,11 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     return rep
 
 
-def _skipped(item: pytest.Item, rep: pytest.TestReport) -> bool:
-    """Whether the test's own verdict is SKIPPED (not INCONCLUSIVE): as this phase's report says, or (at
+def _skipped(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | None) -> bool:
+    """Whether the test's own verdict is SKIPPED (not INCONCLUSIVE): as this phase's outcome says, or (at
     teardown) as an earlier phase decided."""
     if rep.when == "call":
-        return rep.skipped and "INCONCLUSIVE" not in _longrepr_text(rep)
+        return _outcome(rep, raised, "SHALL") == Verdict.SKIPPED
     res = state(item.config).results.get(item.nodeid)
     return res is not None and res.outcome == Verdict.SKIPPED
 
@@ -162,14 +169,15 @@ def pytest_report_teststatus(report: pytest.TestReport, config: pytest.Config):
     return _CONSOLE.get(res.outcome)
 
 
-def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength: str, d: Dut | None) -> None:
+def _collect(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | None, ids: list[str], strength: str,
+             d: Dut | None) -> None:
     st = state(item.config)
     res = st.results.get(item.nodeid)
     if res is None:
         res = st.results[item.nodeid] = Result(item.nodeid, item.name, section_of(item), ids, strength)
     res.duration += rep.duration
     if rep.when == "call" or (rep.when == "setup" and not rep.passed) or (rep.when == "teardown" and rep.failed):
-        outcome, message = _outcome(rep, strength, d)
+        outcome, message = _outcome(rep, raised, strength), "" if rep.passed else _longrepr_text(rep, raised)
         if rep.when == "call" and _MESSAGE in item.stash:
             message = item.stash[_MESSAGE]
             outcome = Verdict.ERROR if message.startswith("harness:") else Verdict.FAIL
@@ -190,23 +198,22 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
         st.info.setdefault("interval_tolerance_ms", d.interval_tolerance_ms)
 
 
-def _outcome(rep: pytest.TestReport, strength: str, d: Dut | None) -> tuple[str, str]:
-    text = _longrepr_text(rep)
-    if rep.failed and any(e in text for e in ("DutError", "BusFault", "BenchGone")):
+def _outcome(rep: pytest.TestReport, raised: BaseException | None, strength: str) -> str:
+    """The verdict of one phase: from its report's outcome and the type of what ended it (``raised``), never from
+    its message's words."""
+    if rep.failed and isinstance(raised, (DutError, BusFault, BenchGone)):
         # the harness could not do what the test needed, or the bus failed under it: no verdict on the DUT
-        return Verdict.ERROR, text
+        return Verdict.ERROR
     if rep.passed:
-        if strength == "OBSERVE":
-            return Verdict.OBSERVED, ""
-        return Verdict.PASS, ""
+        return Verdict.OBSERVED if strength == "OBSERVE" else Verdict.PASS
     if rep.skipped:
-        return (Verdict.INCONCLUSIVE if "INCONCLUSIVE" in text else Verdict.SKIPPED), text
+        return Verdict.INCONCLUSIVE if isinstance(raised, Inconclusive) else Verdict.SKIPPED
     if rep.when == "setup":
-        return Verdict.ERROR, text
-    return Verdict.FAIL, text
+        return Verdict.ERROR
+    return Verdict.FAIL
 
 
-def _longrepr_text(rep: pytest.TestReport) -> str:
+def _longrepr_text(rep: pytest.TestReport, raised: BaseException | None = None) -> str:
     lr = rep.longrepr
     if lr is None:
         return ""
@@ -215,7 +222,8 @@ def _longrepr_text(rep: pytest.TestReport) -> str:
     else:
         crash = getattr(getattr(lr, "reprcrash", None), "message", None)
         text = crash if crash else str(lr)
-    for verdict in (Inconclusive, NotClaimed):  # raised below the test (a helper, a fixture): pytest names the class
+    kinds = (Inconclusive, NotClaimed) + ((type(raised),) if isinstance(raised, pytest.skip.Exception) else ())
+    for verdict in kinds:  # raised below the test (a helper, a fixture): pytest names the class
         text = text.removeprefix(f"{verdict.__module__}.{verdict.__qualname__}: ")
     return text
 

@@ -460,7 +460,27 @@ def rotation_while_running(host):
     return rotation
 
 
+def set_id_while_suspended(host):
+    suspend_answers(host)
+    host.send("set_id", {"node_id": 5, "throttle_channel": 6}, destination=1)
+    host.wait(0.01)
+    host.send("msg_control", {"option": 0, "command": RESUME})
+    host.wait(0.01)
+    return [(e.node_id, e.nvm["throttle_channel"]) for e in host.bench.escs]
+
+
+def set_baud_while_suspended(host):
+    suspend_answers(host)
+    host.send("set_baud", {"baud": 2}, destination=1)
+    host.wait(0.01)
+    host.send("msg_control", {"option": 0, "command": RESUME})
+    host.wait(0.01)
+    return [e.nvm["baud"] for e in host.bench.escs]
+
+
 case("settings_while_suspended", set_freq_while_suspended, (10, 50, 250), (20, 60, 80))
+case("set_id_while_suspended", set_id_while_suspended, [(1, 1)], [(5, 6)])
+case("set_baud_while_suspended", set_baud_while_suspended, [1], [2])
 case("rotation_while_running", rotation_while_running, 0, 1)
 
 # --------------------------------------------------------------------------------------------------

@@ -28,7 +28,7 @@ CAN_TEST_ON, CAN_TEST_OFF = 0xAA, 0x55  # 4.4.1
 HIGHEST, MEDIUM, LOW, LOWEST = 0, 16, 24, 31  # 4.1.2
 RED, GREEN, BLUE = 4, 2, 1  # 4.4.20: bit 2 R, bit 1 G, bit 0 B
 BAUD = {0: 1_000_000, 1: 500_000, 2: 250_000, 3: 200_000, 4: 125_000, 5: 100_000, 6: 50_000}  # 4.4.19
-REPORTS = ("msg1", "msg2", "msg3")
+REPORTS = cat.REPORT_FRAMES
 
 #: Payload + tail bytes on the wire.
 LEN = {"msg1": 7, "msg2": 6, "msg3": 8, "msg_control": 6, "get_esc_id?": 2, "get_esc_id": 3, "set_freq": 5,

@@ -58,3 +58,75 @@ def test_an_answer_before_the_current_node_s_slot_is_a_finding():
         assert _slot_case(ok)[0] == [], ok
     assert _slot_case(0.034 + frame_s - 0.0021)[0] != []
     assert _slot_case(0.034 + frame_s - 0.0001, error=0.0)[0] != []  # the simulated lane: exact
+
+
+def _judged_against(config: dict, host: list[tuple[str, dict, int | None, float]], until: float):
+    """The judge's findings on an emulated ESC with ``config`` (a conforming variant) given ``host``'s frames
+    (name, fields, destination, time), the oracle fed the same."""
+    from ckesc.emulator.model import EscConfig, EscModel, factory_nvm
+    from ckesc.explore.judge import Params, judge
+    from ckesc.explore.oracle import SETTING_KEYS, Oracle
+    from ckesc.protocol.frame import frame_bits
+
+    cfg = EscConfig(node_id=1, boot_time=0.0, report_delay=0.0, **config)
+    nvm = factory_nvm(cfg)
+    esc = EscModel(cfg, dict(nvm))
+    esc.power_on(0.0)
+    oracle = Oracle({"node_id": 1, **{k: nvm[k] for k in SETTING_KEYS}}, powered_at=0.0, start=0.0)
+    decoder, sent = Decoder(), []
+
+    def run_to(t: float) -> None:
+        while (d := esc.next_deadline()) is not None and d <= t:
+            sent.extend(esc.poll(d))
+        sent.extend(esc.poll(t))
+
+    for tid, (name, fields, destination, t) in enumerate(host):
+        wire = encode(name, fields, source=0, destination=destination, transfer_id=tid % 32)
+        msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True, timestamp=t)
+        run_to(t)
+        esc.receive(msg, t)
+        oracle.host_frame(msg)
+    run_to(until)
+    oracle.finish(until)
+    ends = [w._replace(timestamp=w.timestamp + frame_bits(len(w.data)) / esc.bitrate) for w in sent]  # ends, as on a bus
+    frames = [decoder.decode(w) for w in ends]
+    return judge(oracle, frames, 0.0, until, Params()), frames
+
+
+def test_a_refused_set_led_answered_with_the_request_s_values_is_no_finding():
+    """R12 leaves a refused request's answer free (``rejected_answer``: current values, none, or the request's
+    values echoed): an ESC that answers a Set LED sent while reporting is suspended with the request's own values,
+    and applies nothing, conforms (the suite passes it); the judge compared that answer's payload with the model's
+    current values and FAILed it (found against the clean-room ESC)."""
+    from ckesc.protocol import catalogue as cat
+
+    host = [("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND}, None, 0.5),
+            ("set_led", {"option": 0, "color": int(cat.LedColor.RED), "blink": 1}, 1, 0.6),
+            ("get_major_configuration", {"option": 0}, 1, 0.7),
+            ("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME}, None, 0.8),
+            ("get_major_configuration", {"option": 0}, 1, 0.9)]
+    for choice in ("current", "none", "echo"):
+        found, frames = _judged_against({"rejected_answer": choice}, host, 1.5)
+        answers = [(f.fields["color"], f.fields["blink"]) for f in frames if f.name == "set_led"]
+        assert answers == {"current": [(int(cat.DEFAULT_LED_COLOR), 0)], "none": [], "echo": [(int(cat.LedColor.RED), 1)]}[choice]
+        assert [f.text() for f in found] == [], choice
+
+
+def test_an_unknown_requirement_id_is_an_error_not_a_dropped_finding(monkeypatch):
+    """A typo in a judge table's requirement id raises when the module is imported (its tables are checked then),
+    and a finding citing one raises: before, it was read as OBSERVE and the finding silently dropped."""
+    import pytest
+
+    from ckesc.explore import judge
+
+    judge._check_tables()  # the module's own tables pass
+    monkeypatch.setitem(judge.ANSWER_REQ, "set_led", "4.4.20-Tx")
+    with pytest.raises(KeyError, match="4.4.20-Tx"):
+        judge._check_tables()
+    monkeypatch.setitem(judge.ANSWER_REQ, "set_led", "4.4.20-T")
+    monkeypatch.delitem(judge.ANSWER_REQ, "get_rec")
+    with pytest.raises(KeyError, match="get_rec"):
+        judge._check_tables()
+    with pytest.raises(KeyError, match="R9x"):
+        judge.Finding("interval", ["R9x"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0)
+    assert judge.Finding("interval", ["R9"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0).strength == "SHALL"

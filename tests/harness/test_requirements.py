@@ -41,3 +41,23 @@ def test_strongest_strength_decides():
     assert strongest(["R10-answer", "R10"]) == "SHALL"
     assert strongest(["R4", "R6"]) == "READING"
     assert strongest(["R6"]) == "OBSERVE"
+
+
+def test_every_requirement_id_written_in_the_code_exists():
+    """A string that reads as a requirement id (F4, R9a, R15-payload, 4.4.2-3, 4.4.5-T, A-1) anywhere in the package
+    or the suites names one of requirements.toml: a typo is caught here, not read as an unknown (OBSERVE) rule."""
+    import ast
+    import re
+    from pathlib import Path
+
+    import ckesc
+    import conformance
+
+    shaped = re.compile(r"^(F\d+|R\d+[a-z]?(-[\w-]+)?|\d+(\.\d+)+-\w+|A-\d+)$")
+    unknown = [f"{path.name}:{node.lineno}: {node.value}"
+               for root in (Path(ckesc.__file__).parent, Path(conformance.__file__).parent)
+               for path in sorted(root.rglob("*.py"))
+               for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+               if isinstance(node, ast.Constant) and isinstance(node.value, str) and shaped.match(node.value)
+               and node.value not in REQUIREMENTS]
+    assert unknown == [], unknown

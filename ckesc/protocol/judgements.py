@@ -1,0 +1,217 @@
+"""One judgement per timed or matched rule, sans-IO: the conformance tests, the live bus rules, ``ckesc explore``'s
+judge and ``ckesc check-log`` all call these, so that one change of reading changes every verdict alike.
+
+Each function takes what was measured (times in seconds, frames) and the limits the bench and the DUT state (the
+bench's timing error, the DUT's declared jitter, the bus's bit rate as frame durations) and returns a
+:class:`Judgement`: the rule, the measured value, the limit, the allowance given for the measurement's error, and
+whether it holds. A consumer words its own message and keeps its own record (a test's measurement, a bus rule's
+violation, an explorer finding) from it; it never writes a tolerance of its own.
+
+* R2 (:func:`r2_slot_start`, :func:`r2_slot_end`): an answer to MSG Control or GET_ESC_ID starts no earlier than
+  its node's slot, (node_id % 32) x 2 ms after the request, and ends inside it;
+* the 64 ms bound (:func:`answer_bound`, 4.4.2-4, 4.4.3-4);
+* R8 (:func:`r8_onset`, :func:`r8_flag_due`): the comm-loss flag comes up no earlier than 200 ms after the last
+  command and no later than 200 ms + one MSG1 interval;
+* R9 (:func:`r9_mean`, :func:`r9_gap`): a report's interval is the mean of its gaps, held to the scheduling
+  tolerance (1 ms) plus twice the bench's error over the number of gaps; the DUT's jitter widens a single gap only;
+* R9a (:func:`r9a_limit_s`, :func:`r9a_first`, :func:`r9_judged`): the first report after a restart within the
+  catalogue's restart limit; the gaps up to and including the second report after it are not judged;
+* F4 (:func:`f4_mismatches`, :func:`f4_pairs`): a response keeps its request's service id and transfer id, has
+  request=0, goes to the requester, comes from the node asked.
+
+The readings are ``spec/INTERPRETATIONS.md``'s; the protocol facts (200 ms, the slots, the restart slack) are the
+catalogue's (:mod:`.catalogue`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+from . import catalogue as cat
+from .frame import Frame
+from .ids import Kind
+
+#: R9: how far a report interval's mean may stray from its target besides the bench's error (the ESC's
+#: report scheduling); also the tick a real-time bench's single report may stray by on top of its stated error
+SCHEDULING_TOLERANCE_S = 0.001
+#: R9a: the gaps up to and including this report after a restart are OBSERVE; from the next one on, R9
+R9A_UNJUDGED = 2
+#: R9: a test whose purpose is a report's interval judges the mean of at least this many gaps
+R9_GAPS = 10
+#: float noise, never a tolerance: a value computed from stamps that equals its limit on paper holds
+_NOISE_S = 1e-9
+
+_OPS = {"<=": lambda v, lim: v <= lim, ">=": lambda v, lim: v >= lim}
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """One rule judged on one measurement (seconds). ``ok``: the measurement holds the limit, with ``error`` (the
+    part of the measurement that is the bench's, not the DUT's) given to the DUT: it fails only where it is
+    certainly outside. ``op``: how ``measured`` compares with ``limit`` (``<=`` a bound from above)."""
+
+    rule: str
+    measured: float
+    limit: float
+    op: str = "<="
+    error: float = 0.0
+    text: str = ""
+
+    @property
+    def ok(self) -> bool:
+        edge = self.limit + self.error + _NOISE_S if self.op == "<=" else self.limit - self.error - _NOISE_S
+        return _OPS[self.op](self.measured, edge)
+
+    @property
+    def margin(self) -> float:
+        """How far inside its limit the measurement is (negative: outside), before the error."""
+        return self.limit - self.measured if self.op == "<=" else self.measured - self.limit
+
+    def __str__(self) -> str:
+        return (f"[{self.rule}] {self.text}: {self.measured * 1000:.3f} ms, limit {self.op} {self.limit * 1000:g} ms"
+                + (f" +- {self.error * 1000:g} ms" if self.error else "") + ("" if self.ok else " (broken)"))
+
+
+# ------------------------------------------------------------------------------------------ tolerances
+def timing_tolerance(clock: str, timing_error: float) -> float:
+    """The timing tolerance of a lane: exact (0) in simulated time; elsewhere the lane's stated error plus one
+    report-scheduling tick. The bus rules judge single gaps with it, and ``Dut.interval_tolerance_ms`` allows it a
+    report interval."""
+    return 0.0 if clock == "simulated" else timing_error + SCHEDULING_TOLERANCE_S
+
+
+def r9_mean_tolerance_s(gaps: int, error: float) -> float:
+    """R9: how far the mean of ``gaps`` gaps may stray from the interval: the scheduling tolerance plus twice the
+    bench's error over the number of gaps (the stamps' errors cancel but at the two ends)."""
+    return SCHEDULING_TOLERANCE_S + 2 * error / gaps
+
+
+# ------------------------------------------------------------------------------------------ R9, R9a
+def r9_judged(starts: Sequence[float], after_restart: bool = True) -> list[float]:
+    """The reports whose gaps R9 judges: after a restart (R9a-gaps) from the second report on, so that the first
+    gap judged is the second to the third report; otherwise all."""
+    return list(starts[R9A_UNJUDGED - 1:] if after_restart else starts)
+
+
+def r9_mean(starts: Sequence[float], interval: float, *, error: float = 0.0, what: str = "report") -> Judgement | None:
+    """R9 on the mean of the gaps between ``starts`` (the reports judged, :func:`r9_judged`): ``measured`` is how far
+    the mean strays from ``interval``, ``limit`` the scheduling tolerance, ``error`` twice the bench's error over the
+    gaps. The DUT's declared jitter never widens the mean. None: fewer than two reports."""
+    gaps = len(starts) - 1
+    if gaps < 1:
+        return None
+    mean = (starts[-1] - starts[0]) / gaps
+    return Judgement("R9", abs(mean - interval), SCHEDULING_TOLERANCE_S, "<=", 2 * error / gaps,
+                     f"{what} every {mean * 1000:.3f} ms (mean of {gaps} gaps), not {interval * 1000:g} ms")
+
+
+def r9_gap(lo: float, hi: float, interval: float, *, tolerance: float, jitter: float = 0.0) -> Judgement:
+    """R9 on one gap (the live rule) known to lie in ``[lo, hi]`` (bus queueing): held to ``interval`` within the
+    lane's ``tolerance`` (:func:`timing_tolerance`) and the DUT's declared ``jitter``. The judgement is the side that
+    breaks: ``hi`` below the interval (too soon, ``op`` ``>=``) or ``lo`` above it (too late)."""
+    allowance = tolerance + jitter  # (the bus rules' hot path: no text formatted here)
+    if hi < interval:
+        return Judgement("R9", hi, interval, ">=", allowance, "a gap, at its longest")
+    return Judgement("R9", lo, interval, "<=", allowance, "a gap, at its shortest")
+
+
+def r9a_limit_s(interval: float, old: float | None = None, *, jitter: float = 0.0) -> float:
+    """R9a: how long after a restart the first report may come: the catalogue's restart limit of its interval (after
+    a Set Freq write, of the longer of its ``old`` and new interval), with the DUT's declared jitter on top."""
+    return cat.restart_limit_s(interval if old is None else max(interval, old)) + jitter
+
+
+def r9a_first(delay: float, limit: float, *, error: float = 0.0, what: str = "the first report") -> Judgement:
+    """R9a: the first report ``delay`` after a restart is within ``limit`` (:func:`r9a_limit_s`)."""
+    return Judgement("R9a", delay, limit, "<=", error, f"{what} {delay * 1000:.3f} ms after the restart")
+
+
+# ------------------------------------------------------------------------------------------ R8
+def r8_window_s(msg1_interval: float, *, jitter: float = 0.0) -> tuple[float, float]:
+    """R8: the earliest and latest the comm-loss flag may show after the last command: 200 ms, and 200 ms plus one
+    MSG1 interval (the MSG1 that carries it may stray by the DUT's declared jitter)."""
+    return cat.COMM_LOSS_TIMEOUT_S, cat.COMM_LOSS_TIMEOUT_S + msg1_interval + jitter
+
+
+def r8_onset(onset: float, msg1_interval: float, *, jitter: float = 0.0, error: float = 0.0) -> tuple[Judgement, Judgement]:
+    """R8 on the first MSG1 with the comm-loss flag ``onset`` after the last command: (not before 200 ms, not after
+    200 ms + one MSG1 interval)."""
+    early, late = r8_window_s(msg1_interval, jitter=jitter)
+    text = f"the comm-loss flag {onset * 1000:.3f} ms after the last command"
+    return (Judgement("R8", onset, early, ">=", error, text), Judgement("R8", onset, late, "<=", error, text))
+
+
+def r8_flag_due(since: float, msg1_interval: float, *, jitter: float = 0.0, error: float = 0.0) -> bool | None:
+    """R8: what an MSG1 ``since`` after the last command must show: False (clear) before 200 ms, True (set) after
+    200 ms + one MSG1 interval, None (free) in between or within ``error`` of either edge."""
+    early, late = r8_onset(since, msg1_interval, jitter=jitter, error=error)
+    if not early.ok:
+        return False
+    if not late.ok:
+        return True
+    return None
+
+
+# ------------------------------------------------------------------------------------------ R2 and the 64 ms bound
+def r2_slot_start(start: float, node_id: int, *, error: float = 0.0) -> Judgement:
+    """R2: an answer ``start`` after its request (MSG Control, GET_ESC_ID) starts no earlier than node ``node_id``'s
+    slot (the node id it has now)."""
+    return Judgement("R2", start, cat.answer_slot_s(node_id), ">=", error,
+                     f"node {node_id}'s answer starts {start * 1000:.3f} ms after the request")
+
+
+def r2_slot_end(end: float, node_id: int, *, error: float = 0.0) -> Judgement:
+    """R2: ... and ends inside its slot, ``end`` after the request."""
+    return Judgement("R2", end, cat.answer_slot_s(node_id) + cat.ANSWER_SLOT_S, "<=", error,
+                     f"node {node_id}'s answer ends {end * 1000:.3f} ms after the request")
+
+
+def answer_bound(end: float, *, error: float = 0.0, rule: str = "4.4.2-4") -> Judgement:
+    """4.4.2-4 / 4.4.3-4: an answer to a broadcast ends no later than 64 ms after the request."""
+    return Judgement(rule, end, cat.ANSWER_DELAY_MAX_S, "<=", error, f"answer {end * 1000:.3f} ms after the request")
+
+
+# ------------------------------------------------------------------------------------------ F4
+@dataclass(frozen=True)
+class Addressed:
+    """What F4 reads of a frame (a :class:`~.frame.Frame` has all of it): for a frame known only by its raw id."""
+
+    kind: Kind
+    type_id: int
+    transfer_id: int | None
+    destination: int | None
+    source: int
+
+
+def f4_mismatches(frame: Frame | Addressed, *, service: int, transfer_id: int | None, requester: int, asked: int | None) -> list[str]:
+    """F4: what of ``frame`` differs from an answer to a request (``service``, ``transfer_id``) that ``requester`` sent
+    to node ``asked`` (None: any node may answer, Set ID being a pseudo-broadcast, R11). Empty: it is that answer."""
+    out = []
+    if frame.type_id != service:
+        out.append(f"service {frame.type_id} != the request's {service} (F4)")
+    if frame.kind is not Kind.RESPONSE:
+        out.append("request bit set in a response (F1/F4)")
+    if frame.transfer_id != transfer_id:
+        out.append(f"transfer id {frame.transfer_id} != request's {transfer_id} (F4)")
+    if frame.destination != requester:
+        out.append(f"destination {frame.destination} != requester {requester} (F4)")
+    if asked is not None and frame.source != asked:
+        out.append(f"source {frame.source} != the node asked, {asked} (F4)")
+    return out
+
+
+#: F4: a frame of the request's service that differs from its answer in at most this many other fields is still
+#: taken as the answer (and failed with the field named), never as no answer
+F4_PAIRING_SLACK = 1
+
+
+def f4_pairs(mismatches: Sequence[str]) -> bool:
+    """Whether a frame with ``mismatches`` (:func:`f4_mismatches`, same service) is taken as the request's answer."""
+    return len(mismatches) <= F4_PAIRING_SLACK
+
+
+def asked_node(name: str, destination: int) -> int | None:
+    """The node an answer to request ``name`` sent to ``destination`` must come from (None: any, Set ID answers from
+    its new id, R11)."""
+    return None if name == "set_id" else destination

@@ -1,0 +1,108 @@
+"""One trace, four consumers, one finding (issue #28): the frames of an emulated ESC judged by the conformance
+suite's R9 check (:func:`conformance.reports` calls ``judgements.r9_judged`` / ``r9_mean``), the live bus rules
+(:mod:`ckesc.evidence.rules`), ``ckesc explore``'s judge (against its faultless oracle) and ``ckesc check-log`` (the
+command, over a candump log of the same frames). An ESC whose MSG1 comes every 30 ms instead of 20 (the emulator's
+fault ``report_interval_wrong``) is R9 to all four; the faultless ESC is R9 to none."""
+
+from __future__ import annotations
+
+import can
+import pytest
+
+from ckesc.cli import main as cli_main
+from ckesc.emulator.config import EscConfig
+from ckesc.emulator.model import EscModel
+from ckesc.evidence.rules import BusRules
+from ckesc.explore.judge import Params, judge
+from ckesc.explore.oracle import Oracle
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.frame import Decoder, encode, frame_bits
+from ckesc.protocol.judgements import R9_GAPS, r9_judged, r9_mean
+
+NODE = 5
+BOOT_S = 0.25
+ASK_AT = 0.4  # the host reads the intervals (Set/Get Freq read): the node states its 20 ms
+END_S = 1.6
+
+
+def _trace(faults: tuple[str, ...]) -> tuple[can.Message, list[can.Message]]:
+    """The host's Set/Get Freq read at ASK_AT and everything the emulated ESC sends up to END_S, as heard."""
+    esc = EscModel(EscConfig(node_id=NODE, boot_time=BOOT_S, faults=faults))
+    esc.power_on(0.0)
+    wire = encode("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}, kind="request",
+                  source=0, destination=NODE, transfer_id=0)
+    ask = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True, timestamp=ASK_AT,
+                      is_rx=False)
+    out = []
+
+    def run(until: float) -> None:
+        while (d := esc.next_deadline()) is not None and d <= until:
+            out.extend(esc.poll(d))
+        out.extend(esc.poll(until))
+
+    run(ASK_AT)
+    esc.receive(ask, ASK_AT)
+    run(END_S)
+    heard, bus_free = [], 0.0  # on the bus one at a time (the lowest id first), stamped at their end as SocketCAN does
+    for w in sorted(out, key=lambda w: (w.timestamp, w.arbitration_id)):
+        bus_free = max(w.timestamp, bus_free) + frame_bits(len(w.data)) / cat.DEFAULT_BITRATE
+        heard.append(can.Message(arbitration_id=w.arbitration_id, data=w.data, is_extended_id=True, timestamp=bus_free))
+    return ask, heard
+
+
+def _conformance(ask, heard) -> set[str]:
+    """As ``conformance.reports.check_restart`` judges a report's interval: the mean of R9_GAPS gaps from the second
+    report after the event on, against the interval the node's answer states."""
+    decoder = Decoder()
+    frames = [decoder.decode(m) for m in heard]
+    answer = next(f for f in frames if f.name == "set_freq" and f.timestamp >= ASK_AT)
+    target = answer.fields["msg1_interval"] * cat.INTERVAL_UNIT_S
+    starts = [f.timestamp - frame_bits(len(f.data)) / cat.DEFAULT_BITRATE for f in frames
+              if f.name == "msg1" and f.timestamp > answer.timestamp]
+    j = r9_mean(r9_judged(starts)[:R9_GAPS + 1], target, error=0.0)
+    assert j is not None
+    return set() if j.ok else {j.rule}
+
+
+def _bus_rules(ask, heard) -> set[str]:
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    out = set()
+    for m in sorted([ask, *heard], key=lambda m: m.timestamp):
+        for v in rules.feed_message(m):
+            out.update(r for r in v.rules if v.message.startswith("msg1 "))
+    return out
+
+
+def _explorer(ask, heard) -> set[str]:
+    baseline = {"node_id": NODE, "throttle_channel": NODE, **cat.DEFAULT_REPORT_INTERVALS}
+    oracle = Oracle(baseline, powered_at=0.0, start=BOOT_S)
+    oracle.host_frame(ask, 0)
+    oracle.finish(END_S)
+    decoder = Decoder()
+    found = judge(oracle, [decoder.decode(m) for m in heard if m.timestamp >= BOOT_S], BOOT_S, END_S, Params(boot_s=BOOT_S))
+    return {r for f in found if f.subject == "msg1 interval" for r in f.requirements}
+
+
+def _check_log(ask, heard, tmp_path, capsys) -> set[str]:
+    log = tmp_path / "trace.log"
+    log.write_text("".join(f"({m.timestamp:.6f}) can0 {m.arbitration_id:08X}#{bytes(m.data).hex().upper()}\n"
+                           for m in sorted([ask, *heard], key=lambda m: m.timestamp)))
+    code = cli_main(["check-log", "--complete", str(log)])
+    text = capsys.readouterr().out
+    assert code in (0, 1), text
+    if code == 0:
+        return set()
+    return {"R9"} if "R9" in text and "msg1 30.000 ms after the previous one" in text else {"other: " + text[-300:]}
+
+
+@pytest.mark.parametrize("faults, expected", [((), False), (("report_interval_wrong",), True)],
+                         ids=["20 ms", "30 ms instead of 20"])
+def test_one_trace_the_same_r9_finding_from_all_four(faults, expected, tmp_path, capsys):
+    ask, heard = _trace(faults)
+    got = {
+        "conformance": "R9" in _conformance(ask, heard),
+        "bus rules": "R9" in _bus_rules(ask, heard),
+        "explorer": "R9" in _explorer(ask, heard),
+        "check-log": "R9" in _check_log(ask, heard, tmp_path, capsys),
+    }
+    assert got == dict.fromkeys(got, expected)

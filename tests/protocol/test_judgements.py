@@ -1,0 +1,147 @@
+"""The judgement of each timed or matched rule (ckesc.protocol.judgements), at and around its limits."""
+
+from __future__ import annotations
+
+import pytest
+
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol import judgements as J
+from ckesc.protocol.frame import Decoder, encode
+from ckesc.protocol.ids import Kind
+
+MS = 0.001
+EPS = 1e-6  # well outside float noise, well inside any tolerance
+
+
+# ------------------------------------------------------------------------------------------ R9
+def _grid(interval: float, n: int, first: float = 0.0) -> list[float]:
+    return [first + k * interval for k in range(n)]
+
+
+@pytest.mark.parametrize("gaps", [1, 10])
+def test_r9_mean_holds_up_to_the_scheduling_tolerance_plus_twice_the_error_over_the_gaps(gaps):
+    error = 0.5 * MS
+    tol = J.SCHEDULING_TOLERANCE_S + 2 * error / gaps
+    assert tol == pytest.approx(J.r9_mean_tolerance_s(gaps, error))
+    for off, ok in ((0.0, True), (tol - EPS, True), (tol + EPS, False), (-(tol - EPS), True), (-(tol + EPS), False)):
+        j = J.r9_mean(_grid(0.020 + off, gaps + 1), 0.020, error=error)
+        assert j is not None and j.rule == "R9" and j.ok is ok, (off, j)
+        assert j.measured == pytest.approx(abs(off))
+
+
+def test_r9_mean_25_ms_instead_of_20_fails_whatever_the_jitter():
+    """INTERPRETATIONS R9: an ESC that reports every 25 ms instead of 20 FAILs on any bench, however much jitter it
+    declares: the mean takes no jitter at all; with ten gaps a bench of 10 ms error still tells."""
+    j = J.r9_mean(_grid(0.025, 11), 0.020, error=0.010)
+    assert j is not None and not j.ok and "25.000 ms" in j.text
+    assert J.r9_mean([0.0], 0.020) is None  # no gap: nothing to judge
+
+
+def test_r9a_gaps_the_first_gap_judged_is_the_second_to_the_third_report():
+    starts = [1.0, 2.0, 3.0, 4.0]
+    assert J.r9_judged(starts) == [2.0, 3.0, 4.0]
+    assert J.r9_judged(starts, after_restart=False) == starts
+    assert J.R9A_UNJUDGED == 2
+
+
+def test_r9_single_gap_takes_the_lane_tolerance_and_the_jitter():
+    tol, jitter = 1.5 * MS, 2 * MS
+    allowance = tol + jitter
+    for lo, hi, ok, op in ((0.020, 0.020, True, "<="), (0.020 + allowance - EPS, 0.021 + allowance, True, "<="),
+                           (0.020 + allowance + EPS, 0.021 + allowance, False, "<="),
+                           (0.010, 0.020 - allowance + EPS, True, ">="), (0.010, 0.020 - allowance - EPS, False, ">=")):
+        j = J.r9_gap(lo, hi, 0.020, tolerance=tol, jitter=jitter)
+        assert (j.ok, j.op) == (ok, op), (lo, hi, j)
+
+
+def test_r9a_first_report_within_the_catalogue_s_restart_limit():
+    assert J.r9a_limit_s(0.020) == pytest.approx(cat.restart_limit_s(0.020)) == pytest.approx(0.025)
+    assert J.r9a_limit_s(0.010) == pytest.approx(0.013)  # max(3 ms, a quarter): the 3 ms floor
+    assert J.r9a_limit_s(0.020, 0.100) == pytest.approx(cat.restart_limit_s(0.100))  # the longer of old and new
+    assert J.r9a_limit_s(0.020, jitter=0.002) == pytest.approx(0.027)
+    limit = J.r9a_limit_s(0.020)
+    assert J.r9a_first(limit, limit).ok and J.r9a_first(limit - EPS, limit).ok
+    assert not J.r9a_first(limit + EPS, limit).ok
+    assert J.r9a_first(limit + MS - EPS, limit, error=MS).ok and not J.r9a_first(limit + MS + EPS, limit, error=MS).ok
+
+
+def test_timing_tolerance_is_exact_in_simulated_time_and_a_tick_on_top_of_the_error_elsewhere():
+    assert J.timing_tolerance("simulated", 0.005) == 0.0
+    assert J.timing_tolerance("bus timestamp", 0.0005) == pytest.approx(0.0015)
+
+
+# ------------------------------------------------------------------------------------------ R8
+def test_r8_onset_window():
+    early, late = J.r8_window_s(0.020)
+    assert (early, late) == (pytest.approx(cat.COMM_LOSS_TIMEOUT_S), pytest.approx(cat.COMM_LOSS_TIMEOUT_S + 0.020))
+    for onset, oks in ((0.200, (True, True)), (0.200 - EPS, (False, True)), (0.220, (True, True)),
+                       (0.220 + EPS, (True, False))):
+        assert tuple(j.ok for j in J.r8_onset(onset, 0.020)) == oks, onset
+    assert all(j.ok for j in J.r8_onset(0.222, 0.020, jitter=0.002))  # the MSG1 carrying it may be late by the jitter
+    assert not J.r8_onset(0.199, 0.020, jitter=0.002)[0].ok  # ... never early: the flag comes no sooner than 200 ms
+    assert J.r8_onset(0.199, 0.020, error=MS)[0].ok  # within the bench's error: given to the DUT
+
+
+def test_r8_flag_due_clear_before_200_ms_set_after_one_interval_more_free_between():
+    assert J.r8_flag_due(0.150, 0.020) is False
+    assert J.r8_flag_due(0.200 - EPS, 0.020) is False
+    assert J.r8_flag_due(0.200, 0.020) is None and J.r8_flag_due(0.210, 0.020) is None
+    assert J.r8_flag_due(0.220, 0.020) is None and J.r8_flag_due(0.220 + EPS, 0.020) is True
+    assert J.r8_flag_due(0.199, 0.020, error=2 * MS) is None
+    assert J.r8_flag_due(0.221, 0.020, error=2 * MS) is None
+
+
+# ------------------------------------------------------------------------------------------ R2, 64 ms
+@pytest.mark.parametrize("node", [1, 5, 17, 33])
+def test_r2_slot_edges(node):
+    slot = (node % 32) * 0.002
+    assert J.r2_slot_start(slot, node).ok and not J.r2_slot_start(slot - EPS, node).ok
+    assert J.r2_slot_start(slot - MS + EPS, node, error=MS).ok and not J.r2_slot_start(slot - MS - EPS, node, error=MS).ok
+    assert J.r2_slot_end(slot + 0.002, node).ok and not J.r2_slot_end(slot + 0.002 + EPS, node).ok
+    assert J.r2_slot_end(slot + 0.002 + MS - EPS, node, error=MS).ok
+
+
+def test_answer_bound_64_ms():
+    assert J.answer_bound(0.064).ok and not J.answer_bound(0.064 + EPS).ok
+    assert J.answer_bound(0.064 + EPS, error=MS).ok
+    assert J.answer_bound(0.070, rule="4.4.3-4").rule == "4.4.3-4"
+
+
+# ------------------------------------------------------------------------------------------ F4
+def _answer(**kw):
+    args = {"source": 5, "destination": 0, "transfer_id": 7, "kind": "response"} | kw
+    wire = encode("set_freq", {"option": 0, "msg1_interval": 10, "msg2_interval": 50, "msg3_interval": 250}, **args)
+    return Decoder().decode(wire)
+
+
+def test_f4_an_answer_keeps_service_transfer_id_and_addresses():
+    service = cat.spec("set_freq").type_id
+    ok = J.f4_mismatches(_answer(), service=service, transfer_id=7, requester=0, asked=5)
+    assert ok == []
+    for kw, word in ((dict(transfer_id=8), "transfer id"), (dict(destination=3), "destination"),
+                     (dict(source=6), "source"), (dict(kind="request"), "request bit")):
+        got = J.f4_mismatches(_answer(**kw), service=service, transfer_id=7, requester=0, asked=5)
+        assert len(got) == 1 and word in got[0], (kw, got)
+        assert J.f4_pairs(got)  # one field off: still this request's answer, failed with the field named
+    two = J.f4_mismatches(_answer(transfer_id=8, source=6), service=service, transfer_id=7, requester=0, asked=5)
+    assert len(two) == 2 and not J.f4_pairs(two)
+    assert "service" in J.f4_mismatches(_answer(), service=service + 1, transfer_id=7, requester=0, asked=5)[0]
+
+
+def test_f4_set_id_answers_from_any_node():
+    assert J.asked_node("set_id", 5) is None and J.asked_node("set_freq", 5) == 5
+    assert J.f4_mismatches(_answer(source=9), service=cat.spec("set_freq").type_id, transfer_id=7, requester=0,
+                           asked=None) == []
+
+
+def test_f4_reads_a_raw_id_too():
+    f = _answer(transfer_id=3)
+    raw = J.Addressed(Kind.RESPONSE, f.type_id, f.transfer_id, f.destination, f.source)
+    assert J.f4_mismatches(raw, service=f.type_id, transfer_id=3, requester=0, asked=5) == []
+
+
+def test_judgement_is_a_frozen_record_with_its_text():
+    j = J.r9a_first(0.030, 0.025, what="the first MSG1")
+    with pytest.raises(AttributeError):
+        j.limit = 1.0  # type: ignore[misc]
+    assert not j.ok and j.margin == pytest.approx(-0.005) and "R9a" in str(j) and "broken" in str(j)

@@ -1,0 +1,102 @@
+"""No tolerance or timing fact retyped outside the catalogue and the judgement module (issue #28: one judgement per
+rule). The source of ``ckesc/`` and ``conformance/`` is read with ``ast``; every place that writes
+
+* a small float (below 10 ms: a tolerance's size, ``0.001``, ``0.0005``) or one of the catalogue's timing facts
+  (64 ms, 200 ms),
+* a ``[2:]`` slice (R9a's gaps skipped by hand),
+* a ``1.25 *`` (R9a's restart slack by hand)
+
+must be in :data:`ALLOWED`, each with why it is not a rule's tolerance. A new one fails here: put a tolerance in
+``ckesc/protocol/judgements.py`` (or a protocol fact in the catalogue) and call it, or, if it truly is none (a
+bench's stated error, the emulator's own timing, float noise), allow it here with the reason.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections import Counter
+from pathlib import Path
+
+from ckesc.protocol import catalogue as cat
+
+ROOT = Path(__file__).resolve().parents[2]
+OWNERS = {"ckesc/protocol/catalogue.py", "ckesc/protocol/judgements.py"}
+#: the catalogue's timing facts, which no other module writes as a number
+FACTS = {cat.ANSWER_DELAY_MAX_S, cat.COMM_LOSS_TIMEOUT_S}
+SMALL_S = 0.01
+
+_NOISE = "float noise in a comparison or a rounding, not a tolerance"
+_EMULATOR = "the emulator's own behaviour (what it plays), not a limit any judgement holds a DUT to"
+#: (file, literal) -> (how many, why it is not a rule's tolerance)
+ALLOWED: dict[tuple[str, str], tuple[int, str]] = {
+    ("ckesc/bench/lanes.py", "0.002"): (1, "HOST_SEND_ERROR_S: the host clock's stated error at send (a bench's error)"),
+    ("ckesc/bench/dut.py", "0.2"): (1, "OUTPUT_SETTLE_S: a test allowance for a ramping throttle output, not R8's 200 ms"),
+    ("ckesc/bench/link.py", "0.0025"): (1, "throttle_stream's default period: the harness's command rate"),
+    ("ckesc/bench/realtime_lane.py", "0.002"): (1, "the real-time lane's stated timing error (a bench's error)"),
+    ("ckesc/session/lane_setup.py", "0.002"): (1, "the real-time lane's least stated timing error (a bench's error)"),
+    ("ckesc/emulator/config.py", "0.0005"): (1, _EMULATOR),
+    ("ckesc/emulator/model.py", "0.007"): (1, _EMULATOR),
+    ("ckesc/emulator/output.py", "0.001"): (1, _EMULATOR),
+    ("ckesc/emulator/realtime.py", "0.0005"): (1, _EMULATOR),
+    ("ckesc/emulator/realtime.py", "0.2"): (1, "a poll timeout of the real-time emulator's loop, not R8's 200 ms"),
+    ("ckesc/emulator/realtime_timing.py", "1e-06"): (1, _EMULATOR),
+    ("ckesc/emulator/realtime_timing.py", "0.001"): (1, _EMULATOR),
+    ("ckesc/emulator/reporting.py", "0.003"): (1, "the report_interval_wrong fault's wrong unit (a fault the suite must find)"),
+    ("ckesc/emulator/variants.py", "0.003"): (1, "the jitter a conforming variant may play (declared as its profile's jitter_s)"),
+    ("ckesc/emulator/variants.py", "0.0002"): (1, _EMULATOR),
+    ("ckesc/evidence/checklog.py", "0.001"): (1, "USB_ADAPTER_ERROR_S: a capturing adapter's stated error (a bench's error)"),
+    ("ckesc/evidence/findings.py", "0.0005"): (1, "a histogram bin's width in the summary, not a limit"),
+    ("ckesc/evidence/findings.py", "1e-06"): (1, _NOISE),
+    ("ckesc/evidence/rules.py", "1e-09"): (1, _NOISE),
+    ("ckesc/evidence/tracker.py", "1e-09"): (1, _NOISE),
+    ("ckesc/explore/judge.py", "0.005"): (1, "_ECHO_SLACK_S: how late a real bench stamps the host's own echo (a bench's error)"),
+    ("ckesc/explore/runner.py", "0.006"): (1, "how long the explorer reads past the 64 ms bound for an answer (a read window)"),
+    ("ckesc/reporting/compare.py", "1e-06"): (1, _NOISE),
+    ("ckesc/rigs/rig.py", "[2:]"): (2, "a rig file's key path without its first two parts, not report gaps"),
+    ("conformance/answers.py", "1e-12"): (1, _NOISE),
+    ("conformance/reports.py", "0.005"): (1, "REACT_S: the test allowance for a frame queued before the DUT could act"),
+    ("conformance/test_s4_4_3_get_esc_id.py", "0.007"): (1, "PHASE_STEP_S: how a test moves its request across the slots"),
+    ("conformance/throttle.py", "0.0025"): (1, "STREAM_PERIOD_S: the harness's command rate"),
+}
+
+
+def _found(path: Path) -> list[str]:
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Constant) and isinstance(node.value, float) and not isinstance(node.value, bool):
+            if 0 < abs(node.value) < SMALL_S or node.value in FACTS:
+                out.append(repr(node.value))
+        elif isinstance(node, ast.Slice) and node.upper is None and node.step is None \
+                and isinstance(node.lower, ast.Constant) and node.lower.value == 2:
+            out.append("[2:]")
+        elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.Mult) \
+                and any(isinstance(x, ast.Constant) and x.value == 1.25 for x in (node.left, node.right)):
+            out.append("1.25 *")
+    return out
+
+
+def _scan() -> Counter:
+    found: Counter = Counter()
+    for base in ("ckesc", "conformance"):
+        for path in sorted((ROOT / base).rglob("*.py")):
+            rel = path.relative_to(ROOT).as_posix()
+            if rel not in OWNERS:
+                found.update((rel, lit) for lit in _found(path))
+    return found
+
+
+def test_no_tolerance_literal_outside_the_catalogue_and_the_judgements():
+    found = _scan()
+    allowed = Counter({k: n for k, (n, _) in ALLOWED.items()})
+    new = found - allowed
+    assert not new, ("tolerance or timing-fact literals outside ckesc/protocol/catalogue.py and judgements.py "
+                     f"(put them there and call them, or allow them in this test with why): {dict(new)}")
+    gone = allowed - found
+    assert not gone, f"allowed literals no longer there (take them out of ALLOWED): {dict(gone)}"
+
+
+def test_the_scan_sees_what_it_counts(tmp_path):
+    """The scan itself: each kind it counts is seen (a scan that sees nothing would pass anything)."""
+    src = tmp_path / "x.py"
+    src.write_text("a = b <= 0.001\nc = gaps[2:]\nd = 1.25 * x\ne = t > 0.064\nf = 0.5\ng = s[1:]\n")
+    assert sorted(_found(src)) == sorted(["0.001", "[2:]", "1.25 *", "0.064"])
