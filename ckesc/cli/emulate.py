@@ -193,7 +193,7 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--control", type=int_arg, metavar="PORT", help="control channel on 127.0.0.1:PORT (0: a free port); see ckesc control")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
     p.add_argument("--stamp", choices=("due", "send"), default="due",
-                   help="bus timestamp of ESC frames: the time they were due (default) or the time they were sent")
+                   help="bus timestamp of ESC frames: their end (as SocketCAN stamps), had they started when they were due (default) or when they were sent")
     p.add_argument("--boot-spread", type=float, default=0.02, metavar="S",
                    help="ESC k of n boots k/n x S later than the first, so that their reports are not in lockstep, as on a "
                    "real bench (default 0.02: one MSG1 interval; 0: all at once, as the simulated lane)")

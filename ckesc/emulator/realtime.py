@@ -12,10 +12,11 @@ Time bases
     The models run on ``time.monotonic()`` seconds (CLOCK_MONOTONIC, shared by every process on
     the machine). Frames on the bus carry wall-clock stamps (``time.time()`` base, as SocketCAN,
     socketcand and python-can's virtual bus use): ``bus = monotonic + offset``, with ``offset``
-    measured once at start-up so that intervals between stamps are exact. With ``stamp="due"``
-    (the default) an ESC frame is stamped with the time it was due, so report intervals and
-    answer delays seen in bus timestamps are the model's, not this machine's scheduling noise;
-    ``stamp="send"`` stamps the time it was actually handed to the bus. Either way the lateness
+    measured once at start-up so that intervals between stamps are exact. An ESC frame is stamped
+    at its end, as SocketCAN stamps a frame it received: its start plus its duration at the bus's
+    bit rate (``frame_bits``). With ``stamp="due"`` (the default) it starts when it was due, so
+    report intervals and answer delays seen in bus timestamps are the model's, not this machine's
+    scheduling noise; ``stamp="send"`` starts it when it was actually handed to the bus. Either way the lateness
     of every frame (send time - due time) is counted (:meth:`RealtimeEmulator.stats`).
     A frame from the host is given to the ESCs at the time it arrived: the socketcand read time,
     or the bus's own receive stamp where it is plausible (SocketCAN's kernel stamp).
@@ -52,7 +53,7 @@ from typing import Any, Callable
 import can
 
 from ..protocol.catalogue import DEFAULT_BITRATE
-from ..protocol.frame import WireFrame
+from ..protocol.frame import WireFrame, frame_bits
 from .bench import Bench
 from .control import ControlServer, Handler, Reply, dispatch
 from .model import EscModel
@@ -423,14 +424,18 @@ class RealtimeEmulator(ControlCommands):
             return
         t_send = time.monotonic()
         due_stamps = self.stamp == "due"
+        # a frame is stamped at its end, as SocketCAN stamps a frame it received (and socketcand passes it on): its
+        # start (when it was due, or sent) plus its time on the bus at the bench's bit rate
+        bit_s = 1.0 / self.bitrate
         sc = self._socketcand
         if sc is not None and sc.conns:
-            data = b"".join(fmt_frame(w, (w.timestamp if due_stamps else t_send) + self.offset) for w in frames)
+            data = b"".join(fmt_frame(w, (w.timestamp if due_stamps else t_send) + frame_bits(len(w.data)) * bit_s + self.offset)
+                            for w in frames)
             sc.to_clients(data, None, t_send)
         for w in frames:
             if self.bus is not None:
                 t_send = time.monotonic()
-                self._bus_send(w, (w.timestamp if due_stamps else t_send) + self.offset)
+                self._bus_send(w, (w.timestamp if due_stamps else t_send) + frame_bits(len(w.data)) * bit_s + self.offset)
             self.lateness.add(t_send - w.timestamp)
         self.counters["tx"] += len(frames)
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import pytest
 
 from ..bench.dut import Dut
+from ..bench.errors import BenchError
 from ..bench.lanes import BenchGone, BusFault
 from ..bench.verdict import Inconclusive, NotClaimed
 from ..evidence.timing import evidence
@@ -35,8 +36,9 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     ids = item_requirements(item)
     strength = strongest(ids)
     d = dut_of(item)
-    # the bus or the bench failed under the test, not the DUT: an ERROR whatever the requirement's strength
-    harness = call.excinfo is not None and isinstance(call.excinfo.value, (BusFault, BenchGone))
+    # the bus or the bench (its power control) failed under the test, not the DUT: an ERROR whatever the
+    # requirement's strength
+    harness = call.excinfo is not None and isinstance(call.excinfo.value, (BusFault, BenchGone, BenchError))
     if rep.when == "call" and not harness:
         asserted = call.excinfo is not None and isinstance(call.excinfo.value, AssertionError)
         if rep.failed and strength == "OBSERVE":
@@ -190,9 +192,14 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, ids: list[str], strength
         st.info.setdefault("interval_tolerance_ms", d.interval_tolerance_ms)
 
 
+#: the exceptions (by the name pytest's crash message gives them) that say the harness or the bench failed, not the
+#: DUT: the test ERRORs (:mod:`ckesc.bench.errors`, :mod:`ckesc.bench.lanes`, :mod:`ckesc.bench.link`)
+_NOT_THE_DUT = ("DutError", "BusFault", "BenchGone", "BenchError", "PowerFailed")
+
+
 def _outcome(rep: pytest.TestReport, strength: str, d: Dut | None) -> tuple[str, str]:
     text = _longrepr_text(rep)
-    if rep.failed and any(e in text for e in ("DutError", "BusFault", "BenchGone")):
+    if rep.failed and any(e in text for e in _NOT_THE_DUT):
         # the harness could not do what the test needed, or the bus failed under it: no verdict on the DUT
         return Verdict.ERROR, text
     if rep.passed:
