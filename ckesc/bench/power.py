@@ -29,8 +29,9 @@ from .errors import PowerFailed, PreflightError
 ENTRY_POINT_GROUP = "ckesc.power"
 
 #: How long a power command may run before it has failed (``--power-cmd-timeout``): a lab supply's CLI switches in
-#: well under a second; one that hangs (a network PSU that does not answer) must not hold the run
-POWER_COMMAND_TIMEOUT_S = 5.0
+#: well under a second, a Python script (``ckesc control``) in one or two, several on a loaded host in a few; one
+#: that hangs (a network PSU that does not answer) must not hold the run
+POWER_COMMAND_TIMEOUT_S = 10.0
 
 Option = Callable[[str], Any]
 Prompt = Callable[[str], None]

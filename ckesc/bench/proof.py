@@ -55,9 +55,13 @@ def prove_power(link: Link, what: dict[str, str]) -> str:
     except PowerFailed as exc:
         raise PreflightError(f"power off: {exc}") from None
     t_off = link.now()
-    link.wait(off_s)
+    try:
+        link.wait(off_s)
+    except BaseException:  # Ctrl-C while the DUT is off: it is switched on again on the way out
+        _on_anyway(lane)
+        raise
     late = [f.timestamp for f in link.frames(since=t_off + off_s / 2, source=node)]
-    late += [g.msg.timestamp for g in link.undecoded(since=t_off + off_s / 2) if g.msg.arbitration_id & 0x7F == node]
+    late += [g.msg.timestamp for g in link.undecoded(since=t_off + off_s / 2, source=node)]
     if late:
         raise PreflightError(f"the power switch switched nothing: node {node} kept sending after {what['off']} "
                              f"({len(late)} frame(s) {off_s / 2:g}..{off_s:g} s after it, the profile's off_s {off_s:g} s): "
@@ -75,3 +79,10 @@ def prove_power(link: Link, what: dict[str, str]) -> str:
                              "DUT's supply on, or does it boot slower than boot_s says?")
     first = min(heard.values())
     return f"proven: silent when off, first report {(first - on) * 1000:.0f} ms after power-on"
+
+
+def _on_anyway(lane: BusLane) -> None:
+    try:
+        lane.power.on()
+    except Exception:  # noqa: BLE001 - best effort on an exit path
+        pass
