@@ -5,8 +5,9 @@ a new report directory or a moved ``reports/latest``.
 Checked: node ids (1..125 everywhere), emulator fault names, option combinations, the DUT profile
 (schema: see :mod:`.profile`), the reports directory (writable), the power commands (found and
 executable), labgrid power (the environment file, target and power driver; the place acquired, or refused
-with who holds it), the bit-rate command, and the bus itself (opened once and closed again, with the way
-out named for a kernel without SocketCAN).
+with who holds it), the bit-rate command, and the bus itself (opened once, within :data:`BUS_OPEN_TIMEOUT_S`,
+and closed again, with the way out named for a kernel without SocketCAN). Once the tests are collected, the
+bench itself is proven on a real bus (:mod:`ckesc.bench.proof`: who answers GET_ESC_ID, the power switch).
 """
 
 from __future__ import annotations
