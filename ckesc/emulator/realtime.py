@@ -97,12 +97,15 @@ class RealtimeEmulator(ControlCommands):
         control_port: int | None = None,
         bitrate: int = DEFAULT_BITRATE,
         stamp: str = "due",
+        frame_stamp: str = "end",
         echo_own: bool = True,
         rt_priority: int | None = None,
         log: Callable[[str], None] | None = None,
     ) -> None:
         if stamp not in ("due", "send"):
             raise ValueError(f"stamp must be 'due' or 'send', not {stamp!r}")
+        if frame_stamp not in ("end", "start"):
+            raise ValueError(f"frame_stamp must be 'end' or 'start', not {frame_stamp!r}")
         if bus is None and socketcand_port is None:
             raise ValueError("nothing to talk to: give a python-can bus or a socketcand port")
         self.bench = bench
@@ -110,6 +113,7 @@ class RealtimeEmulator(ControlCommands):
         self._own_bus = own_bus
         self.bitrate = int(bitrate)
         self.stamp = stamp
+        self.frame_stamp = frame_stamp
         self.echo_own = echo_own
         self.rt_priority = rt_priority
         self.scheduling = "normal"
@@ -425,8 +429,9 @@ class RealtimeEmulator(ControlCommands):
         t_send = time.monotonic()
         due_stamps = self.stamp == "due"
         # a frame is stamped at its end, as SocketCAN stamps a frame it received (and socketcand passes it on): its
-        # start (when it was due, or sent) plus its time on the bus at the bench's bit rate
-        bit_s = 1.0 / self.bitrate
+        # start (when it was due, or sent) plus its time on the bus at the bench's bit rate; or (frame_stamp "start")
+        # at its start, as an adapter stamping the start of frame does
+        bit_s = 1.0 / self.bitrate if self.frame_stamp == "end" else 0.0
         sc = self._socketcand
         if sc is not None and sc.conns:
             data = b"".join(fmt_frame(w, (w.timestamp if due_stamps else t_send) + frame_bits(len(w.data)) * bit_s + self.offset)
@@ -477,7 +482,9 @@ class RealtimeEmulator(ControlCommands):
         sc = self._socketcand
         if sc is not None and sc.conns and not getattr(item.msg, "is_remote_frame", False):
             skip = None if self.echo_own or not isinstance(item.origin, Conn) else item.origin
-            sc.to_clients(fmt_frame(item.wire, t + self.offset), skip, time.monotonic())
+            # heard at t, its end; stamped at its start one frame earlier where the bench stamps frame starts
+            start = frame_bits(len(item.wire.data)) / self.bitrate if self.frame_stamp == "start" else 0.0
+            sc.to_clients(fmt_frame(item.wire, t - start + self.offset), skip, time.monotonic())
 
     def _read_bus(self) -> None:
         """Helper thread for buses without a file descriptor: only reads and queues."""

@@ -162,17 +162,22 @@ def test_a_profile_with_only_a_name_takes_the_named_defaults_and_fails_no_correc
     assert doc["info"]["timing_error_s"] == DEFAULT_BUS_ERROR_S
 
 
-def test_answer_starts_are_read_as_the_emulator_stamps_them(tmp_path):
+@pytest.mark.parametrize("frame_stamp", ["end", "start"])
+def test_answer_starts_are_read_as_the_bench_stamps_them(tmp_path, frame_stamp):
     """``ckesc emulate`` stamps a frame at its end, as SocketCAN does, and the suite reads a stamp as the end
-    (DEFAULT_STAMP): on a 10 us bench (bus stamps are epoch floats about 0.2 us apart; socketcand's text has
-    microseconds) an ESC at node 5 answers at its slot's start, 10 ms, and passes. Stamped at the frame's start,
-    its answers seemed to start one frame (0.2 ms at 500 kbit/s) early, and FAILed."""
+    (DEFAULT_STAMP); ``--frame-stamp start`` stamps it at its start, as an adapter stamping the start of frame, and a
+    profile saying ``stamp = "start"`` has the suite read it so. Either way, on a 10 us bench (bus stamps are epoch
+    floats about 0.2 us apart; socketcand's text has microseconds) an ESC at node 5 answers at its slot's start,
+    10 ms, and passes. Read the other way, its answers seemed to start one frame (0.2 ms at 500 kbit/s) early and
+    FAILed (as they did when the emulator stamped frame starts and nothing said so)."""
+    stated = 'stamp = "start"\n' if frame_stamp == "start" else ""
     profile = tmp_path / "fine.toml"
-    profile.write_text('[dut]\nname = "my ESC"\n[timing]\nerror_s = 0.00001\n')
-    with Emulator(tmp_path, "--nodes", "5") as emu:
+    profile.write_text('[dut]\nname = "my ESC"\n[timing]\nerror_s = 0.00001\n' + stated)
+    with Emulator(tmp_path, "--nodes", "5", "--frame-stamp", frame_stamp) as emu:
         outcomes, doc, _ = _slot_tests(tmp_path, emu.port, profile)
     assert set(outcomes.values()) == {"PASS"}, outcomes
     assert not any("error_s" in line for line in doc["info"]["bench"]) and doc["info"]["timing_error_s"] == 0.00001
+    assert any("no [timing] stamp" in line for line in doc["info"]["bench"]) == (not stated)
 
 
 def _slot_tests(tmp: Path, port: int, profile: Path) -> tuple[dict[str, str], dict, subprocess.CompletedProcess]:
