@@ -122,6 +122,7 @@ def test_a_power_switch_that_fails_hangs_or_switches_nothing_is_found_before_any
     _one_line_exit_2(done, took, tmp_path, *phrases)
 
 
+@pytest.mark.slow
 def test_no_power_proof_where_no_selected_test_cycles_power(tmp_path, emu):
     """A power switch is not touched by a run that will not cycle power: a wrong one costs that run nothing."""
     done, _ = _run(tmp_path, emu.port, "--power", "command", "--power-off-cmd", "false", "--power-on-cmd", "false",
@@ -162,7 +163,7 @@ def test_a_profile_with_only_a_name_takes_the_named_defaults_and_fails_no_correc
     assert doc["info"]["timing_error_s"] == DEFAULT_BUS_ERROR_S
 
 
-@pytest.mark.parametrize("frame_stamp", ["end", "start"])
+@pytest.mark.parametrize("frame_stamp", ["end", pytest.param("start", marks=pytest.mark.slow)])
 def test_answer_starts_are_read_as_the_bench_stamps_them(tmp_path, frame_stamp):
     """``ckesc emulate`` stamps a frame at its end, as SocketCAN does, and the suite reads a stamp as the end
     (DEFAULT_STAMP); ``--frame-stamp start`` stamps it at its start, as an adapter stamping the start of frame, and a
