@@ -206,10 +206,10 @@ class DutProfile:
         if "error_s" not in self.stated:
             profile = replace(profile, error_s=DEFAULT_BUS_ERROR_S)
             notes.append(f"the profile {self.name!r} states no [timing] error_s: the bench's error is taken as "
-                         f"{DEFAULT_BUS_ERROR_S * 1000:g} ms (the default for a real bus)")
+                         f"{DEFAULT_BUS_ERROR_S * 1000:g} ms (DEFAULT_BUS_ERROR_S, the default for a real bus)")
         if "stamp" not in self.stated:
             notes.append(f"the profile {self.name!r} states no [timing] stamp: frame timestamps are taken as marking the "
-                         f"frame's {DEFAULT_STAMP} (SocketCAN's; say stamp = \"start\" for an adapter that stamps the start "
+                         f"frame's {DEFAULT_STAMP} (DEFAULT_STAMP, SocketCAN's; say stamp = \"start\" for an adapter that stamps the start "
                          "of frame)")
         return replace(profile, defaults_taken=tuple(notes))
 
