@@ -19,7 +19,7 @@ from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, Kind
 from ckesc.protocol.judgements import answer_bound, r2_slot_end, r2_slot_start
 from ckesc.protocol.requirements import Verdict
 
-from .reports import frame_start, ms
+from .reports import frame_end, frame_start, ms, on_bus_s
 
 #: Every ESC answers a broadcast within 64 ms (R2); the harness's discovery reads twice that
 BROADCAST_WINDOW_S = 2 * cat.ANSWER_DELAY_MAX_S
@@ -69,6 +69,15 @@ def wide_node(error: float) -> int | None:
     return n if n >= 2 and tells(n, error) and n != DEFAULT_ESC_NODE_ID else None
 
 
+def request_end(dut, sent) -> float:
+    """When the DUT had the whole request (its last bit), from which its answer slot counts: the request's echo's
+    stamp where it marks the frame's end, that stamp and its time on the bus where the lane's stamps mark a frame's
+    start (a host clock time at send, without an echo, is taken as it is: its stated error covers the frame)."""
+    if sent.bus_time is not None and dut.lane.stamp == "start":
+        return sent.time + on_bus_s(dut, sent.wire)
+    return sent.time
+
+
 def check_answer_slot(dut, answer, sent, node: int, what: str, max_requirement: str) -> None:
     """R2: node n's slot is [n x 2 ms, n x 2 ms + 2 ms] after the request (n = node_id % 32; the 32 slots tile the
     64 ms): the answer starts no earlier than its slot and ends inside it; ``max_requirement`` (4.4.2-4 /
@@ -84,7 +93,8 @@ def check_answer_slot(dut, answer, sent, node: int, what: str, max_requirement: 
     slot = cat.answer_slot_s(node)
     error = delay_error(dut, sent)
     err = error * 1000
-    start, end = frame_start(dut, answer) - sent.time, answer.timestamp - sent.time
+    heard = request_end(dut, sent)
+    start, end = frame_start(dut, answer) - heard, frame_end(dut, answer) - heard
     rec = dut.record
     first, last = r2_slot_start(start, node, error=error), r2_slot_end(end, node, error=error)
     lo, hi = first.limit - first.error, last.limit + last.error  # (the DUT is given the error: judged on these)

@@ -1,7 +1,7 @@
 """What a DUT reports on its own, as the report sections (4.4.1 - 4.4.14) read it (not a section: no
 tests here).
 
-- timing: :func:`ms`, :func:`frame_start`, :data:`REACT_S` / :func:`react_s`, :func:`interval_s`;
+- timing: :func:`ms`, :func:`frame_start` / :func:`frame_end`, :data:`REACT_S` / :func:`react_s`, :func:`interval_s`;
 - which reports came, decodable or not: :func:`reported`, :func:`report_starts`, and the ones that
   did not decode: :func:`garbled`, :func:`describe_garbled`, :func:`need_decoded`;
 - MSG Control (4.4.2): :func:`msg_control`, :func:`resume`, :func:`check_suspended`, and capturing
@@ -52,11 +52,22 @@ def ms(seconds: float) -> float:
     return round(seconds * 1000, 6)
 
 
+def on_bus_s(dut, frame) -> float:
+    """How long ``frame`` took on the bus: an extended frame of n data bytes takes frame_bits(n) bit times (on a
+    real bus stuff bits make it up to ~20 % longer, inside the lane's stated error)."""
+    return frame_bits(len(frame.data)) / dut.lane.bitrate
+
+
 def frame_start(dut, frame) -> float:
-    """When a frame started on the bus: its timestamp is its end (SocketCAN, and the simulated lane,
-    where an extended frame of n data bytes takes frame_bits(n) bit times; on a real bus stuff bits
-    make it up to ~20 % longer, inside the lane's stated error)."""
-    return frame.timestamp - frame_bits(len(frame.data)) / dut.lane.bitrate
+    """When a frame started on the bus: its timestamp less its time on the bus where the lane's stamps mark a
+    frame's end (SocketCAN, socketcand, both emulators), its timestamp where they mark its start (the DUT
+    profile's [timing] stamp)."""
+    return frame.timestamp - (on_bus_s(dut, frame) if dut.lane.stamp == "end" else 0.0)
+
+
+def frame_end(dut, frame) -> float:
+    """When a frame ended on the bus (its last bit: when a receiver has it): :func:`frame_start`'s counterpart."""
+    return frame.timestamp + (on_bus_s(dut, frame) if dut.lane.stamp == "start" else 0.0)
 
 
 def interval_s(settings: dict, which: str) -> float:
@@ -123,7 +134,7 @@ def reported(dut, since: float, *, source: int, names=REPORTS + EXP_FRAMES) -> l
     for g in undecoded(dut):
         kind, _, src, _, spec = classify(g.msg.arbitration_id)
         if kind is Kind.MESSAGE and spec is not None and spec.name in names and src == source:
-            out.append((spec.name, (g.msg.timestamp or 0.0) - frame_bits(len(g.msg.data)) / dut.lane.bitrate))
+            out.append((spec.name, frame_start(dut, g.msg) if g.msg.timestamp else 0.0))
     return sorted((x for x in out if x[1] >= since + REACT_S), key=lambda x: x[1])
 
 

@@ -56,6 +56,9 @@ class Lane(ABC):
     name: str
     clock: str  # the verdict clock label: "simulated" or "bus timestamp"
     timing_error: float = 0.0  # seconds: margins smaller than this are INCONCLUSIVE
+    #: which end of a frame the lane's timestamps mark: "end" (SocketCAN, socketcand, both emulators) or "start"
+    #: (an adapter stamping the start of frame; the DUT profile's [timing] stamp)
+    stamp: str = "end"
     #: whether the host's own frames come back from the bus (their echo gives their bus time); False: the
     #: lane hands out :class:`OwnFrame` copies stamped by the host clock at send
     echo: bool = True
@@ -257,8 +260,9 @@ class BusLane(Lane):
     clock = "bus timestamp"
 
     def __init__(self, bus_kwargs: dict[str, Any], power: PowerControl, *, timing_error: float,
-                 bitrate_cmd: str | None = None, host_send_error: float = HOST_SEND_ERROR_S) -> None:
+                 bitrate_cmd: str | None = None, host_send_error: float = HOST_SEND_ERROR_S, stamp: str = "end") -> None:
         self.bus_kwargs = dict(bus_kwargs)
+        self.stamp = stamp
         self.host_send_error = host_send_error
         self.bus_kwargs.setdefault("receive_own_messages", True)
         self._pending: deque[can.Message] = deque()  # arrived, seen by now(), not yet handed out by recv()

@@ -23,10 +23,15 @@ from collections.abc import Callable
 from importlib.metadata import entry_points
 from typing import Any
 
-from .errors import PreflightError
+from .errors import PowerFailed, PreflightError
 
 #: the entry-point group other packages register power backends in
 ENTRY_POINT_GROUP = "ckesc.power"
+
+#: How long a power command may run before it has failed (``--power-cmd-timeout``): a lab supply's CLI switches in
+#: well under a second, a Python script (``ckesc control``) in one or two, several on a loaded host in a few; one
+#: that hangs (a network PSU that does not answer) must not hold the run
+POWER_COMMAND_TIMEOUT_S = 10.0
 
 Option = Callable[[str], Any]
 Prompt = Callable[[str], None]
@@ -63,15 +68,25 @@ class CommandPower(PowerControl):
 
     name = "command"
 
-    def __init__(self, off_cmd: str, on_cmd: str) -> None:
+    def __init__(self, off_cmd: str, on_cmd: str, timeout: float = POWER_COMMAND_TIMEOUT_S) -> None:
         if not off_cmd or not on_cmd:
             raise ValueError("--power command needs both --power-off-cmd and --power-on-cmd")
         self.off_cmd, self.on_cmd = off_cmd, on_cmd
+        self.timeout = timeout
 
     def _run(self, cmd: str) -> None:
-        done = subprocess.run(shlex.split(cmd), capture_output=True, text=True, timeout=60)
+        """Run ``cmd``; a :class:`PowerFailed` when it cannot start, exits non-zero or is still running after
+        :attr:`timeout` s (it is then killed)."""
+        try:
+            done = subprocess.run(shlex.split(cmd), capture_output=True, text=True, timeout=self.timeout)
+        except subprocess.TimeoutExpired:
+            raise PowerFailed(f"power command {cmd!r} did not return within {self.timeout:g} s (killed; "
+                              "--power-cmd-timeout gives it longer)") from None
+        except OSError as exc:
+            raise PowerFailed(f"power command {cmd!r} could not be run: {exc.strerror or exc}") from None
         if done.returncode != 0:
-            raise RuntimeError(f"power command {cmd!r} failed ({done.returncode}): {done.stderr.strip()}")
+            err = " ".join(done.stderr.split())[-300:]
+            raise PowerFailed(f"power command {cmd!r} failed (exit status {done.returncode})" + (f": {err}" if err else ""))
 
     def off(self) -> None:
         self._run(self.off_cmd)
@@ -127,7 +142,7 @@ class NoPower(PowerControl):
 
 
 def _command(get: Option, prompt: Prompt) -> PowerControl:
-    return CommandPower(get("power_off_cmd"), get("power_on_cmd"))
+    return CommandPower(get("power_off_cmd"), get("power_on_cmd"), get("power_cmd_timeout") or POWER_COMMAND_TIMEOUT_S)
 
 
 def _labgrid(get: Option, prompt: Prompt) -> PowerControl:

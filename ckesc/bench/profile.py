@@ -10,6 +10,7 @@ your own is a path, or a name found in ``./fixtures/duts/``.
                    jitter_s: the DUT's report-interval jitter allowance (R9): widens what a single report
                    interval may do (the live bus rules, R9a's first reports), never the mean a test judges
                    boot_s: power-on to first report; off_s: off time of a power cycle
+                   stamp: "end" | "start": which end of a frame the bench's timestamps mark
     [readings]     R4 = "lsb" | "swapped"   (12-bit nibble order)
     [functions]    absent = ["get_rec", ...]: optional functions the ESC lacks (R9b; the names are
                    ckesc.protocol.functions.OPTIONAL): their tests are SKIPPED as "not claimed"
@@ -24,7 +25,7 @@ from __future__ import annotations
 import difflib
 import tomllib
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any, Literal, TypeVar
@@ -70,6 +71,17 @@ class _Capabilities(_Section):
     multi_node: bool = Field(False, description="several ESCs on the bus (the multi-ESC tests)")
 
 
+#: The bench's measurement error taken on a real bus (``--dut bus``) when the profile states none: a SocketCAN
+#: adapter's receive stamps plus the host's scheduling, as the shipped ``ckesc-generic`` profile states it. The run
+#: prints it when it is taken (a bench is never assumed exact)
+DEFAULT_BUS_ERROR_S = 0.002
+#: Which end of a frame the bench's timestamps mark when the profile does not say: its end, as SocketCAN stamps a
+#: frame when it has been received (and the echo of the host's own frame when it has been sent), socketcand passes
+#: those stamps on, and the emulators stamp. Some adapters stamp the start of frame (their hardware's SOF stamp)
+DEFAULT_STAMP = "end"
+STAMPS = ("end", "start")
+
+
 class _Timing(_Section):
     model_config = ConfigDict(extra="forbid", strict=False)  # an int (2) is a float here, a string is not
     error_s: float = Field(0.0, ge=0.0, le=10.0, description=(
@@ -81,6 +93,10 @@ class _Timing(_Section):
         "widens what the DUT may do; error_s still decides INCONCLUSIVE around it. The reports state both"))
     boot_s: float = Field(1.0, ge=0.0, le=600.0, description="power-on to first report")
     off_s: float = Field(1.0, ge=0.0, le=600.0, description="off time of a power cycle")
+    stamp: Literal["end", "start"] = Field(DEFAULT_STAMP, description=(
+        "which end of a frame **the bench's** timestamps mark: \"end\" (SocketCAN, socketcand, the emulators) or "
+        "\"start\" (an adapter stamping the start of frame); the suite converts a stamp to a frame's start and end "
+        "with it. Left out on a real bus, the run prints the default it takes"))
 
 
 class _Readings(_Section):
@@ -173,6 +189,29 @@ class DutProfile:
     path: str | None = None
     #: optional functions the DUT lacks (R9b): not part of its conformance claim
     absent: tuple[str, ...] = ()
+    #: which end of a frame the bench's timestamps mark ("end" or "start")
+    stamp: str = DEFAULT_STAMP
+    #: the [timing] keys the profile states (the others are defaults: :meth:`on_a_real_bus` names those it takes)
+    stated: frozenset[str] = frozenset({"error_s", "stamp"})
+    #: one line for each limit a real bus needs that the profile left out, and the default taken (:meth:`on_a_real_bus`)
+    defaults_taken: tuple[str, ...] = ()
+
+    def on_a_real_bus(self) -> DutProfile:
+        """This profile as a real bus (``--dut bus``) uses it: the limits a real bus cannot do without (the bench's
+        timing error, which end of a frame its stamps mark) as stated, or the named defaults
+        (:data:`DEFAULT_BUS_ERROR_S`, :data:`DEFAULT_STAMP`), each default taken said in :attr:`defaults_taken`
+        (the run prints them and the reports keep them)."""
+        notes: list[str] = []
+        profile = self
+        if "error_s" not in self.stated:
+            profile = replace(profile, error_s=DEFAULT_BUS_ERROR_S)
+            notes.append(f"the profile {self.name!r} states no [timing] error_s: the bench's error is taken as "
+                         f"{DEFAULT_BUS_ERROR_S * 1000:g} ms (DEFAULT_BUS_ERROR_S, the default for a real bus)")
+        if "stamp" not in self.stated:
+            notes.append(f"the profile {self.name!r} states no [timing] stamp: frame timestamps are taken as marking the "
+                         f"frame's {DEFAULT_STAMP} (DEFAULT_STAMP, SocketCAN's; say stamp = \"start\" for an adapter that stamps the start "
+                         "of frame)")
+        return replace(profile, defaults_taken=tuple(notes))
 
     def claims(self, function: str) -> bool:
         """Whether the conformance claim includes ``function`` (a core function always)."""
@@ -205,7 +244,8 @@ class DutProfile:
         return cls(name=doc.dut.name or path.name.removesuffix(".toml"), description=doc.dut.description,
                    capabilities=doc.capabilities.model_dump(), error_s=doc.timing.error_s, jitter_s=doc.timing.jitter_s,
                    boot_s=doc.timing.boot_s, off_s=doc.timing.off_s, readings=doc.readings.model_dump(), path=str(path),
-                   absent=tuple(doc.functions.absent))
+                   absent=tuple(doc.functions.absent), stamp=doc.timing.stamp,
+                   stated=frozenset(doc.timing.model_fields_set))
 
 
 def _is_name(name_or_path: str) -> bool:

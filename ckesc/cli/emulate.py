@@ -113,7 +113,8 @@ def _run_emulate(args: argparse.Namespace) -> int:
     bus = _open_bus(args) if args.interface is not None else None
     try:
         emulator = RealtimeEmulator(bench, bus=bus, own_bus=True, socketcand_port=args.socketcand, control_port=args.control,
-                                    bitrate=args.bitrate, stamp=args.stamp, echo_own=not args.no_echo_own,
+                                    bitrate=args.bitrate, stamp=args.stamp, frame_stamp=args.frame_stamp,
+                                    echo_own=not args.no_echo_own,
                                     rt_priority=args.rt_priority)
     except OSError as exc:
         if bus is not None:
@@ -193,7 +194,11 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--control", type=int_arg, metavar="PORT", help="control channel on 127.0.0.1:PORT (0: a free port); see ckesc control")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
     p.add_argument("--stamp", choices=("due", "send"), default="due",
-                   help="bus timestamp of ESC frames: the time they were due (default) or the time they were sent")
+                   help="bus timestamp of ESC frames: their end (as SocketCAN stamps), had they started when they were due (default) or when they were sent")
+    p.add_argument("--frame-stamp", choices=("end", "start"), default="end",
+                   help="which end of a frame its bus timestamp marks: end (default, as SocketCAN stamps, and socketcand "
+                   "passes on) or start (as an adapter stamping the start of frame: its DUT profile says [timing] stamp = "
+                   "\"start\")")
     p.add_argument("--boot-spread", type=float, default=0.02, metavar="S",
                    help="ESC k of n boots k/n x S later than the first, so that their reports are not in lockstep, as on a "
                    "real bench (default 0.02: one MSG1 interval; 0: all at once, as the simulated lane)")

@@ -12,10 +12,11 @@ Time bases
     The models run on ``time.monotonic()`` seconds (CLOCK_MONOTONIC, shared by every process on
     the machine). Frames on the bus carry wall-clock stamps (``time.time()`` base, as SocketCAN,
     socketcand and python-can's virtual bus use): ``bus = monotonic + offset``, with ``offset``
-    measured once at start-up so that intervals between stamps are exact. With ``stamp="due"``
-    (the default) an ESC frame is stamped with the time it was due, so report intervals and
-    answer delays seen in bus timestamps are the model's, not this machine's scheduling noise;
-    ``stamp="send"`` stamps the time it was actually handed to the bus. Either way the lateness
+    measured once at start-up so that intervals between stamps are exact. An ESC frame is stamped
+    at its end, as SocketCAN stamps a frame it received: its start plus its duration at the bus's
+    bit rate (``frame_bits``). With ``stamp="due"`` (the default) it starts when it was due, so
+    report intervals and answer delays seen in bus timestamps are the model's, not this machine's
+    scheduling noise; ``stamp="send"`` starts it when it was actually handed to the bus. Either way the lateness
     of every frame (send time - due time) is counted (:meth:`RealtimeEmulator.stats`).
     A frame from the host is given to the ESCs at the time it arrived: the socketcand read time,
     or the bus's own receive stamp where it is plausible (SocketCAN's kernel stamp).
@@ -52,7 +53,7 @@ from typing import Any, Callable
 import can
 
 from ..protocol.catalogue import DEFAULT_BITRATE
-from ..protocol.frame import WireFrame
+from ..protocol.frame import WireFrame, frame_bits
 from .bench import Bench
 from .control import ControlServer, Handler, Reply, dispatch
 from .model import EscModel
@@ -96,12 +97,15 @@ class RealtimeEmulator(ControlCommands):
         control_port: int | None = None,
         bitrate: int = DEFAULT_BITRATE,
         stamp: str = "due",
+        frame_stamp: str = "end",
         echo_own: bool = True,
         rt_priority: int | None = None,
         log: Callable[[str], None] | None = None,
     ) -> None:
         if stamp not in ("due", "send"):
             raise ValueError(f"stamp must be 'due' or 'send', not {stamp!r}")
+        if frame_stamp not in ("end", "start"):
+            raise ValueError(f"frame_stamp must be 'end' or 'start', not {frame_stamp!r}")
         if bus is None and socketcand_port is None:
             raise ValueError("nothing to talk to: give a python-can bus or a socketcand port")
         self.bench = bench
@@ -109,6 +113,7 @@ class RealtimeEmulator(ControlCommands):
         self._own_bus = own_bus
         self.bitrate = int(bitrate)
         self.stamp = stamp
+        self.frame_stamp = frame_stamp
         self.echo_own = echo_own
         self.rt_priority = rt_priority
         self.scheduling = "normal"
@@ -423,14 +428,19 @@ class RealtimeEmulator(ControlCommands):
             return
         t_send = time.monotonic()
         due_stamps = self.stamp == "due"
+        # a frame is stamped at its end, as SocketCAN stamps a frame it received (and socketcand passes it on): its
+        # start (when it was due, or sent) plus its time on the bus at the bench's bit rate; or (frame_stamp "start")
+        # at its start, as an adapter stamping the start of frame does
+        bit_s = 1.0 / self.bitrate if self.frame_stamp == "end" else 0.0
         sc = self._socketcand
         if sc is not None and sc.conns:
-            data = b"".join(fmt_frame(w, (w.timestamp if due_stamps else t_send) + self.offset) for w in frames)
+            data = b"".join(fmt_frame(w, (w.timestamp if due_stamps else t_send) + frame_bits(len(w.data)) * bit_s + self.offset)
+                            for w in frames)
             sc.to_clients(data, None, t_send)
         for w in frames:
             if self.bus is not None:
                 t_send = time.monotonic()
-                self._bus_send(w, (w.timestamp if due_stamps else t_send) + self.offset)
+                self._bus_send(w, (w.timestamp if due_stamps else t_send) + frame_bits(len(w.data)) * bit_s + self.offset)
             self.lateness.add(t_send - w.timestamp)
         self.counters["tx"] += len(frames)
 
@@ -472,7 +482,9 @@ class RealtimeEmulator(ControlCommands):
         sc = self._socketcand
         if sc is not None and sc.conns and not getattr(item.msg, "is_remote_frame", False):
             skip = None if self.echo_own or not isinstance(item.origin, Conn) else item.origin
-            sc.to_clients(fmt_frame(item.wire, t + self.offset), skip, time.monotonic())
+            # heard at t, its end; stamped at its start one frame earlier where the bench stamps frame starts
+            start = frame_bits(len(item.wire.data)) / self.bitrate if self.frame_stamp == "start" else 0.0
+            sc.to_clients(fmt_frame(item.wire, t - start + self.offset), skip, time.monotonic())
 
     def _read_bus(self) -> None:
         """Helper thread for buses without a file descriptor: only reads and queues."""

@@ -93,6 +93,13 @@ def pytest_configure(config: pytest.Config) -> None:
 
 @pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if _bench_of(config) is not None and _SETUP_ERROR not in config.stash:
+        try:  # the bench proven (its bus's ESCs, its power switch) as a one-bench run proves it: its mistake is its own
+            collection.bench_proof(config, [it for it in items if collection.is_conformance(it)])
+        except pytest.UsageError as exc:
+            config.stash[_SETUP_ERROR] = str(exc)
+        except Exception as exc:  # noqa: BLE001 - as the preflight's: the worker must not die of it
+            config.stash[_SETUP_ERROR] = f"the bench's set-up failed: {type(exc).__name__}: {exc}"
     if _bench_of(config) is not None and _SETUP_ERROR in config.stash:
         items[:] = []  # nothing of this bench can run: its worker ends at once, the others go on
 

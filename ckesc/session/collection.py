@@ -13,7 +13,7 @@ from ..bench.verdict import NotClaimed
 from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, requirement, section_heading
 from . import preflight as checks
-from .lane_setup import bus_kwargs, open_labgrid
+from .lane_setup import bus_kwargs, open_labgrid, prove_bench
 from .state import state
 
 CONFORMANCE_PACKAGE = "conformance"
@@ -78,6 +78,9 @@ def targets_conformance(config: pytest.Config) -> bool:
     return False
 
 
+_PROVEN = pytest.StashKey[bool]()
+
+
 def preflight(config: pytest.Config) -> None:
     """The preflight (:mod:`.preflight`), once per session: a mistake is a ``pytest.UsageError`` naming it. A batch's
     worker calls it itself, so that its bench's mistake is that bench's and not a crash (``ckesc/rigs/batch.py``)."""
@@ -109,6 +112,27 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     st.selected = [it for it in session.items if is_conformance(it)]
     if st.selected:
         preflight(session.config)  # collected from a path the command line did not name as the suites
+        bench_proof(session.config, st.selected)
+
+
+def bench_proof(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The bench proven before any test (:func:`.lane_setup.prove_bench`), once, and the profile's defaults a real
+    bus takes: said on the console and kept for the reports (``info["bench"]``); a failure is a ``pytest.UsageError``
+    (exit 2, no report), as the preflight's."""
+    if config.stash.get(_PROVEN, False):
+        return
+    config.stash[_PROVEN] = True
+    st = state(config)
+    try:
+        said = [*(st.profile.defaults_taken if st.profile else ()), *prove_bench(config, items)]
+    except checks.PreflightError as exc:
+        raise pytest.UsageError(f"preflight: {exc}") from None
+    if said:
+        st.info["bench"] = said
+        tr = config.pluginmanager.get_plugin("terminalreporter")
+        for line in said:
+            if tr is not None:
+                tr.write_line(f"ckesc: {line}")
 
 
 def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -57,8 +57,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     traces = tracing.writer(session.config)
     if traces is not None:
         traces.end()
-    if not st.conformance or not st.selected:
-        return
+    if not st.conformance or not st.selected or exitstatus == pytest.ExitCode.USAGE_ERROR:
+        return  # a set-up mistake (the preflight, the bench proof): one line, no report
     reason, not_run = _completeness(session, exitstatus)
     st.info["complete"] = reason is None
     st.info["incomplete"] = reason or ""
@@ -82,6 +82,8 @@ def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Co
     st = state(config)
     for left in st.info.get("not_restored", []):  # always said, summary or not: the bench needs a look
         terminalreporter.write_line(f"WARNING: the DUT's settings were not restored after {left['test']}: {left['why']}")
+    if exitstatus == pytest.ExitCode.USAGE_ERROR:
+        return
     if not st.conformance or not st.selected or not config.getoption("ckesc_summary"):
         for line in profile_warnings(st.info):  # (the summary says them otherwise)
             terminalreporter.write_line(line)

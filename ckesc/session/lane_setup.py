@@ -7,6 +7,7 @@ from typing import Any
 
 import pytest
 
+from ..bench import proof
 from ..bench.errors import PreflightError
 from ..bench.lanes import BusLane, Lane, SimLane
 from ..bench.power import PowerControl, open_power
@@ -151,7 +152,7 @@ def make_lane(config: pytest.Config, profile: DutProfile) -> Lane:
         except PreflightError as exc:
             raise pytest.UsageError(str(exc)) from None
     return BusLane(bus_kwargs(config), power, timing_error=profile.error_s, bitrate_cmd=config.getoption("can_bitrate_cmd"),
-                   host_send_error=config.getoption("host_send_error") / 1000)
+                   host_send_error=config.getoption("host_send_error") / 1000, stamp=profile.stamp)
 
 
 def make_multi_lane(config: pytest.Config, timing_error: float) -> Lane:
@@ -169,3 +170,34 @@ def echo_info(lane: Lane) -> dict[str, Any]:
     clock times them (results.json and JUnit carry these keys; summary.txt and report.html say them)."""
     return {"echo": lane.echo, "echo_note": lane.echo_note, "own_frames_clock": lane.own_clock,
             "own_frames_error_s": round(lane.own_error, 9)}
+
+
+def cycles_power(items: list[pytest.Item]) -> bool:
+    """Whether a test of ``items`` may cycle the DUT's power (marker ``power_cycle`` or ``may_power_cycle``)."""
+    return any(it.get_closest_marker("power_cycle") or it.get_closest_marker("may_power_cycle") for it in items)
+
+
+def prove_bench(config: pytest.Config, items: list[pytest.Item]) -> list[str]:
+    """--dut bus: the bench proven before any test (:mod:`..bench.proof`): who answers GET_ESC_ID, the node id given
+    among them, and where a selected test may cycle power and a switch is given (not manual: an operator is the
+    proof), the switch itself. A failure is a :class:`PreflightError`; returns what was proven, for the run to say."""
+    if config.getoption("dut") != "bus":
+        return []
+    st = state(config)
+    profile = st.profile
+    assert profile is not None  # loaded by the preflight
+    lane = make_lane(config, profile)
+    try:
+        where = preflight.bus_where(lane.bus_kwargs)
+        link = proof.discover(lane, profile, config.getoption("node_id"), where)
+        said = [f"bench: {', '.join(f'node {n}' for n in link.nodes)} answered GET_ESC_ID on the bus ({where}); the DUT "
+                f"is node {link.node_id}"]
+        kind = config.getoption("power") or "none"
+        if lane.power.available and kind != "manual" and cycles_power(items):
+            named = ({"off": f"--power-off-cmd {config.getoption('power_off_cmd')!r}",
+                      "on": f"--power-on-cmd {config.getoption('power_on_cmd')!r}"} if kind == "command"
+                     else {"off": f"power off ({lane.power.name})", "on": f"power on ({lane.power.name})"})
+            said.append(f"bench: power switch ({kind}) {proof.prove_power(link, named)}")
+        return said
+    finally:
+        lane.close()

@@ -18,8 +18,10 @@ from pathlib import Path
 from typing import Any
 
 from ..bench.lanes import HOST_SEND_ERROR_S
+from ..bench.power import POWER_COMMAND_TIMEOUT_S
 from ..bench.power import names as power_names
 from ..emulator import variants
+from .preflight import BUS_OPEN_TIMEOUT_S
 from .traces import TRACE_FORMATS
 
 #: ``ckesc run --help``'s groups, in its order (pytest's ``--help`` lists every option under one "ckesc" group)
@@ -110,6 +112,9 @@ OPTIONS: tuple[Option, ...] = (
            help="--dut bus, an adapter that does not echo the host's frames: how much later than the host clock at send a "
                 "frame may reach the bus (driver, USB, TX queue), in ms; the error of every time taken from the host's own "
                 f"frames (default {HOST_SEND_ERROR_S * 1000:g})"),
+    Option("bus_open_timeout", type=float, default=BUS_OPEN_TIMEOUT_S, metavar="S",
+           help="--dut bus: how long the preflight waits for the bus to open (a socketcand daemon or adapter that does not "
+                f"answer) before it stops the run with exit 2 (default {BUS_OPEN_TIMEOUT_S:g})"),
     Option("node_id", type=int, rig="node_id", help="the DUT's node id (default: discovered with GET_ESC_ID)"),
     Option("nodes", rig="emulator.nodes", help="emulator: node ids of the emulated bench (default 1); the DUT is the first"),
     Option("profile", rig="profile",
@@ -119,6 +124,9 @@ OPTIONS: tuple[Option, ...] = (
            help="power control (default: emulator for --dut emulator, none for --dut bus)"),
     Option("power_off_cmd", rig="power.command.off", help="--power command: shell command that switches the DUT off"),
     Option("power_on_cmd", rig="power.command.on", help="--power command: shell command that switches the DUT on"),
+    Option("power_cmd_timeout", type=float, default=POWER_COMMAND_TIMEOUT_S, metavar="S",
+           help="--power command: a power command still running after S seconds has failed (default "
+                f"{POWER_COMMAND_TIMEOUT_S:g})"),
     Option("labgrid_env", metavar="FILE", rig="power.labgrid.env",
            help="--power labgrid: labgrid environment file whose target has a power driver (PowerProtocol)"),
     Option("labgrid_target", metavar="NAME", rig="power.labgrid.target",

@@ -5,13 +5,15 @@ a new report directory or a moved ``reports/latest``.
 Checked: node ids (1..125 everywhere), emulator fault names, option combinations, the DUT profile
 (schema: see :mod:`.profile`), the reports directory (writable), the power commands (found and
 executable), labgrid power (the environment file, target and power driver; the place acquired, or refused
-with who holds it), the bit-rate command, and the bus itself (opened once and closed again, with the way
-out named for a kernel without SocketCAN).
+with who holds it), the bit-rate command, and the bus itself (opened once, within :data:`BUS_OPEN_TIMEOUT_S`,
+and closed again, with the way out named for a kernel without SocketCAN). Once the tests are collected, the
+bench itself is proven on a real bus (:mod:`ckesc.bench.proof`: who answers GET_ESC_ID, the power switch).
 """
 
 from __future__ import annotations
 
 import errno
+import logging
 import os
 import shlex
 import shutil
@@ -109,22 +111,67 @@ def command(cmd: str | None, option: str) -> None:
 
 
 def profile(get: Option) -> DutProfile:
-    """The run's DUT profile: ``--profile``, else the emulator's or the generic one."""
+    """The run's DUT profile: ``--profile``, else the emulator's or the generic one; on a real bus with the limits it
+    leaves out taken from their named defaults (:meth:`.profile.DutProfile.on_a_real_bus`)."""
     name = get("profile") or ("emulator" if get("dut") == "emulator" else "ckesc-generic")
     try:
-        return DutProfile.load(name)
+        loaded = DutProfile.load(name)
     except ProfileError as exc:
         raise PreflightError(str(exc)) from None
+    # a real bus is never taken as exact: the limits the profile leaves out are the named defaults, said by the run
+    return loaded.on_a_real_bus() if get("dut") == "bus" else loaded
 
 
-def open_bus(kwargs: dict[str, Any]) -> None:
-    """Open the bus once and close it: a dead adapter is named here, not by every test."""
+#: How long the preflight waits for python-can to open the bus before it names the bus as not answering: a
+#: socketcand client retries its connection for 10 s and then may wait for the daemon's greeting for ever; a USB
+#: adapter that is not there fails at once. ``--bus-open-timeout`` gives another.
+BUS_OPEN_TIMEOUT_S = 5.0
+
+
+def bus_where(kwargs: dict[str, Any]) -> str:
+    """The bus as the user gave it: its interface, channel, address (host, port) and bit rate."""
+    keys = ("interface", "channel", "host", "port", "bitrate")
+    return ", ".join(f"{k}={kwargs[k]}" for k in keys if kwargs.get(k) is not None)
+
+
+def open_bus_bounded(kwargs: dict[str, Any], timeout: float = BUS_OPEN_TIMEOUT_S) -> Any:
+    """``can.Bus(**kwargs)``, given at most ``timeout`` s (a :class:`PreflightError` naming the interface and the
+    address otherwise): python-can opens a bus in its constructor and some backends retry or block there (a
+    socketcand daemon nobody runs, a network adapter that does not answer). The open runs in a daemon thread; one
+    that never returns is abandoned (the run stops with exit 2), one that returns late is shut down."""
+    import threading
+
     import can
 
-    where = ", ".join(f"{k}={kwargs[k]}" for k in ("interface", "channel", "bitrate") if kwargs.get(k) is not None)
-    try:
-        bus = can.Bus(**kwargs)
-    except Exception as exc:  # noqa: BLE001 - python-can's backends raise anything; all mean "cannot use it"
+    box: dict[str, Any] = {}
+    late = threading.Event()
+
+    def opener() -> None:
+        try:
+            bus = can.Bus(**kwargs)
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller below
+            box["error"] = exc
+            return
+        if late.is_set():  # the caller gave up on it: nobody will close it otherwise
+            _shutdown(bus)
+        else:
+            box["bus"] = bus
+
+    thread = threading.Thread(target=opener, name="ckesc-bus-open", daemon=True)
+    thread.start()
+    thread.join(timeout)
+    if thread.is_alive():
+        late.set()
+        if "bus" in box:  # it opened just now
+            return box["bus"]
+        # what the abandoned open still logs (python-can's socketcand client warns at every retry) goes nowhere: the
+        # run ends with the one line below, not hundreds of warnings after it
+        logging.getLogger("can").addHandler(logging.NullHandler())
+        raise PreflightError(f"cannot open the CAN bus ({bus_where(kwargs)}): no answer within {timeout:g} s (is the "
+                             "adapter plugged in, the socketcand daemon or `ckesc emulate` running at that address and "
+                             "port? --bus-open-timeout gives it longer)")
+    if "error" in box:
+        exc = box["error"]
         cause = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         hint = ""
         if getattr(exc, "errno", None) == errno.EAFNOSUPPORT or "Address family not supported" in str(exc) or (
@@ -133,11 +180,21 @@ def open_bus(kwargs: dict[str, Any]) -> None:
                     "the VM lane (tools/vm-lane)")
         elif isinstance(exc, can.CanInterfaceNotImplementedError) or "Unknown interface" in str(exc):
             hint = f" - known interfaces: {', '.join(sorted(can.interfaces.VALID_INTERFACES))}"
-        raise PreflightError(f"cannot open the CAN bus ({where}): {cause}{hint}") from None
+        raise PreflightError(f"cannot open the CAN bus ({bus_where(kwargs)}): {' '.join(cause.split())}{hint}") from None
+    return box["bus"]
+
+
+def _shutdown(bus: Any) -> None:
     try:
         bus.shutdown()
     except Exception:  # noqa: BLE001 - it opened; closing is best effort
         pass
+
+
+def open_bus(kwargs: dict[str, Any], timeout: float = BUS_OPEN_TIMEOUT_S) -> None:
+    """Open the bus once and close it: a dead adapter, or an address nobody answers at, is named here (within
+    ``timeout`` s), not by every test."""
+    _shutdown(open_bus_bounded(kwargs, timeout))
 
 
 def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None,
@@ -184,5 +241,5 @@ def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None,
         if power == "labgrid" and labgrid is not None:  # a shared place is locked before its bus is opened
             labgrid()
         if bus_kwargs is not None:
-            open_bus(bus_kwargs())
+            open_bus(bus_kwargs(), get("bus_open_timeout") or BUS_OPEN_TIMEOUT_S)
     return prof

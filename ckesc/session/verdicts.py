@@ -13,6 +13,7 @@ from __future__ import annotations
 import pytest
 
 from ..bench.dut import Dut, DutError
+from ..bench.errors import BenchError
 from ..bench.lanes import BenchGone, BusFault
 from ..bench.verdict import Inconclusive, NotClaimed
 from ..evidence.timing import evidence
@@ -40,8 +41,9 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     ids = item_requirements(item)
     strength = strongest(ids)
     d = dut_of(item)
-    # the bus or the bench failed under the test, not the DUT: an ERROR whatever the requirement's strength
-    harness = call.excinfo is not None and isinstance(call.excinfo.value, (BusFault, BenchGone))
+    # the bus or the bench (its power control) failed under the test, not the DUT: an ERROR whatever the
+    # requirement's strength
+    harness = call.excinfo is not None and isinstance(call.excinfo.value, BENCH_FAILED)
     raised = call.excinfo.value if call.excinfo is not None else None  # what ended the phase: decides its verdict
     if rep.when == "call" and not harness:
         asserted = call.excinfo is not None and isinstance(call.excinfo.value, AssertionError)
@@ -198,10 +200,18 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | 
         st.info.setdefault("interval_tolerance_ms", d.interval_tolerance_ms)
 
 
+#: what, raised under a test, says the bus or the bench (its power control) failed under it, not the DUT: an ERROR
+#: whatever the requirement's strength (:mod:`ckesc.bench.errors`, :mod:`ckesc.bench.lanes`)
+BENCH_FAILED = (BusFault, BenchGone, BenchError)
+#: ... and with the harness that could not do what the test needed (:class:`~ckesc.bench.dut.DutError`): no verdict
+#: on the DUT
+NOT_THE_DUT = (DutError, *BENCH_FAILED)
+
+
 def _outcome(rep: pytest.TestReport, raised: BaseException | None, strength: str) -> str:
     """The verdict of one phase: from its report's outcome and the type of what ended it (``raised``), never from
     its message's words."""
-    if rep.failed and isinstance(raised, (DutError, BusFault, BenchGone)):
+    if rep.failed and isinstance(raised, NOT_THE_DUT):
         # the harness could not do what the test needed, or the bus failed under it: no verdict on the DUT
         return Verdict.ERROR
     if rep.passed:

@@ -104,7 +104,7 @@ def test_a_batch_of_emulated_benches_reports_each_whole_and_one_absent_dut_never
     lines = [line for line in out.splitlines() if line.startswith("bench ")]
     assert sorted(line.split(":")[0] for line in lines) == ["bench dark", "bench down", "bench empty", "bench live",
                                                             "bench sim-a", "bench sim-b"], out
-    assert any(line.startswith("bench dark: ABSENT") and "the DUT did not answer" in line for line in lines), out
+    assert any(line.startswith("bench dark: ABSENT") and "no ESC answered GET_ESC_ID" in line for line in lines), out
     assert any(line.startswith("bench down: ABSENT") and "cannot open the CAN bus" in line for line in lines), out
     doc = json.loads((batch / "batch.json").read_text())
     status = {b["name"]: b["status"] for b in doc["benches"]}
@@ -124,8 +124,8 @@ def test_a_batch_of_emulated_benches_reports_each_whole_and_one_absent_dut_never
         assert (batch / name / "report.html").is_file() and (batch / name / "summary.txt").is_file()
         assert list((batch / name / "traces").glob("*.blf"))
     assert json.loads((batch / "sim-b" / "results.json").read_text())["info"]["faults"] == ""
-    dark_run = json.loads((batch / "dark" / "results.json").read_text())
-    assert dark_run["results"] == [] and dark_run["info"]["incomplete"].startswith("aborted: the DUT did not answer")
+    # no ESC answers on its bus: its bench proof says so before any test (issue #29), as a one-bench run's exit 2
+    assert "no ESC answered GET_ESC_ID" in (batch / "dark" / "setup-error.txt").read_text()
     # the merged JUnit: one testsuite per bench and section, each case in its bench's package
     xml = JUnitXml.fromfile(str(batch / "junit.xml"))
     suites = {s.name: s for s in xml}
@@ -133,9 +133,6 @@ def test_a_batch_of_emulated_benches_reports_each_whole_and_one_absent_dut_never
         assert {n.split(": ")[1].split(" ")[0] for n in suites if n.startswith(f"{name}: ")} == set(SECTIONS)
         assert all(case.classname.startswith(f"ckesc.{name}.s4_4_") for n, s in suites.items() if n.startswith(name + ":")
                    for case in s)
-    dark_suites = [s for n, s in suites.items() if n.startswith("dark: ")]
-    assert dark_suites and all(s.properties() and dict((p.name, p.value) for p in s.properties())["bench_status"] == "ABSENT"
-                               for s in dark_suites)
     # batch.html: the bench x section matrix, the identities and links to each report
     page = (batch / "batch.html").read_text()
     for name in ("sim-a", "sim-b", "live", "dark", "down"):
