@@ -17,9 +17,9 @@ from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, HOST_NODE_ID, RESERVED_NODE_
 from ckesc.protocol.legality import field_cases, illegal_cases
 
 from .answers import esc_id_replies, esc_ids, put_back
-from .reports import msg_control
 from .raw_command_12b import FORMAT as RAW_12B
 from .raw_command_12b import VALUES as RAW_12B_VALUES
+from .reports import msg_control
 from .settings import check_neighbours_kept, neighbours_moved
 
 SECTION = "4.4.18"

@@ -746,9 +746,15 @@ def test_every_checked_rule_is_broken_by_some_fault():
     assert sorted(CHECKED_RULES - broken) == []
 
 
+#: Rules the document now states that no fault breaks and no test checks yet, each with the issue that builds its
+#: checks: a rule added to INTERPRETATIONS.md is either checked or listed here, never silently left out.
+NOT_YET_CHECKED = {"R17": "#30 robustness", "R18": "#30 a loaded bus", "R19": "#31 ckesc soak"}
+
+
 def test_the_checked_rules_are_the_documents():
     ids = _rule_ids()
-    assert CHECKED_RULES <= ids and ids - CHECKED_RULES == {"F6", "R6"}
+    assert CHECKED_RULES <= ids and ids - CHECKED_RULES - NOT_YET_CHECKED.keys() == {"F6", "R6"}
+    assert NOT_YET_CHECKED.keys() <= ids, "a rule listed as pending is no longer in INTERPRETATIONS.md"
 
 
 def test_faults_can_be_switched_on_a_running_bench(lane):
