@@ -188,3 +188,18 @@ def _slot_tests(tmp: Path, port: int, profile: Path) -> tuple[dict[str, str], di
     outcomes = {r["name"]: r["outcome"] for r in doc["results"]}
     assert done.returncode == 0 and len(outcomes) >= 2 and "FAIL" not in outcomes.values(), (outcomes, done.stdout[-3000:])
     return outcomes, doc, done
+
+
+def test_a_late_answer_fails_its_64ms_bound_where_the_slot_cannot_be_told(tmp_path):
+    """On a 2 ms bench without power control node 1's slot cannot be told, and the DUT cannot be moved to one that
+    can (Set ID needs the window after a power-up): the answer's start is INCONCLUSIVE there, but the 64 ms bound, a
+    SHALL, is still judged at the DUT's own node id: an ESC answering 80 ms late FAILs 4.4.2-4 / 4.4.3-4."""
+    with Emulator(tmp_path, "--faults", "answer_late") as emu:
+        done, _ = _run(tmp_path, emu.port, "--", "-k", "reply_comes_in or answer_is_command_zero_in_the_node_slot")
+    doc = json.loads((tmp_path / "reports" / "latest" / "results.json").read_text())
+    got = {r["name"]: (r["outcome"], r["message"].splitlines()[0] if r["message"] else "") for r in doc["results"]}
+    assert done.returncode == 1 and len(got) >= 2, (got, done.stdout[-3000:])
+    for outcome, first in got.values():
+        assert outcome == "FAIL" and first.startswith(("[4.4.2-4 SHALL]", "[4.4.3-4 SHALL]")), got
+    for r in doc["results"]:
+        assert "no power control" in dict(r["observations"])["answer slots checked at"], r["observations"]
