@@ -18,7 +18,7 @@ from __future__ import annotations
 import copy
 import heapq
 import random
-from typing import Any
+from typing import Any, Callable
 
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import BAUD_RATES
@@ -66,6 +66,9 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         for key, value in factory_nvm(self.config).items():  # flash from an older emulator: fill gaps
             self.nvm.setdefault(key, value)
         self.nvm_dirty = nvm is None
+        #: the public hook for a request the model rejects (an illegal value, or refused: R10-R12), called with the
+        #: request before its answer (whose form is the ESC's freedom, ``config.rejected_answer``); None: no one asks
+        self.on_rejected: Callable[[Frame], None] | None = None
         self._rng = random.Random(self.config.seed * 1_000_003 + self.config.slot)
         rounding = self.config.value_rounding
         #: temperatures and run times to whole units, voltage and current to 0.01 / 0.1 (value_rounding)
