@@ -12,14 +12,14 @@ import math
 from contextlib import contextmanager
 
 from ckesc.bench.dut import DutError
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, Kind
 from ckesc.protocol.judgements import answer_bound, r2_slot_end, r2_slot_start
 from ckesc.protocol.requirements import Verdict
 
-from .reports import frame_end, frame_start, ms, on_bus_s
+from .telemetry import frame_end, frame_start, ms, on_bus_s
 
 #: Every ESC answers a broadcast within 64 ms (R2); the harness's discovery reads twice that
 BROADCAST_WINDOW_S = 2 * cat.ANSWER_DELAY_MAX_S

@@ -4,9 +4,9 @@
 
 from __future__ import annotations
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 
-from .reports import need_decoded
+from .telemetry import need_decoded
 from .throttle import STREAM_PERIOD_S, can_throttle, command_for
 
 #: Throttle for run_motor: a gentle spin, enough to count running time

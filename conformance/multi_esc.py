@@ -1,4 +1,4 @@
-"""Several ESCs on one bus (not a section: no tests here): the :func:`bench` fixture, with the run's
+"""Several ESCs on one bus (not a section: no tests here): the :func:`escs` fixture, with the run's
 emulator faults, and :func:`several_escs`, the 'needs two or more ESCs' check.
 """
 
@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 
-from .reports import node_settings
+from .telemetry import node_settings
 
 
 def with_emulator_faults(multi_dut, config):
@@ -29,14 +29,14 @@ def with_emulator_faults(multi_dut, config):
 
 
 @pytest.fixture
-def bench(multi_dut, request):
+def escs(multi_dut, request):
     """Several ESCs on one bus (``multi_dut``), with the run's emulator faults."""
     return with_emulator_faults(multi_dut, request.config)
 
 
-def several_escs(bench, what: str) -> list[int]:
+def several_escs(escs, what: str) -> list[int]:
     """The node ids on the bench, INCONCLUSIVE unless two or more answered GET_ESC_ID (``what`` is the
     clause's own words, e.g. 'all ESCs')."""
-    if len(bench.nodes) < 2:
-        raise Inconclusive(f"only node(s) {bench.nodes} answered GET_ESC_ID: '{what}' needs two or more")
-    return bench.nodes
+    if len(escs.nodes) < 2:
+        raise Inconclusive(f"only node(s) {escs.nodes} answered GET_ESC_ID: '{what}' needs two or more")
+    return escs.nodes

@@ -5,7 +5,7 @@ ESC's own limits (MSG2, MSG_EXP1), temperatures (MSG3, MSG_EXP11, MSG_EXP12). Ph
 
 from __future__ import annotations
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 
 #: Physics, not protocol: a LiHV cell full is 4.35 V; no drone ESC runs below two cells at 3.0 V.

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 
-from .reports import exp_capture
+from .telemetry import exp_capture
 
 SECTION = "attachment"
 

@@ -25,7 +25,7 @@ from typing import Any
 import pytest
 
 from ckesc.bench.dut import DutError
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import Frame, classify, encode
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, Kind
@@ -35,7 +35,7 @@ from ckesc.protocol.transfer import TRANSFER_ID_MODULO, TransferIdCounter, parse
 from . import wire
 from .answers import BROADCAST_WINDOW_S
 from .codes import code
-from .reports import read_request
+from .telemetry import read_request
 from .throttle import command_for
 from .wire import QUERIES, SCOPES, Heard, check_each, describe, in_scope, run_heard
 

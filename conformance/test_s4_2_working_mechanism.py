@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 
 from .codes import code

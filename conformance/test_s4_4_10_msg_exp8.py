@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from .answers import reference
-from .reports import exp_reports
+from .telemetry import exp_reports
 
 SECTION = "4.4.10"
 

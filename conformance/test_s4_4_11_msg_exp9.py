@@ -8,7 +8,7 @@ from ckesc.protocol import catalogue as cat
 
 from .answers import reference
 from .motor import RUN_S, SECOND, run_motor
-from .reports import exp_reports
+from .telemetry import exp_reports
 
 SECTION = "4.4.11"
 

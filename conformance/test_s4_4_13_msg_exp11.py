@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 
 from .physics import SAME_SENSOR_C
-from .reports import REACT_S, exp_reports, interval_s
+from .telemetry import REACT_S, exp_reports, interval_s
 
 SECTION = "4.4.13"
 

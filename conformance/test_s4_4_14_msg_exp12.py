@@ -8,7 +8,7 @@ from ckesc.protocol import catalogue as cat
 
 from .answers import reference
 from .physics import MAX_PLAUSIBLE_C
-from .reports import describe_garbled, garbled
+from .telemetry import describe_garbled, garbled
 
 SECTION = "4.4.14"
 

@@ -24,7 +24,7 @@ RAW_MAX = max(_CODEC.decode(b"\xff" * _SIZE)["channels"])  # 4.4.15-2: 14 bits, 
 FORMAT = RawCommand(NAME, per_frame=N_CHANNELS, requirement="4.4.15-4")
 #: one distinct value per channel, well inside 0..2000: a wrong channel or packing shows
 VALUES = {c: 505 + 397 * (c - 1) for c in FORMAT.channels}
-bench = throttle.bench  # fixture: multi_dut with each ESC's channel and MSG1 interval
+escs_on_channels = throttle.escs_on_channels  # fixture: multi_dut with each ESC's channel and MSG1 interval
 motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
 
 
@@ -37,9 +37,9 @@ def test_throttle_is_not_answered(dut):
 
 
 @pytest.mark.requirement("4.4.15-1", "R3", "4.4.18-6", "4.4.4-T")
-def test_every_esc_parses_the_same_frame(bench):
+def test_every_esc_parses_the_same_frame(escs_on_channels):
     """All ESCs on the bus take their own channel's value from the one broadcast frame."""
-    FORMAT.check_every_esc(bench, VALUES)
+    FORMAT.check_every_esc(escs_on_channels, VALUES)
 
 
 @pytest.mark.requirement("4.4.15-2", "4.4.15-4", "R3", "4.4.4-T")

@@ -17,7 +17,7 @@ from .raw_command_12b import FORMAT, GROUPS, NAME, PER_GROUP, RAW_MAX, VALUES
 from .throttle import check
 
 SECTION = "4.4.16"
-bench = throttle.bench  # fixture: multi_dut with each ESC's channel and MSG1 interval
+escs_on_channels = throttle.escs_on_channels  # fixture: multi_dut with each ESC's channel and MSG1 interval
 motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
 
 
@@ -30,9 +30,9 @@ def test_throttle_is_not_answered(dut):
 
 
 @pytest.mark.requirement("4.4.16-1", "4.4.16-3", "R4", "4.4.18-6", "4.4.4-T")
-def test_every_esc_parses_the_same_frames(bench):
+def test_every_esc_parses_the_same_frames(escs_on_channels):
     """All ESCs on the bus take their own channel's value from the same broadcast frames."""
-    FORMAT.check_every_esc(bench, VALUES)
+    FORMAT.check_every_esc(escs_on_channels, VALUES)
 
 
 @pytest.mark.requirement("4.4.16-2", "4.4.16-3", "4.4.16-4", "R4", "4.4.4-T")

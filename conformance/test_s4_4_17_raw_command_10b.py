@@ -29,7 +29,7 @@ DOUBLING = cat.THROTTLE_MAX // cat.THROTTLE_10B_MAX  # 4.4.17-2: 0..1000 -> 0..2
 FORMAT = RawCommand(NAME, per_frame=N_CHANNELS, scale=DOUBLING, requirement="4.4.17-4")
 #: one distinct value per channel, inside 0..1000: a wrong channel or packing shows
 VALUES = {c: 130 + 140 * (c - 1) for c in FORMAT.channels}
-bench = throttle.bench  # fixture: multi_dut with each ESC's channel and MSG1 interval
+escs_on_channels = throttle.escs_on_channels  # fixture: multi_dut with each ESC's channel and MSG1 interval
 motor_stopped = throttle.motor_stopped  # autouse fixture: the motor stopped before and after each test
 
 
@@ -42,9 +42,9 @@ def test_throttle_is_not_answered(dut):
 
 
 @pytest.mark.requirement("4.4.17-1", "R5", "4.4.18-6", "4.4.4-T")
-def test_every_esc_parses_the_same_frame(bench):
+def test_every_esc_parses_the_same_frame(escs_on_channels):
     """All ESCs on the bus take their own channel's value from the one broadcast frame."""
-    FORMAT.check_every_esc(bench, VALUES)
+    FORMAT.check_every_esc(escs_on_channels, VALUES)
 
 
 @pytest.mark.requirement("4.4.17-2", "4.4.17-4", "R5", "4.4.4-T")

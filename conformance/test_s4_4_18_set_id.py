@@ -9,7 +9,7 @@ moved to an unexpected id is still found.
 import pytest
 
 from ckesc.bench.epochs import AFTER, INSIDE
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.host import HostProtocol
@@ -19,8 +19,8 @@ from ckesc.protocol.legality import field_cases, illegal_cases
 from .answers import esc_id_replies, esc_ids, put_back
 from .raw_command_12b import FORMAT as RAW_12B
 from .raw_command_12b import VALUES as RAW_12B_VALUES
-from .reports import msg_control
 from .settings import check_neighbours_kept, neighbours_moved
+from .telemetry import msg_control
 
 SECTION = "4.4.18"
 SPEC = cat.spec("set_id")

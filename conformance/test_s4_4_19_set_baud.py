@@ -11,12 +11,12 @@ import pytest
 
 from ckesc.bench.dut import DutError
 from ckesc.bench.epochs import AFTER, INSIDE
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
 from .answers import RESTORE_IN_WINDOW_S
-from .reports import msg_control, resume
+from .telemetry import msg_control, resume
 
 SECTION = "4.4.19"
 SPEC = cat.spec("set_baud")

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 
 from . import multi_esc
 from .multi_esc import several_escs
-from .reports import (
+from .telemetry import (
     EXP_FRAMES,
     REACT_S,
     REPORTS,
@@ -25,7 +25,7 @@ from .reports import (
 )
 
 SECTION = "4.4.1"
-bench = multi_esc.bench  # fixture: several ESCs on one bus, with the run's emulator faults
+escs = multi_esc.escs  # fixture: several ESCs on one bus, with the run's emulator faults
 
 COUNT_MODULO = cat.spec("can_test").layouts[0].field("count").mask + 1  # "accumulated cyclically" (4.4.1-2)
 
@@ -180,22 +180,22 @@ def test_test_mode_is_lost_at_power_off(dut):
 
 
 @pytest.mark.requirement("4.4.1-1", "4.4.1-2", "4.4.1-3", "R16")
-def test_every_esc_enters_and_leaves_test_mode(bench):
+def test_every_esc_enters_and_leaves_test_mode(escs):
     """The broadcast reaches every ESC: each counts, none reports otherwise; after 0x55 each reports again."""
-    nodes = several_escs(bench, "every ESC")
-    window = max(_window(bench, n) for n in nodes)
+    nodes = several_escs(escs, "every ESC")
+    window = max(_window(escs, n) for n in nodes)
     try:
-        on = can_test(bench, cat.CAN_TEST_ON)
-        bench.wait(window)
+        on = can_test(escs, cat.CAN_TEST_ON)
+        escs.wait(window)
         for node in nodes:
-            others = reported(bench, on.time, source=node)
+            others = reported(escs, on.time, source=node)
             assert not others, f"node {node}: {others[0][0]} reported in CAN Test mode (4.4.1-2)"
-            _check_counting(bench, _test_frames(bench, on.time, node), node)
-        off = can_test(bench, cat.CAN_TEST_OFF)
-        bench.wait(window)
+            _check_counting(escs, _test_frames(escs, on.time, node), node)
+        off = can_test(escs, cat.CAN_TEST_OFF)
+        escs.wait(window)
         for node in nodes:
-            assert not _test_frames(bench, off.time, node), f"node {node}: CAN Test frames after 0x55"
-            assert reported(bench, off.time, source=node, names=REPORTS), f"node {node}: no report after 0x55 (4.4.1-3)"
+            assert not _test_frames(escs, off.time, node), f"node {node}: CAN Test frames after 0x55"
+            assert reported(escs, off.time, source=node, names=REPORTS), f"node {node}: no report after 0x55 (4.4.1-3)"
     finally:
-        can_test(bench, cat.CAN_TEST_OFF)
-        resume(bench)
+        can_test(escs, cat.CAN_TEST_OFF)
+        resume(escs)

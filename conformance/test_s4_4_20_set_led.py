@@ -8,7 +8,7 @@ shows. The ``dut`` fixture restores (option 1) and verifies the LED it found.
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 

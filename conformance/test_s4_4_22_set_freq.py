@@ -5,8 +5,8 @@ import pytest
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
-from .reports import R9_GAPS, at_report_phase, check_restart, settle_reports
 from .settings import changes, check_neighbours_kept, listed, neighbours_moved, other_intervals
+from .telemetry import R9_GAPS, at_report_phase, check_restart, settle_reports
 
 SECTION = "4.4.22"
 INTERVALS = cat.INTERVAL_FIELDS

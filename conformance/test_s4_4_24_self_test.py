@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 
 from .codes import code
-from .reports import exp_capture
+from .telemetry import exp_capture
 
 SECTION = "4.4.24"
 

@@ -11,7 +11,7 @@ Get Rec (223) and Clear Rec (224) are tested with 4.4.14.
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import Kind

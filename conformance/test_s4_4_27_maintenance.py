@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 
 from .answers import heard_instead
 from .motor import run_motor
-from .reports import INTERVALS
+from .telemetry import INTERVALS
 
 SECTION = "4.4.27"
 

@@ -10,7 +10,7 @@ from ckesc.protocol.legality import field_cases
 
 from .answers import BROADCAST_WINDOW_S, heard_instead
 from .codes import code
-from .reports import INTERVALS, read_request
+from .telemetry import INTERVALS, read_request
 
 SECTION = "4.4.28"
 

@@ -1,8 +1,8 @@
 """Spec section 4.4.2: MSG Control (20010) - suspend / resume active reporting, MSG_EXP mode, the answer.
 
-The helpers the report and broadcast modules share with this one are in ``conformance/reports.py``
+The helpers the report and broadcast modules share with this one are in ``conformance/telemetry.py``
 (reports, MSG Control, MSG_EXP capture), ``conformance/answers.py`` (the answer slot timing of R2)
-and ``conformance/multi_esc.py`` (the :func:`bench` fixture).
+and ``conformance/multi_esc.py`` (the :func:`escs` fixture).
 """
 
 from __future__ import annotations
@@ -11,14 +11,15 @@ from typing import Any
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 
 from . import multi_esc
 from .answers import answer_window_s, check_answer_slot, settle, slot_node
 from .multi_esc import several_escs
-from .reports import (
+from .settings import changes, listed
+from .telemetry import (
     EXP_FRAMES,
     INTERVALS,
     REACT_S,
@@ -41,12 +42,11 @@ from .reports import (
     restart_limit_s,
     resume,
 )
-from .settings import changes, listed
 
 SECTION = "4.4.2"
 
 COMMANDS = {"suspend": cat.MSG_CONTROL_SUSPEND, "resume": cat.MSG_CONTROL_RESUME, "resume_exp": cat.MSG_CONTROL_RESUME_EXP}
-bench = multi_esc.bench  # fixture: several ESCs on one bus, with the run's emulator faults
+escs = multi_esc.escs  # fixture: several ESCs on one bus, with the run's emulator faults
 #: The parameter changes R12 holds back while reporting is suspended (4.4.2-3): every persisted setting's writer. Set ID
 #: and Set Baud, limited to the 120 s window (R11) and read back their own way, are checked in their sections
 #: (test_set_id_while_suspended_changes_nothing, test_set_baud_while_suspended_changes_nothing).
@@ -150,28 +150,28 @@ def test_suspension_is_lost_at_power_off(dut):
 
 
 @pytest.mark.requirement("4.4.2-1", "4.4.2-2", "4.4.2-4", "R2")
-def test_every_esc_answers_in_its_slot_and_obeys(bench):
+def test_every_esc_answers_in_its_slot_and_obeys(escs):
     """All ESCs on the bus answer each command in their own slot and act on it."""
-    nodes = several_escs(bench, "all ESCs")
-    longest = max(longest_interval_s(bench, n) for n in nodes)
-    settle(bench)
+    nodes = several_escs(escs, "all ESCs")
+    longest = max(longest_interval_s(escs, n) for n in nodes)
+    settle(escs)
     try:
         for command in ("suspend", "resume"):
-            sent = msg_control(bench, COMMANDS[command])
-            bench.wait(2 * cat.ANSWER_DELAY_MAX_S)
+            sent = msg_control(escs, COMMANDS[command])
+            escs.wait(2 * cat.ANSWER_DELAY_MAX_S)
             for node in nodes:
-                answers = bench.frames("msg_control", since=sent.time, source=node)
+                answers = escs.frames("msg_control", since=sent.time, source=node)
                 assert len(answers) == 1, f"node {node}: {len(answers)} answers to MSG Control {command} (4.4.2-2: all respond)"
-                check_answer_slot(bench, answers[0], sent, node, f"MSG Control {command}", "4.4.2-4")
-            bench.wait(longest + REACT_S)
+                check_answer_slot(escs, answers[0], sent, node, f"MSG Control {command}", "4.4.2-4")
+            escs.wait(longest + REACT_S)
             for node in nodes:
-                reports = reported(bench, sent.time, source=node, names=REPORTS)
+                reports = reported(escs, sent.time, source=node, names=REPORTS)
                 if command == "suspend":
                     assert not reports, f"node {node} still reports after 0x55555555 (4.4.2-1)"
                 else:
                     assert reports, f"node {node} does not report after 0xAAAAAAAA (4.4.2-1)"
     finally:
-        resume(bench)
+        resume(escs)
 
 
 @pytest.mark.requirement("4.4.2-3", "R12")

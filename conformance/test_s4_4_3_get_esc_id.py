@@ -7,10 +7,10 @@ import pytest
 from . import multi_esc
 from .answers import answer_window_s, check_answer_slot, settle, slot_node
 from .multi_esc import several_escs
-from .reports import describe_garbled, garbled, ms
+from .telemetry import describe_garbled, garbled, ms
 
 SECTION = "4.4.3"
-bench = multi_esc.bench  # fixture: several ESCs on one bus, with the run's emulator faults
+escs = multi_esc.escs  # fixture: several ESCs on one bus, with the run's emulator faults
 #: between queries: not a multiple of any report interval, so each query meets the reports at another phase
 PHASE_STEP_S = 0.007
 
@@ -71,13 +71,13 @@ def test_reply_comes_in_the_node_slot(dut):
 
 
 @pytest.mark.requirement("4.4.3-2", "4.4.3-4", "R1", "R2")
-def test_every_esc_replies_in_its_slot(bench):
+def test_every_esc_replies_in_its_slot(escs):
     """All ESCs on the bus reply, each once, with its own id and channel, each in its own slot
     (node ids sharing node_id % 32 share a slot and go out by arbitration)."""
-    nodes = several_escs(bench, "all ESCs")
-    sent = _query(bench)
-    heard = sorted({f.source for f in bench.frames("get_esc_id", since=sent.time) if f.source != bench.host_node})
-    bench.record.observe("nodes", {"discovered": nodes, "replied": heard})
+    nodes = several_escs(escs, "all ESCs")
+    sent = _query(escs)
+    heard = sorted({f.source for f in escs.frames("get_esc_id", since=sent.time) if f.source != escs.host_node})
+    escs.record.observe("nodes", {"discovered": nodes, "replied": heard})
     for node in sorted(set(nodes) | set(heard)):  # each node discovery found, and any it missed
-        r = _check_reply(bench, sent, node)
-        check_answer_slot(bench, r, sent, node, "GET_ESC_ID", "4.4.3-4")
+        r = _check_reply(escs, sent, node)
+        check_answer_slot(escs, r, sent, node, "GET_ESC_ID", "4.4.3-4")

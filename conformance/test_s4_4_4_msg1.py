@@ -6,14 +6,14 @@ import math
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import Status
 from ckesc.protocol.frame import frame_bits
 from ckesc.protocol.judgements import r8_onset
 
-from .reports import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
 from .settings import changes, listed
+from .telemetry import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
 from .throttle import FORMAT_CHANNELS, STREAM_PERIOD_S, can_throttle, command_for
 
 SECTION = "4.4.4"

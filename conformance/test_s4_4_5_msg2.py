@@ -7,7 +7,7 @@ import pytest
 from ckesc.protocol import catalogue as cat
 
 from .physics import check_voltage_current, esc_limits
-from .reports import (
+from .telemetry import (
     check_interval_follows_set_freq,
     describe_garbled,
     garbled,

@@ -7,7 +7,7 @@ import pytest
 from ckesc.protocol import catalogue as cat
 
 from .physics import MAX_PLAUSIBLE_C, SAME_SENSOR_C
-from .reports import REACT_S, check_interval_follows_set_freq, describe_garbled, garbled, interval_s, ms, need_decoded
+from .telemetry import REACT_S, check_interval_follows_set_freq, describe_garbled, garbled, interval_s, ms, need_decoded
 
 SECTION = "4.4.6"
 

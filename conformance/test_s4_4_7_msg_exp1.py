@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 
 from .physics import CELL_FULL_V, MIN_SUPPLY_V, check_voltage_current, esc_limits
-from .reports import exp_reports, interval_s
+from .telemetry import exp_reports, interval_s
 
 SECTION = "4.4.7"
 

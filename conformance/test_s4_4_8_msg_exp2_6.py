@@ -7,7 +7,7 @@ import pytest
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 
-from .reports import describe_garbled, exp_capture
+from .telemetry import describe_garbled, exp_capture
 
 SECTION = "4.4.8"
 

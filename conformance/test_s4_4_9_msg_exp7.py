@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import LedColor
 
-from .reports import exp_reports
+from .telemetry import exp_reports
 
 SECTION = "4.4.9"
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import pytest
 
 from ckesc.bench.dut import DutError
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import Kind
@@ -178,11 +178,11 @@ class RawCommand:
         assert len(msg1) <= limit, (f"{len(msg1)} MSG1 in {span * 1000:.0f} ms at a {interval * 1000:.0f} ms interval "
                                     f"(at most {limit}): the commands are being answered")
 
-    def check_every_esc(self, bench, values: Mapping[int, int]) -> None:
+    def check_every_esc(self, escs, values: Mapping[int, int]) -> None:
         """Every ESC on the bench outputs its own channel's value of the one command cycle."""
-        channels = bench.channels
-        bench.record.observe("node -> throttle channel", channels)
-        got = self.output(bench, self.frames(values), nodes=bench.nodes)
+        channels = escs.channels
+        escs.record.observe("node -> throttle channel", channels)
+        got = self.output(escs, self.frames(values), nodes=escs.nodes)
         for node, pwms in got.items():
             check(pwms, self.expected(channels[node], values), f"node {node} on channel {channels[node]}")
 
@@ -269,8 +269,8 @@ def on_channel(dut, channel: int):
 
 
 @pytest.fixture
-def bench(multi_dut):
-    """``multi_dut`` with ``bench.channels`` (each ESC's throttle channel) and ``bench.intervals`` (its
+def escs_on_channels(multi_dut):
+    """``multi_dut`` with ``.channels`` (each ESC's throttle channel) and ``.intervals`` (its
     MSG1 interval), read here: an ESC that cannot say is a setup error, not a verdict."""
     multi_dut.channels = {n: multi_dut.ask("get_major_configuration", {"option": 0}, destination=n)["throttle_channel"]
                           for n in multi_dut.nodes}

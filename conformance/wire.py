@@ -25,7 +25,7 @@ from ckesc.protocol.transfer import parse_tail, tail_byte
 
 from .answers import BROADCAST_WINDOW_S
 from .codes import code
-from .reports import read_request
+from .telemetry import read_request
 
 #: The longest report interval the document allows (250 x 2 ms): any report comes within it
 LONGEST_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S

@@ -17,9 +17,9 @@ from ..protocol.ids import Kind
 from .epochs import WINDOW_MARGIN_S, PowerEpoch
 from .lanes import Lane
 from .link import MAX_GARBLED, DutError, DutUnreachable, Exchange, Link, Sent, echo_probe
+from .outcomes import Inconclusive
 from .profile import DutProfile
 from .supply import Supply
-from .verdict import Inconclusive
 
 __all__ = ["MAX_GARBLED", "Dut", "DutError", "DutUnreachable", "Exchange", "Link", "Sent", "Supply", "echo_probe"]
 

@@ -19,8 +19,8 @@ from ..protocol.judgements import timing_tolerance
 from ..protocol.transfer import TRANSFER_ID_MODULO
 from .epochs import WINDOW_REQUESTS
 from .lanes import Lane, OwnFrame
+from .outcomes import Inconclusive, NotClaimed, Record
 from .profile import DutProfile
-from .verdict import Inconclusive, NotClaimed, Record
 
 #: How long the host waits for the echo of its own frame once it has left (the echo follows in microseconds
 #: to milliseconds; it is read late only when the host itself was held up)

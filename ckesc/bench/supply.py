@@ -8,7 +8,7 @@ from typing import Iterable
 from ..protocol import catalogue as cat
 from .epochs import INSIDE, WINDOW_MARGIN_S, PowerEpoch, unusable
 from .link import DutError, Link
-from .verdict import Inconclusive
+from .outcomes import Inconclusive
 
 
 class Supply:

@@ -84,7 +84,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
     import threading
     import time
 
-    from ..emulator.bench import Bench
+    from ..emulator.emulated_bench import EmulatedBench
     from ..emulator.flash import FlashError
     from ..emulator.realtime import RealtimeEmulator
     from ..emulator.realtime_timing import stagger_boot
@@ -102,7 +102,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
         raise UsageError(f"--rt-priority must be 1..99 (SCHED_FIFO), not {args.rt_priority}")
     faults = _fault_spec(args.faults, args.nodes)
     try:
-        bench = Bench(args.nodes, faults=faults, flash=args.flash_path, seed=args.seed, config=_model_options(args))
+        bench = EmulatedBench(args.nodes, faults=faults, flash=args.flash_path, seed=args.seed, config=_model_options(args))
     except FlashError as exc:
         raise UsageError(str(exc)) from None
     except ValueError as exc:  # unknown fault names, listed with the known ones

@@ -1,7 +1,7 @@
 """The CKESC 2.1 ESC behaviour model: frames and a time in, frames and the next deadline out.
 
 No sockets, threads, sleeps or clocks: the simulated-time bus and the real-time process drive the
-same :class:`EscModel`. One model is one ESC; a bench of several shares a bus in the adapters.
+same :class:`EscModel`. One model is one ESC; several share a bus in an :class:`~.emulated_bench.EmulatedBench`.
 
     esc = EscModel(EscConfig(slot=0), nvm=None)     # nvm: what was in flash, or None for factory state
     esc.power_on(now=0.0)
@@ -18,7 +18,7 @@ from __future__ import annotations
 import copy
 import heapq
 import random
-from typing import Any
+from typing import Any, Callable
 
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import BAUD_RATES
@@ -26,12 +26,12 @@ from ..protocol.errors import DecodeError, UnknownTypeError
 from ..protocol.frame import Decoder, Frame, WireFrame
 from ..protocol.ids import Kind
 from ..protocol.transfer import TransferIdCounter
-from .answers import Answers
 from .config import REPORT_TIMERS, EscConfig, factory_nvm
-from .motor import Motor
-from .output import Output
-from .reporting import EXP_MODE, REPORT_NAMES, REPORTING, SUSPENDED, Reporting
-from .settings import Settings
+from .esc_answers import Answers
+from .esc_motor import Motor
+from .esc_output import Output
+from .esc_settings import Settings
+from .esc_telemetry import EXP_MODE, REPORT_NAMES, REPORTING, SUSPENDED, Telemetry
 
 __all__ = ["EXP_MODE", "HANDLED", "REPORTING", "REPORT_TIMERS", "SUSPENDED", "THROTTLE_FRAMES", "EscConfig", "EscModel",
            "factory_nvm"]
@@ -55,9 +55,9 @@ _PERSIST_FAULTS = {
 }
 
 
-class EscModel(Output, Motor, Reporting, Settings, Answers):
+class EscModel(Output, Motor, Telemetry, Settings, Answers):
     """One emulated ESC. See the module docstring for the driving contract; each concern's methods live in
-    the module of its base class (config, output, motor, reporting, settings, answers)."""
+    the module of its base class (config, esc_output, esc_motor, esc_telemetry, esc_settings, esc_answers)."""
 
     def __init__(self, config: EscConfig | None = None, nvm: dict[str, Any] | None = None) -> None:
         self.config = config or EscConfig()
@@ -66,6 +66,9 @@ class EscModel(Output, Motor, Reporting, Settings, Answers):
         for key, value in factory_nvm(self.config).items():  # flash from an older emulator: fill gaps
             self.nvm.setdefault(key, value)
         self.nvm_dirty = nvm is None
+        #: the public hook for a request the model rejects (an illegal value, or refused: R10-R12), called with the
+        #: request before its answer (whose form is the ESC's freedom, ``config.rejected_answer``); None: no one asks
+        self.on_rejected: Callable[[Frame], None] | None = None
         self._rng = random.Random(self.config.seed * 1_000_003 + self.config.slot)
         rounding = self.config.value_rounding
         #: temperatures and run times to whole units, voltage and current to 0.01 / 0.1 (value_rounding)

@@ -2,7 +2,7 @@
 
 One thread drives everything: it waits in ``select()`` on all its inputs (the bus, the socketcand
 clients, the control connections, a wake-up pipe) with a timeout that ends at the earliest absolute
-deadline of the ESCs and of its own timers, and then does the work that is due. The :class:`Bench`
+deadline of the ESCs and of its own timers, and then does the work that is due. The :class:`EmulatedBench`
 and its models are touched from that thread only; other threads (a bus reader for buses without a
 file descriptor, callers of :meth:`RealtimeEmulator.request`) hand work over through a queue and the
 wake-up pipe. On Linux the thread's timer slack is set to 1 ns (``prctl(PR_SET_TIMERSLACK)``) and
@@ -54,8 +54,8 @@ import can
 
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame, frame_bits
-from .bench import Bench
 from .control import ControlServer, Handler, Reply, dispatch
+from .emulated_bench import EmulatedBench
 from .model import EscModel
 from .realtime_control import ControlCommands
 from .realtime_timing import Histogram, clock_offset, set_timer_slack
@@ -80,7 +80,7 @@ class _Input:
 
 
 class RealtimeEmulator(ControlCommands):
-    """A :class:`Bench` driven in real time on a python-can bus and/or as a socketcand hub.
+    """An :class:`EmulatedBench` driven in real time on a python-can bus and/or as a socketcand hub.
 
     ``run()`` drives it in the calling thread until :meth:`stop` (the CLI: main thread, signals call
     ``stop``); ``start()`` runs it in a background thread (tests). Listening sockets are opened by
@@ -89,7 +89,7 @@ class RealtimeEmulator(ControlCommands):
 
     def __init__(
         self,
-        bench: Bench,
+        bench: EmulatedBench,
         *,
         bus: can.BusABC | None = None,
         own_bus: bool = False,

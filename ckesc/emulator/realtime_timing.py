@@ -11,7 +11,7 @@ import sys
 import time
 from typing import Any
 
-from .bench import Bench
+from .emulated_bench import EmulatedBench
 
 _PR_SET_TIMERSLACK = 29
 _PR_GET_TIMERSLACK = 30
@@ -38,7 +38,7 @@ def set_timer_slack(ns: int) -> int | None:
     return old
 
 
-def stagger_boot(bench: Bench, spread: float) -> None:
+def stagger_boot(bench: EmulatedBench, spread: float) -> None:
     """Make ESC k of n boot ``k/n x spread`` seconds later than the first (its ``boot_time``), every
     power-up. Real ESCs on one supply do not boot in lockstep; identical models would report in
     lockstep forever, and a batch of n reports due at the same instant leaves the last one late by

@@ -32,7 +32,7 @@ from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskA
 
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame, frame_bits  # noqa: F401 - frame_bits: also imported from here
-from .bench import Bench
+from .emulated_bench import EmulatedBench
 from .model import EscModel
 
 _WORLDS: dict[str, SimWorld] = {}
@@ -70,7 +70,7 @@ class SimWorld:
     Frames wait in ``_waiting`` (a heap by ready time) until the clock reaches their ready time,
     then contend in ``_ready`` (a heap by id, i.e. arbitration order) for the bus."""
 
-    def __init__(self, channel: str, bench: Bench, *, power_on: bool = True) -> None:
+    def __init__(self, channel: str, bench: EmulatedBench, *, power_on: bool = True) -> None:
         self.channel = channel
         self.bench = bench
         self.now = 0.0
@@ -253,7 +253,7 @@ class SimEscBus(can.BusABC):
             faults = [f for f in faults.split(",") if f.strip()]
         world = _WORLDS.get(channel)
         if world is None:
-            bench = Bench(nodes, faults=faults, flash=flash_path, seed=seed, config=esc_config)
+            bench = EmulatedBench(nodes, faults=faults, flash=flash_path, seed=seed, config=esc_config)
             world = _WORLDS[channel] = SimWorld(channel, bench)
         self.world = world
         self.bitrate = int(bitrate)
@@ -270,7 +270,7 @@ class SimEscBus(can.BusABC):
         return self.world.clock
 
     @property
-    def bench(self) -> Bench:
+    def bench(self) -> EmulatedBench:
         return self.world.bench
 
     def now(self) -> float:

@@ -10,7 +10,7 @@ frame, a blank or comment line, or a reported bad record.
 candump ``-L`` logs (``.log``) are read by :func:`read_candump`, everything else by python-can's
 ``can.LogReader`` (``.asc``, ``.blf``, ``.trc``, ``.csv``, ``.mf4``, ``.db``, compressed ``.gz``).
 Why a reader of our own for candump: python-can's ``CanutilsLogReader`` builds a ``can.Message`` per
-line: 4.1 us of CPU per frame (246k frames/s, ``bench/bench_checklog.py`` on this project's machine),
+line: 4.1 us of CPU per frame (246k frames/s, ``benchmarks/checklog.py`` on this project's machine),
 which with the rules' ~2.1 us leaves ``ckesc check-log`` at its 160k frames/s target with no margin (and
 at well under half of it in wall time on a loaded machine); it also stops at the first bad line, without
 its number. Splitting the common line form ``(ts) iface 1F4E5205#DATA`` ourselves costs 1.7 us (580k

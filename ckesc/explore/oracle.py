@@ -26,15 +26,6 @@ from ..protocol.frame import Decoder, Frame
 SETTING_KEYS = ("rotation", "throttle_source", "throttle_channel", "led_color", "led_blink", *cat.INTERVAL_FIELDS)
 
 
-class _OracleModel(EscModel):
-    """The faultless model, noting every request it rejects (its answer is the DUT's freedom: R10-R12)."""
-
-    free: set[tuple[str, int]]
-
-    def _respond_rejected(self, req: Frame, now: float, current: dict) -> None:
-        self.free.add((req.name, req.transfer_id or 0))
-
-
 @dataclass
 class State:
     """What the model's ESC is doing after an event: its mode and report intervals (seconds)."""
@@ -58,7 +49,9 @@ class Oracle:
     powered_at: float
     start: float | None = None  # the program's start (what the model sends before it is not kept)
     host_node: int = 0
-    model: _OracleModel = field(init=False)
+    model: EscModel = field(init=False)
+    #: the requests the model rejected, as (name, transfer id): their answer is the DUT's freedom (R10-R12)
+    free: set[tuple[str, int]] = field(init=False, default_factory=set)
     out: list[Frame] = field(default_factory=list)  # the model's frames, decoded, stamped with their due time
     states: list[State] = field(default_factory=list)
     host: list[tuple[Frame, int | None]] = field(default_factory=list)  # host frames fed, with the program step
@@ -66,15 +59,16 @@ class Oracle:
 
     def __post_init__(self) -> None:
         b = self.baseline
+        # rejected_answer "none": a rejected request gets no predicted answer, only a note in ``free`` (on_rejected)
         config = EscConfig(node_id=b["node_id"], throttle_channel=b.get("throttle_channel"), boot_time=0.0,
-                           report_delay=0.0, baud_code=b.get("baud", cat.DEFAULT_BAUD_CODE))
+                           report_delay=0.0, baud_code=b.get("baud", cat.DEFAULT_BAUD_CODE), rejected_answer="none")
         nvm = factory_nvm(config)
         nvm.update({k: b[k] for k in SETTING_KEYS if k in b})
         nvm.update({k: b[k] for k in ("power_ups", "stops") if b.get(k) is not None})
         if b.get("power_ups") is not None:
             nvm["power_ups"] = (b["power_ups"] - 1) & 0xFFFF  # power_on() below counts the power-up the DUT had
-        self.model = _OracleModel(config, nvm)
-        self.model.free = set()
+        self.model = EscModel(config, nvm)
+        self.model.on_rejected = lambda req: self.free.add((req.name, req.transfer_id or 0))
         self._decoder = Decoder()
         self.model.power_on(self.powered_at)
         start = self.powered_at if self.start is None else self.start
@@ -83,10 +77,6 @@ class Oracle:
         self._note(start, "start")
 
     # ---------------------------------------------------------------- feeding
-    @property
-    def free(self) -> set[tuple[str, int]]:
-        return self.model.free
-
     @property
     def node_id(self) -> int:
         return self.model.node_id

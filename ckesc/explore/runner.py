@@ -18,7 +18,7 @@ import can
 
 from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
 from ..bench.lanes import BusLane, Lane
-from ..bench.verdict import Inconclusive
+from ..bench.outcomes import Inconclusive
 from ..emulator import variants
 from ..evidence.live import LaneRules
 from ..protocol import catalogue as cat

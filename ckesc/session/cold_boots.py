@@ -14,9 +14,9 @@ import pytest
 from ..bench.dut import Dut, DutError
 from ..bench.epochs import PowerEpoch
 from ..bench.link import Link
+from ..bench.outcomes import Inconclusive
 from ..bench.supply import Supply
-from ..bench.verdict import Inconclusive
-from . import tracing
+from . import trace_hooks
 from .collection import lacking
 from .state import state
 
@@ -68,7 +68,7 @@ def stage(config: pytest.Config, group: list[pytest.Item]) -> None:
     if any(lacking(it, profile) for it in group):
         return  # one would be skipped: nothing of it may run first
     name = f"shared power cycle {len(st.info.setdefault('cold_boots', [])) + 1}"
-    traces = tracing.writer(config)
+    traces = trace_hooks.writer(config)
     d = Dut(lane, profile, node_id=st.node_id)
     boot = _ColdBoot([it.nodeid for it in group], d.settings(), name)
     entry: dict[str, Any] = {"name": name, "tests": boot.members}
@@ -98,7 +98,7 @@ def traced_power_cycle(config: pytest.Config, name: str, entry: dict[str, Any]) 
     it) gets its trace files and the power-up, or the error: that is recorded, not raised (the tests that were to
     use the power-up meet the problem as their own). Returns the power-up's epoch, None when it failed."""
     st = state(config)
-    lane, profile, traces = st.lane, st.profile, tracing.writer(config)
+    lane, profile, traces = st.lane, st.profile, trace_hooks.writer(config)
     assert lane is not None and profile is not None
     if traces is not None:
         traces.begin(name)
@@ -140,7 +140,7 @@ def cold_boot(request: pytest.FixtureRequest, dut: Dut):
         if group is not None and not group.dissolved and group.epoch is not None and dut.lane.epoch is group.epoch:
             written = group.written[item.nodeid]
             written.used = True
-            item.stash[tracing.EARLIER] = written.traces  # its write's trace is the test's own
+            item.stash[trace_hooks.EARLIER] = written.traces  # its write's trace is the test's own
             dut.record.observations.extend(written.observations)
             others = [m for m in group.members if m != item.nodeid]
             dut.record.observe("power cycle", f"{group.name}, after this test's write and those of {others}: "

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from ..bench.outcomes import NotClaimed
 from ..bench.profile import DutProfile
-from ..bench.verdict import NotClaimed
 from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, requirement, section_heading
 from . import preflight as checks

@@ -11,7 +11,7 @@ import pytest
 from ..reporting import report
 from ..reporting.causes import broken_outside_a_fail
 from ..reporting.results import profile_warnings
-from . import tracing
+from . import trace_hooks
 from .collection import conformance_dir, item_requirements, section_of
 from .state import EXIT_ABORTED, report_dir, state
 
@@ -54,7 +54,7 @@ def _completeness(session: pytest.Session, exitstatus: int) -> tuple[str | None,
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     st = state(session.config)
-    traces = tracing.writer(session.config)
+    traces = trace_hooks.writer(session.config)
     if traces is not None:
         traces.end()
     if not st.conformance or not st.selected or exitstatus == pytest.ExitCode.USAGE_ERROR:

@@ -14,8 +14,8 @@ from ..bench import statement
 from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
 from ..bench.lanes import BenchGone, BusLane, Lane
 from ..bench.link import Link
+from ..bench.outcomes import Inconclusive
 from ..bench.profile import DutProfile
-from ..bench.verdict import Inconclusive
 from ..emulator import variants
 from ..protocol import catalogue as cat
 from ..protocol import functions
@@ -26,7 +26,7 @@ from .collection import check_claims, lacking
 from .lane_setup import echo_info, emulator_options, make_lane, make_multi_lane
 from .safety import zero_throttle_now
 from .state import EXIT_ABORTED, state
-from .tracing import trace_lane
+from .trace_hooks import trace_lane
 
 #: Frames kept across the run for the run-wide checks (4.1): a whole suite in real time is ~70,000; a
 #: DUT that floods the bus must not grow memory without bound
@@ -67,7 +67,7 @@ def ckesc_lane(request: pytest.FixtureRequest):
     _install_signal_guard(config)
     opened = lane.now()
     yield lane
-    st.info["lane_seconds"] = round(lane.now() - opened, 3)  # the whole run on the lane's clock (bench_suite.py)
+    st.info["lane_seconds"] = round(lane.now() - opened, 3)  # the whole run on the lane's clock (benchmarks/suite.py)
     try:
         if st.node_id is not None:
             Link(lane, profile, node_id=st.node_id).zero_throttle()

@@ -22,7 +22,7 @@ from ..bench.power import POWER_COMMAND_TIMEOUT_S
 from ..bench.power import names as power_names
 from ..emulator import variants
 from .preflight import BUS_OPEN_TIMEOUT_S
-from .traces import TRACE_FORMATS
+from .trace_files import TRACE_FORMATS
 
 #: ``ckesc run --help``'s groups, in its order (pytest's ``--help`` lists every option under one "ckesc" group)
 RIG, DUT, OUTPUT = ("several benches at once (pytest-xdist: pip install 'ckesc-conformance[rig]')", "device under test",

@@ -11,7 +11,7 @@ and reading and writing the run's typed record (:mod:`.state`):
     order         the run order: waits that overlap (schedule.py), pytest's loop or a batch worker's
     cold_boots    tests sharing one proven power cycle between their writes and their reads
     fixtures      ckesc_lane, dut, multi_dut, record, ckesc_run; zero throttle on every way out, the signal guard
-    tracing       each test's CAN trace (traces.py writes it)
+    trace_hooks   each test's CAN trace: its span and the lanes traced (trace_files.py writes the files)
     bus_rules     the rules that hold at all times, live over every frame
     verdicts      each test's phase reports -> its one Result, and the console's count of it
     finish        the session's end: complete or why not, exit status, the reports written
@@ -28,12 +28,12 @@ from __future__ import annotations
 
 import pytest
 
-from . import bus_rules, cold_boots, collection, finish, fixtures, options, order, tracing, verdicts
+from . import bus_rules, cold_boots, collection, finish, fixtures, options, order, trace_hooks, verdicts
 from .progress import ProgressReporter
 from .state import state
 
 #: the plugin's modules, registered in this order (pluggy calls the later registered first, among equals)
-MODULES = (collection, order, cold_boots, fixtures, tracing, bus_rules, verdicts, finish)
+MODULES = (collection, order, cold_boots, fixtures, trace_hooks, bus_rules, verdicts, finish)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -4,7 +4,7 @@ and the console counting each test once by that verdict. Also the run's stop whe
 falls silent.
 
 A phase's verdict is decided in one place, :func:`_outcome`, from the type of what ended it (as pytest decides
-passed, failed or skipped from the exception's type in one hook): :class:`~ckesc.bench.verdict.Inconclusive` is
+passed, failed or skipped from the exception's type in one hook): :class:`~ckesc.bench.outcomes.Inconclusive` is
 INCONCLUSIVE (a measurement inside the bench's error is one too), any other skip SKIPPED, a harness or bus error
 (``DutError``, ``BusFault``, ``BenchGone``) ERROR; never a word in the message."""
 
@@ -15,7 +15,7 @@ import pytest
 from ..bench.dut import Dut, DutError
 from ..bench.errors import BenchError
 from ..bench.lanes import BenchGone, BusFault
-from ..bench.verdict import Inconclusive, NotClaimed
+from ..bench.outcomes import Inconclusive, NotClaimed
 from ..evidence.timing import evidence
 from ..protocol.requirements import Verdict, requirement, strongest
 from ..reporting.results import Result

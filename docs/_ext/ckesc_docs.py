@@ -13,7 +13,7 @@ which a directive could not add. An unknown name is an error; a fence this exten
 A figure in prose is a role: ``{ckesc-figure}`suite.tests``` is the number of tests pytest collects now,
 ``{ckesc-figure}`run.PASS``` the PASS count of the recorded faultless run (``docs/recorded/faultless-run.json``,
 refused when it is not a run of the suite the code has now), ``{ckesc-figure}`suite.json:simulated.overlap.protocol_s .0f```
-a recorded benchmark's figure (``bench/results/``), ``{ckesc-figure}`code:MODULE.NAME``` a constant of the code; a
+a recorded benchmark's figure (``benchmarks/results/``), ``{ckesc-figure}`code:MODULE.NAME``` a constant of the code; a
 line the suite prints (``sample.progress``) is made by the code that prints it. ``tests/test_docs.py`` fails a page
 that writes such a figure by hand.
 """
@@ -232,8 +232,8 @@ def cli() -> str:
 # ------------------------------------------------------------------------------------ figures in prose
 #: the faultless simulated run the pages cite (``python docs/recorded/record_run.py`` re-records it)
 RECORD = ROOT / "docs" / "recorded" / "faultless-run.json"
-#: the benchmarks' recorded results (``python bench/<name>.py`` writes them)
-BENCH_RESULTS = ROOT / "bench" / "results"
+#: the benchmarks' recorded results (``python benchmarks/<name>.py`` writes them)
+BENCH_RESULTS = ROOT / "benchmarks" / "results"
 ROLE = "ckesc-figure"
 
 
@@ -312,7 +312,7 @@ FIGURES: dict[str, Callable[[], str]] = {
     "run.recorded": lambda: recorded_run()["recorded"],
 }
 def _plugtest(what: str) -> str:
-    """The plugtest's figures (``bench/results/plugtest-explore.json``): when each defect was first seen."""
+    """The plugtest's figures (``benchmarks/results/plugtest-explore.json``): when each defect was first seen."""
     doc = json.loads((BENCH_RESULTS / "plugtest-explore.json").read_text(encoding="utf-8"))
     first = sorted((min(f["seconds_before"] for f in r["found"]), r["defect"]) for r in doc["runs"] if r["defect"] and r["found"])
     if what == "found":
@@ -359,7 +359,7 @@ def _json_path(doc: object, path: str) -> object:
 def figure(name: str) -> tuple[str, bool]:
     """A figure's text and whether it is shown as code. ``name``: one of :data:`FIGURES` / :data:`SAMPLES`; a
     recorded benchmark's ``FILE:PATH[ FORMAT]`` (``suite.json:simulated.overlap.protocol_s .0f``: that JSON file of
-    ``bench/results/``, a dotted path in it, list items by index); or a constant of the code,
+    ``benchmarks/results/``, a dotted path in it, list items by index); or a constant of the code,
     ``code:MODULE.NAME[ FORMAT]``. FORMAT: a Python format spec (``.0f``), ``verdicts`` (a {verdict: count} table
     as "291 PASS, 5 INCONCLUSIVE"), ``yes`` (a truth as yes / no), ``sum``
     (of a table's or a list's numbers) or ``ms`` and a format spec (microseconds shown in milliseconds: ``ms.1f``)."""
@@ -380,7 +380,7 @@ def figure(name: str) -> tuple[str, bool]:
     else:
         file = BENCH_RESULTS / where
         if file.parent != BENCH_RESULTS or not file.is_file():
-            raise KeyError(f"no recorded benchmark {where!r} in bench/results/")
+            raise KeyError(f"no recorded benchmark {where!r} in benchmarks/results/")
         value = _json_path(json.loads(file.read_text(encoding="utf-8")), path)
     if fmt == "verdicts":  # a {verdict: count} table, in the reports' order of verdicts
         order = ("PASS", "FAIL", "ERROR", "OBSERVED", "INCONCLUSIVE", "SKIPPED")

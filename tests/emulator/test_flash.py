@@ -10,7 +10,7 @@ import pytest
 
 from ckesc.emulator import EscConfig, factory_nvm, sim_bus
 from ckesc.emulator import flash as flash_mod
-from ckesc.emulator.bench import Bench
+from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.emulator.flash import FORMAT, FlashError, FlashStore
 
 
@@ -130,7 +130,7 @@ def test_an_unreadable_file_is_refused_and_kept(store, content):
         store.load()
     assert str(store.path) in str(err.value)
     with pytest.raises(FlashError):
-        Bench([1], flash=store.path)
+        EmulatedBench([1], flash=store.path)
     assert store.path.read_bytes() == content  # never overwritten
     assert _leftovers(store) == []
 
@@ -162,7 +162,7 @@ def test_opening_a_sim_bus_on_a_corrupt_flash_fails_and_keeps_the_file(tmp_path)
 
 def test_a_bench_persists_on_power_off_and_only_when_changed(tmp_path):
     path = tmp_path / "esc-flash.json"
-    bench = Bench([1, 2], flash=path)
+    bench = EmulatedBench([1, 2], flash=path)
     bench.power_on(0.0)
     bench.power_off(1.0)
     stored = FlashStore(path).load()
@@ -171,7 +171,7 @@ def test_a_bench_persists_on_power_off_and_only_when_changed(tmp_path):
     os.utime(path, ns=(0, 0))
     bench.persist()  # nothing changed since
     assert path.stat().st_mtime_ns == 0 != mtime
-    again = Bench([5, 6], flash=path)  # the flash's node ids win over the factory ones
+    again = EmulatedBench([5, 6], flash=path)  # the flash's node ids win over the factory ones
     assert [e.node_id for e in again.escs] == [1, 2]
     again.power_on(2.0)
     again.power_off(3.0)

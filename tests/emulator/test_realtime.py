@@ -31,8 +31,8 @@ from ckesc.bench.dut import echo_probe
 from ckesc.bench.lanes import BusLane
 from ckesc.bench.power import NoPower
 from ckesc.cli import main
-from ckesc.emulator.bench import Bench
 from ckesc.emulator.control import control_request
+from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.emulator.flash import FlashStore
 from ckesc.emulator.realtime import RealtimeEmulator
 from ckesc.emulator.realtime_timing import Histogram
@@ -384,7 +384,7 @@ def virtual(request):
         channel = f"ckesc-rt-{os.getpid()}-{next(_channels)}"
         emu_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True, ignore_config=True)
         host = can.Bus(interface="virtual", channel=channel, receive_own_messages=True, ignore_config=True)
-        emu = RealtimeEmulator(Bench(nodes, flash=kwargs.pop("flash", None)), bus=emu_bus, own_bus=True, **kwargs)
+        emu = RealtimeEmulator(EmulatedBench(nodes, flash=kwargs.pop("flash", None)), bus=emu_bus, own_bus=True, **kwargs)
         made.append((emu, host))
         return emu.start(), host
 

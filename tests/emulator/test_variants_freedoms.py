@@ -124,6 +124,8 @@ def test_service_delay_places_the_answer(delay):
 @pytest.mark.parametrize("choice", ["current", "none", "echo"])
 def test_rejected_answer_answers_an_illegal_or_refused_request_so_and_applies_nothing(choice):
     esc = Esc(rejected_answer=choice)
+    heard = []  # the model's public hook hears every rejected request, whatever its answer (the explorer's oracle)
+    esc.model.on_rejected = lambda req: heard.append(req.name)
     illegal = {"option": 1, "msg1_interval": 9, "msg2_interval": 60, "msg3_interval": 250}
     got = esc.answers(esc.send("set_freq", illegal), "set_freq")
     assert (esc.model.nvm["msg1_interval"], esc.model.nvm["msg2_interval"]) == (10, 50)  # nothing applied
@@ -136,9 +138,11 @@ def test_rejected_answer_answers_an_illegal_or_refused_request_so_and_applies_no
     assert esc.model.node_id == NODE
     assert [(f.fields["node_id"], f.fields["throttle_channel"]) for f in got] == {
         "current": [(1, 1)], "none": [], "echo": [(5, 5)]}[choice]
-    # a legal, accepted request is answered as before
+    assert heard == ["set_freq", "set_id"]
+    # a legal, accepted request is answered as before, and not heard as rejected
     legal = {"option": 1, "msg1_interval": 11, "msg2_interval": 50, "msg3_interval": 250}
     assert [f.fields["msg1_interval"] for f in esc.answers(esc.send("set_freq", legal), "set_freq")] == [11]
+    assert heard == ["set_freq", "set_id"]
 
 
 @pytest.mark.parametrize("choice, throttle", [("clamp", 2000), ("hold", 500), ("zero", 0)])

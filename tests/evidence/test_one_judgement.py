@@ -1,5 +1,5 @@
 """One trace, four consumers, one finding (issue #28): the frames of an emulated ESC judged by the conformance
-suite's R9 check (:func:`conformance.reports` calls ``judgements.r9_judged`` / ``r9_mean``), the live bus rules
+suite's R9 check (:func:`conformance.telemetry` calls ``judgements.r9_judged`` / ``r9_mean``), the live bus rules
 (:mod:`ckesc.evidence.rules`), ``ckesc explore``'s judge (against its faultless oracle) and ``ckesc check-log`` (the
 command, over a candump log of the same frames). An ESC whose MSG1 comes every 30 ms instead of 20 (the emulator's
 fault ``report_interval_wrong``) is R9 to all four; the faultless ESC is R9 to none."""
@@ -51,7 +51,7 @@ def _trace(faults: tuple[str, ...]) -> tuple[can.Message, list[can.Message]]:
 
 
 def _conformance(ask, heard) -> set[str]:
-    """As ``conformance.reports.check_restart`` judges a report's interval: the mean of R9_GAPS gaps from the second
+    """As ``conformance.telemetry.check_restart`` judges a report's interval: the mean of R9_GAPS gaps from the second
     report after the event on, against the interval the node's answer states."""
     decoder = Decoder()
     frames = [decoder.decode(m) for m in heard]

@@ -27,7 +27,7 @@ from ckesc.bench.dut import Dut
 from ckesc.bench.lanes import BenchGone, BusFault, BusLane
 from ckesc.bench.power import NoPower
 from ckesc.bench.profile import DutProfile
-from ckesc.emulator.bench import Bench
+from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.emulator.realtime import RealtimeEmulator
 
 _channels = itertools.count()
@@ -46,7 +46,7 @@ def flaky(monkeypatch):
     def start(fail_after: int, recover: bool = True) -> Dut:
         channel = f"ckesc-flaky-{os.getpid()}-{next(_channels)}"
         emu_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True, ignore_config=True)
-        emu = RealtimeEmulator(Bench((1,)), bus=emu_bus, own_bus=True).start()
+        emu = RealtimeEmulator(EmulatedBench((1,)), bus=emu_bus, own_bus=True).start()
         lane = BusLane({"interface": "flaky-virtual", "channel": channel, "fail_after": fail_after, "recover": recover,
                         "ignore_config": True}, NoPower(), timing_error=0.002)
         made.append((emu, lane))

@@ -1,6 +1,6 @@
 """The conformance package's own layout (issue #15): a test module holds one section's tests and is
 nobody's library. What several modules share lives in the package's non-test modules
-(``conformance/reports.py``, ``throttle.py``, ...), so no module there imports a ``test_*`` module.
+(``conformance/telemetry.py``, ``throttle.py``, ...), so no module there imports a ``test_*`` module.
 Read with ``ast`` from the source, without importing the modules."""
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ from ckesc.bench.dut import Dut, echo_probe
 from ckesc.bench.lanes import BusLane, OwnFrame
 from ckesc.bench.power import NoPower
 from ckesc.bench.profile import DutProfile
-from ckesc.emulator.bench import Bench
+from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.emulator.realtime import RealtimeEmulator
 from ckesc.evidence.live import LaneRules
 
@@ -48,7 +48,7 @@ def bench():
     def start(echo: bool):
         channel = f"ckesc-no-echo-{os.getpid()}-{next(_channels)}"
         emu_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True, ignore_config=True)
-        emu = RealtimeEmulator(Bench((1,)), bus=emu_bus, own_bus=True).start()
+        emu = RealtimeEmulator(EmulatedBench((1,)), bus=emu_bus, own_bus=True).start()
         lane = BusLane({"interface": "virtual", "channel": channel, "receive_own_messages": echo, "ignore_config": True},
                        NoPower(), timing_error=0.002)
         rules = LaneRules(lane)

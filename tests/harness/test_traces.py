@@ -16,7 +16,7 @@ from ckesc.bench.lanes import SimLane
 from ckesc.protocol import DecodeError, Decoder, encode
 from ckesc.protocol.ids import parse_can_id
 from ckesc.session.lane_setup import MULTI_NODES
-from ckesc.session.traces import TRACE_FORMATS, TestTraces, trace_name
+from ckesc.session.trace_files import TRACE_FORMATS, TestTraces, trace_name
 
 
 class _Collect(can.Listener):

@@ -10,7 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ckesc.bench.verdict import Record
+from ckesc.bench.outcomes import Record
 
 CKESC = [sys.executable, "-m", "ckesc"]
 
@@ -40,7 +40,7 @@ _SUITE = '''
 import pytest
 from dataclasses import dataclass
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 
 SECTION = "4.4.2"
 

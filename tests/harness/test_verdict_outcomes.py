@@ -1,5 +1,5 @@
 """One verdict decision from typed outcomes (issue #28, item 3): INCONCLUSIVE is what an
-:class:`~ckesc.bench.verdict.Inconclusive` (or a measurement inside the bench's error) ends a test with, SKIPPED
+:class:`~ckesc.bench.outcomes.Inconclusive` (or a measurement inside the bench's error) ends a test with, SKIPPED
 any other skip, whatever words their messages use. Tried in a real pytest process against the emulator. (A test
 citing an unknown requirement id stops the run at collection: ``ckesc.session.collection``; every id the suites cite
 is checked statically in test_requirements.py.)"""
@@ -14,7 +14,7 @@ from pathlib import Path
 _SUITE = '''
 import pytest
 
-from ckesc.bench.verdict import Inconclusive
+from ckesc.bench.outcomes import Inconclusive
 
 SECTION = "4.4.2"
 

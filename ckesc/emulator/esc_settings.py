@@ -10,7 +10,7 @@ from ..protocol import catalogue as cat
 from ..protocol.catalogue import BAUD_RATES, CONFIG_WINDOW_S, EXPAND_COMMANDS, INTERVAL_UNIT_S
 from ..protocol.frame import Frame
 from .config import factory_nvm
-from .reporting import REPORT_NAMES, SUSPENDED
+from .esc_telemetry import REPORT_NAMES, SUSPENDED
 
 
 class Settings:

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """Lateness of the real-time emulator (``ckesc emulate``): a script run by hand, not a unit test.
 
-    python bench/bench_realtime.py                  # 60 s per run; writes bench/results/realtime.json
-    python bench/bench_realtime.py --seconds 20     # shorter runs
-    python bench/bench_realtime.py --seconds 5 --nodes 20 --out /tmp/rt.json --no-readme   # a quick look
+    python benchmarks/realtime.py                  # 60 s per run; writes benchmarks/results/realtime.json
+    python benchmarks/realtime.py --seconds 20     # shorter runs
+    python benchmarks/realtime.py --seconds 5 --nodes 20 --out /tmp/rt.json --no-readme   # a quick look
 
 Each run starts ``ckesc emulate --nodes 1-N --socketcand 0 --control 0`` in its own process, as the suite
 uses it, connects python-can's stock socketcand client from this process (a thread reads every frame, as a
@@ -51,12 +51,12 @@ import can
 from ckesc.emulator.realtime_timing import Histogram
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_decode import cpu_model  # noqa: E402
+from decode import cpu_model  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_OUT = HERE / "results" / "realtime.json"
 README = HERE / "README.md"
-BEGIN, END = "<!-- bench_realtime: begin -->", "<!-- bench_realtime: end -->"
+BEGIN, END = "<!-- benchmarks/realtime.py: begin -->", "<!-- benchmarks/realtime.py: end -->"
 TARGET_P99_US = 1000.0
 TARGET_NODES = 20
 DEFAULT_SPREAD = 0.02
@@ -204,7 +204,7 @@ def table(runs: list[dict[str, Any]]) -> str:
 
 
 def update_readme(report: dict[str, Any], command: str) -> None:
-    """Write the figures between this script's markers in bench/README.md (the section is added once)."""
+    """Write the figures between this script's markers in benchmarks/README.md (the section is added once)."""
     text = README.read_text(encoding="utf-8") if README.exists() else "# Benchmarks\n"
     figures = (f"{BEGIN}\nMeasured on {report['date'][:10]} with `{command}`: {report['cpu']}, {os.cpu_count()} vCPUs, "
                f"Linux {platform.release()}, CPython {report['python']}, python-can {report['versions']['python-can']}.\n\n"
@@ -221,12 +221,12 @@ def update_readme(report: dict[str, Any], command: str) -> None:
 
 
 SECTION = """
-## Real-time emulator lateness: `bench_realtime.py`
+## Real-time emulator lateness: `realtime.py`
 
 ```sh
 . .venv/bin/activate
-python bench/bench_realtime.py                 # 10 runs of 60 s, about 12 minutes
-python bench/bench_realtime.py --seconds 20    # shorter
+python benchmarks/realtime.py                 # 10 runs of 60 s, about 12 minutes
+python benchmarks/realtime.py --seconds 20    # shorter
 ```
 
 Each run starts `ckesc emulate --nodes 1-N --socketcand 0 --control 0` in its own process and reads every frame
@@ -241,7 +241,7 @@ that was busy meanwhile (from `/proc/stat`: the emulator, the reading client, th
 running on the machine). "SCHED_FIFO" runs use `--rt-priority 10`. "lockstep" runs use `--boot-spread 0`
 (every ESC boots at the same instant, as in the simulated lane); the default spreads the ESCs' boot times over
 one MSG1 interval (20 ms), as the ESCs of a real bench are never in step. The script writes
-`bench/results/realtime.json` and the table below, and exits 1 if the target (p99 <= 1 ms at 20 ESCs) is missed.
+`benchmarks/results/realtime.json` and the table below, and exits 1 if the target (p99 <= 1 ms at 20 ESCs) is missed.
 """
 
 
@@ -250,8 +250,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--seconds", type=float, default=60.0, help="measurement per run (default 60)")
     ap.add_argument("--nodes", default="1,8,20", help="ESC counts to run (default 1,8,20)")
     ap.add_argument("--no-extra", action="store_true", help="skip the 20-ESC runs with SCHED_FIFO and in lockstep")
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON result (default bench/results/realtime.json)")
-    ap.add_argument("--no-readme", action="store_true", help="do not write the figures into bench/README.md")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON result (default benchmarks/results/realtime.json)")
+    ap.add_argument("--no-readme", action="store_true", help="do not write the figures into benchmarks/README.md")
     args = ap.parse_args(argv)
 
     logging.getLogger("can.interfaces.socketcand").setLevel(logging.ERROR)  # "Got incomplete message": TCP split a frame
@@ -281,7 +281,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "cpus": os.cpu_count(),
         "versions": {"python-can": can.__version__},
         "seconds_per_run": args.seconds,
-        "method": "see bench/bench_realtime.py docstring; figures in µs",
+        "method": "see benchmarks/realtime.py docstring; figures in µs",
         "runs": runs,
         "target": {"lateness_p99_us": TARGET_P99_US, "nodes": TARGET_NODES, "p99_us": p99, "met": met},
     }
@@ -293,7 +293,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"\n{table(runs)}\n\ntarget lateness p99 <= {TARGET_P99_US:g} us at {TARGET_NODES} ESCs: {verdict} {p99}")
     print(f"wrote {args.out}")
     if not args.no_readme and target_runs:
-        command = "python bench/bench_realtime.py" + ("" if args.seconds == 60 else f" --seconds {args.seconds:g}")
+        command = "python benchmarks/realtime.py" + ("" if args.seconds == 60 else f" --seconds {args.seconds:g}")
         update_readme(report, command)
         print(f"updated {README}")
     return 1 if met is False else 0

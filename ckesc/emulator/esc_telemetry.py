@@ -31,7 +31,7 @@ _PWM, _CCW, _COMM_FAULT, _RUNNING = (int(Status.THROTTLE_PWM), int(Status.DIRECT
                                      int(Status.RUNNING))
 
 
-class Reporting:
+class Telemetry:
     """Part of :class:`~ckesc.emulator.model.EscModel`: the report streams and their timers."""
 
     def _reports_active(self) -> bool:

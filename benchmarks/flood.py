@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Memory and verdicts of ``ckesc run`` against a DUT that floods the bus: a script run by hand, not a unit test.
 
-    python bench/bench_flood.py                    # writes bench/results/flood.json
-    python bench/bench_flood.py --rate 2000 --out /tmp/flood.json   # a quick look at a lighter flood
+    python benchmarks/flood.py                    # writes benchmarks/results/flood.json
+    python benchmarks/flood.py --rate 2000 --out /tmp/flood.json   # a quick look at a lighter flood
 
 ``ckesc emulate --nodes 1 --socketcand 0`` is the DUT (node 1) on a socketcand bus. A second process, the
 flooder, joins the same bus with python-can's stock socketcand client and sends garbage from node 1 for as

@@ -1,7 +1,7 @@
 """``ckesc check-log`` throughput and memory over a capture of a saturated 1 Mbit/s bus.
 
 The capture is generated once by the emulator in simulated time and streamed to disk as a candump
-log (cached under ``bench/.cache/``, outside git): 38 ESCs reporting MSG1, MSG2 and MSG3 every 20 ms
+log (cached under ``benchmarks/.cache/``, outside git): 38 ESCs reporting MSG1, MSG2 and MSG3 every 20 ms
 (the shortest legal interval, set by Set/Get Freq writes the capture holds) and a host sending
 RawCommand_12b at 400 Hz on all 5 groups plus GET_ESC_ID once a second: about 96 % bus load, 7,700
 frames/s. A second capture, the first fifth of the first, shows that memory does not grow with the
@@ -14,7 +14,7 @@ processes on a shared machine disturb far less; peak RSS from the same rusage. A
 capture. Target: >= 160k frames/s (an hour of such a bus, 28 million frames, in under 3 minutes).
 The run also checks that the faultless emulator's saturated bus breaks no rule (exit 0).
 
-    python bench/bench_checklog.py [--frames 5000000] [--repeat 3] [--regenerate]
+    python benchmarks/checklog.py [--frames 5000000] [--repeat 3] [--regenerate]
 """
 
 from __future__ import annotations
@@ -165,7 +165,7 @@ def main() -> int:
     Path(args.out).write_text(json.dumps(doc, indent=1) + "\n")
     clean = all(r["exit"] == 0 and r["violations"] == 0 for res in results.values() for r in res["runs"])
     if not clean:
-        print("the faultless emulator's capture broke a rule: a false alarm (see bench/.cache/result.json)", file=sys.stderr)
+        print("the faultless emulator's capture broke a rule: a false alarm (see benchmarks/.cache/result.json)", file=sys.stderr)
     return 0 if clean and doc["met"] else 1
 
 

@@ -8,9 +8,9 @@ collection order, each window test sitting its window out (the "before"); ``over
 other tests while a window elapses. Targets: the whole run <= 600 s of simulated protocol time, and
 <= 600 s wall in the real-time lane.
 
-    python bench/bench_suite.py             # simulated lane, both orders (seconds)
-    python bench/bench_suite.py --realtime  # also the real-time lane, overlap order (about 12 minutes)
-    python bench/bench_suite.py --realtime --realtime-orders overlap,collection   # both (about 35 minutes)
+    python benchmarks/suite.py             # simulated lane, both orders (seconds)
+    python benchmarks/suite.py --realtime  # also the real-time lane, overlap order (about 12 minutes)
+    python benchmarks/suite.py --realtime --realtime-orders overlap,collection   # both (about 35 minutes)
 """
 
 from __future__ import annotations

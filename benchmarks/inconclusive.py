@@ -4,11 +4,11 @@ drawn conforming variant, in the simulated lane, in real time with the bus's ech
 clock, +-4 ms on a 2 ms bench), with every INCONCLUSIVE listed with its reason and any FAIL or ERROR (on a conforming
 emulator, the suite's bug, or the machine's load beyond the stated error).
 
-    python bench/bench_inconclusive.py                         # every configuration (about 35 minutes)
-    python bench/bench_inconclusive.py --configs sim sim-variant
-    python bench/bench_inconclusive.py --seed 3 --out /tmp/inc.json
+    python benchmarks/inconclusive.py                         # every configuration (about 35 minutes)
+    python benchmarks/inconclusive.py --configs sim sim-variant
+    python benchmarks/inconclusive.py --seed 3 --out /tmp/inc.json
 
-Writes ``bench/results/inconclusive.json`` (per configuration: the counts, each INCONCLUSIVE's test and message,
+Writes ``benchmarks/results/inconclusive.json`` (per configuration: the counts, each INCONCLUSIVE's test and message,
 every FAIL/ERROR, the load average around it) and prints a table.
 """
 

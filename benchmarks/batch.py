@@ -11,11 +11,11 @@ For each lane, one bench alone (``ckesc run`` with no rig: the baseline), then b
 benches of the same sections, one after another in this one run. A batch in which a bench did not pass is
 recorded with the tests that failed (an overloaded machine fails real-time timing tests) and makes the exit 1.
 
-    python bench/bench_batch.py                           # both lanes, N = 1 2 4 8 (about 10 minutes)
-    python bench/bench_batch.py --lanes realtime --n 1 4  # a quick look
-    python bench/bench_batch.py --out /tmp/batch.json
+    python benchmarks/batch.py                           # both lanes, N = 1 2 4 8 (about 10 minutes)
+    python benchmarks/batch.py --lanes realtime --n 1 4  # a quick look
+    python benchmarks/batch.py --out /tmp/batch.json
 
-Writes ``bench/results/batch.json`` (the machine, the load average around each run, every wall time).
+Writes ``benchmarks/results/batch.json`` (the machine, the load average around each run, every wall time).
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
-"""Each conformance test's CAN trace in the run's ``traces/`` (the writer: :mod:`.traces`): one writer per run,
-its listener on every lane the plugin opens, and a trace spanning each test's setup, call and teardown."""
+"""The hooks that trace each conformance test's frames into the run's ``traces/`` (the files are written by
+:mod:`.trace_files`): one writer per run, its listener on every lane the plugin opens, and a trace spanning each
+test's setup, call and teardown."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from ..bench.lanes import Lane
 from .collection import is_conformance
 from .safety import EXIT_READ_S, zero_throttle_now
 from .state import report_dir, state
-from .traces import TestTraces
+from .trace_files import TestTraces
 
 _WRITER = pytest.StashKey[TestTraces]()
 #: trace files a test made before its own protocol (its write before a shared cold boot), by lane

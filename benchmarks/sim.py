@@ -4,7 +4,7 @@
 RawCommand_12b at 400 Hz on all 5 groups (2000 throttle frames/s), at 1 Mbit/s. Target: >= 20x
 real time. A script, not a timed test:
 
-    python bench/bench_sim.py [--seconds 30] [--repeat 3] [--profile]
+    python benchmarks/sim.py [--seconds 30] [--repeat 3] [--profile]
 """
 
 from __future__ import annotations

@@ -6,11 +6,11 @@ and the judge run) and real time against ``ckesc emulate`` (protocol-bound: powe
 simulated lane's programs may wait out the 120 s Set ID window; real time leaves those out (a program would take
 two minutes).
 
-    python bench/bench_explore.py                            # both lanes (about 3 minutes)
-    python bench/bench_explore.py --lanes simulated --programs 200
-    python bench/bench_explore.py --out /tmp/explore.json
+    python benchmarks/explore.py                            # both lanes (about 3 minutes)
+    python benchmarks/explore.py --lanes simulated --programs 200
+    python benchmarks/explore.py --out /tmp/explore.json
 
-Writes ``bench/results/explore.json`` (the machine, each lane's figures).
+Writes ``benchmarks/results/explore.json`` (the machine, each lane's figures).
 """
 
 from __future__ import annotations

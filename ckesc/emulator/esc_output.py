@@ -73,7 +73,10 @@ class Output:
 
     def _respond_rejected(self, req: Frame, now: float, current: dict) -> None:
         """The answer to a request that changed nothing (an illegal value, or refused: R10-R12 leave open
-        whether, and with what, it is answered): the current values, none, or the request's values echoed."""
+        whether, and with what, it is answered): the current values, none, or the request's values echoed. The
+        model's ``on_rejected`` hook, if set, hears of the request first."""
+        if self.on_rejected is not None:
+            self.on_rejected(req)
         how = self.config.rejected_answer
         if how == "current":
             self._respond(req, now, current)

@@ -1,4 +1,5 @@
-"""Per-test CAN traces, written by python-can's own log writers.
+"""The trace files: per-test CAN traces, written by python-can's own log writers (the hooks that decide which
+test and lanes a trace spans: :mod:`.trace_hooks`).
 
 The plugin puts a :meth:`TestTraces.listener` on every lane it opens (``lane.listeners``).
 Between :meth:`TestTraces.begin` and :meth:`TestTraces.end` (a test's setup, call and teardown)

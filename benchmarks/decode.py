@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Decode throughput on a realistic bus: a script run by hand, not a unit test.
 
-    python bench/bench_decode.py                 # 1,000,000 frames, best of 5; writes bench/results/decode.json
-    python bench/bench_decode.py --frames 100000 --repeat 3 --out /tmp/decode.json   # a quick look
+    python benchmarks/decode.py                 # 1,000,000 frames, best of 5; writes benchmarks/results/decode.json
+    python benchmarks/decode.py --frames 100000 --repeat 3 --out /tmp/decode.json   # a quick look
 
 The bus (F1-F3, R2, R4, R9 defaults): 20 ESCs (nodes 1..20) report MSG1 every 20 ms, MSG2 every 100 ms and
 MSG3 every 500 ms (the default intervals 10/50/250 x 2 ms); the host (node 0) sends RawCommand_12b at 400 Hz on
@@ -280,7 +280,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=1_000_000, help="frames on the synthetic bus (default 1,000,000)")
     ap.add_argument("--repeat", type=int, default=5, help="runs per measurement, best kept (default 5)")
     ap.add_argument("--dronecan-repeat", type=int, default=3, help="runs per dronecan measurement (slow; default 3)")
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON result (default bench/results/decode.json)")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON result (default benchmarks/results/decode.json)")
     ap.add_argument("--no-dronecan", action="store_true", help="skip the dronecan comparison")
     args = ap.parse_args(argv)
 
@@ -335,7 +335,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "mix": dict(mix.most_common()),
             "hobbywing_subset": len(subset),
         },
-        "method": "best of N, gc off during a run, loop included; see bench/bench_decode.py docstring",
+        "method": "best of N, gc off during a run, loop included; see benchmarks/decode.py docstring",
         "results": results,
         "targets": {k: {"frames_per_s": v, "met": met[k]} for k, v in TARGETS.items()},
     }

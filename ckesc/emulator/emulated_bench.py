@@ -1,6 +1,7 @@
-"""A bench: several emulated ESCs on one power supply, sharing one bus.
+"""The emulated bench: several emulated ESCs on one power supply, sharing one bus (the host's side of a
+bench, its lanes and power, is :mod:`ckesc.bench`).
 
-Both lanes drive a :class:`Bench`: it delivers a frame to every powered ESC listening at the
+Both lanes drive an :class:`EmulatedBench`: it delivers a frame to every powered ESC listening at the
 frame's bit rate, collects what the ESCs have due, and keeps their flash. Still sans-IO except for
 the flash file, which it writes only when told to (:meth:`persist`).
 """
@@ -24,7 +25,7 @@ def _or_inf(t: float | None) -> float:
     return INF if t is None else t
 
 
-class Bench:
+class EmulatedBench:
     def __init__(
         self,
         nodes: Iterable[int] = (1,),
