@@ -146,7 +146,9 @@ def test_a_partly_applied_illegal_write_names_each_changed_setting_from_what_to_
     assert ("after the illegal write msg1_interval 20, msg2_interval 9, msg3_interval 200 and a power cycle: "
             "msg1_interval 10 -> 20, msg3_interval 250 -> 200") in by["test_illegal_write_changes_nothing_after_power_cycle"]
     summary = (next(p for p in tmp_path.iterdir() if p.is_dir() and not p.is_symlink()) / "summary.txt").read_text()
-    assert "changed msg1_interval 10 -> 20, msg3_interval 250 -> 200 - in 3 tests" in summary, summary
+    # the cause's heading is its first test's own line, never edited (issue #29 item 3)
+    assert ("illegal msg2_interval=9 changed msg1_interval 10 -> 20, msg3_interval 250 -> 200 (R10: ignored, never partly "
+            "applied) - in 3 tests") in summary, summary
 
 
 def test_a_setting_taken_while_suspended_names_its_old_and_new_value(tmp_path):
