@@ -180,7 +180,6 @@ def open_bus(kwargs: dict[str, Any], timeout: float = BUS_OPEN_TIMEOUT_S) -> Non
     _shutdown(open_bus_bounded(kwargs, timeout))
 
 
-
 def bus_kwargs(options: BenchOptions) -> dict[str, Any]:
     """python-can's arguments for --dut bus: the options, then CAN_* and can.conf (a mistake: PreflightError)."""
     import can

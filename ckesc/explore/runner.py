@@ -1,11 +1,12 @@
 """Running a program on the DUT, with the oracle model in lockstep and the live bus rules listening (the IO part).
 
-:class:`Session` opens the bench as ``ckesc run`` would (the same options, the same lanes and profile), finds
-the DUT and notes its settings: the *baseline* every program starts from. :meth:`Session.run` puts the DUT back
-into that known state (a power cycle where the bench has power control, then the settings restored and
-verified, as the suite's ``dut`` fixture does), runs the program step by step, feeds every host frame and power
-switch to a fresh :class:`~ckesc.explore.oracle.Oracle` after each step (so that a request goes to the node id
-the model says the DUT has), reads the settings back at the end, and returns an :class:`Outcome`.
+:class:`Session` builds the bench as ``ckesc run`` does (:func:`ckesc.bench.station.build`: the same options,
+checks, lanes and profile), finds the DUT and notes its settings: the *baseline* every program starts from.
+:meth:`Session.run` puts the DUT back into that known state (a power cycle where the bench has power control, then
+the settings restored and verified, as the suite's ``dut`` fixture does), runs the program step by step, feeds
+every host frame and power switch to a fresh :class:`~ckesc.explore.oracle.Oracle` after each step (so that a
+request goes to the node id the model says the DUT has), reads the settings back at the end, and returns an
+:class:`Outcome`.
 """
 
 from __future__ import annotations

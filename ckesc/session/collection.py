@@ -124,9 +124,10 @@ def cycles_power(items: list[pytest.Item]) -> bool:
 
 
 def bench_proof(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The bench proven before any test (:meth:`~ckesc.bench.station.Station.prove`), once, where a selected test may
-    cycle power with the power switch, and the profile's defaults a real bus takes: said on the console and kept for the reports (``info["bench"]``); a failure is a ``pytest.UsageError``
-    (exit 2, no report), as the preflight's."""
+    """The bench proven before any test (:meth:`~ckesc.bench.station.Station.prove`), once, with its power switch
+    where a selected test may cycle power, and the profile's defaults a real bus takes: said on the console and kept
+    for the reports (``info["bench"]``); a failure is a ``pytest.UsageError`` (exit 2, no report), as the
+    preflight's."""
     if config.stash.get(_PROVEN, False):
         return
     config.stash[_PROVEN] = True
