@@ -201,15 +201,17 @@ class BatchError(ValueError):
 def _static_preflight(bench) -> None:
     """The bench's preflight without its bus (that is opened by its own worker: a bench that is not there is
     ABSENT, not a set-up mistake of the batch)."""
-    from .session import preflight
+    from .bench import checks
+    from .bench.errors import PreflightError
+    from .bench.station import BenchOptions
 
-    opts = {**options.BENCH_OPTIONS, "ckesc_reports": None, **bench.options()}
+    opts = {**options.BENCH_OPTIONS, **bench.options()}
     if opts.get("power") == "manual":
         raise BatchError(f"bench {bench.name}: power 'manual' prompts an operator at the console, which a batch cannot; "
                          f"run that bench alone: {bench.command_line()}")
     try:
-        preflight.run(lambda dest: opts.get(dest), bus_kwargs=None)
-    except preflight.PreflightError as exc:
+        checks.check(BenchOptions.of(opts.get))
+    except PreflightError as exc:
         raise BatchError(f"bench {bench.name}: {exc}") from None
 
 

@@ -4,8 +4,8 @@
 The built-in backends are ``emulator`` (the simulated bench's own switch), ``command`` (shell commands,
 e.g. a lab PSU's CLI), ``labgrid`` (labgrid's power drivers, :mod:`.labgrid_power`), ``manual`` (an
 operator) and ``none``. Another package adds one the way python-can finds interfaces: an entry point in
-the ``ckesc.power`` group naming a factory ``factory(get, prompt) -> PowerControl`` (``get``: the run's
-options by name; ``prompt``: asks the operator), e.g. in its pyproject.toml::
+the ``ckesc.power`` group naming a factory ``factory(get, prompt) -> PowerControl`` (``get``: the bench's
+options by name, :meth:`.station.BenchOptions.get`; ``prompt``: asks the operator), e.g. in its pyproject.toml::
 
     [project.entry-points."ckesc.power"]
     my-psu = "my_package.power:open_psu"

@@ -1,8 +1,10 @@
 """``ckesc profile``: DUT profiles as conformance statements (issue #29): ``show`` and ``list`` the profiles,
 ``init`` writes one from what the DUT answers, ``check`` says where a profile and the DUT disagree.
 
-``init`` and ``check`` open the bench as ``ckesc explore`` does (``ckesc run``'s bench options, the explorer's
-:class:`~ckesc.explore.runner.Session`) and ask the DUT with reads only (:mod:`ckesc.bench.statement`)."""
+``init`` and ``check`` build the bench from ``ckesc run``'s bench options as every command does
+(:class:`~ckesc.bench.station.BenchOptions`, :func:`~ckesc.bench.station.build`), find the DUT on it as
+``ckesc explore`` does (its :class:`~ckesc.explore.runner.Session`) and ask it with reads only
+(:mod:`ckesc.bench.statement`)."""
 
 from __future__ import annotations
 
@@ -108,10 +110,11 @@ def _ask(args: argparse.Namespace):
     from ..bench import statement
     from ..bench.dut import DutError
     from ..bench.lanes import BenchGone
+    from ..bench.station import BenchOptions
     from ..explore import command
 
     try:
-        session = command.open_session(command.bench_options(args))
+        session = command.open_session(BenchOptions.of(vars(args).get))
     except command.BenchProblem as exc:
         print(f"ckesc profile {args.action}: {exc}", file=sys.stderr)
         return None, None

@@ -11,11 +11,12 @@ from typing import Any, TextIO
 from ..bench.dut import DutError
 from ..bench.errors import PreflightError
 from ..bench.lanes import BenchGone
+from ..bench.station import BenchOptions
 from .engine import Stats, explore
 from .report import load_replay, run_dir, summary_text, write_reports
-from .runner import DEFAULTS, RestoreError, Session
+from .runner import OPTION_NAMES, RestoreError, Session
 
-BENCH_OPTIONS = tuple(DEFAULTS)
+BENCH_OPTIONS = OPTION_NAMES
 
 
 class BenchProblem(RuntimeError):
@@ -23,10 +24,14 @@ class BenchProblem(RuntimeError):
 
 
 def bench_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The bench options given on the command line (None: not given), as the reports and a replay file keep them;
+    :class:`Session` makes its :class:`~ckesc.bench.station.BenchOptions` of them."""
     return {k: getattr(args, k) for k in BENCH_OPTIONS if getattr(args, k, None) is not None}
 
 
-def open_session(options: dict[str, Any]) -> Session:
+def open_session(options: BenchOptions | dict[str, Any]) -> Session:
+    """The bench of ``options``, built and its DUT found (:class:`Session`); a set-up mistake is a ``ValueError``
+    (exit 2), a bench that cannot be used a :class:`BenchProblem` (exit 3)."""
     try:
         return Session(options)
     except PreflightError as exc:  # a set-up mistake (options, fault names, profile): a usage error

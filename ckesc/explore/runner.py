@@ -1,36 +1,36 @@
 """Running a program on the DUT, with the oracle model in lockstep and the live bus rules listening (the IO part).
 
-:class:`Session` opens the bench as ``ckesc run`` would (the same options, the same lanes and profile), finds
-the DUT and notes its settings: the *baseline* every program starts from. :meth:`Session.run` puts the DUT back
-into that known state (a power cycle where the bench has power control, then the settings restored and
-verified, as the suite's ``dut`` fixture does), runs the program step by step, feeds every host frame and power
-switch to a fresh :class:`~ckesc.explore.oracle.Oracle` after each step (so that a request goes to the node id
-the model says the DUT has), reads the settings back at the end, and returns an :class:`Outcome`.
+:class:`Session` builds the bench as ``ckesc run`` does (:func:`ckesc.bench.station.build`: the same options,
+checks, lanes and profile), finds the DUT and notes its settings: the *baseline* every program starts from.
+:meth:`Session.run` puts the DUT back into that known state (a power cycle where the bench has power control, then
+the settings restored and verified, as the suite's ``dut`` fixture does), runs the program step by step, feeds
+every host frame and power switch to a fresh :class:`~ckesc.explore.oracle.Oracle` after each step (so that a
+request goes to the node id the model says the DUT has), reads the settings back at the end, and returns an
+:class:`Outcome`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import can
 
 from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
+from ..bench.errors import PreflightError
 from ..bench.lanes import BusLane, Lane
 from ..bench.outcomes import Inconclusive
-from ..emulator import variants
+from ..bench.station import BENCH_ROWS, BenchOptions, build
 from ..evidence.live import LaneRules
 from ..protocol import catalogue as cat
 from ..protocol.errors import DecodeError
 from ..protocol.frame import Decoder, Frame
-from ..session import lane_setup, options, preflight
 from .actions import Action, Bench, stream_fields
 from .judge import Finding, Params, judge
 from .oracle import SETTING_KEYS, Oracle
 
-#: The bench options and their defaults, as the pytest plugin has them (the one option table)
-DEFAULTS: dict[str, Any] = {o.dest: o.default for o in options.bench_options()}
+#: The bench options by name (:class:`~ckesc.bench.station.BenchOptions`' fields, ``ckesc run``'s bench options)
+OPTION_NAMES: tuple[str, ...] = tuple(o.dest for o in BENCH_ROWS)
 #: The read-back every program ends with: a setting clobbered anywhere in it shows here (242, 214, GET_ESC_ID)
 PROBE = (Action("send", "get_major_configuration", {"option": 0}),
          Action("send", "set_freq", dict(cat.FREQ_READ)),
@@ -42,16 +42,6 @@ SETTLE_S = 0.6  # read after the last step, so that what it did shows (MSG1 and 
 RESTORE_SETTLE_S = 2 * cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S + 0.1
 #: restores (each followed by a power cycle where the bench has power control) until the settings hold
 RESTORE_TRIES = 3
-
-
-class _Options:
-    """What ``lane_setup.make_lane`` asks a pytest config for, from a plain dict of bench options."""
-
-    def __init__(self, options: Mapping[str, Any]) -> None:
-        self.options = {**DEFAULTS, **{k: v for k, v in options.items() if v is not None}}
-
-    def getoption(self, name: str) -> Any:
-        return self.options[name]
 
 
 class Recorder(can.Listener):
@@ -95,25 +85,31 @@ class RestoreError(RuntimeError):
 class Session:
     """One bench, open for a whole exploration (many programs)."""
 
-    def __init__(self, options: Mapping[str, Any]) -> None:
-        self.options = _Options(options)
-        get = self.options.getoption
-        if get("power") == "labgrid":
-            raise preflight.PreflightError("ckesc explore: --power labgrid is not supported yet (use command)")
-        profile = preflight.profile(get)
-        played = lane_setup.emulator_options(self.options) if get("dut") == "emulator" else {}
-        for key, value in variants.declared(played).items():  # what the emulated ESC's vendor would state
-            if value > getattr(profile, key):
-                profile = dataclasses.replace(profile, **{key: value})
+    def __init__(self, options: BenchOptions | Mapping[str, Any]) -> None:
+        """Build the bench of ``options`` (:func:`~ckesc.bench.station.build`, as ``ckesc run`` does: a set-up
+        mistake is a :class:`PreflightError`) and open its lane; a bench option left out (or None) takes its
+        default."""
+        opts = options if isinstance(options, BenchOptions) else BenchOptions.of(dict(options).get)
+        if opts.power == "labgrid":
+            raise PreflightError("ckesc explore: --power labgrid is not supported yet (use command)")
+        self.options = opts
+        self.station = build(opts)
+        try:
+            self._open()
+        except BaseException:
+            self.station.close()
+            raise
+
+    def _open(self) -> None:
+        opts, profile = self.options, self.station.profile
         self.profile = profile
-        self.lane = lane_setup.make_lane(self.options, profile)
+        self.lane = self.station.open_lane()
         self.recorder = Recorder(self.lane)
         self.rules = LaneRules(self.lane, jitter=profile.jitter_s)
         self.lane.listeners.extend([self.recorder, self.rules])
         if isinstance(self.lane, BusLane):
             self.lane.find_echo(echo_probe(nibble_order=profile.nibble_order))
-        spin = get("allow_motor_spin")
-        self.dut = Dut(self.lane, profile, node_id=get("node_id"), allow_motor_spin=bool(spin))
+        self.dut = Dut(self.lane, profile, node_id=opts.node_id, allow_motor_spin=bool(opts.allow_motor_spin))
         self.baseline_node = self.dut.node_id
         self.baseline = self.dut.settings()
         self.baud_code = next((c for c, r in cat.BAUD_RATES.items() if r == self.lane.bitrate), cat.DEFAULT_BAUD_CODE)
@@ -150,7 +146,7 @@ class Session:
                 except RestoreError as exc:
                     self.left = str(exc)
         finally:
-            self.lane.close()
+            self.station.close()
 
     # ---------------------------------------------------------------- known state
     def _reset(self) -> float:

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 
+from ..bench.errors import PreflightError
 from ..bench.outcomes import NotClaimed
 from ..bench.profile import DutProfile
 from ..protocol import functions
 from ..protocol.requirements import REQUIREMENTS, requirement, section_heading
 from . import preflight as checks
-from .lane_setup import bus_kwargs, open_labgrid, prove_bench
 from .state import state
 
 CONFORMANCE_PACKAGE = "conformance"
@@ -88,10 +88,13 @@ def preflight(config: pytest.Config) -> None:
         return
     config.stash[_PREFLIGHT_DONE] = True
     try:
-        state(config).profile = checks.run(config.getoption, bus_kwargs=lambda: bus_kwargs(config),
-                                           labgrid=lambda: open_labgrid(config))
-    except checks.PreflightError as exc:
+        station = checks.run(config)
+    except PreflightError as exc:
         raise pytest.UsageError(f"preflight: {exc}") from None
+    st = state(config)
+    st.station, st.profile = station, station.profile
+    if config.getoption("power") == "labgrid" and station.power is not None:
+        st.info["power_labgrid"] = getattr(station.power, "where", station.power.name)
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -115,17 +118,24 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         bench_proof(session.config, st.selected)
 
 
+def cycles_power(items: list[pytest.Item]) -> bool:
+    """Whether a test of ``items`` may cycle the DUT's power (marker ``power_cycle`` or ``may_power_cycle``)."""
+    return any(it.get_closest_marker("power_cycle") or it.get_closest_marker("may_power_cycle") for it in items)
+
+
 def bench_proof(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The bench proven before any test (:func:`.lane_setup.prove_bench`), once, and the profile's defaults a real
-    bus takes: said on the console and kept for the reports (``info["bench"]``); a failure is a ``pytest.UsageError``
-    (exit 2, no report), as the preflight's."""
+    """The bench proven before any test (:meth:`~ckesc.bench.station.Station.prove`), once, with its power switch
+    where a selected test may cycle power, and the profile's defaults a real bus takes: said on the console and kept
+    for the reports (``info["bench"]``); a failure is a ``pytest.UsageError`` (exit 2, no report), as the
+    preflight's."""
     if config.stash.get(_PROVEN, False):
         return
     config.stash[_PROVEN] = True
     st = state(config)
     try:
-        said = [*(st.profile.defaults_taken if st.profile else ()), *prove_bench(config, items)]
-    except checks.PreflightError as exc:
+        proven = st.station.prove(cycles_power=cycles_power(items)) if st.station is not None else []
+        said = [*(st.profile.defaults_taken if st.profile else ()), *proven]
+    except PreflightError as exc:
         raise pytest.UsageError(f"preflight: {exc}") from None
     if said:
         st.info["bench"] = said

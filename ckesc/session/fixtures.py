@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import signal
 import sys
+from typing import Any
 
 import pytest
 
@@ -19,11 +20,9 @@ from ..bench.profile import DutProfile
 from ..emulator import variants
 from ..protocol import catalogue as cat
 from ..protocol import functions
-from . import preflight
 from .bus_rules import watch_lane
 from .cold_boots import restore_point
-from .collection import check_claims, lacking
-from .lane_setup import echo_info, emulator_options, make_lane, make_multi_lane
+from .collection import check_claims, lacking, preflight
 from .safety import zero_throttle_now
 from .state import EXIT_ABORTED, state
 from .trace_hooks import trace_lane
@@ -45,12 +44,12 @@ def dut_of(item: pytest.Item) -> Dut | None:
 def ckesc_lane(request: pytest.FixtureRequest):
     config = request.config
     st = state(config)
-    profile = st.profile or preflight.profile(config.getoption)  # loaded by the preflight, before any test
-    played = emulator_options(config) if config.getoption("dut") == "emulator" else {}
-    for key, value in variants.declared(played).items():  # what the emulated ESC's vendor would state in its profile
-        if value > getattr(profile, key):
-            profile = dataclasses.replace(profile, **{key: value})
-    lane = make_lane(config, profile)
+    if st.station is None:  # a session whose command line did not name the suite: built now
+        preflight(config)
+    station = st.station
+    assert station is not None
+    profile = station.profile  # with what an emulated ESC's variant declares (its vendor would state it)
+    lane = station.open_lane()
     st.lane, st.profile = lane, profile
     trace_lane(config, lane, "")
     watcher = watch_lane(config, lane)
@@ -63,7 +62,8 @@ def ckesc_lane(request: pytest.FixtureRequest):
                    jitter_s=profile.jitter_s, not_claimed=functions.not_claimed_text(profile.absent),
                    faults=config.getoption("emulator_faults") or "", **echo_info(lane))
     if config.getoption("dut") == "emulator":  # the conforming variant the emulator played, to replay a verdict
-        st.info.update(emulator_variants=variants.describe(played), emulator_variants_seed=config.getoption("emulator_variants"))
+        st.info.update(emulator_variants=variants.describe(station.played),
+                       emulator_variants_seed=config.getoption("emulator_variants"))
     _install_signal_guard(config)
     opened = lane.now()
     yield lane
@@ -76,7 +76,14 @@ def ckesc_lane(request: pytest.FixtureRequest):
     finally:
         if isinstance(lane, BusLane):
             st.info["bus_recoveries"] = list(lane.recoveries)
-        lane.close()
+        station.close_lane()
+
+
+def echo_info(lane: Lane) -> dict[str, Any]:
+    """What the reports say about the host's own frames: whether the bench echoes them, and so which
+    clock times them (results.json and JUnit carry these keys; summary.txt and report.html say them)."""
+    return {"echo": lane.echo, "echo_note": lane.echo_note, "own_frames_clock": lane.own_clock,
+            "own_frames_error_s": round(lane.own_error, 9)}
 
 
 def _check_profile(config: pytest.Config, lane: Lane, profile: DutProfile) -> None:
@@ -205,7 +212,7 @@ def ckesc_run(request: pytest.FixtureRequest) -> RunView:
 
 @pytest.fixture
 def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
-    """Several ESCs on one bus. With the emulator: a private bench of ``lane_setup.MULTI_NODES`` (the main
+    """Several ESCs on one bus. With the emulator: a private bench of ``station.MULTI_NODES`` (the main
     DUT stays alone, as Set ID needs); on a real bus: the bus as it is (capability multi_node), with
     ``dut.nodes`` the node ids that answered GET_ESC_ID. Settings are not snapshotted: tests using it
     must change nothing persistent on a real bus."""
@@ -215,7 +222,9 @@ def multi_dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
     assert profile is not None
     check_claims(request.node, profile)
     if config.getoption("dut") == "emulator":
-        lane = make_multi_lane(config, ckesc_lane.timing_error)
+        station = state(config).station
+        assert station is not None
+        lane = station.multi_lane(ckesc_lane.timing_error)
         trace_lane(config, lane, "bench")
         watch_lane(config, lane)
         own = True

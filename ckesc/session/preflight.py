@@ -2,80 +2,30 @@
 about a second, so that a mistake is one clear line (exit status 2) and never hundreds of ERRORs,
 a new report directory or a moved ``reports/latest``.
 
-Checked: node ids (1..125 everywhere), emulator fault names, option combinations, the DUT profile
-(schema: see :mod:`.profile`), the reports directory (writable), the power commands (found and
-executable), labgrid power (the environment file, target and power driver; the place acquired, or refused
-with who holds it), the bit-rate command, and the bus itself (opened once, within :data:`BUS_OPEN_TIMEOUT_S`,
-and closed again, with the way out named for a kernel without SocketCAN). Once the tests are collected, the
-bench itself is proven on a real bus (:mod:`ckesc.bench.proof`: who answers GET_ESC_ID, the power switch).
+The bench's checks and its building are the bench layer's, as ``ckesc explore`` and ``ckesc profile`` use them
+(:func:`ckesc.bench.station.build`: node ids, emulator fault names and variants, option combinations, the DUT
+profile, the power commands, labgrid power with its place acquired, the bit-rate command, the bus opened once
+within its bound; :mod:`ckesc.bench.checks`). Here is the session's side: the bench options taken from pytest's
+once (:class:`~ckesc.bench.station.BenchOptions`), the run's own check (the reports directory, writable), a prompt
+that gets past pytest's output capture (``--power manual``), and the station closed at the session's end (a
+labgrid place released on every way out). Once the tests are collected, the bench itself is proven on a real bus
+(:meth:`~ckesc.bench.station.Station.prove`: who answers GET_ESC_ID, the power switch).
 """
 
 from __future__ import annotations
 
-import errno
-import logging
 import os
-import shlex
-import shutil
-import socket
-import sys
 import tempfile
-from collections.abc import Callable
+from contextlib import nullcontext
 from pathlib import Path
-from typing import Any
+
+import pytest
 
 from ..bench.errors import PreflightError
-from ..bench.labgrid_power import labgrid_options
-from ..bench.profile import DutProfile, ProfileError
-from ..emulator import variants
-from ..emulator.faults import FAULTS
-from ..protocol.ids import ESC_NODE_IDS
+from ..bench.power import Prompt
+from ..bench.station import BenchOptions, Station, build
 
-Option = Callable[[str], Any]  # the run's options by dest name (pytest's config.getoption)
-
-
-def node_id(text: str | int, what: str = "node id") -> int:
-    """A node id an ESC can have (F7: 1..0x7D), from ``5`` or ``0x05``."""
-    try:
-        value = text if isinstance(text, int) else int(str(text).strip(), 0)
-    except ValueError:
-        raise PreflightError(f"{what} {text!r} is not a number") from None
-    if value not in ESC_NODE_IDS:
-        raise PreflightError(f"{what} {value} is out of range: an ESC's node id is {ESC_NODE_IDS.start}.."
-                             f"{ESC_NODE_IDS.stop - 1} (0 is the host's; 126 and 127 are reserved, F7)")
-    return value
-
-
-def node_list(text: str) -> list[int]:
-    ids = [node_id(part, "--nodes: node id") for part in text.split(",") if part.strip()]
-    if not ids:
-        raise PreflightError(f"--nodes {text!r} names no node id")
-    dupes = sorted({n for n in ids if ids.count(n) > 1})
-    if dupes:
-        raise PreflightError(f"--nodes names node id {dupes[0]} twice: two ESCs with one node id cannot be told apart")
-    return ids
-
-
-def fault_names(text: str) -> list[str]:
-    names = [f.strip() for f in text.split(",") if f.strip()]
-    unknown = [f for f in names if f not in FAULTS]
-    if unknown:
-        import difflib
-
-        close = difflib.get_close_matches(unknown[0], list(FAULTS), n=3)
-        raise PreflightError(f"--emulator-faults: unknown fault {unknown[0]!r}"
-                             + (f" (did you mean {', '.join(close)}?)" if close else "")
-                             + "; `ckesc control faults` or ckesc/emulator/faults.py lists them")
-    return names
-
-
-def emulator_options(items: list[str], seed: int | None = None) -> dict[str, Any]:
-    """--emulator-option NAME=VALUE over the combination --emulator-variants SEED draws, checked: {EscConfig
-    field: value}. The names and their conforming values are ckesc/emulator/variants.py's."""
-    try:
-        return variants.combination(items, seed)
-    except variants.VariantError as exc:
-        raise PreflightError(f"--emulator-option: {exc}") from None
+__all__ = ["PreflightError", "prompt", "reports_writable", "run"]
 
 
 def reports_writable(base: str | os.PathLike) -> None:
@@ -91,155 +41,23 @@ def reports_writable(base: str | os.PathLike) -> None:
                              "(give another with --reports)") from None
 
 
-def command(cmd: str | None, option: str) -> None:
-    """A command line given to the suite: not empty, splits like a shell line, its program exists."""
-    if not cmd:
-        raise PreflightError(f"{option} is empty")
-    try:
-        argv = shlex.split(cmd)
-    except ValueError as exc:
-        raise PreflightError(f"{option} {cmd!r}: {exc}") from None
-    if not argv:
-        raise PreflightError(f"{option} is empty")
-    program = argv[0]
-    if os.sep in program:
-        if not (os.path.isfile(program) and os.access(program, os.X_OK)):
-            raise PreflightError(f"{option}: {program!r} is not an executable file")
-    elif shutil.which(program) is None:
-        raise PreflightError(f"{option}: program {program!r} not found on PATH (the command is run without a shell: "
-                             "wrap pipes and redirections in sh -c '...')")
+def run(config: pytest.Config) -> Station:
+    """The run's bench, built from its options (the first mistake raises :class:`PreflightError`), and closed by
+    pytest's cleanup at the session's end."""
+    reports = config.getoption("ckesc_reports")
+    station = build(BenchOptions.of(config.getoption), prompt=prompt(config),
+                    before_opening=(lambda: reports_writable(reports)) if reports else None)
+    config.add_cleanup(station.close)
+    return station
 
 
-def profile(get: Option) -> DutProfile:
-    """The run's DUT profile: ``--profile``, else the emulator's or the generic one; on a real bus with the limits it
-    leaves out taken from their named defaults (:meth:`.profile.DutProfile.on_a_real_bus`)."""
-    name = get("profile") or ("emulator" if get("dut") == "emulator" else "ckesc-generic")
-    try:
-        loaded = DutProfile.load(name)
-    except ProfileError as exc:
-        raise PreflightError(str(exc)) from None
-    # a real bus is never taken as exact: the limits the profile leaves out are the named defaults, said by the run
-    return loaded.on_a_real_bus() if get("dut") == "bus" else loaded
+def prompt(config: pytest.Config) -> Prompt:
+    """``--power manual``'s question to the operator, asked with pytest's output capture suspended."""
 
+    def ask(text: str) -> None:
+        capman = config.pluginmanager.getplugin("capturemanager")
+        with capman.global_and_fixture_disabled() if capman else nullcontext():
+            input(f"\n>>> {text} ")
 
-#: How long the preflight waits for python-can to open the bus before it names the bus as not answering: a
-#: socketcand client retries its connection for 10 s and then may wait for the daemon's greeting for ever; a USB
-#: adapter that is not there fails at once. ``--bus-open-timeout`` gives another.
-BUS_OPEN_TIMEOUT_S = 5.0
+    return ask
 
-
-def bus_where(kwargs: dict[str, Any]) -> str:
-    """The bus as the user gave it: its interface, channel, address (host, port) and bit rate."""
-    keys = ("interface", "channel", "host", "port", "bitrate")
-    return ", ".join(f"{k}={kwargs[k]}" for k in keys if kwargs.get(k) is not None)
-
-
-def open_bus_bounded(kwargs: dict[str, Any], timeout: float = BUS_OPEN_TIMEOUT_S) -> Any:
-    """``can.Bus(**kwargs)``, given at most ``timeout`` s (a :class:`PreflightError` naming the interface and the
-    address otherwise): python-can opens a bus in its constructor and some backends retry or block there (a
-    socketcand daemon nobody runs, a network adapter that does not answer). The open runs in a daemon thread; one
-    that never returns is abandoned (the run stops with exit 2), one that returns late is shut down."""
-    import threading
-
-    import can
-
-    box: dict[str, Any] = {}
-    late = threading.Event()
-
-    def opener() -> None:
-        try:
-            bus = can.Bus(**kwargs)
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller below
-            box["error"] = exc
-            return
-        if late.is_set():  # the caller gave up on it: nobody will close it otherwise
-            _shutdown(bus)
-        else:
-            box["bus"] = bus
-
-    thread = threading.Thread(target=opener, name="ckesc-bus-open", daemon=True)
-    thread.start()
-    thread.join(timeout)
-    if thread.is_alive():
-        late.set()
-        if "bus" in box:  # it opened just now
-            return box["bus"]
-        # what the abandoned open still logs (python-can's socketcand client warns at every retry) goes nowhere: the
-        # run ends with the one line below, not hundreds of warnings after it
-        logging.getLogger("can").addHandler(logging.NullHandler())
-        raise PreflightError(f"cannot open the CAN bus ({bus_where(kwargs)}): no answer within {timeout:g} s (is the "
-                             "adapter plugged in, the socketcand daemon or `ckesc emulate` running at that address and "
-                             "port? --bus-open-timeout gives it longer)")
-    if "error" in box:
-        exc = box["error"]
-        cause = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
-        hint = ""
-        if getattr(exc, "errno", None) == errno.EAFNOSUPPORT or "Address family not supported" in str(exc) or (
-                kwargs.get("interface") == "socketcan" and not hasattr(socket, "AF_CAN")):
-            hint = (" - this kernel has no SocketCAN (AF_CAN): run the suite on a Linux host with can0/vcan0, or in "
-                    "the VM lane (tools/vm-lane)")
-        elif isinstance(exc, can.CanInterfaceNotImplementedError) or "Unknown interface" in str(exc):
-            hint = f" - known interfaces: {', '.join(sorted(can.interfaces.VALID_INTERFACES))}"
-        raise PreflightError(f"cannot open the CAN bus ({bus_where(kwargs)}): {' '.join(cause.split())}{hint}") from None
-    return box["bus"]
-
-
-def _shutdown(bus: Any) -> None:
-    try:
-        bus.shutdown()
-    except Exception:  # noqa: BLE001 - it opened; closing is best effort
-        pass
-
-
-def open_bus(kwargs: dict[str, Any], timeout: float = BUS_OPEN_TIMEOUT_S) -> None:
-    """Open the bus once and close it: a dead adapter, or an address nobody answers at, is named here (within
-    ``timeout`` s), not by every test."""
-    _shutdown(open_bus_bounded(kwargs, timeout))
-
-
-def run(get: Option, *, bus_kwargs: Callable[[], dict[str, Any]] | None = None,
-        labgrid: Callable[[], None] | None = None) -> DutProfile:
-    """Every check, in the order a person fixes them; the first failure raises :class:`PreflightError`.
-    Returns the loaded profile. ``bus_kwargs`` resolves the python-can arguments (``--dut bus``); ``labgrid``
-    opens --power labgrid (and acquires its place) before the bus is touched."""
-    dut = get("dut")
-    if get("node_id") is not None:
-        node_id(get("node_id"), "--node-id")
-    if get("nodes"):
-        if dut != "emulator":
-            raise PreflightError("--nodes builds an emulated bench: it needs --dut emulator (give --node-id for a real ESC)")
-        node_list(get("nodes"))
-    if get("emulator_faults"):
-        if dut != "emulator":
-            raise PreflightError("--emulator-faults switches faults of the emulator: it needs --dut emulator")
-        fault_names(get("emulator_faults"))
-    if get("emulator_option") or get("emulator_variants") is not None:
-        if dut != "emulator":
-            raise PreflightError("--emulator-option and --emulator-variants set the emulator's ESCs: they need --dut emulator")
-        emulator_options(get("emulator_option"), get("emulator_variants"))
-    prof = profile(get)
-    if get("ckesc_reports"):
-        reports_writable(get("ckesc_reports"))
-    power = get("power")
-    labgrid_options(get)
-    if dut == "emulator" and power not in (None, "emulator"):
-        raise PreflightError(f"--power {power} is for --dut bus; the emulator's power is switched by the suite")
-    if dut == "bus":
-        if power == "emulator":
-            raise PreflightError("--power emulator works only with --dut emulator (for a real ESC: command, labgrid, manual "
-                                 "or none)")
-        if power == "command":
-            if not get("power_off_cmd") or not get("power_on_cmd"):
-                raise PreflightError("--power command needs both --power-off-cmd and --power-on-cmd")
-            command(get("power_off_cmd"), "--power-off-cmd")
-            command(get("power_on_cmd"), "--power-on-cmd")
-        elif power == "manual" and not sys.stdin.isatty():
-            raise PreflightError("--power manual prompts an operator, but standard input is not a terminal "
-                                 "(use --power command, or --power none to skip the persistence tests)")
-        if get("can_bitrate_cmd"):
-            command(get("can_bitrate_cmd").replace("{bitrate}", "500000"), "--can-bitrate-cmd")
-        if power == "labgrid" and labgrid is not None:  # a shared place is locked before its bus is opened
-            labgrid()
-        if bus_kwargs is not None:
-            open_bus(bus_kwargs(), get("bus_open_timeout") or BUS_OPEN_TIMEOUT_S)
-    return prof

@@ -15,6 +15,7 @@ import pytest
 
 from ..bench.lanes import Lane
 from ..bench.profile import DutProfile
+from ..bench.station import Station
 from ..reporting import report
 from ..reporting.results import Result
 
@@ -47,6 +48,8 @@ class Shield:
 class RunState:
     results: dict[str, Result] = field(default_factory=dict)
     conformance: bool = False  # the session collected conformance tests (else the plugin stays inert)
+    #: the bench the run's options build (the preflight builds it; closed at the session's end)
+    station: Station | None = None
     lane: Lane | None = None
     profile: DutProfile | None = None
     node_id: int | None = None

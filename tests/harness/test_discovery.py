@@ -18,8 +18,8 @@ from __future__ import annotations
 from ckesc.bench.dut import Dut
 from ckesc.bench.profile import DutProfile
 from ckesc.bench.realtime_lane import RealtimeEmulatorLane
+from ckesc.bench.station import MULTI_NODES
 from ckesc.protocol import catalogue as cat
-from ckesc.session.lane_setup import MULTI_NODES
 
 SPREAD_S = 0.3  # ESC k of 3 boots k x 0.1 s after the first: wider than the 128 ms between discovery's queries
 

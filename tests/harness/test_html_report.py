@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
+from ckesc.bench.station import MULTI_NODES
 from ckesc.protocol import catalogue as cat
 from ckesc.reporting.html_report import build
-from ckesc.session.lane_setup import MULTI_NODES
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 #: a few sections with every plot's evidence: answer delays of several nodes (4.4.2, 4.4.3), report

@@ -13,9 +13,9 @@ import can
 import pytest
 
 from ckesc.bench.lanes import SimLane
+from ckesc.bench.station import MULTI_NODES
 from ckesc.protocol import DecodeError, Decoder, encode
 from ckesc.protocol.ids import parse_can_id
-from ckesc.session.lane_setup import MULTI_NODES
 from ckesc.session.trace_files import TRACE_FORMATS, TestTraces, trace_name
 
 

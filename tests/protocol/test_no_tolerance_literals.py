@@ -35,7 +35,7 @@ ALLOWED: dict[tuple[str, str], tuple[int, str]] = {
     ("ckesc/bench/dut.py", "0.2"): (1, "OUTPUT_SETTLE_S: a test allowance for a ramping throttle output, not R8's 200 ms"),
     ("ckesc/bench/link.py", "0.0025"): (1, "throttle_stream's default period: the harness's command rate"),
     ("ckesc/bench/realtime_lane.py", "0.002"): (1, "the real-time lane's stated timing error (a bench's error)"),
-    ("ckesc/session/lane_setup.py", "0.002"): (1, "the real-time lane's least stated timing error (a bench's error)"),
+    ("ckesc/bench/station.py", "0.002"): (1, "the real-time lane's least stated timing error (a bench's error)"),
     ("ckesc/emulator/config.py", "0.0005"): (1, _EMULATOR),
     ("ckesc/emulator/model.py", "0.007"): (1, _EMULATOR),
     ("ckesc/emulator/esc_output.py", "0.001"): (1, _EMULATOR),
