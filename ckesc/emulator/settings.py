@@ -17,7 +17,7 @@ class Settings:
     """Part of :class:`~ckesc.emulator.model.EscModel`: the requests that write settings."""
 
     def _addressed(self, f: Frame) -> bool:
-        return f.destination == self.node_id
+        return f.destination == self.node_id or "answers_other_node" in self.faults
 
     def _settings_locked(self, fault: str = "") -> bool:
         """R12: parameter changes do not take effect while reporting is suspended (unless ``fault``, the request's
