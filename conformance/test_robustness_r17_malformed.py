@@ -120,9 +120,9 @@ def malformed(dut, name: str, fields: dict, *, toggle_only: bool = False) -> lis
         tid = next(tids)
         w = wire(tid, destination)
         can_id = w.arbitration_id
-        if response:  # the same frame with the request bit clear: a response to the host, sent to the ESC
-            i = parse_can_id(can_id)
-            can_id = service_id(i.priority, i.type_id, False, dut.node_id, dut.host_node)
+        if response:  # the same frame with the request bit clear, from another node: a response the ESC never asked
+            i = parse_can_id(can_id)  # (from node 0 a bench whose echo is not told apart would take it for the DUT's)
+            can_id = service_id(i.priority, i.type_id, False, dut.node_id, _other_node(dut))
         datas = multi_frame(w.data[:-1], tid) if whole else [data(w.data)]
         return Bad(what, [WireFrame(can_id, d) for d in datas], tid if spec.has_tail else None)
 
@@ -146,7 +146,7 @@ def malformed(dut, name: str, fields: dict, *, toggle_only: bool = False) -> lis
             out.append(bad("one byte long", lambda d: d[:-1] + bytes(1) + d[-1:] if spec.has_tail else d + bytes(1)))
     if spec.service:
         other = _other_node(dut)
-        out += [bad(f"request to node {other}", destination=other), bad("response frame", response=True)]
+        out += [bad(f"request to node {other}", destination=other), bad(f"response frame from node {other}", response=True)]
     return out
 
 
