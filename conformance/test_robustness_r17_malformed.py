@@ -43,6 +43,8 @@ DESTRUCTIVE = frozenset({"clear_rec"})
 #: classic CAN's most data bytes (a frame one byte longer than its table is sent where it fits)
 MAX_DATA = 8
 TID_MASK = TRANSFER_ID_MODULO - 1
+#: the bits of a node id (F1: seven, 1..127)
+NODE_ID_BITS = max(ESC_NODE_IDS).bit_length()
 #: a read of the temperature records (Expand Set Part): taking it shows as MSG_EXP12 frames
 READ_RECORDS = next(c for c in cat.EXPAND_COMMANDS.values() if c.name == "read_temperature_records")
 
@@ -97,9 +99,11 @@ class Bad:
         return f"{self.what} ({' '.join(str(w) for w in self.frames)})"
 
 
-def _other_node(dut) -> int:
-    """A node id no ESC of the bench has."""
-    return next(n for n in ESC_NODE_IDS if n not in dut.nodes and n != dut.node_id)
+def _other_nodes(dut) -> list[int]:
+    """Node ids no ESC of the bench has, each one bit away from the DUT's: an ESC that decodes fewer than the seven
+    bits of a destination takes a request to one of them."""
+    near = (dut.node_id ^ (1 << bit) for bit in range(NODE_ID_BITS))
+    return [n for n in dict.fromkeys(near) if n in ESC_NODE_IDS and n not in dut.nodes]
 
 
 def malformed(dut, name: str, fields: dict, *, toggle_only: bool = False) -> list[Bad]:
@@ -122,7 +126,7 @@ def malformed(dut, name: str, fields: dict, *, toggle_only: bool = False) -> lis
         can_id = w.arbitration_id
         if response:  # the same frame with the request bit clear, from another node: a response the ESC never asked
             i = parse_can_id(can_id)  # (from node 0 a bench whose echo is not told apart would take it for the DUT's)
-            can_id = service_id(i.priority, i.type_id, False, dut.node_id, _other_node(dut))
+            can_id = service_id(i.priority, i.type_id, False, dut.node_id, _other_nodes(dut)[0])
         datas = multi_frame(w.data[:-1], tid) if whole else [data(w.data)]
         return Bad(what, [WireFrame(can_id, d) for d in datas], tid if spec.has_tail else None)
 
@@ -145,8 +149,9 @@ def malformed(dut, name: str, fields: dict, *, toggle_only: bool = False) -> lis
         if len(wire(0).data) < MAX_DATA:
             out.append(bad("one byte long", lambda d: d[:-1] + bytes(1) + d[-1:] if spec.has_tail else d + bytes(1)))
     if spec.service:
-        other = _other_node(dut)
-        out += [bad(f"request to node {other}", destination=other), bad(f"response frame from node {other}", response=True)]
+        others = _other_nodes(dut)
+        out += [bad(f"request to node {n}", destination=n) for n in others]
+        out.append(bad(f"response frame from node {others[0]}", response=True))
     return out
 
 

@@ -154,7 +154,8 @@ _FAULTS = (
           "ignored"),
     Fault("reset_on_multi_frame_start", ("R17",), "the start frame of a multi-frame transfer resets the ESC (a "
           "watchdog reset: the power-up count grows, the reports restart after the boot)"),
-    Fault("answers_other_node", ("R17",), "requests addressed to another node id are taken and answered"),
+    Fault("destination_low_bits", ("R17",), "a request's destination node id is decoded from its low six bits: a "
+          "request to the node id 64 away is taken and answered"),
     # where features meet (kind INTERACTION): each feature works alone
     Fault("led_save_reverts_rotation", ("R13", "4.4.21-4"),
           "Set Led with option 1 rewrites the flash word it shares with the rotation, taking the rotation from the copy "

@@ -308,7 +308,7 @@ _HANDLERS = {
 THROTTLE_FRAMES = frozenset(cat.THROTTLE_FRAMES)
 
 #: The faults that take a frame R17 says to ignore (faults.py's "robustness (R17)" group, but for the one of
-#: requests to another node, which Settings._addressed plays).
+#: the destination's, which Settings._addressed plays).
 MALFORMED_FAULTS = frozenset({"takes_multi_frame_start", "short_raw_command_padded", "wrong_length_taken",
                               "reset_on_multi_frame_start"})
 

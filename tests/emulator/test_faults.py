@@ -732,7 +732,7 @@ case("takes_multi_frame_start", lambda h: answers_to(h, lambda d: d[:-1] + bytes
 case("short_raw_command_padded", comm_fault_after_short_command, True, False)
 case("wrong_length_taken", lambda h: answers_to(h, lambda d: d[:-1] + bytes(1) + d[-1:]), 0, 1)
 case("reset_on_multi_frame_start", power_ups_after_start_frame, 1, 2)
-case("answers_other_node", lambda h: answers_to(h, lambda d: d, destination=2), 0, 1)
+case("destination_low_bits", lambda h: answers_to(h, lambda d: d, destination=1 + 64), 0, 1)
 
 
 # --------------------------------------------------------------------------------------------------
