@@ -12,7 +12,6 @@ from ..protocol.frame import Frame
 from .config import factory_nvm
 from .reporting import REPORT_NAMES, SUSPENDED
 
-
 #: fault destination_low_bits: the bits of a destination node id it decodes
 _LOW_SIX = 0x3F
 
