@@ -127,7 +127,10 @@ def malformed(dut, name: str, fields: dict, *, toggle_only: bool = False) -> lis
         if response:  # the same frame with the request bit clear, from another node: a response the ESC never asked
             i = parse_can_id(can_id)  # (from node 0 a bench whose echo is not told apart would take it for the DUT's)
             can_id = service_id(i.priority, i.type_id, False, dut.node_id, _other_nodes(dut)[0])
-        datas = multi_frame(w.data[:-1], tid) if whole else [data(w.data)]
+        # a whole transfer as DroneCAN splits it (7 bytes a frame), but that no frame of it has the table's 8 bytes:
+        # an ESC that takes a start frame would read the CRC as a command (a throttle, with no --allow-motor-spin)
+        chunk = MAX_DATA - 2 if len(w.data) == MAX_DATA else MAX_DATA - 1
+        datas = multi_frame(w.data[:-1], tid, chunk=chunk) if whole else [data(w.data)]
         return Bad(what, [WireFrame(can_id, d) for d in datas], tid if spec.has_tail else None)
 
     def tail(start: bool, end: bool, toggle: bool):
@@ -163,10 +166,37 @@ class Effects:
     answers: list[str]
     changed: str
     resets: list[str]
+    settings: dict  # the settings before the frames
 
     def lines(self) -> list[str]:
         return ([f"answered: {'; '.join(self.answers)}"] if self.answers else []) + (
             [f"settings changed: {self.changed}"] if self.changed else []) + self.resets
+
+
+def _leave_can_test(dut, since: int) -> None:
+    """CAN Test off when the DUT sent CAN Test frames in ``dut.trace[since:]`` (the fixture's restore does not)."""
+    if any(f.name == "can_test" for f in dut.trace[since:] if f.source == dut.node_id):
+        dut.broadcast("can_test", {"option": cat.CAN_TEST_OFF})
+        dut.wait(cat.ANSWER_DELAY_MAX_S)
+
+
+def culprits(dut, bads: list[Bad], s: dict) -> list[str]:
+    """Each malformed frame again on its own, the settings ``s`` restored before each: those after which the DUT
+    sent something other than its reports, or a setting changed (for a failure's message: which frame it took)."""
+    found = []
+    for b in bads:
+        dut.restore(s)
+        heard = len(dut.trace)
+        for w in b.frames:
+            dut.send_wire(w)
+        dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
+        sent = sorted({f.name for f in dut.trace[heard:] if f.source == dut.node_id and f.name not in cat.REPORT_FRAMES})
+        _leave_can_test(dut, heard)
+        shown = ", ".join(filter(None, [f"sent {', '.join(sent)}" if sent else "", changes(s, dut.settings())]))
+        if shown:
+            found.append(f"{b}: {shown}")
+    dut.restore(s)
+    return found
 
 
 def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
@@ -206,20 +236,21 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
                       "malformed frame (MSG1 every " + f"{ms(interval):g} ms): reporting stopped")
     if resets:  # an ESC that restarted is let boot before it is asked (its restart is the verdict, not its silence)
         dut.await_reports(t1, t1 + dut.ready_bound_s())
-    if name == "can_test" and any(f.name == "can_test" for f in dut.trace[heard:] if f.source == dut.node_id):
-        dut.broadcast("can_test", {"option": cat.CAN_TEST_OFF})  # leave CAN Test as the restore does not
-        dut.wait(cat.ANSWER_DELAY_MAX_S)
+    _leave_can_test(dut, heard)
     after = dut.settings()
     if ups is not None and (ups_after := dut.power_up_count()) != ups:
         resets.insert(0, f"the power-up count (241) went {ups} -> {ups_after}: the ESC reset")
     state = [f"MSG1 state bits 0x{_status_bits(a):04X} -> 0x{_status_bits(b):04X}" for a, b in [(before[-1], msg1[-1])]
              if before and msg1 and _status_bits(a) != _status_bits(b)]
-    return Effects(answers, ", ".join(filter(None, [changes(s, after), *state])), resets)
+    return Effects(answers, ", ".join(filter(None, [changes(s, after), *state])), resets, s)
 
 
 def _check(dut, name: str, bads: list[Bad], effects: Effects) -> None:
     dut.record.observe("malformed frames sent", "; ".join(str(b) for b in bads))
     problems = effects.lines()
+    if problems and not effects.resets and len(bads) > 1:  # which frame did it (a reset is judged as it is)
+        taken = culprits(dut, bads, effects.settings)
+        problems.append("taken, one at a time: " + ("; ".join(taken) if taken else "none alone"))
     assert not problems, (f"{cat.spec(name).title}: after these malformed frames of a command that would show "
                           f"({'; '.join(b.what for b in bads)}): " + "; ".join(problems)
                           + " (R17: a malformed frame gets no answer, changes nothing and never resets the ESC)")
