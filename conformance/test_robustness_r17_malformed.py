@@ -167,6 +167,7 @@ class Effects:
     changed: str
     resets: list[str]
     settings: dict  # the settings before the frames
+    restarted: bool = False  # the power-up count grew, or MSG1's transfer ids jumped
 
     def lines(self) -> list[str]:
         return ([f"answered: {'; '.join(self.answers)}"] if self.answers else []) + (
@@ -238,17 +239,20 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
         dut.await_reports(t1, t1 + dut.ready_bound_s())
     _leave_can_test(dut, heard)
     after = dut.settings()
-    if ups is not None and (ups_after := dut.power_up_count()) != ups:
+    ups_after = dut.power_up_count() if ups is not None else None
+    if ups_after != ups:
         resets.insert(0, f"the power-up count (241) went {ups} -> {ups_after}: the ESC reset")
-    state = [f"MSG1 state bits 0x{_status_bits(a):04X} -> 0x{_status_bits(b):04X}" for a, b in [(before[-1], msg1[-1])]
-             if before and msg1 and _status_bits(a) != _status_bits(b)]
-    return Effects(answers, ", ".join(filter(None, [changes(s, after), *state])), resets, s)
+    state = []
+    if before and msg1 and _status_bits(before[-1]) != _status_bits(msg1[-1]):
+        state.append(f"MSG1 state bits 0x{_status_bits(before[-1]):04X} -> 0x{_status_bits(msg1[-1]):04X}")
+    restarted = bool(jumps) or (ups is not None and ups_after != ups)
+    return Effects(answers, ", ".join(filter(None, [changes(s, after), *state])), resets, s, restarted)
 
 
 def _check(dut, name: str, bads: list[Bad], effects: Effects) -> None:
     dut.record.observe("malformed frames sent", "; ".join(str(b) for b in bads))
     problems = effects.lines()
-    if problems and not effects.resets and len(bads) > 1:  # which frame did it (a reset is judged as it is)
+    if problems and not effects.restarted and len(bads) > 1:  # which frame did it (a restart is judged as it is)
         taken = culprits(dut, bads, effects.settings)
         problems.append("taken, one at a time: " + ("; ".join(taken) if taken else "none alone"))
     assert not problems, (f"{cat.spec(name).title}: after these malformed frames of a command that would show "
