@@ -127,6 +127,14 @@ if missing := sorted(set(NEIGHBOURS) ^ set(_TARGETS)):
     raise KeyError(f"persisted settings {missing}: say in conformance/settings.py where a neighbour check moves them")
 
 
+def move_request(name: str, s: Mapping[str, int]) -> dict[str, int]:
+    """The fields of persisted setting ``name``'s own request (with its save fields) that would move it from the
+    settings ``s`` to a value it is not at: a write whose taking shows in the settings read."""
+    setting = cat.PERSISTED[name]
+    field_of = {key: f for f, key in setting.fields.items()}
+    return {**setting.save, **{field_of[k]: v for k, v in _TARGETS[name](s).items()}}
+
+
 def _has(dut, name: str) -> bool:
     return name not in _NEEDS or dut.profile.has(_NEEDS[name])
 

@@ -58,6 +58,9 @@ class EscConfig:
     #: place, the frame ending inside the slot) or "late" (as late as leaves room for one longest frame on the
     #: bus ahead of it)
     answer_place: str = "start"
+    #: a single frame whose tail's toggle bit is 1 (R17-toggle leaves it open): "ignore" it, or "take" it as
+    #: DroneCAN's own receiver does
+    toggle_single_frame: str = "ignore"
     service_delay: float = 0.0005  # request to response for services
     # the other freedoms the document leaves (ckesc/emulator/variants.py says what each value does)
     report_phase: str = "together"  # the first MSG1..3 after power-up together, or staggered

@@ -12,11 +12,16 @@ from ..protocol.frame import Frame
 from .config import factory_nvm
 from .esc_telemetry import REPORT_NAMES, SUSPENDED
 
+#: fault destination_low_bits: the bits of a destination node id it decodes
+_LOW_SIX = 0x3F
+
 
 class Settings:
     """Part of :class:`~ckesc.emulator.model.EscModel`: the requests that write settings."""
 
     def _addressed(self, f: Frame) -> bool:
+        if "destination_low_bits" in self.faults:  # a destination decoded from its low six bits only
+            return (f.destination or 0) & _LOW_SIX == self.node_id & _LOW_SIX
         return f.destination == self.node_id
 
     def _settings_locked(self, fault: str = "") -> bool:

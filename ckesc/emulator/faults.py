@@ -144,6 +144,18 @@ _FAULTS = (
     Fault("set_freq_read_wrong", ("4.4.22-2",), "Set/Get Freq read answers the defaults, not the settings"),
     Fault("major_config_bits_swapped", ("4.4.28-1",), "242 puts the direction in bit 6 and the source in bit 7"),
     Fault("maintenance_counts_wrong", ("4.4.27-T",), "241 option 2 swaps the power-up and stop counters"),
+    # malformed and foreign frames (R17): each frame here would be a valid command if its tail, length or address were
+    # those of the table
+    Fault("takes_multi_frame_start", ("R17",), "the start frame of a multi-frame transfer (tail start=1 end=0) is "
+          "taken as a single frame"),
+    Fault("short_raw_command_padded", ("R17", "R8"), "a RawCommand one byte short is zero-padded to its length and "
+          "taken (its last channel read as zero; a comm refresh)"),
+    Fault("wrong_length_taken", ("R17",), "a frame longer than its table is taken, the bytes beyond its payload "
+          "ignored"),
+    Fault("reset_on_multi_frame_start", ("R17",), "the start frame of a multi-frame transfer resets the ESC (a "
+          "watchdog reset: the power-up count grows, the reports restart after the boot)"),
+    Fault("destination_low_bits", ("R17",), "a request's destination node id is decoded from its low six bits: a "
+          "request to the node id 64 away is taken and answered"),
     # where features meet (kind INTERACTION): each feature works alone
     Fault("led_save_reverts_rotation", ("R13", "4.4.21-4"),
           "Set Led with option 1 rewrites the flash word it shares with the rotation, taking the rotation from the copy "

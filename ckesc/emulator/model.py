@@ -22,10 +22,10 @@ from typing import Any, Callable
 
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import BAUD_RATES
-from ..protocol.errors import DecodeError, UnknownTypeError
-from ..protocol.frame import Decoder, Frame, WireFrame
+from ..protocol.errors import DecodeError, LengthError, TailError, UnknownTypeError
+from ..protocol.frame import Decoder, Frame, WireFrame, classify
 from ..protocol.ids import Kind
-from ..protocol.transfer import TransferIdCounter
+from ..protocol.transfer import TransferIdCounter, parse_tail, tail_byte
 from .config import REPORT_TIMERS, EscConfig, factory_nvm
 from .esc_answers import Answers
 from .esc_motor import Motor
@@ -210,9 +210,16 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
             except DecodeError as exc:
                 decoded = exc
         if isinstance(decoded, DecodeError):
-            # another protocol's type id (DroneCAN NodeStatus, ...) is foreign; anything else malformed
+            # another protocol's type id (DroneCAN NodeStatus, ...) is foreign; anything else malformed (R17)
             self.counters["rx_foreign" if isinstance(decoded, UnknownTypeError) else "rx_malformed"] += 1
-            return "dronecan_node_info" in self.faults and self._dronecan_node_info(msg, now)
+            if self._malformed_faults or self.config.toggle_single_frame != "ignore":
+                taken = self._take_malformed(msg, decoded, now)
+                if taken is True:
+                    return True
+                if taken is not None:
+                    decoded = taken
+            if isinstance(decoded, DecodeError):
+                return "dronecan_node_info" in self.faults and self._dronecan_node_info(msg, now)
         frame = decoded
         if frame.spec is None:
             self.counters["rx_foreign"] += 1
@@ -224,6 +231,45 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         if handler is not EscModel._on_throttle:
             self._update(now)  # throttle frames update only when addressed to this ESC's channel
         return handler(self, frame, now) is not False
+
+    @property
+    def _malformed_faults(self) -> bool:
+        return bool(self.faults & MALFORMED_FAULTS)
+
+    def _take_malformed(self, msg: Any, error: DecodeError, now: float) -> Frame | bool | None:
+        """What a faulty ESC (or the toggle variant, R17-toggle) makes of a frame R17 says to ignore: the frame it
+        takes instead, True when it reset (the frame consumed), None when it still ignores it."""
+        data = bytes(msg.data)
+        spec = classify(msg.arbitration_id)[4]
+        if spec is None:
+            return None
+        if isinstance(error, TailError) and data:
+            tail = parse_tail(data[-1])
+            if tail.start and not tail.end and "reset_on_multi_frame_start" in self.faults:
+                self.power_off(now)  # a watchdog reset: the frame's handling hangs, the ESC restarts
+                self.power_on(now)
+                return True
+            single = tail.start and (tail.end or "takes_multi_frame_start" in self.faults)
+            if not single or (tail.toggle and tail.end and self.config.toggle_single_frame != "take"):
+                return None
+            data = data[:-1] + bytes((tail_byte(tail.transfer_id),))
+        elif isinstance(error, LengthError):
+            size = _table_size(spec, classify(msg.arbitration_id)[0])
+            if size is None:
+                return None
+            if len(data) == size - 1 and spec.name in THROTTLE_FRAMES and "short_raw_command_padded" in self.faults:
+                data = data[:-1] + bytes(1) + data[-1:] if spec.has_tail else data + bytes(1)
+            elif len(data) > size and "wrong_length_taken" in self.faults:
+                data = data[:size - 1] + data[-1:] if spec.has_tail else data[:size]
+            else:
+                return None
+        else:
+            return None
+        try:
+            return self._decoder.decode(type(msg)(arbitration_id=msg.arbitration_id, data=data, is_extended_id=True)
+                                        if not isinstance(msg, WireFrame) else msg._replace(data=data))
+        except DecodeError:
+            return None
 
     def poll(self, now: float) -> list[WireFrame]:
         """Everything due at or before ``now``, in due order, each stamped with its due time."""
@@ -263,4 +309,18 @@ _HANDLERS = {
 }
 
 THROTTLE_FRAMES = frozenset(cat.THROTTLE_FRAMES)
+
+#: The faults that take a frame R17 says to ignore (faults.py's "robustness (R17)" group, but for the one of
+#: the destination's, which Settings._addressed plays).
+MALFORMED_FAULTS = frozenset({"takes_multi_frame_start", "short_raw_command_padded", "wrong_length_taken",
+                              "reset_on_multi_frame_start"})
+
+
+def _table_size(spec, kind: Kind) -> int | None:
+    """A frame's data length by its table (the tail byte included) for what the host sends: None when the table
+    allows any length (Get Rec, Clear Rec)."""
+    layout = spec.request if kind is Kind.REQUEST else next((lay for lay in spec.layouts if lay.sender != "esc"), None)
+    if layout is None or layout.size is None:
+        return None
+    return layout.size + spec.has_tail
 HANDLED = frozenset(_HANDLERS)

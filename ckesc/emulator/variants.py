@@ -126,6 +126,10 @@ _FREEDOMS = (
     # priorities (F5-unlisted: 240/241/242 have none in 4.3.2's table)
     Freedom("unlisted_priority", ("F5-unlisted",), "the priority of 240/241/242 answers: the request's, or a fixed one",
             choices=("request", "medium", "low", "lowest")),
+    # malformed frames (R17: a single frame with toggle 1 may be taken or ignored)
+    Freedom("toggle_single_frame", ("R17-toggle",), "a single frame (start=1 end=1) whose toggle bit is 1: ignored "
+            "as not a single-frame transfer, or taken as DroneCAN's receiver (libcanard) takes it",
+            choices=("ignore", "take")),
     # host node (F6: a non-zero host node is OBSERVE)
     Freedom("foreign_host", ("F6",), "commands and requests from a host node other than 0: obeyed, or ignored",
             choices=("accept", "ignore")),

@@ -59,3 +59,42 @@ class TransferIdCounter:
         if slot not in self._next and self._first:
             self._next[slot] = self._first() % TRANSFER_ID_MODULO
         return self._next.get(slot, 0)
+
+
+# --------------------------------------------------------------------------------------------------
+# Multi-frame transfers (DroneCAN's, which this protocol never sends: R17's robustness cases build them)
+
+#: The CKESC document names no DSDL data type signature for its frames; a multi-frame transfer of one of its
+#: types is seeded with this one (DroneCAN's receivers check the CRC with the signature of the type they know).
+NO_SIGNATURE = 0
+
+
+def crc16(data: bytes, crc: int = 0xFFFF) -> int:
+    """CRC-16-CCITT (poly 0x1021, initial 0xFFFF, no reflection, no final xor): DroneCAN's transfer CRC."""
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
+    return crc
+
+
+def transfer_crc(payload: bytes, signature: int = NO_SIGNATURE) -> int:
+    """DroneCAN's transfer CRC of a multi-frame transfer: CRC-16-CCITT over the data type signature (64 bits,
+    little-endian), then the payload."""
+    return crc16(bytes(payload), crc16(signature.to_bytes(8, "little")))
+
+
+def multi_frame(payload: bytes, transfer_id: int, *, signature: int = NO_SIGNATURE, chunk: int = 7) -> list[bytes]:
+    """The frames' data of a multi-frame transfer of ``payload`` as DroneCAN sends one: the transfer CRC
+    (little-endian) ahead of the payload, ``chunk`` bytes (7 on classic CAN) and a tail byte a frame, start on the
+    first, end on the last, the toggle alternating from 0. A payload that would fit one frame is split too (a
+    smaller ``chunk``: at least two frames), so that what is built is always a multi-frame transfer."""
+    if not 1 <= chunk <= 7:
+        raise EncodeError(f"a frame carries 1..7 bytes of a multi-frame transfer, not {chunk}")
+    crc = transfer_crc(payload, signature)
+    body = bytes((crc & 0xFF, crc >> 8)) + bytes(payload)
+    if len(body) <= chunk:
+        chunk = max(1, (len(body) + 1) // 2)
+    pieces = [body[i:i + chunk] for i in range(0, len(body), chunk)]
+    return [piece + bytes((tail_byte(transfer_id, start=i == 0, end=i == len(pieces) - 1, toggle=bool(i % 2)),))
+            for i, piece in enumerate(pieces)]

@@ -247,3 +247,18 @@ def test_the_slowest_conforming_boot_still_reports_within_the_emulator_profiles_
     for w in m.poll(1.0):
         firsts.setdefault(Decoder().decode(w).name, w.timestamp)
     assert max(firsts[k] for k in ("msg1", "msg2", "msg3")) + 0.020 <= boot_s
+
+
+@pytest.mark.parametrize("choice", ["ignore", "take"])
+def test_toggle_single_frame(choice):
+    """A single frame with toggle 1 (R17-toggle): taken only by ``take``; a multi-frame start frame never."""
+    from ckesc.protocol.transfer import tail_byte
+
+    esc = Esc(toggle_single_frame=choice)
+    wire = encode("set_rotation", {"rotation": 1}, source=0, destination=NODE, transfer_id=3)
+    start = wire._replace(data=wire.data[:-1] + bytes((tail_byte(3, end=False),)))
+    esc.model.receive(start, esc.now)
+    assert not esc.answers(esc.run(esc.now + 0.1), "set_rotation") and esc.model.nvm["rotation"] == 0
+    esc.model.receive(wire._replace(data=wire.data[:-1] + bytes((tail_byte(3, toggle=True),))), esc.now)
+    assert bool(esc.answers(esc.run(esc.now + 0.1), "set_rotation")) is (choice == "take")
+    assert esc.model.nvm["rotation"] == (choice == "take")

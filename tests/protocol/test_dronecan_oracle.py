@@ -374,3 +374,43 @@ def test_divergence_msg1_direction_bit():
     # R7: the document puts the direction in bit 15 (the DroneCAN GUI reads bit 14, the throttle source)
     assert Status.DIRECTION_CCW == 1 << 15
     assert Status.THROTTLE_PWM == 1 << 14
+
+
+# --------------------------------------------------------------------------------------------------
+# Multi-frame transfers (R17's robustness cases): our CRC and split against dronecan's Transfer.to_frames
+
+
+def _dronecan_transfer(payload: bytes, tid: int, signature: int) -> list[bytes]:
+    from dronecan.dsdl import common
+
+    t = transport.Transfer(transfer_id=tid, source_node_id=10)
+    t.data_type_id = 20010
+    t.payload = payload
+    t.data_type_crc = common.crc16_from_bytes(common.bytes_from_crc64(signature))
+    return [bytes(f.bytes) for f in t.to_frames()]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.binary(min_size=8, max_size=40), st.integers(0, 31), st.integers(0, (1 << 64) - 1))
+def test_multi_frame_transfer_is_dronecans(payload, tid, signature):
+    from ckesc.protocol.transfer import multi_frame
+
+    assert multi_frame(payload, tid, signature=signature) == _dronecan_transfer(payload, tid, signature)
+
+
+@given(st.binary(min_size=0, max_size=7), st.integers(0, 31))
+def test_a_short_payload_is_still_split(payload, tid):
+    """A payload that fits one frame is split over two or more: start on the first only, end on the last only, the
+    toggle alternating from 0 (dronecan's receiver's checks), and the body is dronecan's CRC and the payload."""
+    from dronecan.dsdl import common
+
+    from ckesc.protocol.transfer import multi_frame, parse_tail
+
+    datas = multi_frame(payload, tid)
+    tails = [parse_tail(d[-1]) for d in datas]
+    assert len(datas) >= 2 and all(t.transfer_id == tid for t in tails)
+    assert [(t.start, t.end, t.toggle) for t in tails] == [
+        (i == 0, i == len(datas) - 1, bool(i % 2)) for i in range(len(datas))]
+    body = b"".join(d[:-1] for d in datas)
+    crc = common.crc16_from_bytes(payload, common.crc16_from_bytes(bytes(8)))
+    assert body == bytes((crc & 0xFF, crc >> 8)) + payload

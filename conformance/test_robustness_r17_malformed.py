@@ -1,0 +1,342 @@
+"""Robustness (R17): malformed and foreign frames are ignored.
+
+For every frame type the ESC takes (the host's messages and the requests of the catalogue), a command that would
+be valid and would show if it were taken (a setting moved, a suspend, CAN Test on, an answer, a comm refresh) is
+sent malformed: as the start, a middle and the end frame of a multi-frame transfer, as a whole multi-frame transfer
+with DroneCAN's CRC, empty, one byte short, one byte long (where CAN's 8 bytes allow), as a request to another node
+and as a response frame. Then: no answer, nothing changed (the settings read, MSG1's state bits), no reset (the
+power-up count of 241 and MSG1's transfer ids continuous, the reports going on), and, for the throttle frames, the
+comm-loss flag raised on time (R8) while only malformed RawCommands arrive. A single frame with toggle 1 may be
+taken or ignored: recorded (OBSERVE). Each malformed frame of a burst has its own transfer id, so that an answer
+names the frame it answers.
+
+Not sent: Set ID and Set Baud (the run order lets tests without ``power_cycle`` run while a 120 s window elapses,
+and they must send neither: R11's window tests are theirs), and Clear Rec (taking it erases the ESC's temperature
+records, and nothing reads that back). A non-zero throttle in a malformed frame only with ``--allow-motor-spin``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pytest
+
+from ckesc.bench.outcomes import Inconclusive
+from ckesc.protocol import Kind, Status
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.frame import WireFrame, encode
+from ckesc.protocol.ids import ESC_NODE_IDS, parse_can_id, service_id
+from ckesc.protocol.judgements import r8_flag_due
+from ckesc.protocol.transfer import TRANSFER_ID_MODULO, multi_frame, tail_byte
+
+from .settings import NEIGHBOURS, changes, move_request
+from .telemetry import frame_start, interval_s, ms
+from .throttle import STREAM_PERIOD_S, can_throttle, command_for, motor_stopped
+
+SECTION = "robustness"
+motor_stopped = motor_stopped  # autouse fixture: the motor stopped before and after each test
+
+#: the requests that write a setting only inside the 120 s window after power-up (R11): not sent (module docstring)
+WINDOW_WRITERS = frozenset(s.writer for s in cat.PERSISTED_SETTINGS if s.window)
+#: taking it erases the ESC's temperature records, which nothing reads back
+DESTRUCTIVE = frozenset({"clear_rec"})
+#: classic CAN's most data bytes (a frame one byte longer than its table is sent where it fits)
+MAX_DATA = 8
+TID_MASK = TRANSFER_ID_MODULO - 1
+#: the bits of a node id (F1: seven, 1..127)
+NODE_ID_BITS = max(ESC_NODE_IDS).bit_length()
+#: a read of the temperature records (Expand Set Part): taking it shows as MSG_EXP12 frames
+READ_RECORDS = next(c for c in cat.EXPAND_COMMANDS.values() if c.name == "read_temperature_records")
+
+
+def _host_layout(spec: cat.FrameSpec) -> cat.Layout | None:
+    """The layout of what the host sends of ``spec`` (None: the ESC takes no such frame from the host)."""
+    if spec.service:
+        return spec.request
+    return next((lay for lay in spec.layouts if lay.sender != "esc"), None)
+
+
+#: every frame type the ESC takes from the host, in the catalogue's order, less those not sent (module docstring)
+TAKEN = [s.name for s in cat.CATALOGUE if _host_layout(s) is not None and s.name not in WINDOW_WRITERS | DESTRUCTIVE]
+#: the persisted setting each writer moves
+_WRITES = {cat.PERSISTED[name].writer: name for name in NEIGHBOURS}
+
+#: a command of each frame type that shows if it is taken (the settings writers and the throttle frames have theirs
+#: from their tables): a frame type added to the catalogue without one fails here, at import
+_COMMANDS = {
+    "can_test": lambda dut, s: {"option": cat.CAN_TEST_ON},
+    "msg_control": lambda dut, s: {"option": 0, "command": cat.MSG_CONTROL_SUSPEND},
+    "get_esc_id": lambda dut, s: {"option": 0},
+    "self_test": lambda dut, s: {},
+    "expand_set_part": lambda dut, s: {"set_cmd": READ_RECORDS.code, "part": next(iter(READ_RECORDS.parts))},
+    "get_rec": lambda dut, s: {"payload": []},
+    "esc_information": lambda dut, s: {"option": 0},
+    "maintenance_information": lambda dut, s: {"option": 2},
+    "get_major_configuration": lambda dut, s: {"option": 0},
+}
+if missing := sorted(set(TAKEN) - set(_COMMANDS) - set(_WRITES) - set(cat.THROTTLE_FRAMES)):
+    raise KeyError(f"frame types {missing}: say in {__name__} which command of theirs shows when taken")
+
+
+def command(dut, name: str, s: dict, value: int = 0) -> dict | None:
+    """The fields of a valid command of ``name`` that shows if it is taken (None: the DUT's channel is not in it)."""
+    if name in _WRITES:
+        return move_request(_WRITES[name], s)
+    if name in cat.THROTTLE_FRAMES:
+        return command_for(name, s["throttle_channel"], value)
+    return _COMMANDS[name](dut, s)
+
+
+@dataclass
+class Bad:
+    """One malformed frame (or a whole multi-frame transfer: several frames) and what it is."""
+
+    what: str
+    frames: list[WireFrame]
+    transfer_id: int | None
+
+    def __str__(self) -> str:
+        return f"{self.what} ({' '.join(str(w) for w in self.frames)})"
+
+
+def _other_nodes(dut) -> list[int]:
+    """Node ids no ESC of the bench has, each one bit away from the DUT's: an ESC that decodes fewer than the seven
+    bits of a destination takes a request to one of them."""
+    near = (dut.node_id ^ (1 << bit) for bit in range(NODE_ID_BITS))
+    return [n for n in dict.fromkeys(near) if n in ESC_NODE_IDS and n not in dut.nodes]
+
+
+def malformed(dut, name: str, fields: dict, *, toggle_only: bool = False) -> list[Bad]:
+    """``name``'s command ``fields`` in every malformed form R17 names, each with its own transfer id; only the single
+    frame with toggle 1 (R17-toggle) when ``toggle_only``."""
+    spec = cat.spec(name)
+    kind = Kind.REQUEST if spec.service else Kind.MESSAGE
+    layout = "query" if name == "get_esc_id" else None
+    tids = iter(range(TRANSFER_ID_MODULO))
+
+    def wire(tid: int, destination: int | None = None) -> WireFrame:
+        node = (dut.node_id if destination is None else destination) if spec.service else None
+        return encode(spec, fields, kind=kind, source=dut.host_node, destination=node, transfer_id=tid, layout=layout,
+                      nibble_order=dut.profile.nibble_order)
+
+    def bad(what: str, data=lambda d: d, *, destination: int | None = None, response: bool = False,
+            whole: bool = False) -> Bad:
+        tid = next(tids)
+        w = wire(tid, destination)
+        can_id = w.arbitration_id
+        if response:  # the same frame with the request bit clear, from another node: a response the ESC never asked
+            i = parse_can_id(can_id)  # (from node 0 a bench whose echo is not told apart would take it for the DUT's)
+            can_id = service_id(i.priority, i.type_id, False, dut.node_id, _other_nodes(dut)[0])
+        # a whole transfer as DroneCAN splits it (7 bytes a frame), but that no frame of it has the table's 8 bytes:
+        # an ESC that takes a start frame would read the CRC as a command (a throttle, with no --allow-motor-spin)
+        chunk = MAX_DATA - 2 if len(w.data) == MAX_DATA else MAX_DATA - 1
+        datas = multi_frame(w.data[:-1], tid, chunk=chunk) if whole else [data(w.data)]
+        return Bad(what, [WireFrame(can_id, d) for d in datas], tid if spec.has_tail else None)
+
+    def tail(start: bool, end: bool, toggle: bool):
+        return lambda d: d[:-1] + bytes((tail_byte(d[-1] & TID_MASK, start=start, end=end, toggle=toggle),))
+
+    if toggle_only:
+        return [bad("single frame, toggle 1", tail(True, True, True))] if spec.has_tail else []
+    out: list[Bad] = []
+    if spec.has_tail:
+        out += [bad("multi-frame start frame (start=1 end=0)", tail(True, False, False)),
+                bad("multi-frame middle frame (start=0 end=0 toggle=1)", tail(False, False, True)),
+                bad("multi-frame end frame (start=0 end=1 toggle=1)", tail(False, True, True)),
+                bad("whole multi-frame transfer with DroneCAN's CRC", whole=True)]
+    out.append(bad("empty", lambda d: b""))
+    size = _host_layout(spec).size
+    if size is not None:  # Get Rec's payload is free: no wrong length
+        if size:  # Self Test's is empty: its tail byte alone, and "empty" is one byte short of it
+            out.append(bad("one byte short", lambda d: d[:-2] + d[-1:] if spec.has_tail else d[:-1]))
+        if len(wire(0).data) < MAX_DATA:
+            out.append(bad("one byte long", lambda d: d[:-1] + bytes(1) + d[-1:] if spec.has_tail else d + bytes(1)))
+    if spec.service and (others := _other_nodes(dut)):  # (none: every node id one bit away is an ESC of the bench)
+        out += [bad(f"request to node {n}", destination=n) for n in others]
+        out.append(bad(f"response frame from node {others[0]}", response=True))
+    return out
+
+
+def _status_bits(f) -> int:
+    return f.fields["status"] & (cat.STATUS_STATE_BITS & ~Status.COMM_FAULT)  # the comm flag moves with time (R8)
+
+
+@dataclass
+class Effects:
+    answers: list[str]
+    changed: str
+    resets: list[str]
+    settings: dict  # the settings before the frames
+    restarted: bool = False  # the power-up count grew, or MSG1's transfer ids jumped
+
+    def lines(self) -> list[str]:
+        return ([f"answered: {'; '.join(self.answers)}"] if self.answers else []) + (
+            [f"settings changed: {self.changed}"] if self.changed else []) + self.resets
+
+
+def _leave_can_test(dut, since: int) -> None:
+    """CAN Test off when the DUT sent CAN Test frames in ``dut.trace[since:]`` (the fixture's restore does not)."""
+    if any(f.name == "can_test" for f in dut.trace[since:] if f.source == dut.node_id):
+        dut.broadcast("can_test", {"option": cat.CAN_TEST_OFF})
+        dut.wait(cat.ANSWER_DELAY_MAX_S)
+
+
+def culprits(dut, bads: list[Bad], s: dict) -> list[str]:
+    """Each malformed frame again on its own, the settings ``s`` restored before each: those after which the DUT
+    sent something other than its reports, or a setting changed (for a failure's message: which frame it took)."""
+    found = []
+    for b in bads:
+        dut.restore(s)
+        heard = len(dut.trace)
+        for w in b.frames:
+            dut.send_wire(w)
+        dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
+        sent = sorted({f.name for f in dut.trace[heard:] if f.source == dut.node_id and f.name not in cat.REPORT_FRAMES})
+        _leave_can_test(dut, heard)
+        shown = ", ".join(filter(None, [f"sent {', '.join(sent)}" if sent else "", changes(s, dut.settings())]))
+        if shown:
+            found.append(f"{b}: {shown}")
+    dut.restore(s)
+    return found
+
+
+def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
+    """Send the malformed frames, then what came of them: answers (a frame from the DUT other than its reports, each
+    named by the malformed frame whose transfer id it carries), changed settings and MSG1 state, resets."""
+    s = dut.settings()
+    interval = interval_s(s, "msg1")
+    ups = dut.power_up_count()
+    t0 = dut.now()
+    heard = len(dut.trace)  # what comes after this is what the malformed frames may have caused
+    before = dut.frames("msg1", since=t0 - 2 * interval - dut.lane.timing_error, source=dut.node_id)
+    for b in bads:
+        for w in b.frames:
+            dut.send_wire(w)
+        dut.wait(STREAM_PERIOD_S)
+    dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
+    t1 = dut.now()
+    by_tid = {b.transfer_id: b for b in bads}
+    answers = []
+    for f in dut.trace[heard:]:
+        if f.source != dut.node_id or f.name in cat.REPORT_FRAMES:
+            continue
+        cause = by_tid.get(f.transfer_id) if f.kind is Kind.RESPONSE else None
+        answers.append(f"{f.name} {f.kind.label} {f.fields}" + (f" to the {cause}" if cause else ""))
+    answers += [f"an undecodable frame {g.msg.arbitration_id:08X}#{bytes(g.msg.data).hex().upper()}"
+                for g in dut.undecoded(since=t0, source=dut.node_id)]
+    msg1 = dut.frames("msg1", since=t0, until=t1, source=dut.node_id)
+    resets = []
+    seq = [*before[-1:], *msg1]
+    jumps = [(a.transfer_id, b.transfer_id) for a, b in zip(seq, seq[1:])
+             if (a.transfer_id + 1) % TRANSFER_ID_MODULO != b.transfer_id]
+    if jumps:
+        resets.append(f"MSG1 transfer ids jumped ({', '.join(f'{a} -> {b}' for a, b in jumps)}): a restart or lost reports")
+    last = msg1[-1].timestamp if msg1 else None
+    if last is None or t1 - last > cat.restart_limit_s(interval) + dut.lane.timing_error:
+        resets.append(f"no MSG1 in the last {ms(t1 - (last or t0)):g} ms of the {ms(t1 - t0):g} ms after the first "
+                      "malformed frame (MSG1 every " + f"{ms(interval):g} ms): reporting stopped")
+    if resets:  # an ESC that restarted is let boot before it is asked (its restart is the verdict, not its silence)
+        dut.await_reports(t1, t1 + dut.ready_bound_s())
+    _leave_can_test(dut, heard)
+    after = dut.settings()
+    ups_after = dut.power_up_count() if ups is not None else None
+    if ups_after != ups:
+        resets.insert(0, f"the power-up count (241) went {ups} -> {ups_after}: the ESC reset")
+    state = []
+    if before and msg1 and _status_bits(before[-1]) != _status_bits(msg1[-1]):
+        state.append(f"MSG1 state bits 0x{_status_bits(before[-1]):04X} -> 0x{_status_bits(msg1[-1]):04X}")
+    restarted = bool(jumps) or (ups is not None and ups_after != ups)
+    return Effects(answers, ", ".join(filter(None, [changes(s, after), *state])), resets, s, restarted)
+
+
+def _check(dut, name: str, bads: list[Bad], effects: Effects) -> None:
+    dut.record.observe("malformed frames sent", "; ".join(str(b) for b in bads))
+    problems = effects.lines()
+    if problems and not effects.restarted and len(bads) > 1:  # which frame did it (a restart is judged as it is)
+        taken = culprits(dut, bads, effects.settings)
+        problems.append("taken, one at a time: " + ("; ".join(taken) if taken else "none alone"))
+    assert not problems, (f"{cat.spec(name).title}: after these malformed frames of a command that would show "
+                          f"({'; '.join(b.what for b in bads)}): " + "; ".join(problems)
+                          + " (R17: a malformed frame gets no answer, changes nothing and never resets the ESC)")
+
+
+# ------------------------------------------------------------------------------------------ tests
+@pytest.mark.requirement("R17")
+@pytest.mark.parametrize("name", TAKEN)
+def test_malformed_frames_are_ignored(dut, name):
+    """Each malformed form of a command that would show if taken: no answer, nothing changed, no reset."""
+    s = dut.settings()
+    fields = command(dut, name, s)
+    if fields is None:
+        pytest.skip(f"{name} cannot address the DUT's throttle channel {s['throttle_channel']}")
+    bads = malformed(dut, name, fields)
+    _check(dut, name, bads, send_and_look(dut, bads, name))
+
+
+@pytest.mark.requirement("R17-toggle")
+@pytest.mark.parametrize("name", [n for n in TAKEN if cat.spec(n).has_tail])
+def test_single_frame_with_toggle_one(dut, name):
+    """A single frame whose toggle bit is 1, of a command that would show: taken or ignored, recorded."""
+    s = dut.settings()
+    fields = command(dut, name, s)
+    if fields is None:
+        pytest.skip(f"{name} cannot address the DUT's throttle channel {s['throttle_channel']}")
+    bads = malformed(dut, name, fields, toggle_only=True)
+    effects = send_and_look(dut, bads, name)
+    dut.record.observe("single frame with toggle 1", f"{bads[0]}: " + ("; ".join(effects.lines()) or "ignored"))
+
+
+@pytest.mark.requirement("R17", "R8")
+@pytest.mark.parametrize("name", cat.THROTTLE_FRAMES)
+def test_malformed_raw_commands_do_not_refresh_comm(dut, name):
+    """After one valid zero-throttle command, only malformed ones (zero throttle, so taking one spins nothing): the
+    comm-loss flag comes up as if nothing had arrived (R8), no later than 200 ms + one MSG1 interval."""
+    s = can_throttle(dut)
+    fields = command(dut, name, s)
+    if fields is None:
+        pytest.skip(f"{name} cannot address the DUT's throttle channel {s['throttle_channel']}")
+    bads = malformed(dut, name, fields)
+    interval = interval_s(s, "msg1")
+    last = dut.broadcast(name, fields)
+    dut.await_echo(last)
+    # malformed commands at the stream's rate, through the whole R8 window and two MSG1 intervals beyond it
+    until = last.time + cat.COMM_LOSS_TIMEOUT_S + 3 * interval + dut.profile.jitter_s + dut.lane.own_error
+    i = 0
+    while dut.now() < until:
+        for w in bads[i % len(bads)].frames:
+            dut.send_wire(w)
+        i += 1
+        dut.wait(STREAM_PERIOD_S)
+    due = [(f, r8_flag_due(frame_start(dut, f) - last.time, interval, jitter=dut.profile.jitter_s,
+                           error=dut.lane.own_error)) for f in dut.frames("msg1", since=last.time, source=dut.node_id)]
+    judged = [f for f, flag in due if flag]
+    if not judged:
+        raise Inconclusive(f"no MSG1 heard more than 200 ms + one MSG1 interval after the last valid command "
+                           f"({ms(dut.now() - last.time):g} ms): the comm-loss flag cannot be judged")
+    clear = [f for f in judged if not f.fields["status"] & Status.COMM_FAULT]
+    dut.record.observe("malformed RawCommands sent", f"{i} frames cycling: " + "; ".join(b.what for b in bads))
+    assert not clear, (f"bit13 (comm fault) clear in MSG1 {ms(frame_start(dut, clear[0]) - last.time):g} ms after the "
+                       f"last valid {name}, while only malformed ones came ({'; '.join(b.what for b in bads)}): a "
+                       "malformed RawCommand refreshed the comm timeout (R17, R8: set after 200 ms + one MSG1 interval)")
+
+
+@pytest.mark.requirement("R17")
+@pytest.mark.parametrize("name", cat.THROTTLE_FRAMES)
+def test_malformed_throttle_does_not_spin(dut, name):
+    """A non-zero throttle in malformed frames: the motor stays stopped (MSG1's PWM and running bit)."""
+    if not dut.allow_motor_spin:
+        pytest.skip("sends a non-zero throttle in malformed frames: taking one would spin the motor; run with "
+                    "--allow-motor-spin (and the propeller off)")
+    s = can_throttle(dut)
+    fields = command(dut, name, s, value=cat.THROTTLE_MAX // 4)
+    if fields is None:
+        pytest.skip(f"{name} cannot address the DUT's throttle channel {s['throttle_channel']}")
+    dut.throttled = True  # the fixture waits for the motor to stop, should one have been taken
+    bads = malformed(dut, name, fields)
+    t0 = dut.now()
+    effects = send_and_look(dut, bads, name)
+    moved = [f for f in dut.frames("msg1", since=t0, source=dut.node_id)
+             if f.fields["pwm"] or f.fields["status"] & Status.RUNNING]
+    problems = effects.lines() + ([f"MSG1 shows the motor driven (pwm {moved[0].fields['pwm']})"] if moved else [])
+    assert not problems, (f"{name} malformed with throttle {cat.THROTTLE_MAX // 4} "
+                          f"({'; '.join(b.what for b in bads)}): " + "; ".join(problems) + " (R17)")
