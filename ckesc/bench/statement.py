@@ -116,7 +116,7 @@ def _fields(link: Link, name: str, fields: dict[str, Any]) -> dict[str, Any] | N
 
 def _longest_interval(config: dict[str, Any] | None) -> float:
     """The longest report interval 242 shows (s), else the longest the document allows."""
-    codes = [config[k] for k in ("msg1_interval", "msg2_interval", "msg3_interval") if config and config.get(k)]
+    codes = [config[k] for k in cat.INTERVAL_FIELDS if config and config.get(k)]
     return max(codes or [cat.REPORT_INTERVAL_RANGE[1]]) * cat.INTERVAL_UNIT_S
 
 

@@ -101,10 +101,15 @@ def test_the_suite_catches_a_defect_of_the_esc_of_another_make(tmp_path):
 
 @pytest.mark.slow
 def test_the_whole_suite_passes_an_esc_of_another_make(tmp_path):
+    """Every section passes it but robustness, which FAILs it on R17 only: its length checks take a frame one byte
+    longer than its table (and 240/242 an empty request), a defect of that ESC (tools/clean-room-esc/README.md)."""
     with CleanRoom(tmp_path) as cr:
         done, results = _run(tmp_path, cr, "--allow-motor-spin", timeout=1800)
     bad = _verdicts(results, "FAIL", "ERROR")
-    assert not bad, "\n".join(bad)
+    r17 = [r for r in results["results"] if r["section"] == "robustness" and r["outcome"] == "FAIL"]
+    assert r17 and all("R17" in r["message"] for r in r17), "\n".join(bad)
+    rest = [v for v in bad if "test_robustness_" not in v]
+    assert not rest, "\n".join(rest)
 
 
 @pytest.mark.slow
