@@ -17,6 +17,8 @@ violation, an explorer finding) from it; it never writes a tolerance of its own.
 * R9a (:func:`r9a_limit_s`, :func:`r9a_first`, :func:`r9_judged`): the first report after a restart within the
   catalogue's restart limit; the gaps up to and including the second report after it are not judged;
 * F3 (:func:`f3_step`, :func:`f3_holds`): consecutive frames of one counter (a sender's message type) carry transfer ids +1 modulo 32;
+* R13 read-back (:func:`r13_read_back`): the persisted settings (the catalogue's ``PERSISTED_SETTINGS``) read back,
+  at once and after a power cycle, are what was written and saved;
 * F4 (:func:`f4_mismatches`, :func:`f4_pairs`): a response keeps its request's service id and transfer id, has
   request=0, goes to the requester, comes from the node asked.
 
@@ -27,7 +29,7 @@ catalogue's (:mod:`.catalogue`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 from . import catalogue as cat
 from .frame import Frame
@@ -222,6 +224,32 @@ def f3_holds(previous: int, current: int) -> bool:
 def f3_step(previous: int, current: int) -> F3Step:
     """F3: the transfer id ``current`` after ``previous`` on one counter (:class:`F3Step`; ``ok``: +1 modulo 32)."""
     return F3Step(previous, current)
+
+
+# ------------------------------------------------------------------------------------------ R13 read-back
+@dataclass(frozen=True)
+class Differs:
+    """One setting read back other than expected: its name as read back (a ``PERSISTED_SETTINGS`` key, ``rotation``),
+    the value expected (written, saved, or the model's) and the value read. ``str``: ``rotation 0 -> 1``."""
+
+    key: str
+    expected: Any
+    read: Any
+
+    def __str__(self) -> str:
+        return f"{self.key} {self.expected} -> {self.read}"
+
+
+def r13_read_back(expected: Mapping[str, Any], read: Mapping[str, Any], keys: Iterable[str] | None = None, *,
+                  missing: Any = None) -> list[Differs]:
+    """R13 on a read-back (after a power cycle: the persisted settings kept; at once: the write taken): every setting
+    among ``keys`` (default: ``expected``'s then ``read``'s, in order, each once) whose value read differs from the one
+    expected, in that order; a setting one side lacks is ``missing`` there. Empty: the read-back is what was
+    expected. Which settings persist, and which request reads each back, is the catalogue's
+    (``PERSISTED_SETTINGS``); which were expected is the consumer's (what it wrote, what its model holds)."""
+    names = dict.fromkeys(keys if keys is not None else [*expected, *read])
+    return [Differs(k, expected.get(k, missing), read.get(k, missing)) for k in names
+            if expected.get(k, missing) != read.get(k, missing)]
 
 
 # ------------------------------------------------------------------------------------------ F4

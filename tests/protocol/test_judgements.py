@@ -130,6 +130,27 @@ def test_f3_advance_and_frames_lost_from_a_capture():
     assert J.f3_step(4, 3).explained_by(30)
 
 
+# ------------------------------------------------------------------------------------------ R13 read-back
+def test_r13_read_back_every_persisted_setting_kept_or_named_with_old_and_new():
+    """R13 over every key of the catalogue's PERSISTED_SETTINGS: read back as written, nothing; one off by one (the
+    least change), that one with what was written and what was read, in the order asked."""
+    keys = [k for s in cat.PERSISTED_SETTINGS for k in s.keys]
+    written = {k: i + 1 for i, k in enumerate(keys)}
+    assert J.r13_read_back(written, dict(written)) == []
+    for k in keys:
+        got = J.r13_read_back(written, written | {k: written[k] + 1}, keys)
+        assert got == [J.Differs(k, written[k], written[k] + 1)] and str(got[0]) == f"{k} {written[k]} -> {written[k] + 1}"
+    two = J.r13_read_back(written, written | {"rotation": 0, "baud": 0}, ["baud", "rotation"])
+    assert [d.key for d in two] == ["baud", "rotation"]
+
+
+def test_r13_read_back_a_setting_one_side_lacks_and_the_keys_judged():
+    """A setting not read back (or not expected) differs, shown as ``missing``; only ``keys`` are judged when given."""
+    assert J.r13_read_back({"rotation": 1}, {}) == [J.Differs("rotation", 1, None)]
+    assert [str(d) for d in J.r13_read_back({}, {"led_color": 2}, missing="none")] == ["led_color none -> 2"]
+    assert J.r13_read_back({"rotation": 1, "led_color": 2}, {"rotation": 1, "led_color": 3}, ["rotation"]) == []
+
+
 # ------------------------------------------------------------------------------------------ F4
 def _answer(**kw):
     args = {"source": 5, "destination": 0, "transfer_id": 7, "kind": "response"} | kw
