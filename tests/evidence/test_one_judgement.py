@@ -90,13 +90,19 @@ def _explorer(ask, heard) -> set[str]:
     return {r for f in found if f.subject == "msg1 interval" for r in f.requirements}
 
 
-def _check_log(ask, heard, tmp_path, capsys) -> set[str]:
+def _check_log_run(ask, heard, tmp_path, capsys) -> tuple[int, str]:
+    """``ckesc check-log --complete`` over a candump log of the frames: its exit code and what it printed."""
     log = tmp_path / "trace.log"
     log.write_text("".join(f"({m.timestamp:.6f}) can0 {m.arbitration_id:08X}#{bytes(m.data).hex().upper()}\n"
                            for m in sorted([ask, *heard], key=lambda m: m.timestamp)))
     code = cli_main(["check-log", "--complete", str(log)])
     text = capsys.readouterr().out
     assert code in (0, 1), text
+    return code, text
+
+
+def _check_log(ask, heard, tmp_path, capsys) -> set[str]:
+    code, text = _check_log_run(ask, heard, tmp_path, capsys)
     if code == 0:
         return set()
     return {"R9"} if "R9" in text and "msg1 30.000 ms after the previous one" in text else {"other: " + text[-300:]}
@@ -142,12 +148,7 @@ def _f3_bus_rules(ask, heard) -> set[str]:
 
 
 def _f3_check_log(ask, heard, tmp_path, capsys) -> set[str]:
-    log = tmp_path / "trace.log"
-    log.write_text("".join(f"({m.timestamp:.6f}) can0 {m.arbitration_id:08X}#{bytes(m.data).hex().upper()}\n"
-                           for m in sorted([ask, *heard], key=lambda m: m.timestamp)))
-    code = cli_main(["check-log", "--complete", str(log)])
-    text = capsys.readouterr().out
-    assert code in (0, 1), text
+    _, text = _check_log_run(ask, heard, tmp_path, capsys)
     return {"F3"} if "F3" in text and f"msg1: {STUCK}" in text and EXPECTED in text else set()
 
 
