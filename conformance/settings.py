@@ -21,6 +21,7 @@ from typing import Any
 
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
+from ckesc.protocol.judgements import Differs, r13_read_back
 
 
 def listed(values: Mapping[str, Any]) -> str:
@@ -29,17 +30,15 @@ def listed(values: Mapping[str, Any]) -> str:
 
 
 def change(name: str, old: Any, new: Any) -> str:
-    """One setting, from what to what: ``rotation 0 -> 1``."""
-    return f"{name} {old} -> {new}"
+    """One setting, from what to what: ``rotation 0 -> 1`` (as :func:`changes` and R13's read-back say it)."""
+    return str(Differs(name, old, new))
 
 
 def changes(before: Mapping[str, Any], after: Mapping[str, Any], keys: Iterable[str] | None = None) -> str:
     """Every setting among ``keys`` (default: ``before``'s then ``after``'s, in order) whose value differs
     between ``before`` and ``after``, as :func:`change`, joined by ``, ``; ``""`` when none differs (so
     ``assert not (d := changes(a, b)), f"... changed {d}"``). A setting one side lacks shows as ``none``."""
-    names = list(dict.fromkeys(keys if keys is not None else [*before, *after]))
-    return ", ".join(change(k, before.get(k, "none"), after.get(k, "none")) for k in names
-                     if before.get(k, "none") != after.get(k, "none"))
+    return ", ".join(str(d) for d in r13_read_back(before, after, keys, missing="none"))
 
 
 @dataclass(frozen=True)

@@ -29,8 +29,8 @@ from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import Frame, classify, encode
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, Kind
-from ckesc.protocol.judgements import Addressed, asked_node, f4_mismatches
-from ckesc.protocol.transfer import TRANSFER_ID_MODULO, TransferIdCounter, parse_tail
+from ckesc.protocol.judgements import Addressed, asked_node, f3_step, f4_mismatches
+from ckesc.protocol.transfer import TransferIdCounter, parse_tail
 
 from . import wire
 from .answers import BROADCAST_WINDOW_S
@@ -118,10 +118,10 @@ def counting_problems(stream: list[Heard], adjacent: Callable[[Heard, Heard], bo
         if adjacent is not None and not adjacent(prev, h):
             continue
         pairs += 1
-        want = (prev.transfer_id + 1) % TRANSFER_ID_MODULO  # type: ignore[operator]
-        wraps += want == 0 and h.transfer_id == 0
-        if h.transfer_id != want:
-            problems.append((h, f"transfer id {h.transfer_id} after {prev.transfer_id}, expected {want}"))
+        step = f3_step(prev.transfer_id, h.transfer_id)  # type: ignore[arg-type]
+        wraps += step.wrapped
+        if not step.ok:
+            problems.append((h, str(step)))
     return problems, pairs, wraps
 
 

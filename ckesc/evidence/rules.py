@@ -64,8 +64,8 @@ import math
 from typing import Any
 
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, priority_name
-from ..protocol.judgements import Addressed, f4_mismatches, r9_gap, r9a_first, r9a_limit_s
-from ..protocol.transfer import SINGLE_FRAME, TRANSFER_ID_MODULO, parse_tail
+from ..protocol.judgements import Addressed, F3Step, f3_holds, f3_step, f4_mismatches, r9_gap, r9a_first, r9a_limit_s
+from ..protocol.transfer import SINGLE_FRAME, parse_tail
 from .findings import Intervals, Violation, ms, quote
 from .tracker import (
     COMM_BYTE,
@@ -261,14 +261,13 @@ class BusRules(Tracker):
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
         if st.ts is not None and st.chain == node.chain and not node.shared and ts > node.unsure_until:
             gap = start - st.start
-            advance = (tid - st.tid) % TRANSFER_ID_MODULO
             period = None
             if st.interval is not None:
                 period = node.periods[st.interval]
             if period is None and st.periodic and st.min_gap < math.inf:
                 period = st.min_gap
-            if advance != 1 and st.moved == node.moved:  # after a Set ID: maybe another ESC, or one back (F3)
-                out = self._transfer_ids(out, st, info, node, data, ts, gap, advance, period)
+            if not f3_holds(st.tid, tid) and st.moved == node.moved:  # after a Set ID: maybe another ESC, or one back
+                out = self._transfer_ids(out, st, info, node, data, ts, gap, f3_step(st.tid, tid), period)
             if st.reset == node.reset:
                 st.nth += 1
                 st.stats.add(gap)
@@ -295,21 +294,20 @@ class BusRules(Tracker):
         return (quote(st.can_id, st.data, st.ts, note=f"{st.name} tid {st.tid}"),  # type: ignore[arg-type]
                 quote(info.can_id, data, ts, note=f"{st.name} tid {data[-1] & 0x1F}"))
 
-    def _transfer_ids(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, gap: float, advance: int,
+    def _transfer_ids(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, gap: float, step: F3Step,
                       period: float | None):
-        expected = (st.tid + 1) % TRANSFER_ID_MODULO
-        if advance and not self.complete:
+        if step.advance and not self.complete:
             if period is None or not st.periodic:
                 return out  # a frame of an irregular stream may be missing from the capture: cannot tell
             k = round(gap / period)
-            if k >= 2 and abs(gap - k * period) <= 0.25 * period + self.tolerance and advance == k % TRANSFER_ID_MODULO:
+            if k >= 2 and abs(gap - k * period) <= 0.25 * period + self.tolerance and step.explained_by(k - 1):
                 self._observe(("F3",), ts, node.id, "lost-frames",
-                              f"{st.name}: transfer id {st.tid} then {st.tid + advance & 0x1F} after {ms(gap)}: "
+                              f"{st.name}: transfer id {step.previous} then {step.current} after {ms(gap)}: "
                               f"{k - 1} frame(s) missing from the capture", self._pair(st, info, data, ts))
                 return out
         return self._violation(out, ("F3", "4.1.3-tid"), ts, node.id, "transfer-id",
-                               f"{st.name}: transfer id {data[-1] & 0x1F} after {st.tid} ({ms(gap)} earlier), expected {expected}",
-                               self._pair(st, info, data, ts))
+                               f"{st.name}: transfer id {step.current} after {step.previous} ({ms(gap)} earlier), "
+                               f"expected {step.expected}", self._pair(st, info, data, ts))
 
     def _cadence(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float):
         """R9 between two reports of one stretch (no restart, no reset between them). Without a period the

@@ -38,6 +38,7 @@ from ..protocol.judgements import (
     r9_judged,
     r9_mean,
     r9a_limit_s,
+    r13_read_back,
 )
 from ..protocol.requirements import requirement
 from .actions import asks_only
@@ -239,11 +240,11 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
         if req.name in _WRITES_HELD and not asks_only(req.name, req.fields) and _state_at(oracle, req.timestamp).mode == "suspended":
             rids.append("R12")  # the model's answer tells the setting it kept: R12 holds the change back
         rids += [rule for rule in earlier if rule not in rids]
-        for k in b:
-            if a.get(k) != b[k]:
-                kept = [KEPT[k]] if req.name in _PERSISTED and k in KEPT and KEPT[k] not in rids else []
-                out.append(Finding("answer", rids + kept, f"{req.name} {_fields(req)} answered {k}={a.get(k)}, the model {b[k]}",
-                                   _fields(got), _fields(want), req.timestamp - t0, step, subject=f"{req.name}.{k}"))
+        for d in r13_read_back(b, a, b):  # the answer read back against the model's (R13's after a power cycle)
+            k = d.key
+            kept = [KEPT[k]] if req.name in _PERSISTED and k in KEPT and KEPT[k] not in rids else []
+            out.append(Finding("answer", rids + kept, f"{req.name} {_fields(req)} answered {k}={d.read}, the model {d.expected}",
+                               _fields(got), _fields(want), req.timestamp - t0, step, subject=f"{req.name}.{k}"))
     return out
 
 

@@ -16,6 +16,9 @@ violation, an explorer finding) from it; it never writes a tolerance of its own.
   tolerance (1 ms) plus twice the bench's error over the number of gaps; the DUT's jitter widens a single gap only;
 * R9a (:func:`r9a_limit_s`, :func:`r9a_first`, :func:`r9_judged`): the first report after a restart within the
   catalogue's restart limit; the gaps up to and including the second report after it are not judged;
+* F3 (:func:`f3_step`, :func:`f3_holds`): consecutive frames of one counter (a sender's message type) carry transfer ids +1 modulo 32;
+* R13 read-back (:func:`r13_read_back`): the persisted settings (the catalogue's ``PERSISTED_SETTINGS``) read back,
+  at once and after a power cycle, are what was written and saved;
 * F4 (:func:`f4_mismatches`, :func:`f4_pairs`): a response keeps its request's service id and transfer id, has
   request=0, goes to the requester, comes from the node asked.
 
@@ -26,11 +29,12 @@ catalogue's (:mod:`.catalogue`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 from . import catalogue as cat
 from .frame import Frame
 from .ids import Kind
+from .transfer import TRANSFER_ID_MODULO
 
 #: R9: how far a report interval's mean may stray from its target besides the bench's error (the ESC's
 #: report scheduling); also the tick a real-time bench's single report may stray by on top of its stated error
@@ -170,6 +174,82 @@ def r2_slot_end(end: float, node_id: int, *, error: float = 0.0) -> Judgement:
 def answer_bound(end: float, *, error: float = 0.0, rule: str = "4.4.2-4") -> Judgement:
     """4.4.2-4 / 4.4.3-4: an answer to a broadcast ends no later than 64 ms after the request."""
     return Judgement(rule, end, cat.ANSWER_DELAY_MAX_S, "<=", error, f"answer {end * 1000:.3f} ms after the request")
+
+
+# ------------------------------------------------------------------------------------------ F3
+@dataclass(frozen=True, slots=True)
+class F3Step:
+    """F3 between two consecutive frames of one counter (one sender's frame type, to one destination): the transfer
+    id ``current`` after ``previous``. Which pairs are consecutive (no frame of the counter between them, no power
+    cycle) is the consumer's to know; what they must carry is this."""
+
+    previous: int
+    current: int
+    rule = "F3"
+
+    @property
+    def expected(self) -> int:
+        """The transfer id F3 wants after ``previous``: +1, modulo 32."""
+        return (self.previous + 1) % TRANSFER_ID_MODULO
+
+    @property
+    def advance(self) -> int:
+        """How far the counter moved, modulo 32 (1: as F3 wants; 0: stuck)."""
+        return (self.current - self.previous) % TRANSFER_ID_MODULO
+
+    @property
+    def ok(self) -> bool:
+        return f3_holds(self.previous, self.current)
+
+    @property
+    def wrapped(self) -> bool:
+        """The counter went from 31 to 0, as F3 wants."""
+        return self.ok and self.current == 0
+
+    def explained_by(self, missing: int) -> bool:
+        """Whether ``missing`` frames of the counter lost between the two (a capture's gap) explain the step: it
+        moved by one per frame sent, modulo 32, and moved at all."""
+        return self.advance != 0 and self.advance == (missing + 1) % TRANSFER_ID_MODULO
+
+    def __str__(self) -> str:
+        return f"transfer id {self.current} after {self.previous}, expected {self.expected}"
+
+
+def f3_holds(previous: int, current: int) -> bool:
+    """F3: whether ``current`` follows ``previous`` on one counter (+1 modulo 32). The bus rules' hot path asks this
+    of every frame and builds the :class:`F3Step` only for one that breaks it."""
+    return current == (previous + 1) % TRANSFER_ID_MODULO
+
+
+def f3_step(previous: int, current: int) -> F3Step:
+    """F3: the transfer id ``current`` after ``previous`` on one counter (:class:`F3Step`; ``ok``: +1 modulo 32)."""
+    return F3Step(previous, current)
+
+
+# ------------------------------------------------------------------------------------------ R13 read-back
+@dataclass(frozen=True)
+class Differs:
+    """One setting read back other than expected: its name as read back (a ``PERSISTED_SETTINGS`` key, ``rotation``),
+    the value expected (written, saved, or the model's) and the value read. ``str``: ``rotation 0 -> 1``."""
+
+    key: str
+    expected: Any
+    read: Any
+
+    def __str__(self) -> str:
+        return f"{self.key} {self.expected} -> {self.read}"
+
+
+def r13_read_back(expected: Mapping[str, Any], read: Mapping[str, Any], keys: Iterable[str] | None = None, *,
+                  missing: Any = None) -> list[Differs]:
+    """R13 on a read-back (after a power cycle: the persisted settings kept; at once: the write taken): every setting
+    among ``keys`` (default: ``expected``'s then ``read``'s, in order, each once) whose value read differs from the one
+    expected, in that order; a setting one side lacks is ``missing`` there. Empty: the read-back is what was
+    expected. Which settings persist, and which request reads each back, is the catalogue's
+    (``PERSISTED_SETTINGS``); which were expected is the consumer's (what it wrote, what its model holds)."""
+    names = dict.fromkeys(keys if keys is not None else [*expected, *read])
+    return [Differs(k, expected.get(k, missing), read.get(k, missing)) for k in names
+            if expected.get(k, missing) != read.get(k, missing)]
 
 
 # ------------------------------------------------------------------------------------------ F4

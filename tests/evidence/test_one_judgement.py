@@ -2,7 +2,12 @@
 suite's R9 check (:func:`conformance.telemetry` calls ``judgements.r9_judged`` / ``r9_mean``), the live bus rules
 (:mod:`ckesc.evidence.rules`), ``ckesc explore``'s judge (against its faultless oracle) and ``ckesc check-log`` (the
 command, over a candump log of the same frames). An ESC whose MSG1 comes every 30 ms instead of 20 (the emulator's
-fault ``report_interval_wrong``) is R9 to all four; the faultless ESC is R9 to none."""
+fault ``report_interval_wrong``) is R9 to all four; the faultless ESC is R9 to none.
+
+F3 likewise (``judgements.f3_step``): an ESC whose message transfer ids never move (``transfer_id_stuck``) is F3 to
+the suite's check (``conformance/test_s4_1_framing.py``), the bus rules and check-log, with the same words; the
+faultless ESC is F3 to none. The explorer's judge does not judge F3: its runner hears the same frames through the live
+bus rules (``evidence/live.LaneRules``, :class:`~ckesc.evidence.rules.BusRules`), whose F3 finding is the explorer's."""
 
 from __future__ import annotations
 
@@ -18,6 +23,8 @@ from ckesc.explore.oracle import Oracle
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import Decoder, encode, frame_bits
 from ckesc.protocol.judgements import R9_GAPS, r9_judged, r9_mean
+from conformance.test_s4_1_framing import counter_streams, counting_problems
+from conformance.wire import Heard
 
 NODE = 5
 BOOT_S = 0.25
@@ -83,13 +90,19 @@ def _explorer(ask, heard) -> set[str]:
     return {r for f in found if f.subject == "msg1 interval" for r in f.requirements}
 
 
-def _check_log(ask, heard, tmp_path, capsys) -> set[str]:
+def _check_log_run(ask, heard, tmp_path, capsys) -> tuple[int, str]:
+    """``ckesc check-log --complete`` over a candump log of the frames: its exit code and what it printed."""
     log = tmp_path / "trace.log"
     log.write_text("".join(f"({m.timestamp:.6f}) can0 {m.arbitration_id:08X}#{bytes(m.data).hex().upper()}\n"
                            for m in sorted([ask, *heard], key=lambda m: m.timestamp)))
     code = cli_main(["check-log", "--complete", str(log)])
     text = capsys.readouterr().out
     assert code in (0, 1), text
+    return code, text
+
+
+def _check_log(ask, heard, tmp_path, capsys) -> set[str]:
+    code, text = _check_log_run(ask, heard, tmp_path, capsys)
     if code == 0:
         return set()
     return {"R9"} if "R9" in text and "msg1 30.000 ms after the previous one" in text else {"other: " + text[-300:]}
@@ -104,5 +117,48 @@ def test_one_trace_the_same_r9_finding_from_all_four(faults, expected, tmp_path,
         "bus rules": "R9" in _bus_rules(ask, heard),
         "explorer": "R9" in _explorer(ask, heard),
         "check-log": "R9" in _check_log(ask, heard, tmp_path, capsys),
+    }
+    assert got == dict.fromkeys(got, expected)
+
+
+# ------------------------------------------------------------------------------------------ F3
+#: the words every consumer's F3 finding carries for a stuck MSG1 counter (judgements.F3Step's fields; the bus rules
+#: put the gap between them)
+STUCK, EXPECTED = "transfer id 0 after 0", "expected 1"
+
+
+def _f3_conformance(heard) -> set[str]:
+    """As ``test_transfer_ids_count_per_frame_type`` judges one unbroken capture: every counter's consecutive frames."""
+    decoder = Decoder()
+    frames = [Heard.of_frame(decoder.decode(m)) for m in heard]
+    msg1 = counter_streams(frames)[(NODE, cat.spec("msg1").type_id)]
+    problems, pairs, _ = counting_problems(msg1)
+    assert pairs > 32
+    return {"F3"} if problems and problems[0][1] == f"{STUCK}, {EXPECTED}" else {str(p) for _, p in problems}
+
+
+def _f3_bus_rules(ask, heard) -> set[str]:
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    out = set()
+    for m in sorted([ask, *heard], key=lambda m: m.timestamp):
+        for v in rules.feed_message(m):
+            if v.message.startswith("msg1: "):
+                out.update(r for r in v.rules if r == "F3" and STUCK in v.message and EXPECTED in v.message)
+    return out
+
+
+def _f3_check_log(ask, heard, tmp_path, capsys) -> set[str]:
+    _, text = _check_log_run(ask, heard, tmp_path, capsys)
+    return {"F3"} if "F3" in text and f"msg1: {STUCK}" in text and EXPECTED in text else set()
+
+
+@pytest.mark.parametrize("faults, expected", [((), False), (("transfer_id_stuck",), True)],
+                         ids=["counting", "stuck"])
+def test_one_trace_the_same_f3_finding_from_the_suite_the_bus_rules_and_check_log(faults, expected, tmp_path, capsys):
+    ask, heard = _trace(faults)
+    got = {
+        "conformance": "F3" in _f3_conformance(heard),
+        "bus rules": "F3" in _f3_bus_rules(ask, heard),
+        "check-log": "F3" in _f3_check_log(ask, heard, tmp_path, capsys),
     }
     assert got == dict.fromkeys(got, expected)

@@ -107,6 +107,50 @@ def test_answer_bound_64_ms():
     assert J.answer_bound(0.070, rule="4.4.3-4").rule == "4.4.3-4"
 
 
+# ------------------------------------------------------------------------------------------ F3
+@pytest.mark.parametrize("previous", [0, 1, 30, 31])
+def test_f3_plus_one_modulo_32_and_nothing_else(previous):
+    """F3 at and around its limits: +1 holds (31 -> 0 is the wrap), +0 (stuck), +2 (one skipped), -1 and 31 -> 32
+    (no modulo) break it."""
+    want = (previous + 1) % 32
+    assert J.f3_holds(previous, want) and J.f3_step(previous, want).ok
+    assert J.f3_step(previous, want).wrapped == (previous == 31)
+    for wrong in {previous, (previous + 2) % 32, (previous - 1) % 32, previous + 1 if previous == 31 else previous}:
+        step = J.f3_step(previous, wrong)
+        assert not step.ok and not J.f3_holds(previous, wrong) and step.expected == want, wrong
+        assert str(step) == f"transfer id {wrong} after {previous}, expected {want}"
+
+
+def test_f3_advance_and_frames_lost_from_a_capture():
+    """A jump of k modulo 32 is explained by k - 1 frames missing from a capture; a stuck counter (advance 0) by
+    none, not even 31 (32 frames lost would bring it round, but it did not move)."""
+    assert J.f3_step(5, 5).advance == 0 and J.f3_step(31, 1).advance == 2 and J.f3_step(1, 0).advance == 31
+    assert J.f3_step(30, 1).explained_by(2) and not J.f3_step(30, 1).explained_by(1)
+    assert J.f3_step(4, 4).explained_by(31) is False and J.f3_step(4, 4).explained_by(0) is False
+    assert J.f3_step(4, 3).explained_by(30)
+
+
+# ------------------------------------------------------------------------------------------ R13 read-back
+def test_r13_read_back_every_persisted_setting_kept_or_named_with_old_and_new():
+    """R13 over every key of the catalogue's PERSISTED_SETTINGS: read back as written, nothing; one off by one (the
+    least change), that one with what was written and what was read, in the order asked."""
+    keys = [k for s in cat.PERSISTED_SETTINGS for k in s.keys]
+    written = {k: i + 1 for i, k in enumerate(keys)}
+    assert J.r13_read_back(written, dict(written)) == []
+    for k in keys:
+        got = J.r13_read_back(written, written | {k: written[k] + 1}, keys)
+        assert got == [J.Differs(k, written[k], written[k] + 1)] and str(got[0]) == f"{k} {written[k]} -> {written[k] + 1}"
+    two = J.r13_read_back(written, written | {"rotation": 0, "baud": 0}, ["baud", "rotation"])
+    assert [d.key for d in two] == ["baud", "rotation"]
+
+
+def test_r13_read_back_a_setting_one_side_lacks_and_the_keys_judged():
+    """A setting not read back (or not expected) differs, shown as ``missing``; only ``keys`` are judged when given."""
+    assert J.r13_read_back({"rotation": 1}, {}) == [J.Differs("rotation", 1, None)]
+    assert [str(d) for d in J.r13_read_back({}, {"led_color": 2}, missing="none")] == ["led_color none -> 2"]
+    assert J.r13_read_back({"rotation": 1, "led_color": 2}, {"rotation": 1, "led_color": 3}, ["rotation"]) == []
+
+
 # ------------------------------------------------------------------------------------------ F4
 def _answer(**kw):
     args = {"source": 5, "destination": 0, "transfer_id": 7, "kind": "response"} | kw
