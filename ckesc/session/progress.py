@@ -130,7 +130,7 @@ def expected_for(ids: list[str], durations: str | Path | None = None) -> dict[st
     return {i: table.get(i, default) for i in ids}
 
 
-_SECTION_OF_ID = re.compile(r"test_s(\d+(?:_\d+)*)_|test_(attachment)_")
+_SECTION_OF_ID = re.compile(r"test_s(\d+(?:_\d+)*)_|test_(attachment|robustness)_")
 
 
 def section_of_id(nodeid: str) -> str:

@@ -52,3 +52,15 @@ def test_a_whole_run_says_its_time_left_and_ends_where_it_said(tmp_path: Path) -
     missing = {r["nodeid"] for r in doc["results"]} - set(read_table())
     assert not missing, f"{len(missing)} tests not in {TABLE.name} (remake: python -m ckesc.session.progress " \
                         f"reports/latest/results.json), e.g. {sorted(missing)[:3]}"
+
+
+def test_every_conformance_module_names_its_section_from_a_test_id():
+    """A batch's controller has test ids only: each module of the suite (the robustness section's too) must give its
+    section's heading from an id, or the batch's progress and the docs' replayed run lose it."""
+    import conformance
+    from ckesc.session.progress import section_of_id
+
+    modules = sorted(p.name for p in Path(conformance.__file__).parent.glob("test_*.py"))
+    assert modules
+    nameless = [m for m in modules if not section_of_id(f"conformance/{m}::test_x")]
+    assert not nameless, nameless
