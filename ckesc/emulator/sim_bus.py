@@ -31,7 +31,8 @@ import can
 from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
 
 from ..protocol.catalogue import DEFAULT_BITRATE
-from ..protocol.frame import WireFrame, frame_bits  # noqa: F401 - frame_bits: also imported from here
+from ..protocol.frame import WireFrame, frame_bits
+from ..protocol.traffic import TrafficSource
 from .emulated_bench import EmulatedBench
 from .model import EscModel
 
@@ -81,7 +82,10 @@ class SimWorld:
         self._in_flight: tuple[float, _Pending] | None = None
         self._seq = itertools.count()
         self._tasks: list[SimCyclicTask] = []
+        self._sources: list[TrafficSource] = []
         self.stats = {"frames": 0, "busy_s": 0.0}
+        #: per traffic source (by name): frames it put on the bus and the bus time they took
+        self.source_stats: dict[str, dict[str, float]] = {}
         if power_on:
             bench.power_on(0.0)
 
@@ -97,6 +101,10 @@ class SimWorld:
         for task in self._tasks:
             if task.next_time < t:
                 t = task.next_time
+        for source in self._sources:
+            due = source.next_due()
+            if due < t:
+                t = due
         if t == INF:
             return None
         return t if t > self.now else self.now
@@ -114,6 +122,11 @@ class SimWorld:
         for task in self._tasks:
             if task.next_time <= t:
                 task.fire(t)
+        for source in self._sources:
+            if source.next_due() <= t:
+                bitrate = source.bitrate or self._host_bitrate()
+                for wire in source.take_due(t):
+                    self._queue(wire, source, bitrate, ready=wire.timestamp)
         if min(self.bench._deadlines) <= t:
             for esc, wire in self.bench.poll(t):
                 self._queue(wire, esc, esc.bitrate, ready=wire.timestamp)
@@ -156,6 +169,10 @@ class SimWorld:
         end, p = self._in_flight  # type: ignore[misc]
         self._in_flight = None
         self.stats["frames"] += 1
+        if isinstance(p.origin, _Shifted):
+            st = self.source_stats[p.origin.name]
+            st["frames"] += 1
+            st["busy_s"] += frame_bits(len(p.wire.data)) / p.bitrate
         wire = p.wire._replace(timestamp=end)
         sender = p.origin if isinstance(p.origin, EscModel) else None
         flags = p.flags or {}
@@ -168,6 +185,25 @@ class SimWorld:
             if bus is p.origin and not bus.receive_own_messages:
                 continue
             bus._deliver(wire, is_rx=bus is not p.origin, **flags)
+
+    # ------------------------------------------------------------------ other nodes
+    def add_source(self, source: TrafficSource) -> None:
+        """Put another node on this bus (:mod:`ckesc.protocol.traffic`): its frames are queued at their due
+        times, its clock starting now, and contend by arbitration with everyone else's."""
+        if not isinstance(source, TrafficSource):
+            raise TypeError(f"not a traffic source: {source!r}")
+        if any(s.name == source.name for s in self._sources):
+            raise ValueError(f"a traffic source named {source.name!r} is already on {self.channel}")
+        self._sources.append(_Shifted(source, self.now))
+        self.source_stats.setdefault(source.name, {"frames": 0, "busy_s": 0.0})
+
+    def remove_source(self, source: TrafficSource | str) -> None:
+        """Take a source off the bus (its frames already queued still go out)."""
+        name = source if isinstance(source, str) else source.name
+        self._sources = [s for s in self._sources if s.name != name]
+
+    def _host_bitrate(self) -> int:
+        return self.buses[-1].bitrate if self.buses else DEFAULT_BITRATE
 
     # ------------------------------------------------------------------ host side
     def send(self, bus: SimEscBus, msg: can.Message) -> None:
@@ -189,6 +225,24 @@ class SimWorld:
         self.power_off()
         self.run_until(self.now + off_time)
         self.power_on()
+
+
+class _Shifted:
+    """A source on the world's clock: its own clock starts at ``t0``."""
+
+    def __init__(self, source: TrafficSource, t0: float) -> None:
+        self.source, self.t0 = source, t0
+        self.name, self.bitrate = source.name, source.bitrate
+
+    def next_due(self) -> float:
+        return self.source.next_due() + self.t0
+
+    def take_due(self, now: float) -> list[WireFrame]:
+        # compared on the world's clock (``now - t0`` could round below a due time and stall the world)
+        out: list[WireFrame] = []
+        while (due := self.source.next_due()) + self.t0 <= now:
+            out.extend(w._replace(timestamp=w.timestamp + self.t0) for w in self.source.take_due(due))
+        return out
 
 
 class SimCyclicTask(ModifiableCyclicTaskABC, RestartableCyclicTaskABC):
