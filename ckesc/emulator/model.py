@@ -27,6 +27,7 @@ from ..protocol.frame import Decoder, Frame, WireFrame, classify
 from ..protocol.ids import Kind
 from ..protocol.transfer import TransferIdCounter, parse_tail, tail_byte
 from .config import REPORT_TIMERS, EscConfig, factory_nvm
+from .faults import onset
 from .esc_answers import Answers
 from .esc_motor import Motor
 from .esc_output import Output
@@ -133,6 +134,10 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         self._resumed = False  # comm_loss_sticky_after_resume: reporting was suspended and resumed
         self._selected = False  # throttle_select_drops_10b: a Throttle Select was taken
         self._boot_node = self.nvm["node_id"]  # answer_slot_from_boot_node: the node id it booted with
+        # the soak faults' state (faults.SOAK; each shows only after its onset, counted from here or from the stream)
+        self._stream_since: float | None = None  # reset_after_streaming: when the uninterrupted command stream began
+        self._warm_at = now + onset("clock_drift_warm", self.config.onsets)  # clock_drift_warm: the clock runs fast
+        self._glitch_at = now + onset("comm_flag_glitch", self.config.onsets)  # comm_flag_glitch: the next glitch
 
     def power_on(self, now: float) -> None:
         if self.powered:
