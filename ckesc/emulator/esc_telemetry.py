@@ -8,8 +8,8 @@ import math
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import (
     CAN_TEST_OFF,
-    COMM_LOSS_TIMEOUT_S,
     CAN_TEST_ON,
+    COMM_LOSS_TIMEOUT_S,
     INTERVAL_UNIT_S,
     MSG_CONTROL_RESUME,
     MSG_CONTROL_RESUME_EXP,

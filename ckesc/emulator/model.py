@@ -27,12 +27,12 @@ from ..protocol.frame import Decoder, Frame, WireFrame, classify
 from ..protocol.ids import Kind
 from ..protocol.transfer import TransferIdCounter, parse_tail, tail_byte
 from .config import REPORT_TIMERS, EscConfig, factory_nvm
-from .faults import onset
 from .esc_answers import Answers
 from .esc_motor import Motor
 from .esc_output import Output
 from .esc_settings import Settings
 from .esc_telemetry import EXP_MODE, REPORT_NAMES, REPORTING, SUSPENDED, Telemetry
+from .faults import onset
 
 __all__ = ["EXP_MODE", "HANDLED", "REPORTING", "REPORT_TIMERS", "SUSPENDED", "THROTTLE_FRAMES", "EscConfig", "EscModel",
            "factory_nvm"]
