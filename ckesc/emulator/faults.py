@@ -12,7 +12,8 @@ the behaviour the faultless model follows, and the self-test reports whether the
 tests, or leaves it to ``ckesc explore`` (model-based exploration). A ``soak`` fault is a long-run defect (R19): it
 shows only after its onset (``onset_s``: tens of minutes of power or of an uninterrupted RawCommand stream, longer
 than the whole ten-minute suite and far longer than any of its streams), so the suite must NOT catch it (the
-self-test proves it misses it) and ``ckesc soak`` must. ``EscConfig.onsets`` moves an onset (a short soak, a test).
+self-test proves it misses it) and ``ckesc soak`` must. ``NAME=SECONDS`` in a list of fault names (``--emulator-faults
+reset_after_streaming=300``), or ``EscConfig.onsets``, moves a soak fault's onset (a short soak, a test).
 """
 
 from __future__ import annotations
@@ -250,6 +251,23 @@ def onset(name: str, onsets=None) -> float:
     return value
 
 
+def split(entry: str) -> tuple[str, float | None]:
+    """A fault list's entry: ``NAME``, or ``NAME=SECONDS`` (a soak fault's onset moved); raises ValueError when
+    SECONDS is no number."""
+    name, eq, seconds = str(entry).partition("=")
+    if not eq:
+        return name.strip(), None
+    try:
+        return name.strip(), float(seconds)
+    except ValueError:
+        raise ValueError(f"fault {entry!r}: NAME=SECONDS takes a number of seconds, not {seconds!r}") from None
+
+
+def onsets_in(entries) -> dict[str, float]:
+    """The onsets ``NAME=SECONDS`` entries of a fault list give (checked: soak faults only, seconds >= 0)."""
+    return check_onsets({name: value for name, value in map(split, entries or ()) if value is not None})
+
+
 def check_onsets(onsets) -> dict[str, float]:
     """EscConfig.onsets checked: soak fault names to a number of seconds >= 0; raises ValueError."""
     out: dict[str, float] = {}
@@ -263,8 +281,9 @@ def check_onsets(onsets) -> dict[str, float]:
 
 
 def check(names) -> frozenset[str]:
-    """Validate fault names; raises ValueError listing the unknown ones and the known ones."""
-    names = frozenset(names or ())
+    """Validate fault names (``NAME=SECONDS`` entries too: :func:`split`), the names without their onsets; raises
+    ValueError listing the unknown ones and the known ones."""
+    names = frozenset(split(n)[0] for n in names or ())
     unknown = names - FAULTS.keys()
     if unknown:
         raise ValueError(f"unknown fault(s) {', '.join(sorted(unknown))}; known: {', '.join(sorted(FAULTS))}")

@@ -136,8 +136,13 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         self._boot_node = self.nvm["node_id"]  # answer_slot_from_boot_node: the node id it booted with
         # the soak faults' state (faults.SOAK; each shows only after its onset, counted from here or from the stream)
         self._stream_since: float | None = None  # reset_after_streaming: when the uninterrupted command stream began
-        self._warm_at = now + onset("clock_drift_warm", self.config.onsets)  # clock_drift_warm: the clock runs fast
-        self._glitch_at = now + onset("comm_flag_glitch", self.config.onsets)  # comm_flag_glitch: the next glitch
+        self.onsets_moved()
+
+    def onsets_moved(self) -> None:
+        """The soak faults' times from this power-up (again, when ``config.onsets`` changed): when the clock runs fast
+        (clock_drift_warm) and the next comm flag glitch (comm_flag_glitch)."""
+        self._warm_at = self.powered_at + onset("clock_drift_warm", self.config.onsets)
+        self._glitch_at = self.powered_at + onset("comm_flag_glitch", self.config.onsets)
 
     def power_on(self, now: float) -> None:
         if self.powered:

@@ -37,7 +37,10 @@ def gaps(frames, name: str = "msg1") -> list[tuple[float, float, int]]:
 
 
 def bench(lane, fault: str | None, onsets: dict[str, float] | None = None):
-    host = lane([1], faults=[fault] if fault else [], esc_config={"onsets": onsets or {}} if fault else {})
+    """A booted bench with ``fault`` on, its onset moved as ``onsets`` says (as NAME=SECONDS, what
+    --emulator-faults takes)."""
+    entry = f"{fault}={onsets[fault]}" if fault and onsets and fault in onsets else fault
+    host = lane([1], faults=[entry] if fault else [])
     host.wait_until(START)
     return host
 
@@ -58,6 +61,21 @@ def test_default_onsets_lie_beyond_the_ten_minute_suite_and_within_an_hour():
     assert onset("run_time_wraps") == 65536 * RUN_TIME_TICK_S  # a uint16 of 50 ms ticks
     with pytest.raises(ValueError, match="only soak faults"):
         EscConfig(onsets={"answer_late": 3})
+    with pytest.raises(ValueError, match="only soak faults"):
+        EscConfig(faults=frozenset({"answer_late=3"}))
+    moved = EscConfig(faults=frozenset({"clock_drift_warm=60", "answer_late"}))
+    assert moved.faults == {"clock_drift_warm", "answer_late"} and moved.onsets == {"clock_drift_warm": 60.0}
+    assert onset("clock_drift_warm", moved.onsets) == 60.0 and onset("reset_after_streaming", moved.onsets) == 1200.0
+
+
+def test_a_soak_fault_switched_on_a_running_bench_takes_its_onset(lane):
+    """bus.set_fault("NAME=SECONDS"): the fault on, its onset moved (here the glitch 20 s after power-up)."""
+    host = bench(lane, None)
+    host.bus.set_fault("comm_flag_glitch=20")
+    assert host.esc(1).faults == {"comm_flag_glitch"} and host.esc(1).config.onsets == {"comm_flag_glitch": 20.0}
+    frames = fly(host, 25.0)
+    [at] = [f.timestamp for f in frames if f.name == "msg1" and f.fields["status"] & Status.COMM_FAULT]
+    assert 20.0 <= at < 20.02, at
 
 
 # ------------------------------------------------------------------------------------------------
@@ -160,6 +178,7 @@ def test_comm_flag_glitch(lane):
     assert 20.0 <= at < 20.02, at  # the first MSG1 from 20 s on (every 20 ms from 0.25 s: 20.01)
 
 
+@pytest.mark.slow
 def test_comm_flag_glitch_comes_once_an_hour(lane):
     """Over two hours (a sparse stream: a command every 0.19 s, within the comm-loss time; reports every 0.5 s) the
     glitches come at 20 s and an hour later, and only then."""

@@ -21,6 +21,7 @@ from ckesc.emulator.faults import FAULTS, SOAK
 from ckesc.reporting.results import Result
 from ckesc.selftest import (
     FaultRun,
+    _suite,
     headline,
     judge,
     run_suite,
@@ -139,3 +140,15 @@ def test_a_soak_fault_is_reported_found_only_by_soak():
     line = headline([FaultRun(None, ()), missed, caught], [])
     assert line == ("the faultless emulator passes, 1 of 2 long-run faults missed by the suite, as they must be "
                     "(found only by soak); 1 NOT"), line
+
+
+def test_a_soak_fault_whose_onset_is_moved_inside_the_run_is_caught():
+    """Only the onset hides a soak fault from the suite: ``clock_drift_warm=0`` (the clock fast from power-up on, the
+    onset moved with --emulator-faults NAME=SECONDS) FAILs MSG2's interval test on R9, and the self-test calls that a
+    PROBLEM (about 8 s)."""
+    results, problem = _suite(["conformance.test_s4_4_5_msg2"], ["-k", "test_msg2_interval_follows_set_freq and 10]",
+                                                                 "--emulator-faults", "clock_drift_warm=0"])
+    assert results is not None, problem
+    run = judge(FaultRun("clock_drift_warm", FAULTS["clock_drift_warm"].rules, kind=SOAK), results)
+    assert run.failing and all("R9" in ids for _, ids in run.failing), run.failing
+    assert not run.ok and "which the suite must miss" in run.problem
