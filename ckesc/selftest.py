@@ -10,6 +10,11 @@ An interaction fault (``kind="interaction"``: a defect where two features meet) 
 features one at a time: the table says whether the suite catches it, and by which tests, or leaves it to ``ckesc
 explore``. A test that fails for it must still cite one of its rules.
 
+A soak fault (``kind="soak"``: a long-run defect, R19) shows only after an onset longer than the whole suite (tens
+of minutes of power or of an uninterrupted RawCommand stream): the suite must MISS it, every test passing as against
+the faultless emulator, and the table says it is found only by soak (``ckesc soak``). A test that fails for it is a
+PROBLEM: the fault's onset is inside the suite's run (it is no long-run defect), or a test fails for another reason.
+
 It must also have no false teeth: against every conforming variant (``ckesc/emulator/variants.py``: a
 behaviour the document, or a stated READING, allows) no test may FAIL or ERROR; one that does is the
 suite's bug, a reading stricter than the document. ``--variants each`` runs every alternative of every
@@ -34,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from .emulator import variants
-from .emulator.faults import FAULTS, INTERACTION, SINGLE
+from .emulator.faults import FAULTS, INTERACTION, SINGLE, SOAK
 from .protocol.requirements import Verdict, requirement
 from .reporting.causes import broken_outside_a_fail
 from .reporting.results import RunRecord
@@ -52,7 +57,7 @@ class FaultRun:
     bus_rules: list[str] = field(default_factory=list)  # the rule ids those failures named
     ran: int = 0
     problem: str = ""
-    kind: str = SINGLE  # the fault's kind (faults.SINGLE or faults.INTERACTION)
+    kind: str = SINGLE  # the fault's kind (faults.SINGLE, faults.INTERACTION or faults.SOAK)
     inconclusive: list[str] = field(default_factory=list)  # tests the fault left INCONCLUSIVE
 
     @property
@@ -121,6 +126,12 @@ def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full
     results, run.problem = _suite(scope_targets(fault, scope), [*pytest_args, *(["--emulator-faults", fault] if fault else [])])
     if results is None:
         return run
+    return judge(run, results)
+
+
+def judge(run: FaultRun, results: list[Any]) -> FaultRun:
+    """The self-test's judgement of one suite run (its results.json results) against ``run.fault``."""
+    fault, rules = run.fault, run.rules
     run.ran = len(results)
     for r in results:
         if r.outcome == Verdict.FAIL:
@@ -140,6 +151,14 @@ def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full
     if fault is None:
         if run.failing or run.errors:
             run.problem = f"{len(run.failing)} failed and {len(run.errors)} errored against the faultless emulator"
+    elif run.kind == SOAK:
+        # a long-run defect: the suite must miss it (the proof that only a soak finds it)
+        if run.failing:
+            run.problem = (f"{len(run.failing)} test(s) failed for a soak fault, which the suite must miss (its onset "
+                           f"{_minutes(FAULTS[fault].onset_s)} is inside the suite's run?): "
+                           f"{', '.join(t for t, _ in run.failing[:5])}")
+        elif run.errors:
+            run.problem = f"{len(run.errors)} test(s) errored: {run.errors[0]}"
     elif observe_only(rules):
         # an OBSERVE rule is recorded, never failed: the fault must fail nothing
         if run.failing:
@@ -155,6 +174,14 @@ def run_suite(fault: str | None, pytest_args: list[str] = (), scope: str = "full
         elif run.errors:
             run.problem = f"{len(run.errors)} test(s) errored: {run.errors[0]}"
     return run
+
+
+def _minutes(seconds: float | None) -> str:
+    """An onset for people: ``20 min``, ``54 min 37 s``."""
+    if seconds is None:
+        return "-"
+    m, sec = divmod(round(seconds), 60)
+    return f"{m} min" + (f" {sec} s" if sec else "")
 
 
 def observe_only(rules: tuple[str, ...]) -> bool:
@@ -262,11 +289,18 @@ def headline(faults: list[FaultRun], variant_runs: list[VariantRun]) -> str:
         parts.append("the faultless emulator passes" if faults[0].ok else "the faultless emulator does NOT pass")
     if len(faults) > 1:
         interactions = [r for r in faults[1:] if r.kind == INTERACTION]
-        caught = "every single fault caught" if interactions else "every fault caught"
-        parts.append(caught if not bad_faults else f"{len(bad_faults)} of {len(faults) - 1} faults NOT caught cleanly")
+        soaks = [r for r in faults[1:] if r.kind == SOAK]
+        bad = [r for r in bad_faults if r.kind != SOAK]
+        caught = "every single fault caught" if interactions or soaks else "every fault caught"
+        if len(faults) - 1 > len(soaks):
+            parts.append(caught if not bad else f"{len(bad)} of {len(faults) - 1 - len(soaks)} faults NOT caught cleanly")
         if interactions:
             parts.append(f"{sum(r.caught for r in interactions)} of {len(interactions)} interaction faults caught by "
                          "the suite (the rest left to ckesc explore)")
+        if soaks:
+            missed = sum(r.ok for r in soaks)
+            parts.append(f"{missed} of {len(soaks)} long-run faults missed by the suite, as they must be (found only "
+                         "by soak)" + (f"; {len(soaks) - missed} NOT" if missed < len(soaks) else ""))
     if variant_runs:
         parts.append(f"no variant failed ({len(variant_runs)} runs)" if not bad_variants
                      else f"{len(bad_variants)} of {len(variant_runs)} variant runs FAILED or ERRORED (the suite's bugs)")
@@ -295,6 +329,8 @@ def table(runs: list[FaultRun]) -> str:
             tests += (f"{'<br>' if tests else ''}{len(bus)} test(s) failed by the live bus rules "
                       f"({' '.join(r.bus_rules)})")
         verdict = ("ok (OBSERVE only: recorded, never failed)" if observe_only(r.rules) else "ok") if r.ok else "PROBLEM: " + r.problem
+        if r.kind == SOAK and r.ok:
+            verdict = f"found only by soak: the suite misses it (onset {_minutes(FAULTS[r.fault].onset_s)})"
         if r.kind == INTERACTION and r.ok:
             verdict = (f"interaction: caught by {len(r.failing)} test(s)" if r.caught else
                        "interaction: not caught by the suite, left to ckesc explore"

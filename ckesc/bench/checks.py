@@ -20,7 +20,7 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from ..emulator import variants
-from ..emulator.faults import FAULTS
+from ..emulator.faults import FAULTS, onsets_in
 from ..protocol.ids import ESC_NODE_IDS
 from .errors import PreflightError
 from .labgrid_power import labgrid_options
@@ -53,8 +53,9 @@ def node_list(text: str) -> list[int]:
 
 
 def fault_names(text: str) -> list[str]:
+    """--emulator-faults: fault names, each maybe ``NAME=SECONDS`` (a soak fault's onset moved), checked."""
     names = [f.strip() for f in text.split(",") if f.strip()]
-    unknown = [f for f in names if f not in FAULTS]
+    unknown = [f for f in names if f.partition("=")[0].strip() not in FAULTS]
     if unknown:
         import difflib
 
@@ -62,6 +63,10 @@ def fault_names(text: str) -> list[str]:
         raise PreflightError(f"--emulator-faults: unknown fault {unknown[0]!r}"
                              + (f" (did you mean {', '.join(close)}?)" if close else "")
                              + "; `ckesc control faults` or ckesc/emulator/faults.py lists them")
+    try:
+        onsets_in(names)
+    except ValueError as exc:
+        raise PreflightError(f"--emulator-faults: {exc}") from None
     return names
 
 

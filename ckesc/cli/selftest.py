@@ -49,6 +49,8 @@ def selftest_command(args: argparse.Namespace) -> int:
         status = "ok" if run.ok else "PROBLEM"
         if run.kind == "interaction" and run.ok:
             status += " (interaction: caught)" if run.caught else " (interaction: left to ckesc explore)"
+        elif run.kind == "soak" and run.ok:
+            status += " (soak: missed by the suite, found only by soak)"
         print(f"[{i:>3}/{n}] {run.fault or '(faultless)':<34} {len(run.failing):>3} failing  {status}", flush=True)
 
     try:

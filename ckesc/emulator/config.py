@@ -80,9 +80,14 @@ class EscConfig:
     supply_voltage: float = 50.4  # 12S full
     seed: int = 0
     faults: frozenset[str] = field(default_factory=frozenset)
+    #: soak faults' onsets in seconds, by fault name, where not their default (faults.FAULTS[name].onset_s); a
+    #: ``NAME=SECONDS`` entry of ``faults`` adds one
+    onsets: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.faults = _faults.check(self.faults)
+        given = self.faults
+        self.faults = _faults.check(given)
+        self.onsets = {**_faults.onsets_in(given), **_faults.check_onsets(self.onsets)}
         # the freedoms the document leaves (conforming variants): each field only at a value that conforms
         _variants.check({name: getattr(self, name) for name in _variants.FREEDOMS})
 

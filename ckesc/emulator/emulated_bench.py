@@ -43,8 +43,8 @@ class EmulatedBench:
         node_list = list(nodes)  # none: a bench with no ESC (``ckesc emulate --nodes none``, a bare hub)
         self.escs: list[EscModel] = []
         for slot, node in enumerate(node_list):
-            names = _faults.check(faults.get(node, ()) if isinstance(faults, Mapping) else (faults or ()))
-            cfg = EscConfig(slot=slot, node_id=node, seed=seed, faults=names, **dict(config or {}))
+            names = frozenset(faults.get(node, ()) if isinstance(faults, Mapping) else (faults or ()))
+            cfg = EscConfig(slot=slot, node_id=node, seed=seed, faults=names, **dict(config or {}))  # checks them
             self.escs.append(EscModel(cfg, stored.get(slot)))
         self.powered = False
         self._decoder = Decoder(track_requests=False)
@@ -76,12 +76,17 @@ class EmulatedBench:
 
     # faults -----------------------------------------------------------------------------------
     def set_fault(self, name: str, on: bool = True, node: int | None = None) -> None:
-        _faults.check([name])
+        """Switch fault ``name`` (``NAME=SECONDS``: a soak fault with its onset moved) on or off."""
+        [name] = _faults.check([entry := name])
+        onsets = _faults.onsets_in([entry])
         if node is not None:
             self.esc(node)  # raises KeyError naming the node ids on the bench
         for esc in self.escs:
             if node is None or esc.node_id == node:
                 (esc.faults.add if on else esc.faults.discard)(name)
+                if on and onsets:
+                    esc.config.onsets = {**esc.config.onsets, **onsets}
+                    esc.onsets_moved()  # counted from the ESC's last power-up
         self.touch()
 
     def set_self_test_fault(self, code: int, node: int | None = None) -> None:

@@ -79,7 +79,7 @@ class Answers:
             fields = {"total_run_time": self._whole(n["total_run_time"]), "mos_t_max": n["records"]["mos"]["t_max"],
                       "cap_t_max": n["records"]["cap"]["t_max"], "info_7": 0}
         elif option == 1:
-            fields = {"run_time": self._whole(self.run_time), "runs": n["starts"], "info_7": 1}
+            fields = {"run_time": self._whole(self.this_run_time()), "runs": n["starts"], "info_7": 1}
         elif option == 2:
             ups, stops = n["power_ups"], n["stops"]
             if "maintenance_counts_wrong" in self.faults:

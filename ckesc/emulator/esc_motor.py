@@ -9,6 +9,7 @@ from ..protocol.catalogue import COMM_LOSS_TIMEOUT_S, INTERVAL_UNIT_S, THROTTLE_
 from ..protocol.codecs import TAIL_BITS_10B, unpack_throttle12
 from ..protocol.frame import Frame
 from .config import RECORD_SENSORS
+from .faults import WARM_CLOCK_RATE, onset
 
 #: (sensor, time constant s, rise at full load degC, ambient degC): a plausible, not a measured, ESC.
 _THERMAL = (("mos", 20.0, 60.0, 25.0), ("cap", 40.0, 35.0, 25.0), ("mcu", 30.0, 20.0, 30.0), ("motor", 60.0, 70.0, 25.0))
@@ -46,6 +47,8 @@ class Motor:
             self._record_temperatures()
         running = self.rpm >= 1 or self.throttle > 0
         if running:
+            if now > self._warm_at and "clock_drift_warm" in self.faults:  # seconds of a fast clock
+                dt *= WARM_CLOCK_RATE
             self.run_time += dt
             self.nvm["total_run_time"] += dt
         if running != self.running:
@@ -163,6 +166,8 @@ class Motor:
                 value = raw if "ten_bit_not_doubled" in self.faults or raw < 0 else raw * 2
         if value is None:
             return False  # not addressed to this ESC's channel: not a command for it
+        if "reset_after_streaming" in self.faults and self._stream_resets(now):
+            return True  # the frame's handling hung: the watchdog restarted the ESC (it boots, then hears again)
         if value > THROTTLE_MAX:
             value = self._over_max(THROTTLE_MAX)
         if value < 0:  # over_max_throttle "hold": the frame's value ignored, the command still heard
@@ -183,6 +188,27 @@ class Motor:
             self.comm_fault = False
         self._refresh_throttle(now)
 
+
+    def _stream_resets(self, now: float) -> bool:
+        """Fault 'reset_after_streaming': a command addressed to this ESC continues the stream (no gap longer than
+        the comm-loss time since the last) or starts one; once the stream has run its onset without a break, the
+        watchdog resets the ESC (a power-up: what flash holds is kept, RAM is not). True when it reset."""
+        last = self.last_command
+        if self._stream_since is None or last is None or now - last > COMM_LOSS_TIMEOUT_S:
+            self._stream_since = now
+            return False
+        if now - self._stream_since < onset("reset_after_streaming", self.config.onsets):
+            return False
+        self.power_off(now)
+        self.power_on(now)
+        return True
+
+    def this_run_time(self) -> float:
+        """This run's running time in seconds as 241 option 1 and MSG_EXP10 report it (fault 'run_time_wraps': kept
+        in a uint16 of 50 ms ticks, so modulo 65536 ticks, or the onset given)."""
+        if "run_time_wraps" in self.faults:
+            return self.run_time % onset("run_time_wraps", self.config.onsets)
+        return self.run_time
 
     def _motor_busy(self) -> bool:
         return (self.running or self.throttle > 0) and "rotation_while_running" not in self.faults

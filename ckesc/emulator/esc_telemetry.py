@@ -9,6 +9,7 @@ from ..protocol import catalogue as cat
 from ..protocol.catalogue import (
     CAN_TEST_OFF,
     CAN_TEST_ON,
+    COMM_LOSS_TIMEOUT_S,
     INTERVAL_UNIT_S,
     MSG_CONTROL_RESUME,
     MSG_CONTROL_RESUME_EXP,
@@ -19,6 +20,7 @@ from ..protocol.codecs import codec_for
 from ..protocol.frame import Frame, WireFrame
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Priority, message_id
 from ..protocol.transfer import tail_byte
+from .faults import GLITCH_EVERY_S, WARM_CLOCK_RATE
 
 # Reporting states (MSG Control, 4.4.2)
 REPORTING = "normal"
@@ -51,6 +53,8 @@ class Telemetry:
             n = cat.DEFAULT_REPORT_INTERVALS["msg2_interval"]
         unit = 0.003 if which == "msg1" and "report_interval_wrong" in self.faults else INTERVAL_UNIT_S
         period = n * unit
+        if self._last_update > self._warm_at and "clock_drift_warm" in self.faults:
+            period /= WARM_CLOCK_RATE  # a warm board's fast clock: the report timer's 2 ms ticks come sooner
         if "report_jitter" in self.faults:
             period *= 1 + self._rng.uniform(-0.3, 0.3)
         return period
@@ -148,7 +152,10 @@ class Telemetry:
             return
         if which == "msg1":
             pwm = 0 if "speed_ignores_throttle" in self.faults else self.throttle
-            fields = {"speed": int(self.rpm), "pwm": pwm, "status": self.status_word()}
+            status = self.status_word()
+            if due >= self._glitch_at and "comm_flag_glitch" in self.faults:
+                status |= self._comm_glitch(due)
+            fields = {"speed": int(self.rpm), "pwm": pwm, "status": status}
         elif which == "msg2":
             volts, amps = self._electrical()
             scale = 10 if "msg2_scale_tenths" in self.faults else 100
@@ -169,6 +176,17 @@ class Telemetry:
                 self._emit_raw(due, 20052, bytes([fields["mos_t"], fields["cap_t"], fields["motor_t"]]), prio or Priority.LOWEST)
                 return
             self._emit(due, "msg3", fields, priority=prio)
+
+    def _comm_glitch(self, due: float) -> int:
+        """Fault 'comm_flag_glitch': the comm-loss bit for the first MSG1 due at or after a glitch time (its onset
+        after power-up, then every GLITCH_EVERY_S) while the command stream runs (a command within the comm-loss
+        time, the flag not set for real); a glitch time that finds no stream passes without one."""
+        while self._glitch_at <= due:
+            self._glitch_at += GLITCH_EVERY_S
+        last = self.last_command
+        streaming = (last is not None and due - last <= COMM_LOSS_TIMEOUT_S and not self.comm_fault
+                     and not self._active_source_is_pwm())
+        return _COMM_FAULT if streaming else 0
 
     def _electrical(self) -> tuple[float, float]:
         sag = 0.02 * self.current
@@ -213,7 +231,7 @@ class Telemetry:
             ("msg_exp8", {"power_ups": power_ups, "starts": n["starts"], "stops": n["stops"]}),
             ("msg_exp9", {"total_run_time": whole(n["total_run_time"] * unit) & 0xFFFFFFFF,
                           "fault_code_1": self.self_test_fault}),
-            ("msg_exp10", {"run_time": whole(self.run_time * unit) & 0xFFFFFFFF, "fault_code_2": 0}),
+            ("msg_exp10", {"run_time": whole(self.this_run_time() * unit) & 0xFFFFFFFF, "fault_code_2": 0}),
             ("msg_exp11", dict(zip(("mos_t", "mcu_t", "cap_t", "motor_t"), exp11))),
         ]
 

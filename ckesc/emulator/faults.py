@@ -9,7 +9,11 @@ Two kinds: a ``single`` fault breaks one feature on its own, and the suite, whic
 must catch it. An ``interaction`` fault lives where two features meet, as real firmware has them (a save that
 rewrites a whole flash block and clobbers its neighbour, a second suspend that latches): its rules are those of
 the behaviour the faultless model follows, and the self-test reports whether the suite catches it, and by which
-tests, or leaves it to ``ckesc explore`` (model-based exploration).
+tests, or leaves it to ``ckesc explore`` (model-based exploration). A ``soak`` fault is a long-run defect (R19): it
+shows only after its onset (``onset_s``: tens of minutes of power or of an uninterrupted RawCommand stream, longer
+than the whole ten-minute suite and far longer than any of its streams), so the suite must NOT catch it (the
+self-test proves it misses it) and ``ckesc soak`` must. ``NAME=SECONDS`` in a list of fault names (``--emulator-faults
+reset_after_streaming=300``), or ``EscConfig.onsets``, moves a soak fault's onset (a short soak, a test).
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from types import MappingProxyType
 
 SINGLE = "single"
 INTERACTION = "interaction"
+SOAK = "soak"
 
 
 @dataclass(frozen=True)
@@ -26,8 +31,17 @@ class Fault:
     name: str
     rules: tuple[str, ...]
     description: str
-    kind: str = SINGLE  # SINGLE or INTERACTION (see the module docstring)
+    kind: str = SINGLE  # SINGLE, INTERACTION or SOAK (see the module docstring)
+    onset_s: float | None = None  # SOAK: when the defect first shows by default (what it counts: its description)
 
+
+#: The MCU clock of a warm ``clock_drift_warm`` ESC against true time: 320 / 300, as AM32 issue 268 measured (300 Hz
+#: frames counted as 320 Hz).
+WARM_CLOCK_RATE = 320 / 300
+#: ``comm_flag_glitch``: after its first glitch (its onset), one glitch every this many seconds of power.
+GLITCH_EVERY_S = 3600.0
+#: ``run_time_wraps``: this run's time is kept in 50 ms ticks (the control loop's) in a uint16 (its onset: 65536 ticks).
+RUN_TIME_TICK_S = 0.05
 
 _FAULTS = (
     # framing (4.1)
@@ -191,6 +205,27 @@ _FAULTS = (
     Fault("throttle_select_drops_10b", ("4.4.17-1", "R5", "R8"),
           "after a Throttle Select (until the next power-up) RawCommand_10b is ignored: the parser table is rebuilt "
           "with the 14-bit and 12-bit formats only", INTERACTION),
+    # long-run defects (kind SOAK, R19): each shows only after its onset, so the ten-minute suite misses it and a
+    # soak finds it (the defects release qualification fears most: issue #31)
+    Fault("reset_after_streaming", ("R19",),
+          "after 20 min of an uninterrupted RawCommand stream to it (no gap as long as the comm-loss time, 200 ms), the "
+          "ESC resets as its watchdog would: a power-up (the power-up count grows, reports and transfer ids restart "
+          "after the boot, RAM state is lost, the settings in flash kept); the next 20 min of stream reset it again",
+          SOAK, onset_s=1200.0),
+    Fault("clock_drift_warm", ("R19", "R9"),
+          "after 15 min powered (the board warm), the ESC's clock runs 6.7 % fast (320 / 300, as AM32 issue 268 "
+          "measured): every report interval shrinks by that much (MSG1 every 18.75 ms instead of 20) and the running "
+          "times (241, MSG_EXP9 and MSG_EXP10) count that much fast; cold again at the next power-up",
+          SOAK, onset_s=900.0),
+    Fault("run_time_wraps", ("R19", "4.4.27-T", "4.4.12-T"),
+          "this run's time (241 option 1, MSG_EXP10) is kept in 50 ms ticks of the control loop in a uint16, not in "
+          "its uint32 of seconds: after 65536 ticks (54 min 36.8 s of motor running) it wraps to 0 and counts again",
+          SOAK, onset_s=65536 * RUN_TIME_TICK_S),
+    Fault("comm_flag_glitch", ("R19", "R8"),
+          "while the RawCommand stream runs without a break, one MSG1 carries the comm-loss flag (bit 13) once an hour "
+          "of power: first 30 min after power-up, then every 60 min (a race of the comm-loss check with its timer); "
+          "the next MSG1 is clear again",
+          SOAK, onset_s=1800.0),
 )
 
 FAULTS = MappingProxyType({f.name: f for f in _FAULTS})
@@ -201,9 +236,54 @@ def interaction(name: str) -> bool:
     return FAULTS[name].kind == INTERACTION
 
 
+def soak(name: str) -> bool:
+    """Whether fault ``name`` is a SOAK fault (a long-run defect the suite must miss and ``ckesc soak`` find)."""
+    return FAULTS[name].kind == SOAK
+
+
+def onset(name: str, onsets=None) -> float:
+    """SOAK fault ``name``'s onset in seconds: ``onsets[name]`` when given (EscConfig.onsets), else its default."""
+    if onsets and name in onsets:
+        return float(onsets[name])
+    value = FAULTS[name].onset_s
+    if value is None:
+        raise ValueError(f"fault {name} has no onset (not a soak fault)")
+    return value
+
+
+def split(entry: str) -> tuple[str, float | None]:
+    """A fault list's entry: ``NAME``, or ``NAME=SECONDS`` (a soak fault's onset moved); raises ValueError when
+    SECONDS is no number."""
+    name, eq, seconds = str(entry).partition("=")
+    if not eq:
+        return name.strip(), None
+    try:
+        return name.strip(), float(seconds)
+    except ValueError:
+        raise ValueError(f"fault {entry!r}: NAME=SECONDS takes a number of seconds, not {seconds!r}") from None
+
+
+def onsets_in(entries) -> dict[str, float]:
+    """The onsets ``NAME=SECONDS`` entries of a fault list give (checked: soak faults only, seconds >= 0)."""
+    return check_onsets({name: value for name, value in map(split, entries or ()) if value is not None})
+
+
+def check_onsets(onsets) -> dict[str, float]:
+    """EscConfig.onsets checked: soak fault names to a number of seconds >= 0; raises ValueError."""
+    out: dict[str, float] = {}
+    for name, value in dict(onsets or {}).items():
+        if name not in FAULTS or FAULTS[name].kind != SOAK:
+            raise ValueError(f"onset for {name!r}: only soak faults have one ({', '.join(n for n, f in FAULTS.items() if f.kind == SOAK)})")
+        if not float(value) >= 0:
+            raise ValueError(f"onset for {name!r}: {value!r} is not a number of seconds >= 0")
+        out[name] = float(value)
+    return out
+
+
 def check(names) -> frozenset[str]:
-    """Validate fault names; raises ValueError listing the unknown ones and the known ones."""
-    names = frozenset(names or ())
+    """Validate fault names (``NAME=SECONDS`` entries too: :func:`split`), the names without their onsets; raises
+    ValueError listing the unknown ones and the known ones."""
+    names = frozenset(split(n)[0] for n in names or ())
     unknown = names - FAULTS.keys()
     if unknown:
         raise ValueError(f"unknown fault(s) {', '.join(sorted(unknown))}; known: {', '.join(sorted(FAULTS))}")

@@ -32,6 +32,7 @@ from .esc_motor import Motor
 from .esc_output import Output
 from .esc_settings import Settings
 from .esc_telemetry import EXP_MODE, REPORT_NAMES, REPORTING, SUSPENDED, Telemetry
+from .faults import onset
 
 __all__ = ["EXP_MODE", "HANDLED", "REPORTING", "REPORT_TIMERS", "SUSPENDED", "THROTTLE_FRAMES", "EscConfig", "EscModel",
            "factory_nvm"]
@@ -133,6 +134,15 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         self._resumed = False  # comm_loss_sticky_after_resume: reporting was suspended and resumed
         self._selected = False  # throttle_select_drops_10b: a Throttle Select was taken
         self._boot_node = self.nvm["node_id"]  # answer_slot_from_boot_node: the node id it booted with
+        # the soak faults' state (faults.SOAK; each shows only after its onset, counted from here or from the stream)
+        self._stream_since: float | None = None  # reset_after_streaming: when the uninterrupted command stream began
+        self.onsets_moved()
+
+    def onsets_moved(self) -> None:
+        """The soak faults' times from this power-up (again, when ``config.onsets`` changed): when the clock runs fast
+        (clock_drift_warm) and the next comm flag glitch (comm_flag_glitch)."""
+        self._warm_at = self.powered_at + onset("clock_drift_warm", self.config.onsets)
+        self._glitch_at = self.powered_at + onset("comm_flag_glitch", self.config.onsets)
 
     def power_on(self, now: float) -> None:
         if self.powered:

@@ -54,6 +54,7 @@ SECTION_TITLES = MappingProxyType(
         **{s.section: s.title for s in reversed(CATALOGUE)},  # a shared section (4.4.25) takes its first frame's title
         "4.4.8": "MSG_EXP2-6",
         "robustness": "Malformed, foreign frames",
+        "soak": "Long runs (ckesc soak)",
     }
 )
 

@@ -26,8 +26,11 @@ def test_every_cited_id_exists():
 
 
 def test_every_shall_and_reading_requirement_has_a_test():
+    """... but those of long runs (section "soak": R19), which ``ckesc soak`` checks over hours, not a test of the
+    ten-minute suite; the emulator's soak faults break them (tests/emulator/test_soak_faults.py)."""
     cited = cited_ids()
-    missing = sorted(rid for rid, req in REQUIREMENTS.items() if req.strength != "OBSERVE" and rid not in cited)
+    missing = sorted(rid for rid, req in REQUIREMENTS.items()
+                     if req.strength != "OBSERVE" and rid not in cited and req.section != "soak")
     assert not missing, f"SHALL/READING requirements no conformance test cites: {missing}"
 
 
