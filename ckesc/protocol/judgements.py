@@ -351,24 +351,25 @@ def r18_queueing_s(share: float, bitrate: int, *, late: float = 0.0) -> float:
 
 def r18_mean(starts: Sequence[float], interval: float, *, share: float, bitrate: int, error: float = 0.0,
              late: float = 0.0, what: str = "report") -> Judgement | None:
-    """R18 (R9 under load) on the mean of the gaps between ``starts``: held to R9's scheduling tolerance, with
-    twice the bench's ``error`` and the load's queueing (:func:`r18_queueing_s`) over the number of gaps given to the
-    DUT. None: fewer than two reports."""
+    """R18 (R9 under load) on the mean of the gaps between ``starts``: held to R9's scheduling tolerance plus the
+    load's queueing (:func:`r18_queueing_s`) over the number of gaps (``limit``), twice the bench's ``error`` over
+    the number of gaps given to the DUT (``error``). The DUT's declared jitter never widens the mean (R9). None:
+    fewer than two reports."""
     gaps = len(starts) - 1
     if gaps < 1:
         return None
     mean = (starts[-1] - starts[0]) / gaps
     w = r18_queueing_s(share, bitrate, late=late)
-    return Judgement("R18", abs(mean - interval), SCHEDULING_TOLERANCE_S, "<=", (2 * error + w) / gaps,
+    return Judgement("R18", abs(mean - interval), SCHEDULING_TOLERANCE_S + w / gaps, "<=", 2 * error / gaps,
                      f"{what} every {mean * 1000:.3f} ms (mean of {gaps} gaps) under {share:.0%} load, not "
                      f"{interval * 1000:g} ms (R9, each gap widened by up to {w * 1000:.3f} ms of queueing)")
 
 
 def r18_gap(gap: float, interval: float, *, share: float, bitrate: int, error: float = 0.0, jitter: float = 0.0,
             late: float = 0.0, what: str = "report") -> Judgement:
-    """R18 (R9 under load) on one gap: within the scheduling tolerance and the load's queueing
-    (:func:`r18_queueing_s`) of ``interval``, with twice the bench's ``error`` and the DUT's declared ``jitter``
-    given to the DUT."""
+    """R18 (R9 under load) on one gap: within the scheduling tolerance, the load's queueing
+    (:func:`r18_queueing_s`) and the DUT's declared ``jitter`` of ``interval`` (``limit``), twice the bench's
+    ``error`` given to the DUT (``error``)."""
     w = r18_queueing_s(share, bitrate, late=late)
-    return Judgement("R18", abs(gap - interval), SCHEDULING_TOLERANCE_S + w, "<=", 2 * error + jitter,
+    return Judgement("R18", abs(gap - interval), SCHEDULING_TOLERANCE_S + w + jitter, "<=", 2 * error,
                      f"a {what} gap of {gap * 1000:.3f} ms under {share:.0%} load, not {interval * 1000:g} ms")
