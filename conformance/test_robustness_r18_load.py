@@ -34,7 +34,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.judgements import R9_GAPS, r18_gap, r18_judged, r18_mean, r18_reached
 from ckesc.protocol.load import LoadSource
 
-from .answers import answer_window_s, check_answer_slot, settle
+from .answers import answer_window_s, check_answer_slot, settle, slot_node
 from .settings import changes, move_request
 from .telemetry import frame_start, interval_s, ms
 
@@ -50,6 +50,9 @@ SHORT = dict(zip(cat.INTERVAL_FIELDS, range(cat.REPORT_INTERVAL_RANGE[0], cat.RE
 #: how many GET_ESC_ID queries a test sends under load
 QUERIES = 3
 _SEEDS = itertools.count(1)
+#: how long a test reads past its window before judging it: a host that plays the load in real time may hand out
+#: frames stamped inside the window that late (seen: 160 ms on a busy 2-core machine); the bench's lag, not the DUT's
+CATCH_UP_S = 0.3
 
 
 @dataclass
@@ -149,6 +152,7 @@ def test_reports_keep_their_intervals_under_load(dut, share, priority):
         t0 = dut.now()
         dut.wait((R9_GAPS + 1) * longest + dut.lane.timing_error)
         t1 = dut.now()
+    dut.wait(CATCH_UP_S)
     _bench_reached(load)
     u, rate, error = _share(load), dut.lane.bitrate, dut.lane.timing_error
     broken = []
@@ -175,26 +179,31 @@ def test_reports_keep_their_intervals_under_load(dut, share, priority):
 
 
 @pytest.mark.requirement("R18", "R2", "4.4.3-4")
+@pytest.mark.may_power_cycle  # slot_node: Set ID in a fresh window on a coarse bench
 @pytest.mark.parametrize("priority", PRIORITIES)
-@pytest.mark.parametrize("share", SHARES, ids=lambda s: f"{s:.0%}")
-def test_get_esc_id_answered_in_its_slot_under_load(dut, share, priority):
-    """GET_ESC_ID under load: the reply in the node's R2 slot and within 64 ms, neither widened (R18 widens R9
-    only; the suite's high load ranks below the ESC's answers)."""
-    node = dut.node_id
-    replies = []
-    settle(dut)
-    with loaded(dut, share, priority) as load:
-        for n in range(QUERIES):
-            sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
-            dut.wait(answer_window_s(dut))
-            got = [f for f in dut.frames("get_esc_id", since=sent.time, source=node)
-                   if f.layout is not None and f.layout.name == "reply"]
-            replies.append((sent, got))
-    _bench_reached(load)
-    for n, (sent, got) in enumerate(replies):
-        assert got, (f"query {n + 1}: no GET_ESC_ID reply from node {node} within {ms(answer_window_s(dut)):g} ms under "
-                     f"{share:.0%} {priority}-priority load (R18: the ESC keeps R2 and the 64 ms bound under load)")
-        check_answer_slot(dut, got[0], sent, node, f"GET_ESC_ID query {n + 1} under {share:.0%} {priority} load", "4.4.3-4")
+def test_get_esc_id_answered_in_its_slot_under_load(dut, priority):
+    """GET_ESC_ID under each load: the reply in the node's R2 slot and within 64 ms, neither widened (R18 widens R9
+    only; the suite's high load ranks below the ESC's answers). At a node id whose slot the bench can tell (slot_node:
+    Set ID there and back, once for all the loads)."""
+    with slot_node(dut) as node:
+        for share in SHARES:
+            replies = []
+            settle(dut)
+            with loaded(dut, share, priority) as load:
+                for n in range(QUERIES):
+                    sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
+                    dut.wait(answer_window_s(dut))
+                    replies.append(sent)
+            dut.wait(CATCH_UP_S)
+            _bench_reached(load)
+            for n, sent in enumerate(replies):
+                got = [f for f in dut.frames("get_esc_id", since=sent.time, source=node)
+                       if f.layout is not None and f.layout.name == "reply"]
+                assert got, (f"query {n + 1}: no GET_ESC_ID reply from node {node} within "
+                             f"{ms(answer_window_s(dut)):g} ms under {share:.0%} {priority}-priority load (R18: the ESC "
+                             "keeps R2 and the 64 ms bound under load)")
+                check_answer_slot(dut, got[0], sent, node, f"GET_ESC_ID query {n + 1} under {share:.0%} {priority} load",
+                                  "4.4.3-4")
 
 
 @pytest.mark.requirement("R18")
@@ -215,12 +224,14 @@ def test_commands_obeyed_under_load(dut, share, priority):
         dut.wait(cat.ANSWER_DELAY_MAX_S)
         back = dut.now()
         dut.wait(quiet + cat.restart_limit_s(interval))
-        if not dut.frames("msg1", since=back, source=dut.node_id):
-            problems.append(f"no MSG1 in the {ms(dut.now() - back):g} ms after a resume (MSG Control 0xAAAAAAAA)")
+        until = dut.now()
         write = move_request("rotation", s)
         dut.request(cat.PERSISTED["rotation"].writer, write)
         after = dut.settings()
+    dut.wait(CATCH_UP_S)
     _bench_reached(load)
+    if not dut.frames("msg1", since=back, until=until, source=dut.node_id):
+        problems.append(f"no MSG1 in the {ms(until - back):g} ms after a resume (MSG Control 0xAAAAAAAA)")
     moved = changes(s, after)
     if after["rotation"] == s["rotation"]:
         problems.append(f"Set Rotation {write} not read back (settings: {moved or 'unchanged'})")
