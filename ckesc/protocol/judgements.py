@@ -349,6 +349,13 @@ def r18_queueing_s(share: float, bitrate: int, *, late: float = 0.0) -> float:
     return (longest + burst) / (1.0 - share) if share < 1 else float("inf")
 
 
+def r18_tells(interval: float, share: float, bitrate: int, *, late: float = 0.0) -> bool:
+    """R18: whether a gap judged with the load's queueing (:func:`r18_queueing_s`, a late player's included) still
+    tells a report one interval late, or a report missing, from one the load delayed: the widening is shorter than
+    the interval. Where it is not, the bench's player was too late for R9 to be judged under its load."""
+    return r18_queueing_s(share, bitrate, late=late) < interval
+
+
 def r18_mean(starts: Sequence[float], interval: float, *, share: float, bitrate: int, error: float = 0.0,
              late: float = 0.0, what: str = "report") -> Judgement | None:
     """R18 (R9 under load) on the mean of the gaps between ``starts``: held to R9's scheduling tolerance plus the

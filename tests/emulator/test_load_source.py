@@ -9,7 +9,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.errors import UnknownTypeError
 from ckesc.protocol.frame import decode, frame_bits
 from ckesc.protocol.ids import Priority, message_id, parse_can_id, service_id
-from ckesc.protocol.judgements import R18_BURST_FRAMES, r18_queueing_s
+from ckesc.protocol.judgements import R18_BURST_FRAMES, r18_gap, r18_judged, r18_mean, r18_queueing_s, r18_tells
 from ckesc.protocol.load import PRIORITIES, LoadSource, takes
 from ckesc.protocol.traffic import TrafficSource, bus_load
 
@@ -103,3 +103,18 @@ def test_on_the_simulated_bus_the_load_reaches_its_share_and_delays_the_reports_
     finally:
         bus.shutdown()
         sim_bus.discard(channel)
+
+
+def test_r18_passes_a_report_the_load_delayed_and_fails_one_missing_or_off_its_interval():
+    w = r18_queueing_s(0.5, RATE)
+    grid = [i * 0.02 for i in range(12)]
+    delayed = [t + (w if i in (0, 5) else 0.0) for i, t in enumerate(grid)]
+    assert r18_mean(delayed, 0.02, share=0.5, bitrate=RATE).ok
+    assert all(r18_gap(b - a, 0.02, share=0.5, bitrate=RATE).ok for a, b in zip(delayed, delayed[1:]))
+    missing = grid[:5] + grid[6:]
+    assert not r18_mean(missing, 0.02, share=0.5, bitrate=RATE).ok
+    assert not r18_gap(0.04, 0.02, share=0.5, bitrate=RATE).ok
+    slow = [i * 0.022 for i in range(12)]  # every 22 ms instead of 20: no load excuses it
+    assert not r18_mean(slow, 0.02, share=0.5, bitrate=RATE).ok
+    assert r18_judged(0.5) and not r18_judged(0.7)
+    assert r18_tells(0.02, 0.5, RATE) and not r18_tells(0.02, 0.5, RATE, late=0.1)
