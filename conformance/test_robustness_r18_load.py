@@ -30,6 +30,7 @@ import pytest
 
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.bench.traffic_player import TrafficPlayer
+from ckesc.evidence.live import LaneRules
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.judgements import (R9_GAPS, r18_gap, r18_judged, r18_mean, r18_queueing_s, r18_reached,
                                        r18_tells)
@@ -54,6 +55,8 @@ _SEEDS = itertools.count(1)
 #: how long a test reads past its window before judging it: a host that plays the load in real time may hand out
 #: frames stamped inside the window that late (seen: 160 ms on a busy 2-core machine); the bench's lag, not the DUT's
 CATCH_UP_S = 0.3
+#: what the live bus rules do not hold a DUT to above half load (R18: OBSERVE): its report timing
+UNJUDGED_ABOVE_HALF = frozenset({"R9", "R9a"})
 
 
 @dataclass
@@ -245,18 +248,36 @@ def test_commands_obeyed_under_load(dut, share, priority):
                           + " (R18: the ESC obeys its commands under load)")
 
 
+@contextlib.contextmanager
+def timing_unjudged(dut, what: str):
+    """While the block runs, the live bus rules' report timing (R9, R9a) fails no test: R18 makes it OBSERVE above
+    half load. What they found is recorded."""
+    watchers = [w for w in dut.lane.listeners if isinstance(w, LaneRules)]
+    for w in watchers:
+        w.excuse(UNJUDGED_ABOVE_HALF)
+    try:
+        yield
+    finally:
+        excused = [v for w in watchers for v in w.excuse(frozenset())]
+        if excused:
+            dut.record.observe(f"bus rules' report timing {what} (R18: OBSERVE above half load)",
+                               f"{len(excused)}: " + "; ".join(v.message for v in excused[:3]))
+
+
 @pytest.mark.requirement("R18-above-half")
 @pytest.mark.parametrize("priority", ("high", "low", "mixed"))
 def test_above_half_load_is_recorded(dut, priority):
     """At 70 % of the bus: the reports' intervals and a GET_ESC_ID answer, recorded (OBSERVE: R18 holds up to half)."""
     s = _short_intervals(dut)
     longest = max(interval_s(s, r) for r in cat.REPORT_FRAMES)
-    with loaded(dut, ABOVE_HALF, priority) as load:
-        t0 = dut.now()
-        dut.wait((R9_GAPS + 1) * longest)
-        sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
-        dut.wait(answer_window_s(dut))
-        t1 = dut.now()
+    with timing_unjudged(dut, f"under {ABOVE_HALF:.0%} {priority} load"):
+        with loaded(dut, ABOVE_HALF, priority) as load:
+            t0 = dut.now()
+            dut.wait((R9_GAPS + 1) * longest)
+            sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
+            dut.wait(answer_window_s(dut))
+            t1 = dut.now()
+        dut.wait(CATCH_UP_S + max(interval_s(s, r) for r in cat.REPORT_FRAMES))  # the first gaps after it too
     assert not load.judged, "harness: a share R18 judges is not above half"
     for which in cat.REPORT_FRAMES:
         starts = [frame_start(dut, f) for f in dut.frames(which, since=t0, until=sent.time, source=dut.node_id)]
