@@ -103,6 +103,7 @@ def main() -> int:
     args = p.parse_args()
     logging.getLogger("can").setLevel(logging.ERROR)  # python-can warns of every partly read line at this rate
     runs = []
+    loadavg = Path("/proc/loadavg").read_text().split()[:3] if Path("/proc/loadavg").exists() else []
     with tempfile.TemporaryDirectory(prefix="ckesc-load-") as tmp_name:
         hub = Hub(Path(tmp_name))
         try:
@@ -116,6 +117,7 @@ def main() -> int:
     best = {str(b): max((r for r in runs if r["bitrate"] == b), key=lambda r: r["reached"]) for b in BITRATES}
     doc = {"when": datetime.now(UTC).isoformat(timespec="seconds"), "machine": platform.platform(),
            "python": platform.python_version(), "python_can": can.__version__, "seconds": args.seconds,
+           "loadavg_at_start": loadavg,  # the machine's other work: the player shares its 2 cores
            "bench": "ckesc emulate --nodes 1 --socketcand 0 on 127.0.0.1; the player on python-can's socketcand client",
            "runs": runs, "best": best,
            "half_load": {str(b): next(r for r in runs if r["bitrate"] == b and r["asked"] == 0.5) for b in BITRATES}}
