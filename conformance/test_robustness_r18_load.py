@@ -22,7 +22,7 @@ share asked is the bench's limit, INCONCLUSIVE, never the DUT's FAIL.
 from __future__ import annotations
 
 import contextlib
-import itertools
+import zlib
 from dataclasses import dataclass
 
 import can
@@ -50,7 +50,6 @@ PRIORITIES = ("high", "low")
 SHORT = dict(zip(cat.INTERVAL_FIELDS, range(cat.REPORT_INTERVAL_RANGE[0], cat.REPORT_INTERVAL_RANGE[0] + 3)))
 #: how many GET_ESC_ID queries a test sends under load
 QUERIES = 3
-_SEEDS = itertools.count(1)
 #: how long a test reads past its window before judging it: a host that plays the load in real time may hand out
 #: frames stamped inside the window that late (seen: 160 ms on a busy 2-core machine); the bench's lag, not the DUT's
 CATCH_UP_S = 0.3
@@ -80,11 +79,13 @@ class Load:
 
 
 @contextlib.contextmanager
-def loaded(dut, share: float, priority: str):
+def loaded(dut, share: float, priority: str, what: str):
     """Foreign load of ``share`` of the bus at ``priority`` while the block runs (the module docstring says how each
-    lane plays it). The :class:`Load` yielded has the share reached once the block is left; recorded."""
+    lane plays it), its seed made from ``what`` (the test), the share and the priority: the same load whatever the
+    run order. The :class:`Load` yielded has the share reached once the block is left; recorded."""
     bitrate = dut.lane.bitrate
-    source = LoadSource(share, bitrate, priority=priority, seed=next(_SEEDS),
+    seed = zlib.crc32(f"{what} {share} {priority}".encode())
+    source = LoadSource(share, bitrate, priority=priority, seed=seed,
                         exclude_nodes=[*dut.nodes, dut.node_id, dut.host_node])
     load = Load(source)
     sim = getattr(dut.lane, "sim", None)
@@ -92,13 +93,15 @@ def loaded(dut, share: float, priority: str):
     if sim is not None:
         world = sim.world
         source.name = f"r18-load-{source.seed}"
+        busy = world.source_stats.get(source.name, {}).get("busy_s", 0.0)  # (a name used before keeps its stats)
         world.add_source(source)
         try:
             yield load
         finally:
             world.remove_source(source)
             elapsed = dut.now() - t0
-            load.reached = world.source_stats[source.name]["busy_s"] / elapsed if elapsed > 0 else 0.0
+            busy = world.source_stats[source.name]["busy_s"] - busy
+            load.reached = busy / elapsed if elapsed > 0 else 0.0
     else:
         kwargs = getattr(dut.lane, "bus_kwargs", None)
         assert kwargs is not None, f"harness: the {dut.lane.name} lane has no bus a load player can join"
@@ -151,7 +154,7 @@ def test_reports_keep_their_intervals_under_load(dut, share, priority):
     ahead of a lowest-priority frame (R18)."""
     s = _short_intervals(dut)
     longest = max(interval_s(s, r) for r in cat.REPORT_FRAMES)
-    with loaded(dut, share, priority) as load:
+    with loaded(dut, share, priority, "reports") as load:
         t0 = dut.now()
         dut.wait((R9_GAPS + 1) * longest + dut.lane.timing_error)
         t1 = dut.now()
@@ -197,7 +200,7 @@ def test_get_esc_id_answered_in_its_slot_under_load(dut, priority):
         for share in SHARES:
             replies = []
             settle(dut)
-            with loaded(dut, share, priority) as load:
+            with loaded(dut, share, priority, "get_esc_id") as load:
                 for _ in range(QUERIES):
                     sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
                     dut.wait(answer_window_s(dut))
@@ -223,7 +226,7 @@ def test_commands_obeyed_under_load(dut, share, priority):
     interval = interval_s(s, "msg1")
     quiet = 2 * interval + dut.lane.timing_error
     problems = []
-    with loaded(dut, share, priority) as load:
+    with loaded(dut, share, priority, "commands") as load:
         dut.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND})
         dut.wait(cat.ANSWER_DELAY_MAX_S)
         if dut.reports_heard(quiet):
@@ -271,7 +274,7 @@ def test_above_half_load_is_recorded(dut):
     s = _short_intervals(dut)
     longest = max(interval_s(s, r) for r in cat.REPORT_FRAMES)
     with timing_unjudged(dut, f"under {ABOVE_HALF:.0%} {priority} load"):
-        with loaded(dut, ABOVE_HALF, priority) as load:
+        with loaded(dut, ABOVE_HALF, priority, "above half") as load:
             t0 = dut.now()
             dut.wait((R9_GAPS + 1) * longest)
             sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
