@@ -53,6 +53,8 @@ QUERIES = 3
 #: how long a test reads past its window before judging it: a host that plays the load in real time may hand out
 #: frames stamped inside the window that late (seen: 160 ms on a busy 2-core machine); the bench's lag, not the DUT's
 CATCH_UP_S = 0.3
+#: how many of the longest report intervals a load runs before the reports under it are judged
+WARM_UP = 2
 #: what the live bus rules do not hold a DUT to above half load (R18: OBSERVE): its report timing
 UNJUDGED_ABOVE_HALF = frozenset({"R9", "R9a"})
 
@@ -155,6 +157,7 @@ def test_reports_keep_their_intervals_under_load(dut, share, priority):
     s = _short_intervals(dut)
     longest = max(interval_s(s, r) for r in cat.REPORT_FRAMES)
     with loaded(dut, share, priority, "reports") as load:
+        dut.wait(WARM_UP * longest)  # the load established (a player's first frames, a bench's new client) first
         t0 = dut.now()
         dut.wait((R9_GAPS + 1) * longest + dut.lane.timing_error)
         t1 = dut.now()
