@@ -17,7 +17,7 @@ from ..protocol.catalogue import (
     Status,
 )
 from ..protocol.codecs import codec_for
-from ..protocol.frame import Frame, WireFrame
+from ..protocol.frame import Frame, WireFrame, frame_bits
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Priority, message_id
 from ..protocol.transfer import tail_byte
 from .faults import GLITCH_EVERY_S, WARM_CLOCK_RATE
@@ -28,6 +28,11 @@ SUSPENDED = "suspended"
 EXP_MODE = "exp"
 
 REPORT_NAMES = cat.REPORT_FRAMES
+#: fault drops_reports_under_load: a report due when foreign frames (types it does not know) took more than this
+#: share of the bus in the window before it is skipped (an ESC without hardware filters: its receive interrupt
+#: drops each such frame in software, and a busy bus starves the loop that sends the reports)
+_FOREIGN_SHARE = 1 / 3
+_FOREIGN_WINDOW_S = 0.010
 
 _PWM, _CCW, _COMM_FAULT, _RUNNING = (int(Status.THROTTLE_PWM), int(Status.DIRECTION_CCW), int(Status.COMM_FAULT),
                                      int(Status.RUNNING))
@@ -145,11 +150,25 @@ class Telemetry:
             s |= _RUNNING
         return s
 
+    def _heard_foreign(self, msg, now: float) -> None:
+        """Fault drops_reports_under_load: note a foreign frame heard (its end, its time on the bus)."""
+        self._foreign.append((now, frame_bits(len(msg.data)) / self.bitrate))
+        while self._foreign and self._foreign[0][0] < now - _FOREIGN_WINDOW_S:
+            self._foreign.popleft()
+
+    def _starved(self, due: float) -> bool:
+        """Fault drops_reports_under_load: whether foreign frames took more than :data:`_FOREIGN_SHARE` of the bus
+        in the :data:`_FOREIGN_WINDOW_S` before ``due`` (the receive interrupt's software filter starves the loop)."""
+        busy = sum(d for t, d in self._foreign if due - _FOREIGN_WINDOW_S <= t <= due)
+        return busy > _FOREIGN_SHARE * _FOREIGN_WINDOW_S
+
     def _emit_report(self, which: str, due: float) -> None:
         prio = Priority.MEDIUM if "wrong_priority" in self.faults else None
         if self.reporting == EXP_MODE:
             self._emit_exp(which, due)
             return
+        if "drops_reports_under_load" in self.faults and self._starved(due):
+            return  # never built: its transfer id is not counted either
         if which == "msg1":
             pwm = 0 if "speed_ignores_throttle" in self.faults else self.throttle
             status = self.status_word()

@@ -170,6 +170,10 @@ _FAULTS = (
           "watchdog reset: the power-up count grows, the reports restart after the boot)"),
     Fault("destination_low_bits", ("R17",), "a request's destination node id is decoded from its low six bits: a "
           "request to the node id 64 away is taken and answered"),
+    # a loaded bus (R18)
+    Fault("drops_reports_under_load", ("R18",), "a report due when foreign frames took more than a third of the bus "
+          "in the 10 ms before it is skipped (no hardware filter: the receive interrupt drops each foreign frame in "
+          "software and starves the loop that sends the reports)"),
     # where features meet (kind INTERACTION): each feature works alone
     Fault("led_save_reverts_rotation", ("R13", "4.4.21-4"),
           "Set Led with option 1 rewrites the flash word it shares with the rotation, taking the rotation from the copy "

@@ -18,6 +18,7 @@ from __future__ import annotations
 import copy
 import heapq
 import random
+from collections import deque
 from typing import Any, Callable
 
 from ..protocol import catalogue as cat
@@ -134,6 +135,7 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         self._resumed = False  # comm_loss_sticky_after_resume: reporting was suspended and resumed
         self._selected = False  # throttle_select_drops_10b: a Throttle Select was taken
         self._boot_node = self.nvm["node_id"]  # answer_slot_from_boot_node: the node id it booted with
+        self._foreign: deque[tuple[float, float]] = deque()  # drops_reports_under_load: (end, bus time) of foreign frames
         # the soak faults' state (faults.SOAK; each shows only after its onset, counted from here or from the stream)
         self._stream_since: float | None = None  # reset_after_streaming: when the uninterrupted command stream began
         self.onsets_moved()
@@ -222,6 +224,8 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         if isinstance(decoded, DecodeError):
             # another protocol's type id (DroneCAN NodeStatus, ...) is foreign; anything else malformed (R17)
             self.counters["rx_foreign" if isinstance(decoded, UnknownTypeError) else "rx_malformed"] += 1
+            if "drops_reports_under_load" in self.faults and isinstance(decoded, UnknownTypeError):
+                self._heard_foreign(msg, now)
             if self._malformed_faults or self.config.toggle_single_frame != "ignore":
                 taken = self._take_malformed(msg, decoded, now)
                 if taken is True:
@@ -233,6 +237,8 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         frame = decoded
         if frame.spec is None:
             self.counters["rx_foreign"] += 1
+            if "drops_reports_under_load" in self.faults:
+                self._heard_foreign(msg, now)
             return False
         handler = _HANDLERS.get((frame.kind, frame.name))
         if handler is None or (frame.source and self.config.foreign_host == "ignore"):

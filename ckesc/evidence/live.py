@@ -39,16 +39,30 @@ class LaneRules(can.Listener):
         self.found: list[Violation] = []
         self.count = 0
         self.between = 0  # violations while no test ran (session fixtures)
+        #: rule ids whose violations a test has excused for a while (:meth:`excuse`), and those it excused
+        self.excused: frozenset[str] = frozenset()
+        self.excused_found: list[Violation] = []
 
     def on_message_received(self, msg: can.Message) -> None:
         if self.lane.bitrate != self.rules.bitrate:  # the host reopened at another bit rate (Set Baud's tests)
             self.rules.set_bitrate(self.lane.bitrate)
         found = self.rules.feed_message(msg)
+        if found and self.excused:
+            self.excused_found += [v for v in found if v.rules[0] in self.excused]
+            found = [v for v in found if v.rules[0] not in self.excused]
         if found:
             self.count += len(found)
             room = _KEPT - len(self.found)
             if room > 0:
                 self.found.extend(found[:room])
+
+    def excuse(self, rules: frozenset[str]) -> list[Violation]:
+        """From now on, a violation whose first rule is one of ``rules`` fails no test but is kept in
+        :attr:`excused_found` (a reading that makes the rule OBSERVE while the test's stimulus lasts: R18 above
+        half load); ``frozenset()`` ends it. Returns what was excused until now, and forgets it."""
+        excused, self.excused_found = self.excused_found, []
+        self.excused = frozenset(rules)
+        return excused
 
     def power_switched(self, when: float) -> None:
         """The host switched the DUT's power at lane time ``when`` (see BusRules.power_switched)."""

@@ -20,7 +20,10 @@ violation, an explorer finding) from it; it never writes a tolerance of its own.
 * R13 read-back (:func:`r13_read_back`): the persisted settings (the catalogue's ``PERSISTED_SETTINGS``) read back,
   at once and after a power cycle, are what was written and saved;
 * F4 (:func:`f4_mismatches`, :func:`f4_pairs`): a response keeps its request's service id and transfer id, has
-  request=0, goes to the requester, comes from the node asked.
+  request=0, goes to the requester, comes from the node asked;
+* R18 (:func:`r18_queueing_s`, :func:`r18_mean`, :func:`r18_gap`, :func:`r18_judged`): under foreign load of up to
+  half the bus, R9 with each gap widened by the queueing the load can put ahead of a lowest-priority frame; above
+  half load, OBSERVE.
 
 The readings are ``spec/INTERPRETATIONS.md``'s; the protocol facts (200 ms, the slots, the restart slack) are the
 catalogue's (:mod:`.catalogue`).
@@ -32,7 +35,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Sequence
 
 from . import catalogue as cat
-from .frame import Frame
+from .frame import Frame, frame_bits
 from .ids import Kind
 from .transfer import TRANSFER_ID_MODULO
 
@@ -295,3 +298,85 @@ def asked_node(name: str, destination: int) -> int | None:
     """The node an answer to request ``name`` sent to ``destination`` must come from (None: any, Set ID answers from
     its new id, R11)."""
     return None if name == "set_id" else destination
+
+
+# ------------------------------------------------------------------------------------------ R18 a loaded bus
+# (issue #30: the load generator is ckesc.protocol.load; the conformance module conformance/test_robustness_r18_load.py)
+
+#: R18: foreign traffic up to this share of the bus's capacity at its bit rate is judged; above it, OBSERVE
+R18_MAX_SHARE = 0.5
+#: R18's load, as the suite plays it: over any window of length t its frames take at most ``share x t`` of bus time
+#: plus this many longest frames (its bursts); :class:`ckesc.protocol.load.LoadSource` keeps to it by construction
+R18_BURST_FRAMES = 4
+#: R18 in real time: the load reached may fall this far short of the share asked (a player's share is measured
+#: over a short run, its first and last bursts at the edges) before the bench is said not to have reached it
+R18_SHARE_SHORTFALL = 0.1
+
+
+def r18_judged(share: float) -> bool:
+    """R18: whether a DUT is held to R9, R2 and the 64 ms bound under foreign traffic of ``share`` of the bus's
+    capacity (up to half of it); above, what it does is recorded only (OBSERVE)."""
+    return share <= R18_MAX_SHARE + _NOISE_S
+
+
+def r18_reached(asked: float, reached: float) -> bool:
+    """R18 in real time: whether a player that was asked for ``asked`` of the bus and measured ``reached`` made the
+    load a test judges with (else the bench's limit: the test cannot judge the DUT at the share it names)."""
+    return reached >= asked * (1 - R18_SHARE_SHORTFALL)
+
+
+def r18_queueing_s(share: float, bitrate: int, *, late: float = 0.0) -> float:
+    """R18: the longest queueing a load of ``share`` of the bus at ``bitrate`` can put ahead of a lowest-priority
+    frame (which loses arbitration to every load frame), in seconds.
+
+    Let ``C`` be the longest classic frame's time on the bus (8 data bytes, :func:`~.frame.frame_bits`, stuff bits
+    not counted, as the share is not), ``u`` the share, and ``s = R18_BURST_FRAMES x C + u x late`` the load's burst:
+    over any window of length ``t`` the load takes at most ``u t + s`` of bus time (a real-time player late by
+    ``late`` sends the frames due meanwhile back to back: ``u x late`` more). A frame that becomes ready at ``t0``
+    waits for the frame already on the bus (CAN does not preempt: at most ``C``), then for every load frame that
+    arrives before the bus is free for it; the wait ``w`` therefore satisfies ``w = C + s + u w``, so
+
+        w = (C + s) / (1 - u)        (for u <= 1/2: at most 2 (C + s); 500 kbit/s, u = 1/2: 2.6 ms)
+
+    R18 widens R9 by it: a report due at ``d`` starts in ``[d, d + w]``, so each gap lies within ``w`` of its
+    interval and the mean of ``n`` gaps within ``w / n`` (the delays cancel but at the two ends). R18 does not widen
+    R2's slot or the 64 ms bound: it names the widening for R9 only ("keeps R9 (each gap widened by the queueing
+    ...), R2 and the 64 ms bound"); an answer is MEDIUM and the suite's "high" load ranks between the answers and
+    the reports (:mod:`ckesc.protocol.load`), so the only load queued ahead of an answer is the frame in flight,
+    which R2 allows on any bus."""
+    longest = frame_bits(8) / bitrate
+    burst = R18_BURST_FRAMES * longest + share * max(late, 0.0)
+    return (longest + burst) / (1.0 - share) if share < 1 else float("inf")
+
+
+def r18_tells(interval: float, share: float, bitrate: int, *, late: float = 0.0) -> bool:
+    """R18: whether a gap judged with the load's queueing (:func:`r18_queueing_s`, a late player's included) still
+    tells a report one interval late, or a report missing, from one the load delayed: the widening is shorter than
+    the interval. Where it is not, the bench's player was too late for R9 to be judged under its load."""
+    return r18_queueing_s(share, bitrate, late=late) < interval
+
+
+def r18_mean(starts: Sequence[float], interval: float, *, share: float, bitrate: int, error: float = 0.0,
+             late: float = 0.0, what: str = "report") -> Judgement | None:
+    """R18 (R9 under load) on the mean of the gaps between ``starts``: held to R9's scheduling tolerance plus the
+    load's queueing (:func:`r18_queueing_s`) over the number of gaps (``limit``), twice the bench's ``error`` over
+    the number of gaps given to the DUT (``error``). The DUT's declared jitter never widens the mean (R9). None:
+    fewer than two reports."""
+    gaps = len(starts) - 1
+    if gaps < 1:
+        return None
+    mean = (starts[-1] - starts[0]) / gaps
+    w = r18_queueing_s(share, bitrate, late=late)
+    return Judgement("R18", abs(mean - interval), SCHEDULING_TOLERANCE_S + w / gaps, "<=", 2 * error / gaps,
+                     f"{what} every {mean * 1000:.3f} ms (mean of {gaps} gaps) under {share:.0%} load, not "
+                     f"{interval * 1000:g} ms (R9, each gap widened by up to {w * 1000:.3f} ms of queueing)")
+
+
+def r18_gap(gap: float, interval: float, *, share: float, bitrate: int, error: float = 0.0, jitter: float = 0.0,
+            late: float = 0.0, what: str = "report") -> Judgement:
+    """R18 (R9 under load) on one gap: within the scheduling tolerance, the load's queueing
+    (:func:`r18_queueing_s`) and the DUT's declared ``jitter`` of ``interval`` (``limit``), twice the bench's
+    ``error`` given to the DUT (``error``)."""
+    w = r18_queueing_s(share, bitrate, late=late)
+    return Judgement("R18", abs(gap - interval), SCHEDULING_TOLERANCE_S + w + jitter, "<=", 2 * error,
+                     f"a {what} gap of {gap * 1000:.3f} ms under {share:.0%} load, not {interval * 1000:g} ms")

@@ -53,7 +53,7 @@ SECTION_TITLES = MappingProxyType(
         "attachment": "Fault code definitions",
         **{s.section: s.title for s in reversed(CATALOGUE)},  # a shared section (4.4.25) takes its first frame's title
         "4.4.8": "MSG_EXP2-6",
-        "robustness": "Malformed, foreign frames",
+        "robustness": "Malformed, foreign frames, a loaded bus",
         "soak": "Long runs (ckesc soak)",
     }
 )
