@@ -234,7 +234,6 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     ups = dut.power_up_count()
     t0 = dut.now()
     heard = len(dut.trace)  # what comes after this is what the malformed frames may have caused
-    before = dut.frames("msg1", since=t0 - 2 * interval - dut.lane.timing_error, source=dut.node_id)
     for b in bads:
         for w in b.frames:
             dut.send_wire(w)
@@ -242,7 +241,10 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
     t1 = dut.now()
     answers = heard_answers(dut, heard, t0, bads)
-    msg1 = dut.frames("msg1", since=t0, until=t1, source=dut.node_id)
+    # MSG1 from two intervals before the first malformed frame, read once all is in: in real time a frame stamped
+    # before t0 may be read after it (read before the frames were sent, it would be missing from both sides: a jump)
+    seen = dut.frames("msg1", since=t0 - 2 * interval - dut.lane.timing_error, until=t1, source=dut.node_id)
+    before, msg1 = [f for f in seen if f.timestamp < t0], [f for f in seen if f.timestamp >= t0]
     resets = []
     seq = [*before[-1:], *msg1]
     jumps = [(a.transfer_id, b.transfer_id) for a, b in zip(seq, seq[1:])
