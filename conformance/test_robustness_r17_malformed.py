@@ -226,6 +226,17 @@ def heard_answers(dut, heard: int, t0: float, bads: list[Bad]) -> list[str]:
                       for g in dut.undecoded(since=t0, source=dut.node_id)]
 
 
+def read_past(dut) -> float:
+    """Now, once every MSG1 stamped before it is in: read on until the DUT's first MSG1 stamped later, at most the
+    DUT's ready bound (boot time and a longest report interval). In real time a frame comes after its stamp (a
+    loaded bench reads it late): judged before it came, its absence would pass for a silence of the DUT."""
+    t1 = dut.now()
+    if not any(f.timestamp > t1 for f in dut.frames("msg1", since=t1, source=dut.node_id)):
+        dut.read_until(t1 + dut.ready_bound_s(),
+                       stop=lambda f: f.name == "msg1" and f.source == dut.node_id and f.timestamp > t1)
+    return t1
+
+
 def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     """Send the malformed frames, then what came of them: answers (a frame from the DUT other than its reports, each
     named by the malformed frame whose transfer id it carries), changed settings and MSG1 state, resets."""
@@ -239,7 +250,7 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
             dut.send_wire(w)
         dut.wait(STREAM_PERIOD_S)
     dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
-    t1 = dut.now()
+    t1 = read_past(dut)
     answers = heard_answers(dut, heard, t0, bads)
     # MSG1 from two intervals before the first malformed frame, read once all is in: in real time a frame stamped
     # before t0 may be read after it (read before the frames were sent, it would be missing from both sides: a jump)
@@ -327,6 +338,7 @@ def test_malformed_raw_commands_do_not_refresh_comm(dut, name):
             dut.send_wire(w)
         i += 1
         dut.wait(STREAM_PERIOD_S)
+    read_past(dut)
     due = [(f, r8_flag_due(frame_start(dut, f) - last.time, interval, jitter=dut.profile.jitter_s,
                            error=dut.lane.own_error)) for f in dut.frames("msg1", since=last.time, source=dut.node_id)]
     judged = [f for f, flag in due if flag]
@@ -395,9 +407,10 @@ def _set_id_look(dut, request) -> tuple[list[Bad], list[str]]:
     interval = interval_s(dut.settings(), "msg1")
     heard, t0 = len(dut.trace), dut.now()
     _send(dut, bads)
+    t1 = read_past(dut)
     answers = heard_answers(dut, heard, t0, bads)
     problems = [f"answered: {'; '.join(answers)}"] if answers else []
-    t1, msg1 = dut.now(), dut.frames("msg1", since=t0, source=dut.node_id)
+    msg1 = dut.frames("msg1", since=t0, until=t1, source=dut.node_id)
     if not msg1 or t1 - msg1[-1].timestamp > cat.restart_limit_s(interval) + dut.lane.timing_error:
         problems.append(f"no MSG1 in the last {ms(t1 - (msg1[-1].timestamp if msg1 else t0)):g} ms (MSG1 every "
                         f"{ms(interval):g} ms): reporting stopped")
