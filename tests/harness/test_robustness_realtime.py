@@ -60,6 +60,7 @@ def _check_clean_room(doc: dict, expected: set[str]) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # a whole section in real time, twice; minutes on a loaded machine
 def test_the_whole_section_in_real_time_with_and_without_echo(tmp_path):
     """The emulator in its own process, with echo (``--lane realtime``) and without (``ckesc emulate --no-echo-own``
     on a bus, power and bit rate through its control channel): no FAIL, no ERROR, and the same verdicts on both (but
@@ -81,6 +82,7 @@ def test_the_whole_section_in_real_time_with_and_without_echo(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # a whole section in real time; minutes on a loaded machine
 def test_the_whole_section_fails_the_clean_room_esc_on_its_r17_defects_only(tmp_path):
     with CleanRoom(tmp_path) as cr:
         code, doc = _run(tmp_path, "clean-room", cr.bench)
