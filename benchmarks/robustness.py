@@ -157,7 +157,8 @@ def main() -> int:
             else:
                 emu = Emulator(tmp)
                 try:
-                    runs.append(measure(name, emu.bench(_realtime_profile(tmp)), tmp))
+                    # --allow-motor-spin: as --lane realtime (an emulator, no motor) has it, so both run the same tests
+                    runs.append(measure(name, [*emu.bench(_realtime_profile(tmp)), "--allow-motor-spin"], tmp))
                 finally:
                     emu.close()
             r = runs[-1]

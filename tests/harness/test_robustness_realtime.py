@@ -67,7 +67,8 @@ def test_the_whole_section_in_real_time_with_and_without_echo(tmp_path):
     a PASS that the host clock's wider error leaves INCONCLUSIVE, saying so)."""
     code, echo = _run(tmp_path, "echo", ["--lane", "realtime"])
     with Emulator(tmp_path, "--no-echo-own") as emu:
-        code_silent, silent = _run(tmp_path, "no-echo", emu.bench(realtime_profile(tmp_path)))
+        # --allow-motor-spin: the emulator has no motor, and --lane realtime (an emulator) allows it by default
+        code_silent, silent = _run(tmp_path, "no-echo", emu.bench(realtime_profile(tmp_path)), "--allow-motor-spin")
     assert echo["info"]["echo"] is True and silent["info"]["echo"] is False
     for doc in (echo, silent):
         assert not _bad(doc, "FAIL", "ERROR"), "\n".join(_bad(doc, "FAIL", "ERROR"))
