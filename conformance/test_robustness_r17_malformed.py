@@ -48,7 +48,8 @@ motor_stopped = motor_stopped  # autouse fixture: the motor stopped before and a
 original = original  # fixture: the DUT's node id and channel, put back after a malformed Set ID
 rate0 = rate0  # fixture: the DUT and the host put back at their bit rate after a malformed Set Baud
 
-#: the requests that write a setting only inside the 120 s window after power-up (R11): not sent (module docstring)
+#: the requests that write a setting only inside the 120 s window after power-up (R11): sent inside it, in a test of
+#: their own (module docstring)
 WINDOW_WRITERS = frozenset(s.writer for s in cat.PERSISTED_SETTINGS if s.window)
 #: taking it erases the ESC's temperature records, which nothing reads back
 DESTRUCTIVE = frozenset({"clear_rec"})
@@ -237,6 +238,15 @@ def read_past(dut) -> float:
     return t1
 
 
+def send_bads(dut, bads: list[Bad]) -> None:
+    """The malformed frames, a throttle stream's period apart, then the answer bound (64 ms and the bench's error)."""
+    for b in bads:
+        for w in b.frames:
+            dut.send_wire(w)
+        dut.wait(STREAM_PERIOD_S)
+    dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
+
+
 def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     """Send the malformed frames, then what came of them: answers (a frame from the DUT other than its reports, each
     named by the malformed frame whose transfer id it carries), changed settings and MSG1 state, resets."""
@@ -245,11 +255,7 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     ups = dut.power_up_count()
     t0 = dut.now()
     heard = len(dut.trace)  # what comes after this is what the malformed frames may have caused
-    for b in bads:
-        for w in b.frames:
-            dut.send_wire(w)
-        dut.wait(STREAM_PERIOD_S)
-    dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
+    send_bads(dut, bads)
     t1 = read_past(dut)
     answers = heard_answers(dut, heard, t0, bads)
     # MSG1 from two intervals before the first malformed frame, read once all is in: in real time a frame stamped
@@ -386,14 +392,6 @@ def window_malformed(dut, name: str, fields: dict) -> list[Bad]:
     return [b for b in malformed(dut, name, fields) if name not in cat.PSEUDO_BROADCAST or not _elsewhere(dut, b)]
 
 
-def _send(dut, bads: list[Bad]) -> None:
-    for b in bads:
-        for w in b.frames:
-            dut.send_wire(w)
-        dut.wait(STREAM_PERIOD_S)
-    dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
-
-
 def _set_id_look(dut, request) -> tuple[list[Bad], list[str]]:
     """A Set ID to another node id and channel, malformed, inside the window: GET_ESC_ID still names the DUT's, no
     answer, no reset. When it moved: each frame again alone, the DUT put back before each (which one it took)."""
@@ -406,7 +404,7 @@ def _set_id_look(dut, request) -> tuple[list[Bad], list[str]]:
     ups = dut.power_up_count()
     interval = interval_s(dut.settings(), "msg1")
     heard, t0 = len(dut.trace), dut.now()
-    _send(dut, bads)
+    send_bads(dut, bads)
     t1 = read_past(dut)
     answers = heard_answers(dut, heard, t0, bads)
     problems = [f"answered: {'; '.join(answers)}"] if answers else []
@@ -421,7 +419,7 @@ def _set_id_look(dut, request) -> tuple[list[Bad], list[str]]:
         taken = []
         for b in bads:
             put_back(dut, node, channel)
-            _send(dut, [b])
+            send_bads(dut, [b])
             if (now := esc_ids(dut)) != [(node, channel)]:
                 taken.append(f"{b}: GET_ESC_ID answers {now}")
         problems.append("taken, one at a time: " + ("; ".join(taken) if taken else "none alone"))
