@@ -7,8 +7,8 @@ Runs ``ckesc run robustness`` as a user does, traces written (BLF), on each benc
 (``ckesc emulate`` in its own process through socketcand, echoing the host's frames); ``no-echo`` is ``ckesc emulate
 --no-echo-own`` reached as a bus (``--dut bus``, power and bit rate through its control channel), where the host's
 frames are traced as it sent them. Every frame in each test's trace that is not the DUT's (node 1) is one the host
-sent; the ones our decoder refuses (a multi-frame fragment, a wrong length, a frame to another node or a response
-from one) are the malformed ones, the rest the host's reads and restores. Per bench: the frames sent and the time
+sent; the ones our decoder refuses (a multi-frame fragment, a wrong length) are counted as malformed, the rest (the
+host's reads and restores, and the requests to another node and responses from one, which decode) are not. Per bench: the frames sent and the time
 they span, summed over the tests (frames/s on average); the busiest 100 ms of any test (frames/s, and the share of
 the bus's capacity those frames take at 500 kbit/s and 1 Mbit/s, stuff bits not counted: ``frame_bits``); the
 verdicts (the faultless emulator: no FAIL, no ERROR). Figures only: no target.
