@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from contextlib import contextmanager
 
+import pytest
+
 from ckesc.bench.dut import DutError
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
@@ -153,6 +155,21 @@ def put_back(dut, node: int, channel: int) -> None:
     dut.node_id = node
     if found != [(node, channel)]:
         raise DutError(f"could not put the DUT back at node id {node}, channel {channel}: GET_ESC_ID answers {found}")
+
+
+@pytest.fixture
+def original(dut):
+    """(node id, channel) before the test; put back afterwards, whatever happened (Set ID's section and the
+    robustness section's malformed Set ID). INCONCLUSIVE when another ESC answers GET_ESC_ID too."""
+    found = esc_ids(dut)
+    if found != [(dut.node_id, dut.settings()["throttle_channel"])]:
+        raise Inconclusive(f"GET_ESC_ID answers {found}, not just the DUT (node {dut.node_id}): Set ID needs one ESC "
+                           "on the bus, and its effects are read with GET_ESC_ID (see 4.4.3)")
+    node, channel = found[0]
+    try:
+        yield node, channel
+    finally:
+        put_back(dut, node, channel)
 
 
 @contextmanager

@@ -10,9 +10,17 @@ comm-loss flag raised on time (R8) while only malformed RawCommands arrive. A si
 taken or ignored: recorded (OBSERVE). Each malformed frame of a burst has its own transfer id, so that an answer
 names the frame it answers.
 
-Not sent: Set ID and Set Baud (the run order lets tests without ``power_cycle`` run while a 120 s window elapses,
-and they must send neither: R11's window tests are theirs), and Clear Rec (taking it erases the ESC's temperature
-records, and nothing reads that back). A non-zero throttle in a malformed frame only with ``--allow-motor-spin``.
+Set ID and Set Baud take effect only inside the 120 s window after a power-up (R11), so theirs are sent there, in
+tests of their own (``power_cycle``: the run order lets the others run while some window elapses, and they must
+send neither): a Set ID to another node id and channel, a Set Baud to another rate, each malformed, inside the
+window of a proven power-up; then GET_ESC_ID must still name the DUT's node id and channel, and after the next
+power-up (proven by its counter at whichever rate the DUT answers) the DUT must answer at its old rate. Set ID
+ignores its destination (a pseudo-broadcast, R11), so its request to another node is not malformed and not sent.
+Whatever a faulty DUT took, the node id and channel, or the bit rate (and the host with it), are put back and
+verified after the test, as the Set ID and Set Baud sections do (``answers.original``, ``baud.rate0``).
+
+Not sent: Clear Rec (taking it erases the ESC's temperature records, which nothing can put back). A non-zero
+throttle in a malformed frame only with ``--allow-motor-spin``.
 """
 
 from __future__ import annotations
@@ -25,18 +33,23 @@ from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import Kind, Status
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import WireFrame, encode
-from ckesc.protocol.ids import ESC_NODE_IDS, parse_can_id, service_id
+from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, parse_can_id, service_id
 from ckesc.protocol.judgements import r8_flag_due
 from ckesc.protocol.transfer import TRANSFER_ID_MODULO, multi_frame, tail_byte
 
+from .answers import esc_ids, original, put_back
+from .baud import RATES, cycle, rate0
 from .settings import NEIGHBOURS, changes, move_request
 from .telemetry import frame_start, interval_s, ms
 from .throttle import STREAM_PERIOD_S, can_throttle, command_for, motor_stopped
 
 SECTION = "robustness"
 motor_stopped = motor_stopped  # autouse fixture: the motor stopped before and after each test
+original = original  # fixture: the DUT's node id and channel, put back after a malformed Set ID
+rate0 = rate0  # fixture: the DUT and the host put back at their bit rate after a malformed Set Baud
 
-#: the requests that write a setting only inside the 120 s window after power-up (R11): not sent (module docstring)
+#: the requests that write a setting only inside the 120 s window after power-up (R11): sent inside it, in a test of
+#: their own (module docstring)
 WINDOW_WRITERS = frozenset(s.writer for s in cat.PERSISTED_SETTINGS if s.window)
 #: taking it erases the ESC's temperature records, which nothing reads back
 DESTRUCTIVE = frozenset({"clear_rec"})
@@ -200,6 +213,40 @@ def culprits(dut, bads: list[Bad], s: dict) -> list[str]:
     return found
 
 
+def heard_answers(dut, heard: int, t0: float, bads: list[Bad]) -> list[str]:
+    """What the DUT sent in ``dut.trace[heard:]`` (from lane time ``t0``) other than its reports, each answer named by
+    the malformed frame whose transfer id it carries."""
+    by_tid = {b.transfer_id: b for b in bads}
+    answers = []
+    for f in dut.trace[heard:]:
+        if f.source != dut.node_id or f.name in cat.REPORT_FRAMES:
+            continue
+        cause = by_tid.get(f.transfer_id) if f.kind is Kind.RESPONSE else None
+        answers.append(f"{f.name} {f.kind.label} {f.fields}" + (f" to the {cause}" if cause else ""))
+    return answers + [f"an undecodable frame {g.msg.arbitration_id:08X}#{bytes(g.msg.data).hex().upper()}"
+                      for g in dut.undecoded(since=t0, source=dut.node_id)]
+
+
+def read_past(dut) -> float:
+    """Now, once every MSG1 stamped before it is in: read on until the DUT's first MSG1 stamped later, at most the
+    DUT's ready bound (boot time and a longest report interval). In real time a frame comes after its stamp (a
+    loaded bench reads it late): judged before it came, its absence would pass for a silence of the DUT."""
+    t1 = dut.now()
+    if not any(f.timestamp > t1 for f in dut.frames("msg1", since=t1, source=dut.node_id)):
+        dut.read_until(t1 + dut.ready_bound_s(),
+                       stop=lambda f: f.name == "msg1" and f.source == dut.node_id and f.timestamp > t1)
+    return t1
+
+
+def send_bads(dut, bads: list[Bad]) -> None:
+    """The malformed frames, a throttle stream's period apart, then the answer bound (64 ms and the bench's error)."""
+    for b in bads:
+        for w in b.frames:
+            dut.send_wire(w)
+        dut.wait(STREAM_PERIOD_S)
+    dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
+
+
 def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     """Send the malformed frames, then what came of them: answers (a frame from the DUT other than its reports, each
     named by the malformed frame whose transfer id it carries), changed settings and MSG1 state, resets."""
@@ -208,23 +255,13 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     ups = dut.power_up_count()
     t0 = dut.now()
     heard = len(dut.trace)  # what comes after this is what the malformed frames may have caused
-    before = dut.frames("msg1", since=t0 - 2 * interval - dut.lane.timing_error, source=dut.node_id)
-    for b in bads:
-        for w in b.frames:
-            dut.send_wire(w)
-        dut.wait(STREAM_PERIOD_S)
-    dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
-    t1 = dut.now()
-    by_tid = {b.transfer_id: b for b in bads}
-    answers = []
-    for f in dut.trace[heard:]:
-        if f.source != dut.node_id or f.name in cat.REPORT_FRAMES:
-            continue
-        cause = by_tid.get(f.transfer_id) if f.kind is Kind.RESPONSE else None
-        answers.append(f"{f.name} {f.kind.label} {f.fields}" + (f" to the {cause}" if cause else ""))
-    answers += [f"an undecodable frame {g.msg.arbitration_id:08X}#{bytes(g.msg.data).hex().upper()}"
-                for g in dut.undecoded(since=t0, source=dut.node_id)]
-    msg1 = dut.frames("msg1", since=t0, until=t1, source=dut.node_id)
+    send_bads(dut, bads)
+    t1 = read_past(dut)
+    answers = heard_answers(dut, heard, t0, bads)
+    # MSG1 from two intervals before the first malformed frame, read once all is in: in real time a frame stamped
+    # before t0 may be read after it (read before the frames were sent, it would be missing from both sides: a jump)
+    seen = dut.frames("msg1", since=t0 - 2 * interval - dut.lane.timing_error, until=t1, source=dut.node_id)
+    before, msg1 = [f for f in seen if f.timestamp < t0], [f for f in seen if f.timestamp >= t0]
     resets = []
     seq = [*before[-1:], *msg1]
     jumps = [(a.transfer_id, b.transfer_id) for a, b in zip(seq, seq[1:])
@@ -307,6 +344,7 @@ def test_malformed_raw_commands_do_not_refresh_comm(dut, name):
             dut.send_wire(w)
         i += 1
         dut.wait(STREAM_PERIOD_S)
+    read_past(dut)
     due = [(f, r8_flag_due(frame_start(dut, f) - last.time, interval, jitter=dut.profile.jitter_s,
                            error=dut.lane.own_error)) for f in dut.frames("msg1", since=last.time, source=dut.node_id)]
     judged = [f for f, flag in due if flag]
@@ -340,3 +378,92 @@ def test_malformed_throttle_does_not_spin(dut, name):
     problems = effects.lines() + ([f"MSG1 shows the motor driven (pwm {moved[0].fields['pwm']})"] if moved else [])
     assert not problems, (f"{name} malformed with throttle {cat.THROTTLE_MAX // 4} "
                           f"({'; '.join(b.what for b in bads)}): " + "; ".join(problems) + " (R17)")
+
+
+# ------------------------------------------------------------------------------------------ Set ID, Set Baud (R11)
+def _elsewhere(dut, b: Bad) -> bool:
+    """Whether ``b`` is a request to a node other than the DUT."""
+    return any((i := parse_can_id(w.arbitration_id)).kind is Kind.REQUEST and i.destination != dut.node_id
+               for w in b.frames)
+
+
+def window_malformed(dut, name: str, fields: dict) -> list[Bad]:
+    """:func:`malformed`, less a pseudo-broadcast's (Set ID's) request to another node: that one it takes (R11)."""
+    return [b for b in malformed(dut, name, fields) if name not in cat.PSEUDO_BROADCAST or not _elsewhere(dut, b)]
+
+
+def _set_id_look(dut, request) -> tuple[list[Bad], list[str]]:
+    """A Set ID to another node id and channel, malformed, inside the window: GET_ESC_ID still names the DUT's, no
+    answer, no reset. When it moved: each frame again alone, the DUT put back before each (which one it took)."""
+    node, channel = request.getfixturevalue("original")  # put back after the test, whatever it took
+    low, high = cat.spec("set_id").request.field("node_id").legal
+    target = next(n for n in range(low, high + 1) if n not in {node, DEFAULT_ESC_NODE_ID, *dut.nodes})
+    fields = {"node_id": target, "throttle_channel": cat.THROTTLE_CHANNELS[channel % len(cat.THROTTLE_CHANNELS)]}
+    bads = window_malformed(dut, "set_id", fields)
+    dut.open_window()
+    ups = dut.power_up_count()
+    interval = interval_s(dut.settings(), "msg1")
+    heard, t0 = len(dut.trace), dut.now()
+    send_bads(dut, bads)
+    t1 = read_past(dut)
+    answers = heard_answers(dut, heard, t0, bads)
+    problems = [f"answered: {'; '.join(answers)}"] if answers else []
+    msg1 = dut.frames("msg1", since=t0, until=t1, source=dut.node_id)
+    if not msg1 or t1 - msg1[-1].timestamp > cat.restart_limit_s(interval) + dut.lane.timing_error:
+        problems.append(f"no MSG1 in the last {ms(t1 - (msg1[-1].timestamp if msg1 else t0)):g} ms (MSG1 every "
+                        f"{ms(interval):g} ms): reporting stopped")
+        dut.await_reports(t1, t1 + dut.ready_bound_s())  # a restarted ESC is let boot before it is asked
+    found = esc_ids(dut)
+    if found != [(node, channel)]:
+        problems.append(f"GET_ESC_ID answers {found}, was {[(node, channel)]}")
+        taken = []
+        for b in bads:
+            put_back(dut, node, channel)
+            send_bads(dut, [b])
+            if (now := esc_ids(dut)) != [(node, channel)]:
+                taken.append(f"{b}: GET_ESC_ID answers {now}")
+        problems.append("taken, one at a time: " + ("; ".join(taken) if taken else "none alone"))
+    elif (after := dut.power_up_count()) != ups:
+        problems.append(f"the power-up count (241) went {ups} -> {after}: the ESC reset")
+    return bads, problems
+
+
+def _set_baud_look(dut, request) -> tuple[list[Bad], list[str]]:
+    """A Set Baud to another rate, malformed, inside the window: no answer, nothing changed, no reset, and after the
+    next power-up (proven at whichever rate the DUT answers) the DUT at its old rate."""
+    rate = request.getfixturevalue("rate0")  # the DUT and the host put back at it after the test, whatever it took
+    code = next(c for c, r in RATES.items() if r != rate)
+    bads = window_malformed(dut, "set_baud", {"baud": code})
+    dut.open_window()
+    problems = send_and_look(dut, bads, "set_baud").lines()
+    try:
+        after = cycle(dut, rate)
+    except Inconclusive:
+        if not problems:
+            raise
+        return bads, problems  # the FAIL stands; where the rate went is then not known
+    if after != rate:
+        problems.append(f"after the next power-up the DUT answers at {after} bit/s, not {rate}: it took a malformed "
+                        f"Set Baud {code} ({RATES[code]} bit/s)")
+    return bads, problems
+
+
+#: each window writer's read-back (what it moves, looked at after its malformed frames): a writer added to the
+#: catalogue's window settings without one fails here, at import
+_WINDOW_LOOKS = {"set_id": _set_id_look, "set_baud": _set_baud_look}
+if missing := sorted(WINDOW_WRITERS - set(_WINDOW_LOOKS)):
+    raise KeyError(f"window writers {missing}: say in {__name__} how a malformed one taken shows")
+
+
+@pytest.mark.requirement("R17")
+@pytest.mark.power_cycle
+@pytest.mark.parametrize("name", [s.writer for s in cat.PERSISTED_SETTINGS if s.window])
+def test_malformed_window_writes_are_ignored(dut, name, request):
+    """Set ID and Set Baud, each malformed in every form (but Set ID's to another node, which it takes), inside the
+    120 s window of a proven power-up (R11), where a valid one is taken: no answer, the node id / the bit rate after
+    the next power-up unchanged, no reset; the DUT put back whatever it took."""
+    bads, problems = _WINDOW_LOOKS[name](dut, request)
+    dut.record.observe("malformed frames sent", "; ".join(str(b) for b in bads))
+    assert not problems, (f"{cat.spec(name).title}: inside the 120 s window (R11), after these malformed frames of a "
+                          f"command that would show ({'; '.join(b.what for b in bads)}): " + "; ".join(problems)
+                          + " (R17: a malformed frame gets no answer, changes nothing and never resets the ESC)")

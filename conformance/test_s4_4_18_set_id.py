@@ -16,13 +16,14 @@ from ckesc.protocol.host import HostProtocol
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, HOST_NODE_ID, RESERVED_NODE_IDS, Kind
 from ckesc.protocol.legality import field_cases, illegal_cases
 
-from .answers import esc_id_replies, esc_ids, put_back
+from .answers import esc_id_replies, esc_ids, original, put_back
 from .raw_command_12b import FORMAT as RAW_12B
 from .raw_command_12b import VALUES as RAW_12B_VALUES
 from .settings import check_neighbours_kept, neighbours_moved
 from .telemetry import msg_control
 
 SECTION = "4.4.18"
+original = original  # fixture: the DUT's (node id, channel), put back after the test
 SPEC = cat.spec("set_id")
 NODE_FIELD = SPEC.request.field("node_id")
 ID_MIN, ID_MAX = NODE_FIELD.legal  # 4.4.18-5: 1..0x7D
@@ -80,20 +81,6 @@ def _other_channel(channel):
 
 def _other_id(node):
     return node + 1 if node + 1 < ID_MAX else ID_MIN
-
-
-@pytest.fixture
-def original(dut):
-    """(node id, channel) before the test; put back afterwards, whatever happened."""
-    found = esc_ids(dut)
-    if found != [(dut.node_id, dut.settings()["throttle_channel"])]:
-        raise Inconclusive(f"GET_ESC_ID answers {found}, not just the DUT (node {dut.node_id}): Set ID needs one ESC "
-                           "on the bus, and its effects are read with GET_ESC_ID (see 4.4.3)")
-    node, channel = found[0]
-    try:
-        yield node, channel
-    finally:
-        put_back(dut, node, channel)
 
 
 # ------------------------------------------------------------------------------------------ tests

@@ -891,6 +891,8 @@ PERSISTED_SETTINGS: tuple[PersistedSetting, ...] = (
 PERSISTED: Mapping[str, PersistedSetting] = MappingProxyType({s.name: s for s in PERSISTED_SETTINGS})
 #: The requests that write a persisted setting: the parameter changes R12 holds back while reporting is suspended.
 SETTING_WRITERS: frozenset[str] = frozenset(s.writer for s in PERSISTED_SETTINGS)
+#: The requests an ESC takes whatever their destination node id: Set ID is a pseudo-broadcast (R11, 4.4.18-3).
+PSEUDO_BROADCAST: frozenset[str] = frozenset({"set_id"})
 
 
 def spec(name: str) -> FrameSpec:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -37,6 +38,17 @@ class Emulator:
                 ports[kind] = int(addr.rsplit(":", 1)[1])
         self.port, self.control = ports["socketcand"], ports["control"]
 
+    def bench(self, profile: Path) -> list[str]:
+        """``ckesc run``'s bench options that reach this emulator as a third-party DUT on a bus: socketcand, node 1,
+        ``profile``, its power and bit rate switched through its control channel (``ckesc control``)."""
+        control = shlex.join([*CKESC, "control", "--port", str(self.control)])
+        return ["--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0",
+                "--can-config", "host=127.0.0.1", "--can-config", f"port={self.port}",
+                # TCP_NODELAY: python-can's socketcand client otherwise holds a frame back (Nagle)
+                "--can-config", "tcp_tune=True", "--node-id", "1", "--profile", str(profile),
+                "--power", "command", "--power-off-cmd", f"{control} power off", "--power-on-cmd", f"{control} power on",
+                "--can-bitrate-cmd", f"{control} bitrate {{bitrate}}"]
+
     def close(self) -> None:
         end(self.proc)
 
@@ -60,3 +72,16 @@ def end(proc: subprocess.Popen) -> None:
     for pipe in (proc.stdout, proc.stderr):
         if pipe is not None:
             pipe.close()
+
+
+def realtime_profile(tmp: Path) -> Path:
+    """The emulator's profile with the real-time lane's stated error (``--lane realtime`` uses 2 ms): its
+    answers are stamped when due, not when their last bit would have gone, so the R2 slot checks sit
+    within a fraction of a millisecond of their limits."""
+    from ckesc import bench as bench_pkg
+
+    text = (Path(bench_pkg.__file__).parent / "profiles" / "emulator.toml").read_text()
+    path = tmp / "emulator-realtime.toml"
+    path.write_text(text.replace("error_s = 0.0 ", "error_s = 0.002 "))
+    assert "error_s = 0.002" in path.read_text()
+    return path

@@ -23,10 +23,9 @@ from pathlib import Path
 
 import can
 import pytest
-from procs import CKESC, Emulator
+from procs import CKESC, Emulator, realtime_profile
 from procs import env as _env
 
-from ckesc import bench as bench_pkg
 from ckesc.bench.dut import Dut, echo_probe
 from ckesc.bench.lanes import BusLane, OwnFrame
 from ckesc.bench.power import NoPower
@@ -112,23 +111,12 @@ def test_without_echo_the_host_frames_are_handed_out_in_time_order_and_rules_lea
 SECTIONS = "comm_loss or test_s4_4_2_msg_control or test_s4_4_3_get_esc_id or test_s4_4_22_set_freq"
 
 
-def _profile(tmp: Path) -> Path:
-    """The emulator's profile with the real-time lane's stated error (``--lane realtime`` uses 2 ms): its
-    answers are stamped when due, not when their last bit would have gone, so the R2 slot checks sit
-    within a fraction of a millisecond of their limits."""
-    text = (Path(bench_pkg.__file__).parent / "profiles" / "emulator.toml").read_text()
-    path = tmp / "emulator-realtime.toml"
-    path.write_text(text.replace("error_s = 0.0 ", "error_s = 0.002 "))
-    assert "error_s = 0.002" in path.read_text()
-    return path
-
-
 def _run(tmp: Path, port: int, name: str, k: str) -> tuple[dict, str, ET.Element, int]:
     reports = tmp / name
     done = subprocess.run([*CKESC, "run", "--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0",
                            "--can-config", "host=127.0.0.1", "--can-config", f"port={port}",
                            # TCP_NODELAY: python-can's socketcand client otherwise holds a frame back (Nagle)
-                           "--can-config", "tcp_tune=True", "--node-id", "1", "--profile", str(_profile(tmp)), "-q",
+                           "--can-config", "tcp_tune=True", "--node-id", "1", "--profile", str(realtime_profile(tmp)), "-q",
                            "--trace-format", "none", "--reports", str(reports), "--", "-k", k],
                           cwd=tmp, env=_env(tmp), capture_output=True, text=True, timeout=600)
     run = reports / "latest"
