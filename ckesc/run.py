@@ -57,13 +57,13 @@ class SelectionError(ValueError):
 _SECTION = re.compile(r"^(\d+(\.\d+)+|attachment|test_\w+)$")
 
 
-def section_modules(where: Path) -> dict[str, Path]:
-    """Section number ("4.4.22", "4.1", "attachment") -> its test module, from the module names, in the
-    document's order."""
-    out: dict[str, Path] = {}
-    for path in where.glob("test_*.py"):
+def section_modules(where: Path) -> dict[str, list[Path]]:
+    """Section number ("4.4.22", "4.1", "attachment", "robustness") -> its test modules (a section may have
+    several: robustness has R17's and R18's), from the module names, in the document's order."""
+    out: dict[str, list[Path]] = {}
+    for path in sorted(where.glob("test_*.py")):
         m = re.match(r"test_s(\d+(?:_\d+)*)_", path.name)
-        out[m.group(1).replace("_", ".") if m else path.stem.removeprefix("test_").split("_")[0]] = path
+        out.setdefault(m.group(1).replace("_", ".") if m else path.stem.removeprefix("test_").split("_")[0], []).append(path)
     return dict(sorted(out.items(), key=lambda kv: section_key(kv[0])))
 
 
@@ -77,9 +77,12 @@ def resolve_selection(selectors: list[str], cwd: Path | None = None) -> list[str
     out: list[str] = []
     for sel in selectors:
         head, sep, tail = sel.partition("::")
-        if head in modules:
-            path = modules[head]
-        elif head in {p.stem for p in modules.values()}:
+        if head in modules and not sep:
+            out.extend(str(p) for p in modules[head])
+            continue
+        if head in modules and len(modules[head]) == 1:
+            path = modules[head][0]
+        elif head in {p.stem for ps in modules.values() for p in ps}:
             path = where / f"{head}.py"
         elif _SECTION.match(head) and ".py" not in head:
             what = "test module" if head.startswith("test_") else "section"

@@ -13,6 +13,7 @@ from pathlib import Path
 import can
 import pytest
 
+import conformance
 from ckesc.cli import main
 from ckesc.evidence.candump import decode_lines, parse_candump
 from ckesc.protocol import BY_NAME, CATALOGUE
@@ -438,3 +439,12 @@ def test_run_selects_before_the_dashes_and_hands_pytest_what_follows(tmp_path):
     assert {r["nodeid"].split("::")[0] for r in doc["results"]} == {"conformance/test_s4_4_22_set_freq.py"}
 
 
+
+
+def test_a_section_of_several_modules_selects_them_all():
+    """``ckesc run robustness``: R17's module and R18's, not whichever module the glob met last."""
+    from ckesc.run import resolve_selection
+
+    picked = [Path(p).name for p in resolve_selection(["robustness"])]
+    assert picked == sorted(p.name for p in (Path(conformance.__file__).parent).glob("test_robustness_*.py"))
+    assert len(picked) >= 2
