@@ -1,0 +1,141 @@
+"""Foreign traffic (issue #30 item 2, R17): a flight controller's and a smart battery's frames, encoded by the
+``dronecan`` package, played during a run (``--foreign-traffic ardupilot``): the frames are dronecan's and what the
+docs say, the ESC ignores what is not for it, the suite's verdicts with the traffic playing equal those on a
+quiet bus, and a fault that takes a foreign frame turns the traffic run into a FAIL."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import dronecan
+import pytest
+from dronecan import transport
+
+from ckesc.bench import foreign
+from ckesc.emulator.model import EscConfig, EscModel
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.frame import classify
+from ckesc.protocol.ids import Kind
+from ckesc.protocol.transfer import parse_tail
+
+#: a representative part of the suite (GET_ESC_ID's answers and their timing, MSG Control, comm loss, the framing
+#: checks over the whole run's frames): its verdicts with the traffic playing must equal a quiet bus's
+SELECTION = ("conformance/test_s4_4_3_get_esc_id.py", "conformance/test_s4_4_2_msg_control.py::test_answer_is_command_zero_in_the_node_slot",
+             "conformance/test_s4_4_4_msg1.py::test_comm_loss_flag_sets_after_200ms_and_clears")
+
+
+def _transfers(traffic: foreign.ForeignTraffic, seconds: float) -> list[list]:
+    """The frames due in ``seconds``, grouped into transfers (a multi-frame transfer's frames share a due time)."""
+    out: list[list] = []
+    for w in traffic.take_due(seconds):
+        if out and out[-1][0].timestamp == w.timestamp and out[-1][0].arbitration_id == w.arbitration_id:
+            out[-1].append(w)
+        else:
+            out.append([w])
+    return out
+
+
+def test_every_frame_is_dronecans_and_the_throttle_is_zero():
+    """Each transfer decodes with dronecan's own transport (CAN id, tail bytes, the multi-frame CRC) into the type
+    and values the docs list; BatteryCells on 20010 is a true multi-frame transfer; every RawCommand channel is 0."""
+    traffic = foreign.ardupilot()
+    seen: dict[tuple[int, str], int] = {}
+    cells_t = foreign.battery_cells_type()
+    for frames in _transfers(traffic, 2.0):
+        type_id, source = (frames[0].arbitration_id >> 8) & 0xFFFF, frames[0].arbitration_id & 0x7F
+        if type_id == 20010:  # ArduPilot's BatteryCells: dronecan's table has BatteryContinuous there (the module says why)
+            tails = [parse_tail(f.data[-1]) for f in frames]
+            assert len(frames) >= 2 and tails[0].start and not tails[0].end and tails[-1].end
+            assert [t.toggle for t in tails] == [i % 2 for i in range(len(frames))]
+            data = b"".join(f.data[:-1] for f in frames)
+            crc, payload = data[0] | data[1] << 8, data[2:]
+            assert crc == dronecan.dsdl.crc16_from_bytes(payload, initial=cells_t.base_crc)
+            value = transport.CompoundValue(cells_t)
+            value._unpack(transport.bits_from_bytes(bytearray(payload)), True)
+            assert list(value.voltages) == [3900.0] * 12
+            name = "ardupilot.equipment.power.BatteryCells"
+        else:
+            tr = transport.Transfer()
+            tr.from_frames([transport.Frame(f.arbitration_id, f.data) for f in frames])
+            name = dronecan.get_dronecan_data_type(tr.payload).full_name
+            if name == "uavcan.equipment.esc.RawCommand":
+                assert list(tr.payload.cmd) == [0, 0, 0, 0], "the flight controller's throttle is ZERO, always"
+            if name == "com.hobbywing.esc.GetEscID":
+                assert list(tr.payload.payload) == [0]
+        seen[(source, name)] = seen.get((source, name), 0) + 1
+    assert seen == {(10, "ardupilot.indication.SafetyState"): 4, (10, "uavcan.protocol.NodeStatus"): 2,
+                    (10, "com.hobbywing.esc.GetEscID"): 2, (10, "uavcan.equipment.esc.RawCommand"): 800,
+                    (40, "ardupilot.equipment.power.BatteryCells"): 10, (40, "uavcan.protocol.NodeStatus"): 2}
+    # SafetyState is a 2-byte frame on CAN Test's id, as INTERPRETATIONS' facts say
+    safety = next(f for fr in _transfers(foreign.ardupilot(), 0.5) for f in fr if (f.arbitration_id >> 8) & 0xFFFF == 20000)
+    assert len(safety.data) == 2
+
+
+def test_the_esc_ignores_what_is_not_for_it():
+    """R17 on the model: ten seconds of the traffic change no setting, refresh no command, reset nothing; the only
+    frames the ESC sends besides its reports are its GET_ESC_ID replies, one per node 10 query, each in its slot."""
+    esc = EscModel(EscConfig(slot=0, boot_time=0.0))
+    esc.power_on(0.0)
+    before = dict(esc.nvm)
+    traffic = foreign.ardupilot()
+    queries, replies = [], []
+    for frames in _transfers(traffic, 10.0):
+        for w in frames:
+            esc.receive(w, w.timestamp)
+            if classify(w.arbitration_id)[4] is cat.spec("get_esc_id"):
+                queries.append(w.timestamp)
+        for out in esc.poll(frames[0].timestamp):
+            kind, _, source, _, spec = classify(out.arbitration_id)
+            assert kind is Kind.MESSAGE and source == esc.node_id
+            if spec is not None and spec.name == "get_esc_id":
+                replies.append(out.timestamp)
+            else:
+                assert spec is not None and spec.name in cat.ESC_REPORT_FRAMES, f"the ESC answered a foreign frame: {out}"
+    assert esc.nvm == before, "a foreign frame changed a setting"
+    assert esc.last_command is None, "a foreign frame counted as a command (no comm refresh, R17/R8)"
+    assert esc.counters["rx_foreign"] > 0 and esc.counters["rx_malformed"] > 0
+    assert len(queries) == 10 and len(replies) == 10
+    assert all(0 < r - q <= cat.ANSWER_DELAY_MAX_S for q, r in zip(queries, replies))
+
+
+def _run(reports: Path, *args: str) -> dict[str, str]:
+    done = subprocess.run([sys.executable, "-m", "ckesc", "run", "-q", "--trace-format", "none", "--reports", str(reports),
+                           *args], capture_output=True, text=True, timeout=1800)
+    results = reports / "latest" / "results.json"
+    assert results.is_file(), done.stdout[-3000:] + done.stderr[-3000:]
+    doc = json.loads(results.read_text())
+    return {"verdicts": {r["nodeid"]: r["outcome"] for r in doc["results"]}, "info": doc["info"]}
+
+
+def _same_verdicts(tmp_path: Path, *selection: str) -> dict:
+    quiet = _run(tmp_path / "quiet", *selection)
+    played = _run(tmp_path / "ardupilot", "--foreign-traffic", "ardupilot", *selection)
+    assert "foreign_traffic" not in quiet["info"]
+    assert played["verdicts"] == quiet["verdicts"], {k: (v, played["verdicts"].get(k)) for k, v in quiet["verdicts"].items()
+                                                     if played["verdicts"].get(k) != v}
+    return played
+
+
+def test_verdicts_with_ardupilot_traffic_equal_a_quiet_bus(tmp_path):
+    played = _same_verdicts(tmp_path, *SELECTION)
+    assert set(played["verdicts"].values()) <= {"PASS", "OBSERVED"}
+    ft = played["info"]["foreign_traffic"]
+    assert ft["profile"] == "ardupilot" and ft["frames"] > 0 and 0.05 < ft["load"] < 0.2  # ~11 % at 500 kbit/s
+
+
+@pytest.mark.slow
+def test_whole_suite_verdicts_with_ardupilot_traffic_equal_a_quiet_bus(tmp_path):
+    _same_verdicts(tmp_path)
+
+
+def test_a_fault_that_takes_a_foreign_frame_fails_with_the_traffic_only(tmp_path):
+    """Teeth: an ESC that resets on a multi-frame start (BatteryCells on 20010) passes GET_ESC_ID's section on a
+    quiet bus and fails it with the ArduPilot traffic playing."""
+    fault = ("--emulator-faults", "reset_on_multi_frame_start", "conformance/test_s4_4_3_get_esc_id.py")
+    quiet = _run(tmp_path / "quiet", *fault)
+    assert set(quiet["verdicts"].values()) == {"PASS"}
+    played = _run(tmp_path / "ardupilot", "--foreign-traffic", "ardupilot", *fault)
+    assert "FAIL" in played["verdicts"].values() or "ERROR" in played["verdicts"].values(), played["verdicts"]
