@@ -156,6 +156,27 @@ class ForeignTraffic:
                 for s in self.streams]
 
 
+class AtBitrate:
+    """``source``'s nodes as configured for one bit rate: while the bus is at another (``bus_bitrate()``, e.g. a
+    Set Baud test moved the ESC and the host), they are not heard, and their frames due meanwhile are dropped
+    (``dropped``), as on a real bus a node at the wrong rate gets none of its frames through."""
+
+    def __init__(self, source: ForeignTraffic, bitrate: int, bus_bitrate: Callable[[], int]) -> None:
+        self.source, self.bitrate, self.bus_bitrate = source, bitrate, bus_bitrate
+        self.name = source.name
+        self.dropped = 0
+
+    def next_due(self) -> float:
+        return self.source.next_due()
+
+    def take_due(self, now: float) -> list[WireFrame]:
+        frames = self.source.take_due(now)
+        if frames and self.bus_bitrate() != self.bitrate:
+            self.dropped += len(frames)
+            return []
+        return frames
+
+
 def ardupilot(*, esc_rate_hz: float = COPTER_LOOP_HZ, cells: int = 12) -> ForeignTraffic:
     """ArduPilot's flight controller (node 10) and a smart battery (node 40), as the module docstring lists them.
     ``esc_rate_hz``: the flight controller's output rate (its ZERO RawCommand); ``cells``: the battery's cells."""

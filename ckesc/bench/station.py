@@ -340,20 +340,23 @@ class ForeignPlay:
         from . import foreign  # imports dronecan (about a second): only when foreign traffic is asked for
 
         self.name = name
+        # the other nodes talk at the run's bit rate, their configuration: while a test moves the ESC and the host
+        # to another (Set Baud), nothing of theirs gets through (foreign.AtBitrate)
         self.traffic = foreign.profile(name)
+        self.source = foreign.AtBitrate(self.traffic, lane.bitrate, lambda: lane.bitrate)
         self.lane = lane
         self.player: TrafficPlayer | None = None
         self.stats: PlayerStats | None = None
         self._t0 = lane.now()
         self._elapsed: float | None = None
         if isinstance(lane, SimLane):
-            lane.sim.world.add_source(self.traffic)
+            lane.sim.world.add_source(self.source)
         else:
             assert isinstance(lane, BusLane)
             import can
 
             bus = can.Bus(**lane.bus_kwargs)  # its own: the host's bus is read and written by the test's thread only
-            self.player = TrafficPlayer(bus, [self.traffic], bitrate=lane.bitrate).start()
+            self.player = TrafficPlayer(bus, [self.source], bitrate=lane.bitrate).start()
 
     def stop(self) -> None:
         if self._elapsed is not None:
@@ -365,12 +368,13 @@ class ForeignPlay:
             finally:
                 self.player.bus.shutdown()
         elif isinstance(self.lane, SimLane):
-            self.lane.sim.world.remove_source(self.traffic)
+            self.lane.sim.world.remove_source(self.source)
 
     def report(self) -> dict[str, Any]:
         """What was played (its streams, nodes and rates) and what it reached: frames sent, the share of the bus's
         capacity they took, and (real time) how late the player sent them."""
-        out: dict[str, Any] = {"profile": self.name, "streams": self.traffic.describe()}
+        out: dict[str, Any] = {"profile": self.name, "streams": self.traffic.describe(), "bitrate": self.source.bitrate,
+                               "dropped_at_other_bitrate": self.source.dropped}
         if self.player is not None:
             st = self.stats or self.player.stats
             out.update(frames=st.frames, load=round(st.load, 6), late_mean_ms=round(st.late_mean_s * 1000, 3),
