@@ -20,8 +20,8 @@ frame                                       node     rate      from ArduPilot
 ``uavcan.equipment.esc.RawCommand`` (1030)    10     400 Hz    ``SRV_push_servos``: every output cycle
                                                                (Copter's main loop, 400 Hz), priority
                                                                HIGH - 1; four channels, ZERO only
-``ardupilot.equipment.power.BatteryCells``    40     5 Hz      a smart battery (AP_Periph); its DSDL says
-(20010, a multi-frame transfer)                                the rate is the battery's parameter: 5 Hz
+``ardupilot.equipment.power.BatteryCells``    40     1 Hz      a smart battery (AP_Periph); its DSDL says
+(20010, a multi-frame transfer)                                the rate is the battery's parameter: 1 Hz
 ``uavcan.protocol.NodeStatus`` (341)          40     1 Hz      every DroneCAN node
 ==========================================  =======  ========  ===========================================
 
@@ -205,7 +205,7 @@ def ardupilot(*, esc_rate_hz: float = COPTER_LOOP_HZ, cells: int = 12) -> Foreig
                start=0.017),
         Stream("uavcan.equipment.esc.RawCommand", fc, HIGH - 1, 1.0 / esc_rate_hz,
                lambda n: uavcan.equipment.esc.RawCommand(cmd=[0, 0, 0, 0]), start=0.0005),
-        Stream("ardupilot.equipment.power.BatteryCells", batt, LOW, 0.2, battery_cells, start=0.029),
+        Stream("ardupilot.equipment.power.BatteryCells", batt, LOW, 1.0, battery_cells, start=0.029),
         Stream("uavcan.protocol.NodeStatus", batt, LOWEST, 1.0, lambda n: node_status(n, 1.0), start=0.037, fixed=False),
     ]
     return ForeignTraffic("ardupilot", streams)
