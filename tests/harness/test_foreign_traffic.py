@@ -149,3 +149,14 @@ def test_a_fault_that_takes_a_foreign_frame_fails_with_the_traffic_only(tmp_path
     doc = json.loads((tmp_path / "ardupilot" / "latest" / "results.json").read_text())
     message = doc["results"][0]["message"]
     assert message.startswith("[R17") and "a reset" in message and "power-up count" in message, message
+
+
+@pytest.mark.slow  # `ckesc emulate` in its own process, ~20 s
+def test_real_time_lane_plays_it_from_its_own_thread(tmp_path):
+    """In real time a player sends the traffic on a bus of its own (socketcand to the emulator): the verdicts hold and
+    the reports say the load and lateness it reached."""
+    played = _run(tmp_path / "rt", "--lane", "realtime", "--foreign-traffic", "ardupilot",
+                  "conformance/test_s4_4_3_get_esc_id.py::test_reply_comes_in_the_node_slot", FOREIGN_TEST.split("::")[0])
+    assert set(played["verdicts"].values()) == {"PASS"}, played["verdicts"]
+    ft = played["info"]["foreign_traffic"]
+    assert ft["frames"] > 0 and ft["send_errors"] == 0 and 0.05 < ft["load"] < 0.2 and ft["late_max_ms"] >= ft["late_mean_ms"] > 0
