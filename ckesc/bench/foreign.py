@@ -76,6 +76,11 @@ COPTER_LOOP_HZ = 400
 _DSDL = Path(__file__).with_name("dsdl")
 
 
+def _us(microseconds: int) -> float:
+    """A stream's phase (when its first frame is due), in microseconds: not a timing fact, just where it starts."""
+    return microseconds / 1_000_000
+
+
 @cache
 def battery_cells_type() -> Any:
     """ArduPilot's BatteryCells on 20010 (see the module docstring), parsed by ``dronecan``'s DSDL parser from
@@ -199,14 +204,14 @@ def ardupilot(*, esc_rate_hz: float = COPTER_LOOP_HZ, cells: int = 12) -> Foreig
     # phases: the streams do not all start at one instant (different nodes, different loops)
     streams = [
         Stream("ardupilot.indication.SafetyState", fc, LOW, 0.5, lambda n: ap.indication.SafetyState(status=safety_on),
-               start=0.003),
-        Stream("uavcan.protocol.NodeStatus", fc, LOWEST, 1.0, lambda n: node_status(n, 1.0), start=0.011, fixed=False),
+               start=_us(3000)),
+        Stream("uavcan.protocol.NodeStatus", fc, LOWEST, 1.0, lambda n: node_status(n, 1.0), start=_us(11000), fixed=False),
         Stream("com.hobbywing.esc.GetEscID", fc, MEDIUM, 1.0, lambda n: dronecan.com.hobbywing.esc.GetEscID(payload=[0]),
-               start=0.017),
+               start=_us(17000)),
         Stream("uavcan.equipment.esc.RawCommand", fc, HIGH - 1, 1.0 / esc_rate_hz,
-               lambda n: uavcan.equipment.esc.RawCommand(cmd=[0, 0, 0, 0]), start=0.0005),
-        Stream("ardupilot.equipment.power.BatteryCells", batt, LOW, 1.0, battery_cells, start=0.029),
-        Stream("uavcan.protocol.NodeStatus", batt, LOWEST, 1.0, lambda n: node_status(n, 1.0), start=0.037, fixed=False),
+               lambda n: uavcan.equipment.esc.RawCommand(cmd=[0, 0, 0, 0]), start=_us(500)),
+        Stream("ardupilot.equipment.power.BatteryCells", batt, LOW, 1.0, battery_cells, start=_us(29000)),
+        Stream("uavcan.protocol.NodeStatus", batt, LOWEST, 1.0, lambda n: node_status(n, 1.0), start=_us(37000), fixed=False),
     ]
     return ForeignTraffic("ardupilot", streams)
 

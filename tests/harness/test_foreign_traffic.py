@@ -160,3 +160,23 @@ def test_real_time_lane_plays_it_from_its_own_thread(tmp_path):
     assert set(played["verdicts"].values()) == {"PASS"}, played["verdicts"]
     ft = played["info"]["foreign_traffic"]
     assert ft["frames"] > 0 and ft["send_errors"] == 0 and 0.05 < ft["load"] < 0.2 and ft["late_max_ms"] >= ft["late_mean_ms"] > 0
+
+
+def test_the_host_leaves_another_nodes_answer_alone():
+    """Another host on the bus (a flight controller at node 10) asks the ESC the same service with the same transfer id
+    as this host: the ESC's answer to node 10 is node 10's (F4: addressed to it, answering its request), never paired
+    with this host's request as a misaddressed answer; the answer to this host still is."""
+    from ckesc.protocol.frame import encode
+    from ckesc.protocol.host import Heard, HostProtocol, Response
+
+    host = HostProtocol(0)
+    fields = dict(cat.FREQ_READ)
+    _, pending = host.request("set_freq", fields, destination=1, now=0.0, timeout=0.1, transfer_id=3)
+    theirs = encode("set_freq", fields, kind=Kind.REQUEST, source=10, destination=1, transfer_id=3)
+    answer = {"option": 0, "msg1_interval": 10, "msg2_interval": 50, "msg3_interval": 250}
+    to_them = encode("set_freq", answer, kind=Kind.RESPONSE, source=1, destination=10, transfer_id=3)
+    to_us = encode("set_freq", answer, kind=Kind.RESPONSE, source=1, destination=0, transfer_id=3)
+    assert isinstance(host.receive(theirs)[0], Heard)
+    assert isinstance(host.receive(to_them)[0], Heard) and host.pending == [pending]
+    got = host.receive(to_us)[0]
+    assert isinstance(got, Response) and got.pending is pending and got.mismatch == []
