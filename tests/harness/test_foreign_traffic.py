@@ -125,6 +125,7 @@ def _same_verdicts(tmp_path: Path, *selection: str) -> dict:
     return played
 
 
+@pytest.mark.timeout(600)
 def test_verdicts_with_ardupilot_traffic_equal_a_quiet_bus(tmp_path):
     played = _same_verdicts(tmp_path, *SELECTION)
     assert len(played["verdicts"]) == 3 and set(played["verdicts"].values()) == {"PASS"}
@@ -133,11 +134,13 @@ def test_verdicts_with_ardupilot_traffic_equal_a_quiet_bus(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)  # two whole runs: ~1 min quiet, ~4 min with the traffic (its 400 Hz command) alone
 def test_whole_suite_verdicts_with_ardupilot_traffic_equal_a_quiet_bus(tmp_path):
     _same_verdicts(tmp_path)
 
 
 @pytest.mark.slow  # two runs, ~30 s
+@pytest.mark.timeout(600)
 def test_a_fault_that_takes_a_foreign_frame_fails_with_the_traffic_only(tmp_path):
     """Teeth: an ESC that resets on a multi-frame start (BatteryCells on 20010) has no FAIL on a quiet bus, and FAILs
     R17's foreign-traffic test with the ArduPilot traffic playing."""
@@ -152,6 +155,7 @@ def test_a_fault_that_takes_a_foreign_frame_fails_with_the_traffic_only(tmp_path
 
 
 @pytest.mark.slow  # `ckesc emulate` in its own process, ~20 s
+@pytest.mark.timeout(600)
 def test_real_time_lane_plays_it_from_its_own_thread(tmp_path):
     """In real time a player sends the traffic on a bus of its own (socketcand to the emulator): the verdicts hold and
     the reports say the load and lateness it reached."""
