@@ -184,3 +184,24 @@ def test_the_host_leaves_another_nodes_answer_alone():
     assert isinstance(host.receive(to_them)[0], Heard) and host.pending == [pending]
     got = host.receive(to_us)[0]
     assert isinstance(got, Response) and got.pending is pending and got.mismatch == []
+
+
+def test_the_bus_rules_expect_a_reply_to_each_query_of_each_host():
+    """A flight controller's GET_ESC_ID query and the host's within 64 ms: the ESC answers both (R2), which is no
+    sign of two ESCs sharing its node id (4.4.18-2): the rules keep comparing its reports; a third reply is."""
+    from ckesc.evidence.rules import BusRules
+    from ckesc.protocol.frame import encode
+
+    rules = BusRules(complete=True)
+    query = {"option": 0}
+    reply = {"node_id": 1, "throttle_channel": 1}
+    frames = [(0.000, encode("get_esc_id", query, source=0, transfer_id=0, layout="query")),
+              (0.001, encode("get_esc_id", query, source=10, transfer_id=0, layout="query")),
+              (0.002, encode("get_esc_id", reply, source=1, transfer_id=0, layout="reply")),
+              (0.003, encode("get_esc_id", reply, source=1, transfer_id=1, layout="reply"))]
+    for ts, w in frames:
+        list(rules.feed(w.arbitration_id, w.data, ts))
+    assert not rules._nodes[1].shared
+    w = encode("get_esc_id", reply, source=1, transfer_id=2, layout="reply")
+    list(rules.feed(w.arbitration_id, w.data, 0.004))
+    assert rules._nodes[1].shared
