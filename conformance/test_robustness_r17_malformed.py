@@ -37,7 +37,7 @@ from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, parse_can_id, 
 from ckesc.protocol.judgements import r8_flag_due
 from ckesc.protocol.transfer import TRANSFER_ID_MODULO, multi_frame, tail_byte
 
-from .answers import esc_ids, original, put_back
+from .answers import answers_another_node, esc_ids, original, put_back
 from .baud import RATES, cycle, rate0
 from .settings import NEIGHBOURS, changes, move_request
 from .telemetry import frame_start, interval_s, ms
@@ -204,7 +204,8 @@ def culprits(dut, bads: list[Bad], s: dict) -> list[str]:
         for w in b.frames:
             dut.send_wire(w)
         dut.wait(cat.ANSWER_DELAY_MAX_S + dut.lane.timing_error)
-        sent = sorted({f.name for f in dut.trace[heard:] if f.source == dut.node_id and f.name not in cat.REPORT_FRAMES})
+        sent = sorted({f.name for f in dut.trace[heard:] if f.source == dut.node_id and f.name not in cat.REPORT_FRAMES
+                       and not answers_another_node(dut, f)})
         _leave_can_test(dut, heard)
         shown = ", ".join(filter(None, [f"sent {', '.join(sent)}" if sent else "", changes(s, dut.settings())]))
         if shown:
@@ -219,7 +220,7 @@ def heard_answers(dut, heard: int, t0: float, bads: list[Bad]) -> list[str]:
     by_tid = {b.transfer_id: b for b in bads}
     answers = []
     for f in dut.trace[heard:]:
-        if f.source != dut.node_id or f.name in cat.REPORT_FRAMES:
+        if f.source != dut.node_id or f.name in cat.REPORT_FRAMES or answers_another_node(dut, f):
             continue
         cause = by_tid.get(f.transfer_id) if f.kind is Kind.RESPONSE else None
         answers.append(f"{f.name} {f.kind.label} {f.fields}" + (f" to the {cause}" if cause else ""))

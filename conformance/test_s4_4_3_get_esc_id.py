@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from . import multi_esc
-from .answers import answer_window_s, check_answer_slot, settle, slot_node
+from .answers import answer_window_s, check_answer_slot, query_esc_id, settle, slot_node
 from .multi_esc import several_escs
 from .telemetry import describe_garbled, garbled, ms
 
@@ -18,9 +18,7 @@ PHASE_STEP_S = 0.007
 def _query(dut):
     """Broadcast the query and read every answer the 64 ms window (and as long again) brings."""
     settle(dut)
-    sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
-    dut.wait(answer_window_s(dut))  # a late reply is seen, and measured
-    return sent
+    return query_esc_id(dut, answer_window_s(dut))  # a late reply is seen, and measured
 
 
 def _replies(dut, sent, node: int) -> list:

@@ -20,7 +20,7 @@ import pytest
 from ckesc.bench.dut import Dut, DutError
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import FALLBACK_PRIORITY, Frame, WireFrame, classify
-from ckesc.protocol.ids import Kind, parse_can_id, service_id
+from ckesc.protocol.ids import ESC_NODE_IDS, Kind, parse_can_id, service_id
 from ckesc.protocol.transfer import parse_tail, tail_byte
 
 from .answers import BROADCAST_WINDOW_S
@@ -118,17 +118,23 @@ class Recorder(Dut):
         self.sent_wires.add((wire.arbitration_id, bytes(wire.data)))
         return super().send_wire(wire)
 
-    def heard(self) -> list[Heard]:
+    def heard(self, *, every_node: bool = False) -> list[Heard]:
         """Everything heard that the host side did not send (the DUT's frames), decoded or not, in order.
-        Error frames are the adapter's news of bus errors, nobody's frame: left out."""
+        Error frames are the adapter's news of bus errors, nobody's frame: left out. ``every_node``: other nodes'
+        frames too (:meth:`another_nodes`)."""
         raw = [Heard.of_garbled(g) for g in self.garbled if not getattr(g.msg, "is_error_frame", False)]
         # one frame on the wire is one (id, end of frame time): a frame the harness also decoded after
         # repairing it (a wrong tail byte) is judged as it came, once
         seen = {(h.can_id, h.timestamp) for h in raw}
         out = [h for h in map(Heard.of_frame, self.trace) if (h.can_id, h.timestamp) not in seen] + raw
-        others = set(self.nodes) - {self.node_id}  # other ESCs found by discovery (a real bus)
-        out = [h for h in out if not self.ours(h) and not (h.frame and h.cid.source in others)]
-        return sorted(out, key=lambda h: h.timestamp)
+        return sorted((h for h in out if not self.ours(h) and (every_node or not self.another_nodes(h))),
+                      key=lambda h: h.timestamp)
+
+    def another_nodes(self, h: Heard) -> bool:
+        """A frame whose source field (F1) names another node an ESC may be: another ESC of the bench, a flight
+        controller or a battery sharing the bus (``--foreign-traffic``), never the DUT's to be judged. A frame
+        from node 0 or a reserved id (0x7E, 0x7F) that the host did not send is still the DUT's (F7)."""
+        return h.extended and h.cid.source in ESC_NODE_IDS and h.cid.source != self.node_id
 
     def ours(self, h: Heard) -> bool:
         """The host side's frame: one this host sent, or the echo of another host object's on the same
@@ -166,10 +172,13 @@ class Traffic:
 
 def find_node(d: Recorder) -> int:
     """The DUT's node id when GET_ESC_ID discovery failed (its answers did not decode): the source
-    of the frames heard that this host did not send."""
+    of the reports (MSG1..MSG3, decoded or not) heard, which only an ESC sends (a flight controller or a battery
+    on the bus sends none)."""
     d.broadcast("get_esc_id", {"option": 0}, layout="query")
     d.wait(LONGEST_S + BROADCAST_WINDOW_S)
-    sources = [h.cid.source for h in d.heard() if h.extended]
+    sources = [h.cid.source for h in d.heard(every_node=True)
+               if h.extended and h.spec is not None and h.spec.name in cat.REPORT_FRAMES]
+    sources = sources or [h.cid.source for h in d.heard(every_node=True) if h.extended]
     if not sources:
         raise DutError("no frame at all from any ESC: is it powered, at the bus's bit rate, and not at node id 0x7D?")
     return max(set(sources), key=sources.count)

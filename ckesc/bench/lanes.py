@@ -69,6 +69,8 @@ class Lane(ABC):
     can_change_bitrate: bool = True  # reopen() really moves the host to another bit rate (Set Baud's tests)
     #: the DUT's current power-up as the harness made it (None: unknown, or off); see epochs.py
     epoch: PowerEpoch | None = None
+    #: the other nodes' traffic playing on this lane (``--foreign-traffic``: a station.ForeignPlay), None: a quiet bus
+    foreign_traffic: Any = None
     bus: can.BusABC
     power: PowerControl
     bitrate: int

@@ -32,6 +32,7 @@ from .power import POWER_COMMAND_TIMEOUT_S, PowerControl, Prompt, open_power
 from .power import names as power_names
 from .profile import DutProfile
 from .realtime_lane import RealtimeEmulatorLane
+from .traffic_player import PlayerStats, TrafficPlayer
 
 #: the ``ckesc run --help`` group of the bench options (``ckesc/session/options.py`` names the others)
 DUT = "device under test"
@@ -144,6 +145,10 @@ BENCH_ROWS: tuple[Option, ...] = (
                 "127.0.0.1:20408)"),
     Option("allow_motor_spin", action="store_true", default=None, rig="allow_motor_spin",
            help="allow non-zero throttle (default: only for the emulator). PROPELLERS OFF."),
+    Option("foreign_traffic", choices=("ardupilot",),
+           help="other nodes' traffic played on the DUT's bus during the whole run, every frame encoded by the dronecan "
+                "package: ardupilot (a flight controller at node 10 and a smart battery at node 40: SafetyState, "
+                "NodeStatus, GET_ESC_ID, a ZERO RawCommand, BatteryCells; docs/robustness.md); default: none, a quiet bus"),
     Option("emulator_faults", default="", rig="emulator.faults", help="emulator: comma-separated fault names to switch on"),
     Option("emulator_seed", type=int, default=0, rig="emulator.seed", help="emulator: random seed"),
     Option("emulator_option", action="append", default=[], metavar="NAME=VALUE", rig="emulator.options",
@@ -236,12 +241,20 @@ class Station:
         self.power = power
         self.bus_kwargs = bus_kwargs
         self.lane: Lane | None = None
+        #: the foreign traffic playing on the DUT's lane (``--foreign-traffic``): what it is and what it reached
+        self.foreign: ForeignPlay | None = None
 
     # ------------------------------------------------------------------ lanes
     def open_lane(self) -> Lane:
         """The DUT's lane, opened once and kept (:attr:`lane`) until :meth:`close_lane`."""
         if self.lane is None:
             self.lane = self._new_lane()
+            if self.options.foreign_traffic:
+                try:
+                    self.foreign = ForeignPlay(self.options.foreign_traffic, self.lane)
+                except BaseException:
+                    self.close_lane()
+                    raise
         return self.lane
 
     def _new_lane(self) -> Lane:
@@ -275,8 +288,12 @@ class Station:
 
     def close_lane(self) -> None:
         lane, self.lane = self.lane, None
-        if lane is not None:
-            lane.close()
+        try:
+            if self.foreign is not None:
+                self.foreign.stop()  # its figures stay (``foreign.report()``) for the run's reports
+        finally:
+            if lane is not None:
+                lane.close()
 
     def close(self) -> None:
         """The DUT's lane closed, then the power control released (labgrid's place); idempotent."""
@@ -311,3 +328,61 @@ class Station:
             return said
         finally:
             lane.close()
+
+
+class ForeignPlay:
+    """Foreign traffic (:mod:`.foreign`) played on a lane for as long as the lane is open: in the simulated lane a
+    source of its bus (:meth:`~ckesc.emulator.sim_bus.SimWorld.add_source`, its frames contending by arbitration),
+    on a real bus or the real-time emulator a :class:`.traffic_player.TrafficPlayer` on a bus of its own on the same
+    channel. :meth:`report` is what the run's reports say: what was played and the load and lateness reached."""
+
+    def __init__(self, name: str, lane: Lane) -> None:
+        from . import foreign  # imports dronecan (about a second): only when foreign traffic is asked for
+
+        self.name = name
+        # the other nodes talk at the run's bit rate, their configuration: while a test moves the ESC and the host
+        # to another (Set Baud), nothing of theirs gets through (foreign.AtBitrate)
+        self.traffic = foreign.profile(name)
+        self.source = foreign.AtBitrate(self.traffic, lane.bitrate, lambda: lane.bitrate)
+        self.lane = lane
+        self.player: TrafficPlayer | None = None
+        self.stats: PlayerStats | None = None
+        self._t0 = lane.now()
+        self._elapsed: float | None = None
+        lane.foreign_traffic = self  # the tests that judge it find it there
+        if isinstance(lane, SimLane):
+            lane.sim.world.add_source(self.source)
+        else:
+            assert isinstance(lane, BusLane)
+            import can
+
+            bus = can.Bus(**lane.bus_kwargs)  # its own: the host's bus is read and written by the test's thread only
+            self.player = TrafficPlayer(bus, [self.source], bitrate=lane.bitrate).start()
+
+    def stop(self) -> None:
+        if self._elapsed is not None:
+            return
+        self._elapsed = self.lane.now() - self._t0
+        if self.player is not None:
+            try:
+                self.stats = self.player.stop()
+            finally:
+                self.player.bus.shutdown()
+        elif isinstance(self.lane, SimLane):
+            self.lane.sim.world.remove_source(self.source)
+
+    def report(self) -> dict[str, Any]:
+        """What was played (its streams, nodes and rates) and what it reached: frames sent, the share of the bus's
+        capacity they took, and (real time) how late the player sent them."""
+        out: dict[str, Any] = {"profile": self.name, "streams": self.traffic.describe(), "bitrate": self.source.bitrate,
+                               "dropped_at_other_bitrate": self.source.dropped}
+        if self.player is not None:
+            st = self.stats or self.player.stats
+            out.update(frames=st.frames, load=round(st.load, 6), late_mean_ms=round(st.late_mean_s * 1000, 3),
+                       late_max_ms=round(st.late_max_s * 1000, 3), send_errors=st.send_errors, seconds=round(st.elapsed_s, 3))
+        elif isinstance(self.lane, SimLane):
+            sim = self.lane.sim.world.source_stats.get(self.traffic.name, {"frames": 0, "busy_s": 0.0})
+            seconds = self._elapsed if self._elapsed is not None else self.lane.now() - self._t0
+            out.update(frames=int(sim["frames"]), load=round(sim["busy_s"] / seconds, 6) if seconds > 0 else 0.0,
+                       late_mean_ms=0.0, late_max_ms=0.0, send_errors=0, seconds=round(seconds, 3))
+        return out

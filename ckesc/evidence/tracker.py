@@ -248,7 +248,11 @@ class Tracker(Findings):
         self._requests: dict[tuple, deque] = {}
         super().__init__()
         self._last_throttle: tuple[float, str, int] | None = None
-        self._answered: set[int] = set()  # nodes that answered the last Set ID / GET_ESC_ID (a second answer: shared id)
+        #: answers per node to the open Set ID / GET_ESC_ID broadcasts (more than were asked for: a shared id)
+        self._answered: dict[int, int] = {}
+        #: the GET_ESC_ID queries still open (within 64 ms: every ESC answers each once, R2), from any node: another
+        #: host on the bus (a flight controller, F6) queries too, and the ESC answers both
+        self._open_queries: list[float] = []
         self._set_id_ts = -math.inf  # the last Set ID: a node id not heard since may have been left by its ESC
         self._bus_end = -math.inf
         self._busy_from = -math.inf
@@ -345,8 +349,10 @@ class Tracker(Findings):
                     self.heard.commands.append(ts)
                 self._last_throttle = (ts, info.label, type_id)
                 return
-            if type_id == GET_ESC_ID.type_id:
-                self._answered.clear()  # a query: every ESC answers once
+            if type_id == GET_ESC_ID.type_id:  # a query: every ESC answers once (each query still open)
+                self._open_queries = [q for q in self._open_queries if ts - q <= cat.ANSWER_DELAY_MAX_S] + [ts]
+                if len(self._open_queries) == 1:
+                    self._answered.clear()
                 self._query_ts = ts
             switch = REPORTING_SWITCHES.get(type_id)
             if switch is not None and len(data) > switch[0].offset + switch[0].size and field_value(data, switch[0]) in switch[1]:
@@ -364,6 +370,7 @@ class Tracker(Findings):
         if type_id in PSEUDO_BROADCAST:
             key = (info.source, None, type_id)
             self._answered.clear()
+            self._open_queries = []
             for node in self._nodes.values():  # may re-address any ESC: nobody's intervals are known now
                 node.periods = [None] * len(INTERVAL_FIELDS)
                 node.reset += 1
@@ -406,8 +413,9 @@ class Tracker(Findings):
     def _answer(self, node: Node, ts: float) -> None:
         """An answer to a broadcast every ESC answers once (Set ID, GET_ESC_ID): a second one from the same
         node id means two ESCs share it (Set ID sets every ESC on the bus, 4.4.18-2)."""
-        if node.id not in self._answered:
-            self._answered.add(node.id)
+        count = self._answered[node.id] = self._answered.get(node.id, 0) + 1
+        if count <= max(len(self._open_queries), 1):
+            pass
         elif not node.shared:
             node.shared = True
             self._observe(("4.4.18-2",), ts, node.id, "shared-node-id",
@@ -431,8 +439,10 @@ class Tracker(Findings):
 
     def _query_reply(self, info: FrameId, node: Node, ts: float) -> None:
         """An ESC's reply to the broadcast query (GET_ESC_ID): its delay, the first reply of each node only."""
-        if self.heard is not None and self._query_ts is not None and node.id not in self._answered:
-            self.heard.answer(node.id, info.spec.name, ts - self._query_ts)  # type: ignore[union-attr]
+        n = self._answered.get(node.id, 0)  # its replies so far: this one answers the next open query
+        if self.heard is not None and self._query_ts is not None and n == 0:
+            asked = self._open_queries[0] if self._open_queries else self._query_ts
+            self.heard.answer(node.id, info.spec.name, ts - asked)  # type: ignore[union-attr]
 
     def _heard_interval(self, st: Stream, node: Node, gap: float) -> None:
         """Report interval ``gap`` of ``st``, judged against the interval ``node`` stated (R9), for the plots."""

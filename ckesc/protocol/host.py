@@ -12,10 +12,16 @@ node the request went to and is addressed to this host (F4, :func:`.judgements.f
 response that matches in all but one of those is still reported as :class:`Response` with
 ``mismatch`` naming what differs (:func:`.judgements.f4_pairs`), so a suite can fail it with a
 clear message instead of timing out.
+
+The host need not be alone on the bus (a flight controller, F6): a request another node sent is remembered
+(:attr:`HostProtocol.others`, the latest :data:`OTHERS_KEPT`), and a response that answers it (its service id and
+transfer id, from the node it asked, addressed to that node: F4) is that node's, :class:`Heard`, never paired
+with one of this host's requests as a misaddressed answer.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -24,6 +30,9 @@ from .frame import Decoder, Frame, WireFrame, encode
 from .ids import Kind
 from .judgements import asked_node, f4_mismatches, f4_pairs
 from .transfer import TransferIdCounter
+
+#: How many of other nodes' requests the host remembers (their answers come within ~64 ms)
+OTHERS_KEPT = 64
 
 
 @dataclass
@@ -70,6 +79,8 @@ class HostProtocol:
         self.decoder = Decoder(nibble_order=nibble_order)
         self.tids = TransferIdCounter()
         self.pending: list[Pending] = []
+        #: (service id, transfer id, requester, asked node) of the latest requests other nodes sent
+        self.others: deque[tuple[int, int, int, int | None]] = deque(maxlen=OTHERS_KEPT)
 
     # -------------------------------------------------------------- outgoing
     def message(self, name: str, fields: Mapping[str, Any] | None = None, *, layout: str | None = None,
@@ -101,6 +112,11 @@ class HostProtocol:
             frame = self.decoder.decode(msg)
         except DecodeError as exc:
             return [Garbled(msg, exc)]
+        if frame.kind is Kind.REQUEST and frame.source != self.node_id:
+            self.others.append((frame.type_id, frame.transfer_id, frame.source, frame.destination))
+        elif (frame.kind is Kind.RESPONSE and frame.destination != self.node_id
+              and (frame.type_id, frame.transfer_id, frame.destination, frame.source) in self.others):
+            return [Heard(frame)]  # another node's answer to its own request
         if frame.kind is Kind.RESPONSE or (frame.kind is Kind.REQUEST and frame.source != self.node_id):
             match = self._match(frame)
             if match is not None:

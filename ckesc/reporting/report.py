@@ -19,7 +19,7 @@ import xml.etree.ElementTree as ET
 from collections import Counter, defaultdict
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from junit_xml import TestCase, TestSuite, to_xml_report_string
 
@@ -200,6 +200,8 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
     if info.get("run_frames_not_kept"):
         lines.append(f"run-wide checks (4.1): {info['run_frames_not_kept']} of the DUT's frames were not kept (more than "
                      "the run keeps: a flooding DUT); those checks judged the frames kept")
+    if ft := info.get("foreign_traffic"):
+        lines.append(foreign_traffic_text(ft))
     if info.get("bus_recoveries"):
         lines.append(f"bus failures recovered from (the lane reopened the bus): {'; '.join(info['bus_recoveries'])}")
     if banner := incomplete_banner(info):
@@ -256,3 +258,15 @@ def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: li
     if html:
         html_report.build(out)
     return out
+
+
+def foreign_traffic_text(ft: Mapping[str, Any]) -> str:
+    """The summary's line on the foreign traffic a run played (``--foreign-traffic``): what, from which nodes, the
+    frames and load it reached and how late it was."""
+    nodes = sorted({s["node"] for s in ft.get("streams", [])})
+    late = (f", late by {ft.get('late_mean_ms', 0):g} ms on average, {ft.get('late_max_ms', 0):g} ms at most"
+            if ft.get("late_max_ms") else "")
+    errors = f", {ft['send_errors']} sends failed" if ft.get("send_errors") else ""
+    return (f"foreign traffic: {ft.get('profile')} from nodes {', '.join(map(str, nodes))} played during the run: "
+            f"{ft.get('frames', 0)} frames in {ft.get('seconds', 0):g} s, {ft.get('load', 0) * 100:.2f} % of the bus"
+            f"{late}{errors}")

@@ -127,7 +127,8 @@ class RunInfo(TypedDict, total=False):
     ``echo``, ``echo_note``, ``own_frames_clock``, ``own_frames_error_s`` (what times the host's own frames),
     ``first_reports_s``, ``readiness``. The run: ``order``, ``epochs``, ``cold_boots``, ``lane_seconds``,
     ``complete``, ``incomplete`` (why not: aborted / interrupted / subset ...), ``not_run`` (how many tests),
-    ``not_restored``, ``bus_recoveries``, ``run_frames_not_kept``, ``report_dir``; and written with the reports:
+    ``not_restored``, ``bus_recoveries``, ``foreign_traffic`` (``--foreign-traffic``: what was played, the frames sent,
+    the ``load`` they took and, in real time, how late they went out), ``run_frames_not_kept``, ``report_dir``; and written with the reports:
     ``run_id`` (the run directory's name), ``suite_version``, ``git_revision`` (None outside a checkout).
     """
 
@@ -164,6 +165,7 @@ class RunInfo(TypedDict, total=False):
     not_run: int
     not_restored: Any
     bus_recoveries: list[str]
+    foreign_traffic: dict[str, Any]
     run_frames_not_kept: int
     report_dir: str
     run_id: str

@@ -64,6 +64,8 @@ def ckesc_lane(request: pytest.FixtureRequest):
     if config.getoption("dut") == "emulator":  # the conforming variant the emulator played, to replay a verdict
         st.info.update(emulator_variants=variants.describe(station.played),
                        emulator_variants_seed=config.getoption("emulator_variants"))
+    if station.foreign is not None:  # said from the start: an aborted run's reports still say the bus was not quiet
+        st.info["foreign_traffic"] = station.foreign.report()
     _install_signal_guard(config)
     opened = lane.now()
     yield lane
@@ -76,7 +78,11 @@ def ckesc_lane(request: pytest.FixtureRequest):
     finally:
         if isinstance(lane, BusLane):
             st.info["bus_recoveries"] = list(lane.recoveries)
-        station.close_lane()
+        try:
+            station.close_lane()
+        finally:
+            if station.foreign is not None:  # what the foreign traffic reached, once it stopped
+                st.info["foreign_traffic"] = station.foreign.report()
 
 
 def echo_info(lane: Lane) -> dict[str, Any]:

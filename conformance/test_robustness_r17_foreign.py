@@ -1,0 +1,78 @@
+"""Robustness (R17): a flight controller's and a battery's traffic on the ESC's bus is ignored.
+
+With ``--foreign-traffic ardupilot`` (docs/robustness.md) the run plays, for its whole length, what a flight
+controller (node 10) and a smart battery (node 40) send, encoded by the ``dronecan`` package: SafetyState on CAN
+Test's id (20000, a frame shorter than its table), BatteryCells on MSG Control's id (20010, a multi-frame transfer),
+NodeStatus, DroneCAN's own ESC command (zero throttle) and a GET_ESC_ID query once a second. Every other section is
+judged with it playing; this one looks at the traffic itself for a while: the ESC never resets (its MSG1 reports
+go on, their transfer ids counting, and the power-up count of 241 stays), its settings do not change, and it sends
+nothing but its reports and its replies to the flight controller's GET_ESC_ID queries (a legitimate query, F6).
+
+On a quiet bus (no ``--foreign-traffic``) there is nothing foreign to ignore: SKIPPED, saying so. The rest of the
+robustness section (``test_robustness_r17_malformed``) sends its malformed frames itself, on any bus.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from ckesc.bench.dut import DutError
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.ids import Kind
+
+from .answers import answers_another_node
+from .settings import changes
+from .telemetry import interval_s, ms
+
+SECTION = "robustness"
+#: How long the test looks at the traffic: a few of each of its streams (the slowest once a second)
+WATCH_S = 3.0
+
+
+@pytest.mark.requirement("R17")
+def test_foreign_traffic_is_ignored(dut):
+    """While the flight controller's and the battery's frames play: no reset, no setting changed, nothing sent
+    but the reports and the replies to the flight controller's GET_ESC_ID queries."""
+    played = dut.lane.foreign_traffic
+    if played is None:
+        pytest.skip("no foreign traffic on this bus: run with --foreign-traffic ardupilot (docs/robustness.md)")
+    nodes = sorted({s["node"] for s in played.traffic.describe()})
+    s = dut.settings()
+    ups = dut.power_up_count()
+    interval = interval_s(s, "msg1")
+    t0 = dut.now()
+    heard = len(dut.trace)
+    dut.wait(WATCH_S)
+    t1 = dut.now()
+    problems = []
+    msg1 = dut.frames("msg1", since=t0, until=t1, source=dut.node_id)
+    # a reset shows as a silence longer than two intervals and the transfer ids starting again (R17, R13)
+    bound = 2 * interval + dut.interval_tolerance_ms / 1000 + dut.lane.timing_error
+    for a, b in zip(msg1, msg1[1:]):
+        gap = (b.timestamp or 0.0) - (a.timestamp or 0.0)
+        if gap > bound or b.transfer_id != (a.transfer_id + 1) % 32:
+            problems.append(f"MSG1 stopped for {ms(gap)} ms and went on with transfer id {b.transfer_id} after "
+                            f"{a.transfer_id} (a reset)")
+            break
+    if len(msg1) < WATCH_S / interval / 2:
+        problems.append(f"{len(msg1)} MSG1 reports in {WATCH_S:g} s at a {ms(interval)} ms interval")
+    sent = sorted({f"{f.name} {f.kind.label}" for f in dut.trace[heard:] if f.source == dut.node_id
+                   and f.name not in cat.REPORT_FRAMES and not answers_another_node(dut, f)})
+    if sent:
+        problems.append(f"the ESC sent {', '.join(sent)}")
+    try:
+        after, ups_after = dut.settings(), dut.power_up_count()
+    except DutError as exc:
+        problems.append(f"afterwards it did not answer: {exc}")
+    else:
+        if changed := changes(s, after):
+            problems.append(changed)
+        if ups is not None and ups_after is not None and ups_after != ups:
+            problems.append(f"its power-up count (241) went from {ups} to {ups_after}")
+    replies = [f for f in dut.trace[heard:] if f.source == dut.node_id and f.name == "get_esc_id" and f.kind is Kind.MESSAGE]
+    dut.record.observe("foreign traffic watched", f"{played.name} from nodes {nodes} for {WATCH_S:g} s; GET_ESC_ID "
+                       f"replies to the flight controller's queries: {len(replies)}")
+    assert not problems, (f"with {played.name}'s traffic playing (nodes {', '.join(map(str, nodes))}: SafetyState on "
+                          "20000, BatteryCells on 20010, NodeStatus, a zero DroneCAN ESC command, GET_ESC_ID): "
+                          + "; ".join(problems) + " (R17: foreign frames get no answer, change nothing and never "
+                          "reset the ESC)")
