@@ -27,7 +27,9 @@ def test_every_cited_id_exists():
 
 def test_every_shall_and_reading_requirement_has_a_test():
     cited = cited_ids()
-    missing = sorted(rid for rid, req in REQUIREMENTS.items() if req.strength != "OBSERVE" and rid not in cited)
+    # a requirement judged over hours (R19: ``judged_by = "soak"``) is ckesc soak's, tested in tests/soak
+    missing = sorted(rid for rid, req in REQUIREMENTS.items()
+                     if req.strength != "OBSERVE" and req.judged_by == "suite" and rid not in cited)
     assert not missing, f"SHALL/READING requirements no conformance test cites: {missing}"
 
 
