@@ -345,12 +345,11 @@ def r19_report_restart(gap: float, interval: float, step: F3Step, *, error: floa
     """R19: a report gap with a transfer id restart. ``gap``: the time between two consecutive reports of one frame
     type from the ESC, ``interval`` the report's interval, ``step`` the transfer ids across the gap (:func:`f3_step`).
     A reset shows as a gap longer than a restart may take (R9a's restart limit, :func:`r9a_limit_s`, and the bench's
-    ``error``) across which the transfer ids did not count on as the reports missing from it explain (F3): a
-    counter that starts again. A late report whose transfer id counts on is R9's, not a reset."""
-    if gap <= r9a_limit_s(interval, jitter=jitter) + error + _NOISE_S:
+    ``error``) across which the transfer id neither counted on by one (a late report: R9's, not a reset) nor by the
+    reports the gap's length says are missing (lost on the bus, F3): a counter that starts again."""
+    if gap <= r9a_limit_s(interval, jitter=jitter) + error + _NOISE_S or step.ok:
         return None
-    missing = max(round(gap / interval) - 1, 0)
-    if step.explained_by(missing):
+    if step.explained_by(max(round(gap / interval) - 1, 0)):
         return None
     return Reset(what, f"{what} stopped for {gap * 1000:.1f} ms (interval {interval * 1000:g} ms) and came back with "
                  f"{step}: its counter started again")

@@ -21,7 +21,7 @@ from typing import Any, Callable, TextIO
 import can
 
 from ..bench.dut import Dut, echo_probe
-from ..bench.lanes import BenchGone, BusLane
+from ..bench.lanes import BenchGone, BusFault, BusLane
 from ..bench.station import BENCH_ROWS, BenchOptions, build
 from ..protocol import catalogue as cat
 from ..protocol.frame import WireFrame
@@ -153,10 +153,6 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     status = COMPLETED
     problem = ""
     say = (lambda text: None) if soak.quiet else (lambda text: print(text, file=out, flush=True))
-    say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
-        f"{dut.node_id}: RawCommand_{plan.format} at {plan.rate_hz:g} Hz on channels "
-        f"{','.join(map(str, plan.channels))} ({'throttle profile' if plan.throttle and plan.allow_motor_spin else 'zero throttle'}), "
-        "GET_ESC_ID every second, 241 and 242 read")
 
     def line() -> str:
         now = lane.peek_now()
@@ -164,7 +160,12 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
                 f"{monitor.frames} frames, {monitor.count} findings")
 
     send = lane.bus.send
+    stopped_at = t0
     try:
+        say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
+            f"{dut.node_id}: RawCommand_{plan.format} at {plan.rate_hz:g} Hz on channels "
+            f"{','.join(map(str, plan.channels))} ({'throttle profile' if plan.throttle and plan.allow_motor_spin else 'zero throttle'}), "
+            "GET_ESC_ID every second, 241 and 242 read")
         while True:
             now = lane.now()
             if now >= end:
@@ -182,7 +183,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             live.maybe(line)
     except KeyboardInterrupt:
         status = INTERRUPTED
-    except BenchGone as exc:
+    except (BenchGone, BusFault) as exc:  # the bench failed, not the DUT: the run stops, its report says why
         status, problem = ABORTED, str(exc)
     finally:
         ignore = _ignore_interrupts()

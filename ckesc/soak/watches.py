@@ -38,6 +38,8 @@ RING_FRAMES = 40
 AFTER_FRAMES = 10
 #: findings kept whole; past these only counted (a DUT that breaks a rule all the time must not fill the memory)
 MAX_FINDINGS = 100
+#: ... and at most this many of one watch (a watch finding all the time must not hide the others' findings)
+MAX_FINDINGS_PER_WATCH = 20
 #: CAN ids whose classification is kept, and messages kept decoded (a DUT sending ever new ones must not grow the memory)
 MAX_IDS = 4096
 #: the R9 minute
@@ -472,6 +474,7 @@ class Monitor:
         self.ring: deque[tuple[float, int, bytes]] = deque(maxlen=RING_FRAMES)
         self.findings: list[Finding] = []
         self.dropped = 0  # findings counted but not kept
+        self._kept: dict[str, int] = {}  # findings kept per watch
         self._open: list[tuple[Finding, int]] = []  # findings still collecting frames after them
         self.frames = 0
         self.dut_frames = 0
@@ -491,9 +494,11 @@ class Monitor:
 
     # ------------------------------------------------------------------ findings
     def found(self, watch: Watch, t: float, message: str, rules: tuple[str, ...]) -> None:
-        if len(self.findings) >= MAX_FINDINGS:
+        kept = self._kept.get(watch.name, 0)
+        if len(self.findings) >= MAX_FINDINGS or kept >= MAX_FINDINGS_PER_WATCH:
             self.dropped += 1
             return
+        self._kept[watch.name] = kept + 1
         f = Finding(t - self.t0, watch.name, rules, message, [self._line(*r) for r in self.ring])
         self.findings.append(f)
         self._open.append((f, AFTER_FRAMES))
