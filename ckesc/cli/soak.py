@@ -78,6 +78,13 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
 
         if args.throttle_profile and any(v for _, v in args.throttle_profile) and not args.allow_motor_spin:
             raise UsageError("--throttle-profile spins the motor: give --allow-motor-spin too (PROPELLERS OFF)")
+        from ..soak.player import FlightPlan
+
+        try:  # the stream's own options, checked before the bench is opened
+            FlightPlan(0, 1, format=args.format, rate_hz=args.rate, channels=args.channels or (1,),
+                       throttle=args.throttle_profile, allow_motor_spin=bool(args.allow_motor_spin)).check()
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
         given = {k: getattr(args, k) for k in runner.OPTION_NAMES if getattr(args, k, None) not in (None, [], "")}
         soak = runner.SoakOptions(duration_s=args.duration, rate_hz=args.rate, format=args.format,
                                   channels=args.channels, throttle=args.throttle_profile,

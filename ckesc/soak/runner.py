@@ -177,7 +177,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             deadline = min(player.next_deadline(), end)
             while (msg := lane.recv(deadline - lane.now())) is not None:
                 monitor.feed(msg)
-            if soak.stop_on_finding and monitor.count:
+            if soak.stop_on_finding and monitor.count and monitor.settled:  # (the frames after it read)
                 status = STOPPED
                 break
             live.maybe(line)

@@ -15,7 +15,7 @@ CONFIDENCE = "95 %"
 def duration_text(seconds: float) -> str:
     """``28800`` -> ``8 h 0 min``; ``600`` -> ``10 min``; ``42.5`` -> ``42.5 s``."""
     if seconds < 60:
-        return f"{seconds:g} s"
+        return f"{round(seconds, 1):g} s"
     minutes = int(seconds // 60)
     h, m = divmod(minutes, 60)
     return f"{h} h {m} min" if h else f"{m} min"
@@ -62,6 +62,8 @@ class Statement:
         bound = self.bound
         if bound is None:
             return f"0 {self.what}: no {self.unit} judged in {span}"
+        if bound >= 1:
+            return f"0 {self.what} of {self.trials} {self.unit}s judged in {span}: too few to bound the chance"
         return (f"0 {self.what} of {self.trials} {self.unit}s judged in {span}: the chance of one {self.unit} breaking it is below "
                 f"{_rate(bound * 100)} % at {CONFIDENCE} confidence")
 

@@ -296,7 +296,8 @@ class IntervalWatch(Watch):
         minute = int((now - self.t0) // MINUTE_S)
         while minute > self.minute:
             self._close_minute(self.t0 + (self.minute + 1) * MINUTE_S)
-        self._close_minute(now, partial=True)
+        if now - self.t0 > self.minute * MINUTE_S:  # a part of a minute left
+            self._close_minute(now, partial=True)
 
     def statistics(self) -> dict[str, Any]:
         return {"minutes_judged": self.trials, "worst_mean_error_ms": {k: round(v * 1000, 4) for k, v in self.worst.items()},
@@ -454,10 +455,6 @@ class UnexpectedWatch(Watch):
         self.kinds[kind] = self.kinds.get(kind, 0) + 1
         self.find(t, message, rules)
 
-    def find(self, t: float, message: str, rules: Iterable[str] | None = None) -> None:
-        self.trials += 1
-        super().find(t, message, rules)
-
     def statistics(self) -> dict[str, Any]:
         return {"by_kind": self.kinds}
 
@@ -510,6 +507,11 @@ class Monitor:
     def count(self) -> int:
         return len(self.findings) + self.dropped
 
+    @property
+    def settled(self) -> bool:
+        """No finding is still collecting the frames after it."""
+        return not self._open
+
     # ------------------------------------------------------------------ frames
     def feed(self, msg: Any) -> None:
         """One frame heard (a ``can.Message`` or anything with its attributes): ``timestamp``, ``arbitration_id``,
@@ -549,6 +551,7 @@ class Monitor:
             self.other_frames += 1
             return
         self.dut_frames += 1
+        self.unexpected.trials += 1  # every frame of the DUT is judged by it
         frame = self._decode(msg)
         if frame is None:
             return
