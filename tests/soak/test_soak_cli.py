@@ -43,6 +43,8 @@ def test_a_simulated_soak_of_the_faultless_emulator_passes_and_writes_its_report
     assert suite.get("name") == "soak" and suite.get("failures") == "0"
     assert {c.get("name").split(" [")[0] for c in suite.iter("testcase")} == PROPERTIES
     assert summary.startswith("soak completed") and resets["text"] in summary and summary in done.stdout
+    page = next((tmp_path / "reports").glob("*-soak/report.html")).read_text()
+    assert 'id="trend"' in page and 'id="delays"' in page and page.count("<svg") == 2 and resets["text"] in page
 
 
 def test_an_emulator_fault_soak_catches_is_a_finding_and_exit_1(tmp_path):
