@@ -30,8 +30,6 @@ MAINTENANCE_PERIOD_S = 10.0
 SETTINGS_PERIOD_S = 60.0
 #: the 241 options read: 1 (this run: run time), 2 (counters: power-up count)
 MAINTENANCE_OPTIONS = (1, 2)
-#: distinct stream frames kept encoded
-MAX_COMMANDS = 256
 
 
 class Planned(NamedTuple):
@@ -126,23 +124,31 @@ class Player:
         self.sent_stream = 0
         self.skipped = 0  # stream frames skipped (the host was late by more than a period)
         self._reads = 0
-        self._commands: dict[tuple[Any, ...], WireFrame] = {}
+        self._value: int | None = None  # the throttle of the stream's frames encoded in _wires
+        self._wires: list[WireFrame] = []
+        name = FORMATS[plan.format][0]
+        self._key = (Kind.MESSAGE, name) if cat.spec(name).has_tail else None  # the stream's transfer id counter
         self._duties = ((self.stream, self._stream), (self.esc_id, self._esc_id), (self.maintenance, self._maintenance),
                         (self.settings, self._settings))
+        self._reads_due = min(duty.due for duty, _ in self._duties[1:])
 
     def next_deadline(self) -> float:
-        return min(duty.due for duty, _ in self._duties)
+        return min(self.stream.due, self._reads_due)
 
     def due(self, now: float) -> list[Planned]:
         """Every frame due at or before ``now``, in order of their due times (a stream frame first at a tie)."""
         out: list[Planned] = []
-        for duty, make in self._duties:
-            while duty.due <= now:
-                due, behind = duty.take(now)
-                if duty is self.stream:
-                    self.skipped += behind
-                out.extend(make(due))
-        out.sort(key=lambda p: p.due)
+        stream = self.stream
+        while stream.due <= now:
+            due, behind = stream.take(now)
+            self.skipped += behind
+            out.extend(self._stream(due))
+        if self._reads_due <= now:  # (the reads come once a second at most: the stream's path stays short)
+            for duty, make in self._duties[1:]:
+                while duty.due <= now:
+                    out.extend(make(duty.take(now)[0]))
+            self._reads_due = min(duty.due for duty, _ in self._duties[1:])
+            out.sort(key=lambda p: p.due)
         return out
 
     # ------------------------------------------------------------------ the frames
@@ -151,19 +157,8 @@ class Player:
         return encode(name, fields, source=self.plan.host_node, transfer_id=tid, nibble_order=self.plan.nibble_order, **kw)
 
     def _command(self, name: str, fields: dict[str, Any]) -> WireFrame:
-        """A stream frame: encoded once per distinct command, then only its tail byte's transfer id renewed (a stream
-        of one command for hours is the same frame but for its transfer id; RawCommand_10b has none, R5)."""
-        key = (name, fields.get("group"), tuple(fields["channels"]))
-        wire = self._commands.get(key)
-        if wire is None:
-            if len(self._commands) > MAX_COMMANDS:  # a throttle profile of many values must not grow the memory
-                self._commands.clear()
-            wire = self._commands[key] = encode(name, fields, source=self.plan.host_node, transfer_id=0,
-                                                nibble_order=self.plan.nibble_order)
-        if not cat.spec(name).has_tail:
-            return wire
-        tid = self.tids.next((Kind.MESSAGE, name))
-        return wire._replace(data=wire.data[:-1] + bytes((tail_byte(tid),)))
+        """A stream frame's command, encoded (its transfer id set by :meth:`_renew` as it goes out)."""
+        return encode(name, fields, source=self.plan.host_node, transfer_id=0, nibble_order=self.plan.nibble_order)
 
     def _request(self, name: str, fields: dict[str, Any]) -> WireFrame:
         node = self.plan.node_id
@@ -172,9 +167,24 @@ class Player:
 
     def _stream(self, due: float) -> list[Planned]:
         plan = self.plan
-        name, per = FORMATS[plan.format]
-        value = plan.throttle_at(due - self.start)
+        value = plan.throttle_at(due - self.start) if plan.throttle else 0
         self.sent_stream += 1
+        if value == self._value and self._wires:  # the same command again: only the transfer ids move on
+            return [Planned("stream", self._renew(w), due) for w in self._wires]
+        self._value, self._wires = value, [p.wire for p in self._stream_of(value, due)]
+        return [Planned("stream", self._renew(w), due) for w in self._wires]
+
+    def _renew(self, wire: WireFrame) -> WireFrame:
+        """The command ``wire`` (encoded once) with the stream's next transfer id in its tail byte (RawCommand_10b
+        has none, R5)."""
+        if self._key is None:
+            return wire
+        tid = self.tids.next(self._key)
+        return wire._replace(data=wire.data[:-1] + bytes((tail_byte(tid),)))
+
+    def _stream_of(self, value: int, due: float) -> list[Planned]:
+        plan = self.plan
+        name, per = FORMATS[plan.format]
         if plan.format == "12b":
             groups = sorted({(c - 1) // per + 1 for c in plan.channels})
             return [Planned("stream", self._command(name, {"group": g, "channels": [

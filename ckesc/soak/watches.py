@@ -181,7 +181,7 @@ class ResetWatch(Watch):
         if prev is None or tid is None or prev[1] is None:
             return
         interval = self.cfg.intervals.get(name)
-        if interval is None:
+        if interval is None or jd.f3_holds(prev[1], tid):  # counting on: no restart (the hot path, as F3's)
             return
         sign = jd.r19_report_restart(t - prev[0], interval, jd.f3_step(prev[1], tid), error=self.cfg.error,
                                      jitter=self.cfg.jitter, what=name)
@@ -319,6 +319,9 @@ class CommFlagWatch(Watch):
         self.stream_gaps = 0  # the host's stream stopped for longer than the comm-loss time
         self.longest_command_gap = 0.0
         self.flag_set = 0
+        interval = self.cfg.intervals.get("msg1")
+        #: R8's window opens here after the last command (its judgement's: r8_window_s)
+        self._early = jd.r8_window_s(interval, jitter=self.cfg.jitter)[0] if interval else 0.0
 
     def command(self, t: float) -> None:
         if self.last_command is not None:
@@ -342,8 +345,13 @@ class CommFlagWatch(Watch):
             return
         flag = bool(frame.fields.get("status", 0) & cat.Status.COMM_FAULT)
         self.flag_set += flag
-        due = jd.r8_flag_due(t - self.last_command, interval, jitter=self.cfg.jitter,
-                             error=self.cfg.error + self.cfg.own_error)
+        since = t - self.last_command
+        error = self.cfg.error + self.cfg.own_error
+        if not flag and since < self._early - error:  # well before R8's window, clear: as r8_flag_due wants (hot path)
+            self.trials += 1
+            self.flagged = False
+            return
+        due = jd.r8_flag_due(since, interval, jitter=self.cfg.jitter, error=error)
         if due is None:
             return
         self.trials += 1
@@ -545,14 +553,14 @@ class Monitor:
             elif name == "get_esc_id":
                 self.answers.asked(t)
             elif kind is Kind.REQUEST:
-                self._decode(msg)  # the decoder remembers a 241 request: its answer's layout depends on it
+                self._decode(msg, data)  # the decoder remembers a 241 request: its answer's layout depends on it
             return
         if source != cfg.node_id:
             self.other_frames += 1
             return
         self.dut_frames += 1
         self.unexpected.trials += 1  # every frame of the DUT is judged by it
-        frame = self._decode(msg)
+        frame = self._decode(msg, data)
         if frame is None:
             return
         name = frame.name
@@ -575,11 +583,11 @@ class Monitor:
                 return
         self.unexpected.frame(frame, t)
 
-    def _decode(self, msg: Any) -> Frame | None:
+    def _decode(self, msg: Any, data: bytes) -> Frame | None:
         """The frame decoded; a message (its layout the frame's own) decoded once per distinct id and bytes: a report
         of the same values differs only in its transfer id, hours long (the cached frame's ``timestamp`` is its
         first's: the watches take the time from the feed)."""
-        key = (msg.arbitration_id, bytes(msg.data))
+        key = (msg.arbitration_id, data)
         frame = self._frames.get(key)
         if frame is not None:
             return frame
