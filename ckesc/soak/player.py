@@ -180,7 +180,7 @@ class Player:
         if self._key is None:
             return wire
         tid = self.tids.next(self._key)
-        return wire._replace(data=wire.data[:-1] + bytes((tail_byte(tid),)))
+        return WireFrame(wire.arbitration_id, wire.data[:-1] + bytes((tail_byte(tid),)), wire.timestamp, wire.is_extended_id)
 
     def _stream_of(self, value: int, due: float) -> list[Planned]:
         plan = self.plan

@@ -128,32 +128,61 @@ def html_page(record: dict[str, Any]) -> str:
             f"{rows}</table><h2>Trends</h2>{trend}{delays}<h2>Findings</h2>{findings or '<p>none</p>'}</body></html>\n")
 
 
-def _trend_svg(record: dict[str, Any]) -> str:
-    from ..reporting.htmlkit import new_figure, svg
+#: the plots' size (SVG user units) and margin
+_W, _H, _M = 900, 240, 48
+_COLOURS = ("#0969da", "#1a7f37", "#8250df")
 
-    fig = new_figure(9, 3)
-    ax = fig.add_subplot()
+
+def _axes(x_max: float, y_lo: float, y_hi: float, x_label: str, y_label: str) -> tuple[list[str], Any, Any]:
+    """An SVG plot's frame, its labels and its two scales (value -> SVG coordinate)."""
+    y_lo, y_hi = (y_lo - 1, y_hi + 1) if y_hi <= y_lo else (y_lo, y_hi)
+    x_max = x_max or 1
+
+    def x(v: float) -> float:
+        return round(_M + v / x_max * (_W - 2 * _M), 1)
+
+    def y(v: float) -> float:
+        return round(_H - _M - (v - y_lo) / (y_hi - y_lo) * (_H - 2 * _M), 1)
+
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {_W} {_H}" font-size="11">',
+             f'<rect x="{_M}" y="{_M}" width="{_W - 2 * _M}" height="{_H - 2 * _M}" fill="none" stroke="#57606a"/>',
+             f'<text x="{_W / 2}" y="{_H - 8}" text-anchor="middle">{x_label}</text>',
+             f'<text x="12" y="{_H / 2}" transform="rotate(-90 12 {_H / 2})" text-anchor="middle">{y_label}</text>',
+             f'<text x="{_M - 4}" y="{y(y_hi) + 4}" text-anchor="end">{y_hi:.3g}</text>',
+             f'<text x="{_M - 4}" y="{y(y_lo) + 4}" text-anchor="end">{y_lo:.3g}</text>',
+             f'<text x="{x(x_max)}" y="{_H - _M + 14}" text-anchor="end">{x_max:g}</text>',
+             f'<text x="{_M}" y="{_H - _M + 14}">0</text>']
+    return parts, x, y
+
+
+def _trend_svg(record: dict[str, Any]) -> str:
+    """Each report's mean gap per minute minus its interval (ms) over the run, the findings as red lines: drawn as
+    plain SVG (a day is 1440 points per report)."""
     targets = record["watches"]["report intervals"]["statistics"]["intervals_ms"]
-    for name, series in record["r9_per_minute_ms"].items():
-        points = [(i + 1, v - targets[name]) for i, v in enumerate(series) if v is not None and name in targets]
-        if points:
-            ax.plot([p[0] for p in points], [p[1] for p in points], marker=".", label=name)
+    lines = {name: [(i + 1, v - targets[name]) for i, v in enumerate(series) if v is not None]
+             for name, series in record["r9_per_minute_ms"].items() if name in targets}
+    values = [v for pts in lines.values() for _, v in pts] or [0.0]
+    minutes = max(record["ran_s"] / 60, 1)
+    parts, x, y = _axes(minutes, min(values), max(values), "minutes into the run", "mean gap - interval (ms)")
     for f in record["findings"]:
-        ax.axvline(f["t_s"] / 60, color="#cf222e", linewidth=0.8)
-    ax.set_xlabel("minutes into the run")
-    ax.set_ylabel("mean gap - interval (ms)")
-    ax.legend(loc="upper right")
-    return svg(fig)
+        parts.append(f'<line x1="{x(f["t_s"] / 60)}" x2="{x(f["t_s"] / 60)}" y1="{_M}" y2="{_H - _M}" '
+                     'stroke="#cf222e" stroke-width="0.8"/>')
+    for k, (name, pts) in enumerate(lines.items()):
+        colour = _COLOURS[k % len(_COLOURS)]
+        if pts:
+            parts.append(f'<polyline fill="none" stroke="{colour}" points="'
+                         + " ".join(f"{x(m)},{y(v)}" for m, v in pts) + '"/>')
+        parts.append(f'<text x="{_W - _M - 60}" y="{_M + 14 + 14 * k}" fill="{colour}">{name}</text>')
+    return "".join(parts) + "</svg>"
 
 
 def _delays_svg(record: dict[str, Any]) -> str:
-    from ..reporting.htmlkit import new_figure, svg
-
+    """The GET_ESC_ID answer delays' histogram (its last bin: beyond twice the 64 ms bound)."""
     delay = record["watches"]["GET_ESC_ID answers"]["statistics"]["delay"]
-    fig = new_figure(9, 2.5)
-    ax = fig.add_subplot()
-    width = delay["bin_ms"]
-    ax.bar([i * width for i in range(len(delay["bins"]))], delay["bins"], width=width, align="edge")
-    ax.set_xlabel("answer end after the query (ms; the last bin: beyond)")
-    ax.set_ylabel("answers")
-    return svg(fig)
+    bins, width = delay["bins"], delay["bin_ms"]
+    parts, x, y = _axes(len(bins) * width, 0, max(bins) or 1, "answer end after the query (ms)", "answers")
+    for i, n in enumerate(bins):
+        if n:
+            parts.append(f'<rect x="{x(i * width)}" y="{y(n)}" width="{round(max(x((i + 1) * width) - x(i * width), 1), 1)}" '
+                         f'height="{round(y(0) - y(n), 1)}" fill="#0969da"/>')
+    return "".join(parts) + "</svg>"

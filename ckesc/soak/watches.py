@@ -94,8 +94,12 @@ class Histogram:
     def add(self, value: float) -> None:
         self.n += 1
         self.total += value
-        self.lo, self.hi = min(self.lo, value), max(self.hi, value)
-        self.counts[min(max(int(value / self.width), 0), len(self.counts) - 1)] += 1
+        if value < self.lo:
+            self.lo = value
+        if value > self.hi:
+            self.hi = value
+        i = int(value / self.width)
+        self.counts[i if 0 <= i < len(self.counts) else (0 if i < 0 else -1)] += 1
 
     def percentile(self, p: float) -> float | None:
         """The upper edge of the bin holding the ``p``-th percentile (None: empty; the max for the overflow bin)."""
