@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import time
 from pathlib import Path
 from typing import Any
 
 from junit_xml import TestCase, TestSuite, to_xml_report_string
 
+from ..reporting.report import run_dir
 from .statement import duration_text
 
 #: findings printed in the summary (every kept one is in results.json)
@@ -23,20 +25,9 @@ def utc_now() -> str:
     return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
-def run_dir(reports: str | Path) -> Path:
-    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
-    out = Path(reports) / f"{stamp}-soak"
-    n = 1
-    while out.exists():  # two soaks in one second
-        n += 1
-        out = Path(reports) / f"{stamp}-soak-{n}"
-    out.mkdir(parents=True)
-    return out
-
-
 def write(reports: str | Path, record: dict[str, Any]) -> Path:
     """The three files of ``record`` in a new run directory under ``reports``; returns it."""
-    where = run_dir(reports)
+    where = run_dir(Path(reports), time.time(), "soak")
     (where / "results.json").write_text(json.dumps(record, indent=1, default=str) + "\n", encoding="utf-8")
     (where / "junit.xml").write_text(junit_xml(record), encoding="utf-8")
     (where / "summary.txt").write_text(summary_text(record, where), encoding="utf-8")
