@@ -205,6 +205,12 @@ class Player:
         fields = {"option": 0}
         return [Planned("settings", self._request("get_major_configuration", fields), due, fields)]
 
+    @property
+    def frames_per_tick(self) -> int:
+        """How many frames each stream tick sends (RawCommand_12b: one per group of the channels)."""
+        name, per = FORMATS[self.plan.format]
+        return len({(c - 1) // per for c in self.plan.channels}) if self.plan.format == "12b" else 1
+
     def zero(self) -> list[WireFrame]:
         """Zero throttle on every channel the stream commands, in its format: the last frames of a run."""
         name, per = FORMATS[self.plan.format]

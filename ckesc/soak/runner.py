@@ -145,7 +145,8 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     player = Player(plan, t0)
     monitor = Monitor(WatchConfig(node_id=dut.node_id, host_node=dut.host_node, intervals=intervals,
                                   error=lane.timing_error, own_error=lane.own_error, jitter=profile.jitter_s,
-                                  bitrate=lane.bitrate, nibble_order=profile.nibble_order), t0)
+                                  bitrate=lane.bitrate, nibble_order=profile.nibble_order,
+                                  stream_frames=player.frames_per_tick), t0)
     lateness = Histogram(LATENESS_BIN_S, LATENESS_BINS)
     rss_start = _rss_kb()
     end = t0 + soak.duration_s

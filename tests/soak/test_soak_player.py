@@ -63,7 +63,7 @@ def test_the_formats_and_channels(fmt, channels, frames):
                       throttle=((0.0, 100), (1.0, 0)))
     player = Player(plan, start=0.0)
     first = [decode(p.wire) for p in player.due(0.0) if p.what == "stream"]
-    assert len(first) == frames and first[0].name == f"raw_command_{fmt}"
+    assert len(first) == frames == player.frames_per_tick and first[0].name == f"raw_command_{fmt}"
     values = [v for f in first for v in f.fields["channels"]]
     assert values.count(100) == len(channels)  # the profile's throttle on the channels asked, zero elsewhere
     after = [p for t, p in play(player, 1.5) if p.what == "stream" and p.due >= 1.0]

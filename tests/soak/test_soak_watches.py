@@ -158,6 +158,18 @@ def test_the_comm_flag_while_the_stream_runs_is_a_glitch():
     assert len(found) == 1 and found[0].rules == ("R8", "R19") and "shows the comm-loss flag" in found[0].message
 
 
+def test_an_answer_our_own_stream_delayed_is_not_late():
+    """An answer at the end of its slot, pushed past it by one of the host's stream frames (highest priority) queued
+    ahead of it, is the bench's traffic, not the DUT's lateness; two frames' worth past it is the DUT's."""
+    from ckesc.protocol.frame import frame_bits
+
+    slot_end = 2 * cat.ANSWER_SLOT_S  # node 1's slot ends at 4 ms
+    one = frame_bits(8) / CFG.bitrate
+    assert not watch(Esc(answer_delay=slot_end + one / 2), 3.0).findings
+    found = only(watch(Esc(answer_delay=slot_end + 2 * one), 3.0), "GET_ESC_ID answers")
+    assert "R2" in found[0].rules
+
+
 def test_late_and_missing_answers():
     found = only(watch(Esc(answer_delay=0.080), 10.0), "GET_ESC_ID answers")
     assert len(found) == 10 and set(found[0].rules) == {"R2", "4.4.3-4"}
