@@ -1,6 +1,6 @@
 """One way to build a bench from its options, below any command: the pytest plugin (its preflight,
 ``ckesc/session/preflight.py``, from ``config.getoption``), ``ckesc explore`` and ``ckesc profile`` (from their
-argparse namespace, ``ckesc/explore/runner.py``) and the coming ``ckesc soak`` all call :func:`build`.
+argparse namespace, ``ckesc/explore/runner.py``) and ``ckesc soak`` (``ckesc/soak/runner.py``) all call :func:`build`.
 
 :class:`BenchOptions` is plain data: one field per bench option (the device under test, its lane, bus, power and
 profile), made from the rows :data:`BENCH_ROWS`, which ``ckesc/session/options.py`` lists among the run's other

@@ -9,9 +9,9 @@ commands share (exit codes, the parser class, :class:`UsageError`, argument type
 
 Exit codes: 0 success; 1 the input had frames that do not decode (``decode``), the emulator
 answered a control request with an error (``control``) or could not write its flash file at the end
-(``emulate``), or a run regressed (``compare``); 2 usage or input the wire format cannot carry (``encode``), or the emulator cannot start
+(``emulate``), or a run regressed (``compare``), or a soak found something (``soak``); 2 usage or input the wire format cannot carry (``encode``), or the emulator cannot start
 (``emulate``: port in use, unreadable flash file, bus that does not open); 3 no emulator answers on
-the control port (``control``), or the bench could not be used (``explore``, ``profile init`` / ``check``); 1 also
+the control port (``control``), or the bench could not be used (``explore``, ``profile init`` / ``check``, ``soak``); 1 also
 a profile the DUT contradicts (``profile check --strict``); 130 interrupted; 141 stdout closed early (``| head``).
 """
 
@@ -37,12 +37,14 @@ from .profile import add_profile_command
 from .report import add_report_command
 from .run import add_run_command
 from .selftest import add_selftest_command
+from .soak import add_soak_command
 
 #: The subcommands, in help order. Each adds its parser and sets ``handler``.
 COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
     add_run_command,
     add_selftest_command,
     add_explore_command,
+    add_soak_command,
     add_profile_command,
     add_report_command,
     add_compare_command,

@@ -24,6 +24,9 @@ violation, an explorer finding) from it; it never writes a tolerance of its own.
 * R18 (:func:`r18_queueing_s`, :func:`r18_mean`, :func:`r18_gap`, :func:`r18_judged`): under foreign load of up to
   half the bus, R9 with each gap widened by the queueing the load can put ahead of a lowest-priority frame; above
   half load, OBSERVE.
+* R19 (R17: never reset) resets (:func:`r19_power_ups`, :func:`r19_run_time`, :func:`r19_report_restart`): the
+  power-up count of 241 does not grow, its run time does not go back or jump, no report gap with a transfer id
+  restart.
 
 The readings are ``spec/INTERPRETATIONS.md``'s; the protocol facts (200 ms, the slots, the restart slack) are the
 catalogue's (:mod:`.catalogue`).
@@ -380,3 +383,56 @@ def r18_gap(gap: float, interval: float, *, share: float, bitrate: int, error: f
     w = r18_queueing_s(share, bitrate, late=late)
     return Judgement("R18", abs(gap - interval), SCHEDULING_TOLERANCE_S + w + jitter, "<=", 2 * error,
                      f"a {what} gap of {gap * 1000:.3f} ms under {share:.0%} load, not {interval * 1000:g} ms")
+# ------------------------------------------------------------------------------------------ R19 (R17) resets
+@dataclass(frozen=True)
+class Reset:
+    """R19 (and R17's "never resets"): one sign that the ESC restarted between two observations of it, the rule's id,
+    what restarted (``power_ups``, ``run_time``, or the report's name) and the sign in words."""
+
+    what: str
+    text: str
+    rule: str = "R19"
+
+    def __str__(self) -> str:
+        return f"[{self.rule}] {self.text}"
+
+
+#: 241 option 2's power-up count is a u16: it wraps (the count after 65535 is 0, not a reset)
+_POWER_UPS_MODULO = 1 << 16
+
+
+def r19_power_ups(previous: int, current: int) -> Reset | None:
+    """R19: 241 option 2's power-up count, read ``previous`` and later ``current`` with the power left on, has not grown
+    (modulo its u16 width). None: no reset shown; else the :class:`Reset`."""
+    grown = (current - previous) % _POWER_UPS_MODULO
+    if not grown:
+        return None
+    return Reset("power_ups", f"the power-up count (241 option 2) went from {previous} to {current} with the power on")
+
+
+def r19_run_time(previous: int, current: int, elapsed: float, *, error: float = 0.0) -> Reset | None:
+    """R19: 241 option 1's run time (whole seconds), read ``previous`` and ``elapsed`` seconds later ``current``, went
+    neither back nor forward by more than the time that passed: at most ``elapsed`` plus one count (two whole-second
+    reads of a running count differ by up to one more than the seconds between them) plus the bench's ``error``. It
+    may stand still (it counts the motor's running time): only a step back or a jump is a reset."""
+    if current < previous:
+        return Reset("run_time", f"the run time (241 option 1) went back from {previous} s to {current} s")
+    if current - previous > elapsed + 1 + error + _NOISE_S:
+        return Reset("run_time", f"the run time (241 option 1) jumped from {previous} s to {current} s in "
+                     f"{elapsed:.3f} s")
+    return None
+
+
+def r19_report_restart(gap: float, interval: float, step: F3Step, *, error: float = 0.0, jitter: float = 0.0,
+                       what: str = "report") -> Reset | None:
+    """R19: a report gap with a transfer id restart. ``gap``: the time between two consecutive reports of one frame
+    type from the ESC, ``interval`` the report's interval, ``step`` the transfer ids across the gap (:func:`f3_step`).
+    A reset shows as a gap longer than a restart may take (R9a's restart limit, :func:`r9a_limit_s`, and the bench's
+    ``error``) across which the transfer id neither counted on by one (a late report: R9's, not a reset) nor by the
+    reports the gap's length says are missing (lost on the bus, F3): a counter that starts again."""
+    if gap <= r9a_limit_s(interval, jitter=jitter) + error + _NOISE_S or step.ok:
+        return None
+    if step.explained_by(max(round(gap / interval) - 1, 0)):
+        return None
+    return Reset(what, f"{what} stopped for {gap * 1000:.1f} ms (interval {interval * 1000:g} ms) and came back with "
+                 f"{step}: its counter started again")

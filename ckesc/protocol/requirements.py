@@ -72,6 +72,9 @@ class Requirement:
     quote: str
     note: str = ""
     capability: str | None = None
+    #: what judges it: the conformance suite (a test must cite it), or ``soak`` (hours of running: ``ckesc soak``'s
+    #: watches, R19, which no ten-minute test can judge)
+    judged_by: str = "suite"
 
     @property
     def title(self) -> str:

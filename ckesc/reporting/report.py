@@ -215,9 +215,10 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def run_dir(base: Path, started: float) -> Path:
-    """A new directory ``base/<UTC timestamp>[-n]/`` for a run that started at ``started``."""
-    stamp = datetime.fromtimestamp(started, UTC).strftime("%Y%m%dT%H%M%SZ")
+def run_dir(base: Path, started: float, kind: str = "") -> Path:
+    """A new directory ``base/<UTC timestamp>[-kind][-n]/`` for a run that started at ``started`` (``kind``: another
+    command's run than the suite's, ``soak``)."""
+    stamp = datetime.fromtimestamp(started, UTC).strftime("%Y%m%dT%H%M%SZ") + (f"-{kind}" if kind else "")
     out = base / stamp
     n = 1
     while True:

@@ -1,0 +1,286 @@
+"""A soak run, the IO part: the bench built as every command builds it (:func:`ckesc.bench.station.build`), the DUT
+found and its settings read once (:class:`ckesc.bench.dut.Dut`), then the :class:`~.player.Player` driven on the
+lane's clock and every frame read fed to the :class:`~.watches.Monitor`, until the duration has passed, a finding
+stops it (``stop_on_finding``) or the operator does (Ctrl-C, SIGTERM). On every way out the stream stops and zero
+throttle goes out on every channel in every format (as the suite's exit paths do), then the reports are written.
+
+In the simulated lane ``lane.recv`` advances the discrete-event clock, so hours cost minutes; in real time it
+waits. The host's own timing is measured either way: how late each stream frame went out after it was due
+(``host.send_lateness``), the stream's jitter as the host made it.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, TextIO
+
+import can
+
+from ..bench.dut import Dut, echo_probe
+from ..bench.lanes import BenchGone, BusFault, BusLane
+from ..bench.station import BENCH_ROWS, BenchOptions, build
+from ..protocol import catalogue as cat
+from ..protocol.frame import WireFrame
+from . import report
+from .player import FORMATS, FlightPlan, Player
+from .statement import Statement, duration_text
+from .watches import Histogram, Monitor, WatchConfig
+
+#: lane time read after the closing zero throttle, so that its frames are on the bus before the lane closes
+EXIT_READ_S = 0.01
+#: the live line: at most once per this many seconds of wall time on a terminal; elsewhere (a CI log) this often
+LIVE_TTY_S = 1.0
+LIVE_LOG_S = 60.0
+#: the host's send lateness histogram: bins of a tenth of a millisecond up to 20 ms
+LATENESS_BIN_S = 0.0001
+LATENESS_BINS = 200
+
+COMPLETED, INTERRUPTED, STOPPED, ABORTED = "COMPLETED", "INTERRUPTED", "STOPPED", "ABORTED"
+
+
+@dataclass(frozen=True)
+class SoakOptions:
+    """What ``ckesc soak`` adds to the bench options."""
+
+    duration_s: float
+    rate_hz: float = 400.0
+    format: str = "14b"
+    channels: tuple[int, ...] | None = None  # None: every channel of one frame of the format
+    throttle: tuple[tuple[float, int], ...] = ()
+    stop_on_finding: bool = False
+    reports: str = "reports"
+    quiet: bool = False
+
+
+@dataclass
+class Outcome:
+    status: str
+    findings: int
+    where: Path | None
+    statements: list[Statement]
+
+
+class Live:
+    """The live console line: elapsed, left, frames, findings; at most once a second of wall time on a terminal
+    (rewritten in place), once a minute elsewhere."""
+
+    def __init__(self, out: TextIO, quiet: bool, clock: Callable[[], float]) -> None:
+        self.out, self.quiet, self.clock = out, quiet, clock
+        self.tty = bool(getattr(out, "isatty", lambda: False)())
+        self.every = LIVE_TTY_S if self.tty else LIVE_LOG_S
+        self.next = clock() + self.every
+        self.shown = False
+
+    def maybe(self, line: Callable[[], str]) -> None:
+        if self.quiet:
+            return
+        now = self.clock()
+        if now < self.next:
+            return
+        self.next = now + self.every
+        self._show(line())
+
+    def _show(self, text: str) -> None:
+        if self.tty:
+            self.out.write("\r\x1b[2K" + text)
+            self.shown = True
+        else:
+            self.out.write(text + "\n")
+        self.out.flush()
+
+    def done(self) -> None:
+        if self.tty and self.shown:
+            self.out.write("\n")
+            self.out.flush()
+
+
+def _raise_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def run(bench: BenchOptions, soak: SoakOptions, *, out: TextIO = sys.stdout, given: dict[str, Any] | None = None,
+        wall: Callable[[], float] = time.monotonic) -> Outcome:
+    """One soak of ``bench`` (a set-up mistake raises :class:`~ckesc.bench.errors.PreflightError` before anything
+    is opened; a DUT that cannot be found raises :class:`~ckesc.bench.dut.DutError`)."""
+    station = build(bench)
+    old_term = signal.getsignal(signal.SIGTERM)
+    in_main = _in_main_thread()
+    if in_main:
+        signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        return _run(station, bench, soak, out, given or {}, wall)
+    finally:
+        station.close()
+        if in_main:
+            signal.signal(signal.SIGTERM, old_term)
+
+
+def _in_main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: dict[str, Any],
+         wall: Callable[[], float]) -> Outcome:
+    started_utc = report.utc_now()
+    wall0 = wall()
+    lane = station.open_lane()
+    profile = station.profile
+    if isinstance(lane, BusLane):
+        lane.find_echo(echo_probe(nibble_order=profile.nibble_order))
+    dut = Dut(lane, profile, node_id=bench.node_id, allow_motor_spin=bool(bench.allow_motor_spin))
+    settings = dut.settings()
+    intervals = {name: settings[field] * cat.INTERVAL_UNIT_S for name, field in cat.REPORT_INTERVAL_FIELDS.items()}
+    per = FORMATS[soak.format][1] if soak.format in FORMATS else 4
+    plan = FlightPlan(host_node=dut.host_node, node_id=dut.node_id, format=soak.format, rate_hz=soak.rate_hz,
+                      channels=soak.channels or tuple(range(1, per + 1)), throttle=soak.throttle,
+                      allow_motor_spin=bool(bench.allow_motor_spin), nibble_order=profile.nibble_order)
+    plan.check()
+    t0 = lane.now()
+    player = Player(plan, t0)
+    monitor = Monitor(WatchConfig(node_id=dut.node_id, host_node=dut.host_node, intervals=intervals,
+                                  error=lane.timing_error, own_error=lane.own_error, jitter=profile.jitter_s,
+                                  bitrate=lane.bitrate, nibble_order=profile.nibble_order,
+                                  stream_frames=player.frames_per_tick), t0)
+    lateness = Histogram(LATENESS_BIN_S, LATENESS_BINS)
+    rss_start = _rss_kb()
+    end = t0 + soak.duration_s
+    live = Live(out, soak.quiet, wall)
+    status = COMPLETED
+    problem = ""
+    say = (lambda text: None) if soak.quiet else (lambda text: print(text, file=out, flush=True))
+
+    def line() -> str:
+        now = lane.peek_now()
+        return (f"soak: {duration_text(max(now - t0, 0))} elapsed, {duration_text(max(end - now, 0))} left, "
+                f"{monitor.frames} frames, {monitor.count} findings")
+
+    send = lane.bus.send
+    stopped_at = t0
+    try:
+        say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
+            f"{dut.node_id}: RawCommand_{plan.format} at {plan.rate_hz:g} Hz on channels "
+            f"{','.join(map(str, plan.channels))} ({'throttle profile' if plan.throttle and plan.allow_motor_spin else 'zero throttle'}), "
+            "GET_ESC_ID every second, 241 and 242 read")
+        while True:
+            now = lane.now()
+            if now >= end:
+                break
+            for planned in player.due(now):
+                send(_message(planned.wire))
+                if planned.what == "stream":
+                    lateness.add(max(now - planned.due, 0.0))
+            deadline = min(player.next_deadline(), end)
+            while (msg := lane.recv(deadline - lane.now())) is not None:
+                monitor.feed(msg)
+            if soak.stop_on_finding and monitor.count and monitor.settled:  # (the frames after it read)
+                status = STOPPED
+                break
+            live.maybe(line)
+    except KeyboardInterrupt:
+        status = INTERRUPTED
+    except (BenchGone, BusFault) as exc:  # the bench failed, not the DUT: the run stops, its report says why
+        status, problem = ABORTED, str(exc)
+    finally:
+        ignore = _ignore_interrupts()
+        try:
+            stopped_at = lane.peek_now()
+            _zero(lane, player, dut)
+            live.done()
+        finally:
+            ignore()
+    ignore = _ignore_interrupts()
+    try:
+        monitor.close(stopped_at)
+        ran = stopped_at - t0
+        statements = [Statement(w.name, w.rules, w.what, w.one, w.events, ran, w.statement_unit, w.trials)
+                      for w in monitor.watches]
+        record = {
+            "kind": "soak", "status": status, "problem": problem, "started_utc": started_utc,
+            "bench": {k: _plain(v) for k, v in (given or {}).items()},
+            "lane": lane.name, "clock": lane.clock, "timing_error_s": lane.timing_error, "profile": profile.name,
+            "faults": bench.emulator_faults or "", "node_id": dut.node_id, "host_node": dut.host_node,
+            "plan": {"format": plan.format, "rate_hz": plan.rate_hz, "channels": list(plan.channels),
+                     "throttle": [list(s) for s in plan.throttle] if plan.allow_motor_spin else [],
+                     "allow_motor_spin": plan.allow_motor_spin},
+            "settings_at_start": settings,
+            "duration_s": soak.duration_s, "ran_s": round(ran, 6), "wall_s": round(wall() - wall0, 3),
+            "frames": {"total": monitor.frames, "dut": monitor.dut_frames, "host": monitor.own_frames,
+                       "other": monitor.other_frames},
+            "host": {"stream_frames": player.sent_stream, "stream_skipped": player.skipped,
+                     "send_lateness": lateness.to_json()},
+            "memory": {"rss_start_kb": rss_start, "rss_end_kb": _rss_kb(), "peak_rss_kb": _peak_rss_kb()},
+            "watches": {w.name: {"rules": list(w.rules), "events": w.events, "trials": w.trials,
+                                 "statistics": w.statistics()} for w in monitor.watches},
+            "r9_per_minute_ms": monitor.intervals.series,
+            "findings": [f.to_json() for f in monitor.findings], "findings_not_kept": monitor.dropped,
+            "statement": [s.to_json() for s in statements],
+        }
+        where = report.write(soak.reports, record)
+        if not soak.quiet:
+            out.write(report.summary_text(record, where))
+            out.flush()
+    finally:
+        ignore()
+    return Outcome(status, monitor.count, where, statements)
+
+
+def _message(wire: WireFrame) -> can.Message:
+    return can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id)
+
+
+def _zero(lane, player: Player, dut: Dut) -> None:
+    """Zero throttle on the way out: the stream's own format first, then every format on every channel (the
+    suite's :meth:`~ckesc.bench.link.Link.zero_throttle`), then the lane read until the frames are out. Best
+    effort: a bench that went away cannot be zeroed, and the run says why it ended."""
+    try:
+        for wire in player.zero():
+            lane.bus.send(_message(wire))
+        dut.zero_throttle()
+        until = lane.now() + EXIT_READ_S
+        while (left := until - lane.now()) > 0:
+            lane.recv(left)
+    except Exception:  # noqa: BLE001 - best effort on the way out (the bench may be gone)
+        pass
+
+
+def _ignore_interrupts() -> Callable[[], None]:
+    """SIGINT ignored while the run zeroes the throttle and writes its report (a second Ctrl-C must not lose it);
+    returns the undo."""
+    if not _in_main_thread():
+        return lambda: None
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return lambda: signal.signal(signal.SIGINT, old)
+
+
+def _rss_kb() -> int | None:
+    """The process's resident memory now (kB; Linux's /proc), else None: a day's run must stay flat."""
+    try:
+        with open("/proc/self/statm", encoding="ascii") as f:
+            pages = int(f.read().split()[1])
+    except (OSError, ValueError, IndexError):
+        return None
+    import os
+
+    return pages * os.sysconf("SC_PAGE_SIZE") // 1024
+
+
+def _peak_rss_kb() -> int | None:
+    try:
+        import resource
+    except ImportError:  # not on Windows
+        return None
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+
+
+def _plain(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else value
+
+
+#: the bench options by name (``ckesc run``'s), for the report's record of what was given
+OPTION_NAMES = tuple(o.dest for o in BENCH_ROWS)

@@ -1,0 +1,620 @@
+"""The soak's watches, sans-IO: every frame of the run in (with its lane timestamp), findings out.
+
+One owner per watched property (R19), each calling the rule's judgement in :mod:`ckesc.protocol.judgements`:
+
+* :class:`ResetWatch` - no reset: 241's power-up count does not grow, its run time neither goes back nor jumps, no
+  report gap with a transfer id restart (:func:`~ckesc.protocol.judgements.r19_power_ups`, ``r19_run_time``,
+  ``r19_report_restart``);
+* :class:`IntervalWatch` - R9 over every minute, per report (MSG1..3): the mean of that minute's gaps
+  (:func:`~ckesc.protocol.judgements.r9_mean`); the trend is one mean per minute and report;
+* :class:`CommFlagWatch` - the comm flag (MSG1's status, R8) set only when the stream stops
+  (:func:`~ckesc.protocol.judgements.r8_flag_due`);
+* :class:`AnswerWatch` - GET_ESC_ID's answers in the node's slot (R2) and within 64 ms (4.4.3-4), their delays as
+  a fixed-bin histogram;
+* :class:`SettingsWatch` - 242's answers unchanged (:func:`~ckesc.protocol.judgements.r13_read_back`);
+* :class:`UnexpectedWatch` - frames the ESC should not send: one that does not decode, or a frame type normal
+  reporting never sends and the player never asked for.
+
+Memory does not grow with the run's length: counters, fixed-bin histograms, the last value of each counter, a ring
+of recent frames (:data:`RING_FRAMES`), at most :data:`MAX_FINDINGS` findings kept whole (the rest counted), and
+the R9 trend, one value per minute and report (1440 a day: the one thing that grows, as the trend plot needs it).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping
+
+from ..protocol import catalogue as cat
+from ..protocol import judgements as jd
+from ..protocol.errors import DecodeError
+from ..protocol.frame import Decoder, Frame, classify, frame_bits
+from ..protocol.ids import Kind
+
+#: frames kept before a finding (the ring) and read after it
+RING_FRAMES = 40
+AFTER_FRAMES = 10
+#: findings kept whole; past these only counted (a DUT that breaks a rule all the time must not fill the memory)
+MAX_FINDINGS = 100
+#: ... and at most this many of one watch (a watch finding all the time must not hide the others' findings)
+MAX_FINDINGS_PER_WATCH = 20
+#: CAN ids whose classification is kept, and messages kept decoded (a DUT sending ever new ones must not grow the memory)
+MAX_IDS = 4096
+#: the R9 minute
+MINUTE_S = 60.0
+#: GET_ESC_ID delay histogram: bins of a quarter slot over twice the 64 ms bound, then one overflow bin
+DELAY_BIN_S = cat.ANSWER_SLOT_S / 4
+DELAY_BINS = 2 * round(cat.ANSWER_DELAY_MAX_S / DELAY_BIN_S)
+#: the report frames R9 and the reset watch follow
+REPORTS = cat.REPORT_FRAMES
+#: what normal reporting sends besides the reports, and the answers to what the player asks
+ANSWERS = ("get_esc_id", "maintenance_information", "get_major_configuration")
+#: a frame that does not decode: the requirement its reason breaks
+DECODE_RULES = {"not-extended-data-frame": "F1", "not-single-frame": "F2", "reserved-node-id": "F7",
+                "unknown-type-id": "4.3.1-1"}
+
+
+@dataclass
+class Finding:
+    """One thing a watch found: when (s into the run), which watch, the requirements, what, and the frames around it
+    (candump lines with times into the run)."""
+
+    t: float
+    watch: str
+    rules: tuple[str, ...]
+    message: str
+    before: list[str] = field(default_factory=list)
+    after: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"t_s": round(self.t, 6), "watch": self.watch, "rules": list(self.rules), "message": self.message,
+                "frames_before": self.before, "frames_after": self.after}
+
+    def line(self) -> str:
+        return f"{clock(self.t)} [{' '.join(self.rules)}] {self.watch}: {self.message}"
+
+
+def clock(seconds: float) -> str:
+    """``3725.5`` -> ``1:02:05.500`` (a time into the run)."""
+    whole = int(seconds)
+    h, rest = divmod(whole, 3600)
+    m, s = divmod(rest, 60)
+    return f"{h}:{m:02d}:{s:02d}.{int(round((seconds - whole) * 1000)) % 1000:03d}"
+
+
+class Histogram:
+    """A streaming distribution of values in seconds: count, min, max, mean and fixed bins (percentiles from them)."""
+
+    def __init__(self, width: float, bins: int) -> None:
+        self.width, self.counts = width, [0] * (bins + 1)  # the last bin: everything beyond
+        self.n, self.total, self.lo, self.hi = 0, 0.0, math.inf, -math.inf
+
+    def add(self, value: float) -> None:
+        self.n += 1
+        self.total += value
+        if value < self.lo:
+            self.lo = value
+        if value > self.hi:
+            self.hi = value
+        i = int(value / self.width)
+        self.counts[i if 0 <= i < len(self.counts) else (0 if i < 0 else -1)] += 1
+
+    def percentile(self, p: float) -> float | None:
+        """The upper edge of the bin holding the ``p``-th percentile (None: empty; the max for the overflow bin)."""
+        if not self.n:
+            return None
+        need, seen = p / 100 * self.n, 0
+        for i, c in enumerate(self.counts):
+            seen += c
+            if seen >= need and c:
+                return self.hi if i == len(self.counts) - 1 else min((i + 1) * self.width, self.hi)
+        return self.hi
+
+    def to_json(self) -> dict[str, Any]:
+        def ms(v: float | None) -> float | None:
+            return None if v is None or not math.isfinite(v) else round(v * 1000, 3)
+
+        return {"count": self.n, "min_ms": ms(self.lo), "max_ms": ms(self.hi),
+                "mean_ms": ms(self.total / self.n) if self.n else None,
+                **{f"p{p}_ms": ms(self.percentile(p)) for p in (50, 90, 99)},
+                "bin_ms": self.width * 1000, "bins": self.counts}
+
+
+@dataclass(frozen=True)
+class WatchConfig:
+    """What the watches need to know of the bench and the DUT: node ids, the report intervals (s) the DUT was set to
+    at the start, the bench's timing error (s; its own frames' error ``own_error``), the DUT's declared jitter, the
+    bit rate (frame durations)."""
+
+    node_id: int
+    host_node: int
+    intervals: Mapping[str, float]
+    error: float = 0.0
+    own_error: float = 0.0
+    jitter: float = 0.0
+    bitrate: int = cat.DEFAULT_BITRATE
+    nibble_order: str = "lsb"
+    #: the host's stream frames one tick sends: each, at the highest priority, may be queued ahead of an answer
+    stream_frames: int = 1
+
+
+class Watch:
+    """A watched property: its name, the requirement(s) it judges, how many times it was judged (``trials``) and how
+    many events broke it (``events``). ``statement_unit``: ``hour`` (events per hour of run) or what a trial is."""
+
+    name = ""
+    rules: tuple[str, ...] = ()
+    statement_unit = "hour"
+    what = ""  # the events, for the statement: "resets"
+    one = ""  # one event: "reset"
+
+    def __init__(self, monitor: Monitor) -> None:
+        self.monitor = monitor
+        self.cfg = monitor.cfg
+        self.trials = 0
+        self.events = 0
+
+    def find(self, t: float, message: str, rules: Iterable[str] | None = None) -> None:
+        self.events += 1
+        self.monitor.found(self, t, message, tuple(rules) if rules is not None else self.rules)
+
+    def statistics(self) -> dict[str, Any]:
+        return {}
+
+    def close(self, now: float) -> None:
+        """The run ended at ``now``: judge what is still open."""
+
+
+# ------------------------------------------------------------------------------------------------ resets
+class ResetWatch(Watch):
+    name = "resets"
+    rules = ("R19", "R17")
+    what = "resets"
+    one = "reset"
+
+    def __init__(self, monitor: Monitor) -> None:
+        super().__init__(monitor)
+        self.power_ups: int | None = None
+        self.run_time: tuple[int, float] | None = None  # (value, answer time)
+        self.last: dict[str, tuple[float, int | None]] = {}  # report -> (time, transfer id)
+        self.reads = {"power_ups": 0, "run_time": 0}
+
+    def report(self, name: str, t: float, tid: int | None) -> None:
+        prev = self.last.get(name)
+        self.last[name] = (t, tid)
+        if prev is None or tid is None or prev[1] is None:
+            return
+        interval = self.cfg.intervals.get(name)
+        if interval is None or jd.f3_holds(prev[1], tid):  # counting on: no restart (the hot path, as F3's)
+            return
+        sign = jd.r19_report_restart(t - prev[0], interval, jd.f3_step(prev[1], tid), error=self.cfg.error,
+                                     jitter=self.cfg.jitter, what=name)
+        if sign is not None:
+            self.find(t, sign.text, (sign.rule, "R17"))
+
+    def maintenance(self, frame: Frame, t: float) -> None:
+        f = frame.fields
+        if "power_ups" in f:
+            self.reads["power_ups"] += 1
+            self.trials += 1
+            if self.power_ups is not None and (sign := jd.r19_power_ups(self.power_ups, f["power_ups"])) is not None:
+                self.find(t, sign.text, (sign.rule, "R17"))
+            self.power_ups = f["power_ups"]
+        elif "run_time" in f:
+            self.reads["run_time"] += 1
+            self.trials += 1
+            if self.run_time is not None:
+                before, when = self.run_time
+                sign = jd.r19_run_time(before, f["run_time"], t - when, error=2 * self.cfg.error)
+                if sign is not None:
+                    self.find(t, sign.text, (sign.rule, "R17"))
+            self.run_time = (f["run_time"], t)
+
+    def statistics(self) -> dict[str, Any]:
+        return {"reads_241": self.reads, "power_ups": self.power_ups,
+                "run_time_s": self.run_time[0] if self.run_time else None}
+
+
+# ------------------------------------------------------------------------------------------------ R9
+class _Span:
+    """One minute's report starts as :func:`~ckesc.protocol.judgements.r9_mean` reads them (the first, the last, how
+    many), without keeping them."""
+
+    __slots__ = ("first", "last", "n")
+
+    def __init__(self, first: float) -> None:
+        self.first = self.last = first
+        self.n = 1
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, i: int) -> float:
+        if i in (0, -self.n):
+            return self.first
+        if i in (-1, self.n - 1):
+            return self.last
+        raise IndexError("a minute's span keeps its first and last report only")
+
+
+class IntervalWatch(Watch):
+    name = "report intervals"
+    rules = ("R9", "R19")
+    statement_unit = "report-minute"
+    what = "report-minutes out of R9"
+    one = "report-minute out of R9"
+
+    def __init__(self, monitor: Monitor) -> None:
+        super().__init__(monitor)
+        self.t0 = monitor.t0
+        self.minute = 0
+        self.spans: dict[str, _Span | None] = dict.fromkeys(REPORTS)
+        self.carry: dict[str, float | None] = dict.fromkeys(REPORTS)  # each report's last start before this minute
+        #: the trend: per report, the mean interval (ms) of each minute (None: not judged)
+        self.series: dict[str, list[float | None]] = {r: [] for r in REPORTS}
+        self.worst: dict[str, float] = {}
+
+    def report(self, name: str, t: float) -> None:
+        minute = int((t - self.t0) // MINUTE_S)
+        while minute > self.minute:
+            self._close_minute(self.t0 + (self.minute + 1) * MINUTE_S)
+        span = self.spans[name]
+        if span is None:
+            carry = self.carry[name]
+            span = self.spans[name] = _Span(carry if carry is not None else t)
+            if carry is None:
+                return
+        span.last = t
+        span.n += 1
+
+    def _close_minute(self, end: float, *, partial: bool = False) -> None:
+        for name in REPORTS:
+            interval = self.cfg.intervals.get(name)
+            span, self.spans[name] = self.spans[name], None
+            prior = self.carry[name]
+            if span is not None:
+                self.carry[name] = span.last
+            if interval is None:
+                self.series[name].append(None)
+                continue
+            if span is None or len(span) < 2:
+                self.series[name].append(None)
+                if span is None and prior is not None and not partial:
+                    self.trials += 1
+                    self.find(end, f"no {name} in minute {self.minute + 1} (interval {interval * 1000:g} ms)")
+                continue
+            if partial and len(span) - 1 < jd.R9_GAPS:
+                self.series[name].append(None)
+                continue
+            judged = jd.r9_mean(span, interval, error=self.cfg.error, what=name)
+            assert judged is not None
+            mean = (span.last - span.first) / (len(span) - 1)
+            self.series[name].append(round(mean * 1000, 4))
+            self.worst[name] = max(self.worst.get(name, 0.0), judged.measured)
+            self.trials += 1
+            if not judged.ok:
+                self.find(end, f"minute {self.minute + 1}: {judged}")
+        self.minute += 1
+
+    def close(self, now: float) -> None:
+        minute = int((now - self.t0) // MINUTE_S)
+        while minute > self.minute:
+            self._close_minute(self.t0 + (self.minute + 1) * MINUTE_S)
+        if now - self.t0 > self.minute * MINUTE_S:  # a part of a minute left
+            self._close_minute(now, partial=True)
+
+    def statistics(self) -> dict[str, Any]:
+        return {"minutes_judged": self.trials, "worst_mean_error_ms": {k: round(v * 1000, 4) for k, v in self.worst.items()},
+                "intervals_ms": {k: v * 1000 for k, v in self.cfg.intervals.items()}}
+
+
+# ------------------------------------------------------------------------------------------------ comm flag
+class CommFlagWatch(Watch):
+    name = "comm flag"
+    rules = ("R8", "R19")
+    what = "comm flag glitches"
+    one = "comm flag glitch"
+
+    def __init__(self, monitor: Monitor) -> None:
+        super().__init__(monitor)
+        self.last_command: float | None = None
+        self.msg1_since_stream = 0
+        self.flagged = False  # inside an episode already found
+        self.stream_gaps = 0  # the host's stream stopped for longer than the comm-loss time
+        self.longest_command_gap = 0.0
+        self.flag_set = 0
+        interval = self.cfg.intervals.get("msg1")
+        #: R8's window opens here after the last command (its judgement's: r8_window_s)
+        self._early = jd.r8_window_s(interval, jitter=self.cfg.jitter)[0] if interval else 0.0
+
+    def command(self, t: float) -> None:
+        if self.last_command is not None:
+            gap = t - self.last_command
+            if gap > self.longest_command_gap:
+                self.longest_command_gap = gap
+            if gap > cat.COMM_LOSS_TIMEOUT_S:
+                self.stream_gaps += 1
+        else:
+            self.msg1_since_stream = 0
+        self.last_command = t
+
+    def msg1(self, frame: Frame, t: float) -> None:
+        if self.last_command is None:
+            return
+        self.msg1_since_stream += 1
+        if self.msg1_since_stream < 2:  # the MSG1 due as the stream began may still show the flag of before it
+            return
+        interval = self.cfg.intervals.get("msg1")
+        if interval is None:
+            return
+        flag = bool(frame.fields.get("status", 0) & cat.Status.COMM_FAULT)
+        self.flag_set += flag
+        since = t - self.last_command
+        error = self.cfg.error + self.cfg.own_error
+        if not flag and since < self._early - error:  # well before R8's window, clear: as r8_flag_due wants (hot path)
+            self.trials += 1
+            self.flagged = False
+            return
+        due = jd.r8_flag_due(since, interval, jitter=self.cfg.jitter, error=error)
+        if due is None:
+            return
+        self.trials += 1
+        if flag == due:
+            self.flagged = False
+            return
+        if not self.flagged:
+            self.flagged = True
+            since = (t - self.last_command) * 1000
+            self.find(t, f"MSG1 {'shows' if flag else 'lacks'} the comm-loss flag {since:.1f} ms after the last command "
+                      f"({'the stream runs' if not due else 'the stream stopped'})")
+
+    def statistics(self) -> dict[str, Any]:
+        return {"msg1_judged": self.trials, "msg1_with_flag": self.flag_set,
+                "host_stream_gaps_over_200ms": self.stream_gaps,
+                "longest_command_gap_ms": round(self.longest_command_gap * 1000, 3)}
+
+
+# ------------------------------------------------------------------------------------------------ GET_ESC_ID
+class AnswerWatch(Watch):
+    name = "GET_ESC_ID answers"
+    rules = ("R2", "4.4.3-4")
+    statement_unit = "answer"
+    what = "answers late, early or missing"
+    one = "answer late, early or missing"
+
+    def __init__(self, monitor: Monitor) -> None:
+        super().__init__(monitor)
+        self.delays = Histogram(DELAY_BIN_S, DELAY_BINS)
+        self.query: float | None = None
+        self.answered = True
+        self.missing = 0
+        self.error = max(self.cfg.error, self.cfg.own_error)
+        #: the host's own stream may delay an answer (never blame the DUT for the bench's traffic): one tick's stream
+        #: frames ahead of it on the bus widen the late side of R2's slot and of the 64 ms bound
+        self.queueing = self.cfg.stream_frames * frame_bits(8) / self.cfg.bitrate
+
+    def asked(self, t: float) -> None:
+        if self.query is not None and not self.answered:
+            self.trials += 1
+            self.missing += 1
+            bound = jd.answer_bound(t - self.query, error=self.error, rule="4.4.3-4")
+            self.find(t, f"no answer to GET_ESC_ID within {(t - self.query) * 1000:.0f} ms: {bound}", ("4.4.3-4", "R19"))
+        self.query, self.answered = t, False
+
+    def reply(self, frame: Frame, t: float) -> None:
+        if self.query is None or self.answered:
+            self.monitor.unexpected.find(t, f"a GET_ESC_ID reply that answers no query ({frame.fields})", ("R1",))
+            return
+        self.answered = True
+        self.trials += 1
+        end = t - self.query
+        self.delays.add(end)
+        start = end - frame_bits(len(frame.data)) / self.cfg.bitrate
+        node = self.cfg.node_id
+        late = self.error + self.queueing
+        broken = [j for j in (jd.r2_slot_start(start, node, error=self.error), jd.r2_slot_end(end, node, error=late),
+                              jd.answer_bound(end, error=late, rule="4.4.3-4")) if not j.ok]
+        if broken:
+            self.find(t, "; ".join(str(j) for j in broken), tuple(dict.fromkeys(j.rule for j in broken)))
+
+    def statistics(self) -> dict[str, Any]:
+        return {"answers": self.delays.n, "missing": self.missing, "delay": self.delays.to_json()}
+
+
+# ------------------------------------------------------------------------------------------------ settings
+class SettingsWatch(Watch):
+    name = "settings"
+    rules = ("R19", "R13")
+    what = "settings changes"
+    one = "settings change"
+
+    def __init__(self, monitor: Monitor) -> None:
+        super().__init__(monitor)
+        self.first: dict[str, Any] | None = None
+        self.now: dict[str, Any] | None = None
+
+    def read(self, frame: Frame, t: float) -> None:
+        self.trials += 1
+        fields = dict(frame.fields)
+        if self.first is None:
+            self.first = self.now = fields
+            return
+        changed = jd.r13_read_back(self.now or {}, fields)
+        if changed:
+            self.find(t, "Get Major Configuration (242) changed: " + ", ".join(str(d) for d in changed))
+        self.now = fields
+
+    def statistics(self) -> dict[str, Any]:
+        return {"reads_242": self.trials, "first": self.first, "last": self.now}
+
+
+# ------------------------------------------------------------------------------------------------ unexpected
+class UnexpectedWatch(Watch):
+    name = "unexpected frames"
+    rules = ("R19",)
+    what = "unexpected frames"
+    one = "unexpected frame"
+
+    def __init__(self, monitor: Monitor) -> None:
+        super().__init__(monitor)
+        self.kinds: dict[str, int] = {}
+
+    def garbled(self, error: DecodeError, t: float) -> None:
+        self._note(f"undecodable ({error.reason})", t, f"a frame that does not decode: {error}",
+                   (DECODE_RULES.get(error.reason, "R19"),))
+
+    def frame(self, frame: Frame, t: float) -> None:
+        self._note(frame.name, t, f"{frame.name} ({frame.kind.label}) {frame.fields}: normal reporting never sends it and "
+                   "the flight controller asked for nothing it answers", self.rules)
+
+    def _note(self, kind: str, t: float, message: str, rules: tuple[str, ...]) -> None:
+        self.kinds[kind] = self.kinds.get(kind, 0) + 1
+        self.find(t, message, rules)
+
+    def statistics(self) -> dict[str, Any]:
+        return {"by_kind": self.kinds}
+
+
+# ------------------------------------------------------------------------------------------------ the monitor
+class Monitor:
+    """Every frame of the run in (:meth:`feed`), in order, the DUT's and the host's own (their echo), with lane
+    timestamps; the watches fed; findings kept (:attr:`findings`, the first :data:`MAX_FINDINGS`) and counted."""
+
+    def __init__(self, cfg: WatchConfig, t0: float) -> None:
+        self.cfg = cfg
+        self.t0 = t0
+        self.decoder = Decoder(nibble_order=cfg.nibble_order)
+        self.ring: deque[tuple[float, int, bytes]] = deque(maxlen=RING_FRAMES)
+        self.findings: list[Finding] = []
+        self.dropped = 0  # findings counted but not kept
+        self._kept: dict[str, int] = {}  # findings kept per watch
+        self._open: list[tuple[Finding, int]] = []  # findings still collecting frames after them
+        self.frames = 0
+        self.dut_frames = 0
+        self.own_frames = 0
+        self.other_frames = 0
+        self.last_t = t0
+        self._ids: dict[int, tuple[Any, ...]] = {}
+        self._frames: dict[tuple[int, bytes], Frame] = {}
+        self.resets = ResetWatch(self)
+        self.intervals = IntervalWatch(self)
+        self.comm = CommFlagWatch(self)
+        self.answers = AnswerWatch(self)
+        self.settings = SettingsWatch(self)
+        self.unexpected = UnexpectedWatch(self)
+        self.watches: tuple[Watch, ...] = (self.resets, self.intervals, self.comm, self.answers, self.settings,
+                                           self.unexpected)
+
+    # ------------------------------------------------------------------ findings
+    def found(self, watch: Watch, t: float, message: str, rules: tuple[str, ...]) -> None:
+        kept = self._kept.get(watch.name, 0)
+        if len(self.findings) >= MAX_FINDINGS or kept >= MAX_FINDINGS_PER_WATCH:
+            self.dropped += 1
+            return
+        self._kept[watch.name] = kept + 1
+        f = Finding(t - self.t0, watch.name, rules, message, [self._line(*r) for r in self.ring])
+        self.findings.append(f)
+        self._open.append((f, AFTER_FRAMES))
+
+    def _line(self, t: float, can_id: int, data: bytes) -> str:
+        return f"{t - self.t0:12.6f}  {can_id:08X}#{data.hex().upper()}"
+
+    @property
+    def count(self) -> int:
+        return len(self.findings) + self.dropped
+
+    @property
+    def settled(self) -> bool:
+        """No finding is still collecting the frames after it."""
+        return not self._open
+
+    # ------------------------------------------------------------------ frames
+    def feed(self, msg: Any) -> None:
+        """One frame heard (a ``can.Message`` or anything with its attributes): ``timestamp``, ``arbitration_id``,
+        ``data``, ``is_extended_id`` (and the error / remote flags)."""
+        t = msg.timestamp
+        can_id = msg.arbitration_id
+        data = bytes(msg.data)
+        self.frames += 1
+        self.last_t = t
+        if self._open:
+            line = self._line(t, can_id, data)
+            still = []
+            for f, left in self._open:
+                f.after.append(line)
+                if left > 1:
+                    still.append((f, left - 1))
+            self._open = still
+        self.ring.append((t, can_id, data))
+        info = self._ids.get(can_id)
+        if info is None:
+            if len(self._ids) > MAX_IDS:  # a DUT sending ever new ids must not grow the memory
+                self._ids.clear()
+            info = self._ids[can_id] = classify(can_id) if getattr(msg, "is_extended_id", True) else (None,) * 5
+        kind, type_id, source, _, spec = info
+        cfg = self.cfg
+        if source == cfg.host_node and spec is not None:
+            self.own_frames += 1
+            name = spec.name
+            if name in cat.THROTTLE_FRAMES:
+                self.comm.command(t)
+            elif name == "get_esc_id":
+                self.answers.asked(t)
+            elif kind is Kind.REQUEST:
+                self._decode(msg, data)  # the decoder remembers a 241 request: its answer's layout depends on it
+            return
+        if source != cfg.node_id:
+            self.other_frames += 1
+            return
+        self.dut_frames += 1
+        self.unexpected.trials += 1  # every frame of the DUT is judged by it
+        frame = self._decode(msg, data)
+        if frame is None:
+            return
+        name = frame.name
+        if kind is Kind.MESSAGE:
+            if name in REPORTS:
+                self.intervals.report(name, t)
+                self.resets.report(name, t, frame.transfer_id)
+                if name == "msg1":
+                    self.comm.msg1(frame, t)
+                return
+            if name == "get_esc_id" and frame.layout is not None and frame.layout.name == "reply":
+                self.answers.reply(frame, t)
+                return
+        elif kind is Kind.RESPONSE and frame.destination == cfg.host_node:
+            if name == "maintenance_information":
+                self.resets.maintenance(frame, t)
+                return
+            if name == "get_major_configuration":
+                self.settings.read(frame, t)
+                return
+        self.unexpected.frame(frame, t)
+
+    def _decode(self, msg: Any, data: bytes) -> Frame | None:
+        """The frame decoded; a message (its layout the frame's own) decoded once per distinct id and bytes: a report
+        of the same values differs only in its transfer id, hours long (the cached frame's ``timestamp`` is its
+        first's: the watches take the time from the feed)."""
+        key = (msg.arbitration_id, data)
+        frame = self._frames.get(key)
+        if frame is not None:
+            return frame
+        try:
+            frame = self.decoder.decode(msg)
+        except DecodeError as exc:
+            if (msg.arbitration_id & 0x7F) == self.cfg.node_id:
+                self.unexpected.garbled(exc, msg.timestamp)
+            return None
+        if frame.kind is Kind.MESSAGE and getattr(msg, "is_extended_id", True) and not getattr(msg, "is_error_frame", False) \
+                and not getattr(msg, "is_remote_frame", False):
+            if len(self._frames) > MAX_IDS:
+                self._frames.clear()
+            self._frames[key] = frame
+        return frame
+
+    def close(self, now: float) -> None:
+        """The run ended at lane time ``now``: the watches judge what is still open."""
+        for w in self.watches:
+            w.close(now)

@@ -1,0 +1,231 @@
+"""The soak's watches (sans-IO), fed hand-made frame sequences: silent on a faultless ESC's, and each finds its own
+defect, citing its requirement, with the frames around it. Also R19's reset judgements."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import pytest
+
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol import judgements as jd
+from ckesc.protocol.frame import WireFrame, encode
+from ckesc.protocol.ids import Kind
+from ckesc.soak.watches import AFTER_FRAMES, MAX_FINDINGS_PER_WATCH, Histogram, Monitor, WatchConfig
+
+HOST, NODE = 0, 1
+MSG1, MSG2, MSG3 = 0.020, 0.100, 0.500
+CFG = WatchConfig(node_id=NODE, host_node=HOST, intervals={"msg1": MSG1, "msg2": MSG2, "msg3": MSG3})
+SETTINGS = {"direction": 0, "throttle_source": 0, "throttle_channel": 1, "led_blink": 0, "led_color": 2,
+            "msg1_interval": 10, "msg2_interval": 50, "msg3_interval": 250, "reserved": 0}
+
+
+@dataclass
+class Esc:
+    """A faultless ESC's side of a soak, frame by frame, and the defects a test switches on."""
+
+    msg1_interval: float = MSG1
+    reset_at: float | None = None  # MSG1 stops for 300 ms and its transfer ids start again at 0
+    flag_at: float | None = None  # one MSG1 shows the comm-loss flag while the stream runs
+    answer_delay: float = 0.0025
+    no_answer_at: float | None = None
+    power_ups: list[int] = field(default_factory=lambda: [7])
+    run_times: list[int] = field(default_factory=lambda: [0])
+    led_after: float | None = None
+    extra: list[WireFrame] = field(default_factory=list)
+
+    def frames(self, seconds: float) -> list[WireFrame]:
+        out: list[WireFrame] = []
+        tid = {"stream": 0, "msg1": 0, "msg2": 0, "msg3": 0, "q": 0, "241": 0, "242": 0}
+
+        def nxt(key: str) -> int:
+            tid[key] = (tid[key] + 1) % 32
+            return (tid[key] - 1) % 32
+
+        t = 0.0
+        while t < seconds:  # the host's stream at 50 Hz
+            out.append(encode("raw_command_14b", {"channels": [0] * 4}, source=HOST, transfer_id=nxt("stream"), timestamp=t))
+            t = round(t + 0.02, 9)
+        t, k = 0.001, 0
+        while t < seconds:
+            if self.reset_at is not None and self.reset_at <= t < self.reset_at + 0.3:
+                t = round(t + self.msg1_interval, 9)
+                if t >= self.reset_at + 0.3:
+                    tid["msg1"] = 0
+                continue
+            status = cat.Status.COMM_FAULT if self.flag_at is not None and abs(t - self.flag_at) < 0.01 else 0
+            out.append(encode("msg1", {"speed": 0, "pwm": 0, "status": int(status)}, source=NODE,
+                              transfer_id=nxt("msg1"), timestamp=t))
+            k += 1
+            t = round(0.001 + k * self.msg1_interval, 9)
+        for name, interval, fields in (("msg2", MSG2, {"voltage": 1200, "current": 0, "temperature": 30}),
+                                       ("msg3", MSG3, {"mos_t": 30, "cap_t": 30, "motor_t": 30, "mcu_t": 30})):
+            n = 0
+            while (t := 0.003 + n * interval) < seconds:
+                out.append(encode(name, fields, source=NODE, transfer_id=nxt(name), timestamp=t))
+                n += 1
+        s = 0
+        while (t := 0.005 + s) < seconds:  # GET_ESC_ID once a second, and its answer
+            q = nxt("q")
+            out.append(encode("get_esc_id", {"option": 0}, source=HOST, transfer_id=q, layout="query", timestamp=t))
+            if self.no_answer_at is None or abs(t - self.no_answer_at) > 0.5:
+                out.append(encode("get_esc_id", {"node_id": NODE, "throttle_channel": 1}, source=NODE, transfer_id=q,
+                                  layout="reply", timestamp=t + self.answer_delay))
+            s += 1
+        r = 0
+        while (t := 2.5 + r * 5.0) < seconds:  # 241 options 1 and 2 in turn, and 242 every 20 s
+            option = 1 + r % 2
+            q = nxt("241")
+            out.append(encode("maintenance_information", {"option": option}, source=HOST, destination=NODE,
+                              transfer_id=q, timestamp=t))
+            if option == 1:
+                value = self.run_times[min(r // 2, len(self.run_times) - 1)]
+                answer = {"run_time": value, "runs": 0, "info_7": 1}
+            else:
+                value = self.power_ups[min(r // 2, len(self.power_ups) - 1)]
+                answer = {"power_ups": value, "stops": 0, "fault_code": 0, "option": 2}
+            out.append(encode("maintenance_information", answer, kind=Kind.RESPONSE, source=NODE, destination=HOST,
+                              transfer_id=q, layout=f"response_option_{option}", timestamp=t + 0.004))
+            if r % 4 == 0:
+                q = nxt("242")
+                out.append(encode("get_major_configuration", {"option": 0}, source=HOST, destination=NODE,
+                                  transfer_id=q, timestamp=t + 0.5))
+                led = 4 if self.led_after is not None and t > self.led_after else SETTINGS["led_color"]
+                out.append(encode("get_major_configuration", {**SETTINGS, "led_color": led}, kind=Kind.RESPONSE,
+                                  source=NODE, destination=HOST, transfer_id=q, timestamp=t + 0.504))
+            r += 1
+        out += self.extra
+        return sorted(out, key=lambda w: w.timestamp)
+
+
+def watch(esc: Esc, seconds: float = 65.0) -> Monitor:
+    monitor = Monitor(CFG, t0=0.0)
+    for frame in esc.frames(seconds):
+        monitor.feed(frame)
+    monitor.close(seconds)
+    return monitor
+
+
+def only(monitor: Monitor, name: str) -> list:
+    others = [f.line() for f in monitor.findings if f.watch != name]
+    assert not others, others
+    mine = [f for f in monitor.findings if f.watch == name]
+    assert mine, f"{name} found nothing"
+    return mine
+
+
+def test_a_faultless_esc_gives_no_finding_and_every_watch_judged():
+    m = watch(Esc())
+    assert [f.line() for f in m.findings] == []
+    assert m.intervals.trials == 3 * 2  # MSG1..3 in the whole minute and in the last 5 s (enough gaps)
+    assert m.intervals.series["msg1"] == [pytest.approx(20.0), pytest.approx(20.0)]
+    assert m.answers.trials == 65 and m.answers.delays.n == 65
+    assert m.resets.reads == {"power_ups": 6, "run_time": 7} and m.settings.trials == 4
+    assert m.comm.trials > 3000
+
+
+def test_a_report_interval_off_by_more_than_the_scheduling_tolerance_breaks_r9_in_every_minute():
+    found = only(watch(Esc(msg1_interval=MSG1 + 1.5 * jd.SCHEDULING_TOLERANCE_S)), "report intervals")
+    assert [f.rules for f in found] == [("R9", "R19")] * 2
+    assert "msg1 every 21.500 ms" in found[0].message and found[0].t == pytest.approx(60.0)
+    assert not watch(Esc(msg1_interval=MSG1 + 0.5 * jd.SCHEDULING_TOLERANCE_S), 61.0).findings
+
+
+def test_a_reset_shows_as_a_report_gap_with_a_transfer_id_restart():
+    m = watch(Esc(reset_at=30.0))
+    found = [f for f in m.findings if f.watch == "resets"]
+    assert len(found) == 1 and found[0].rules == ("R19", "R17") and "started again" in found[0].message
+    assert found[0].t == pytest.approx(30.3, abs=0.03)
+    assert len(found[0].before) > 10 and len(found[0].after) == AFTER_FRAMES  # the frames around it
+
+
+@pytest.mark.parametrize("esc, words", [
+    (Esc(power_ups=[7, 7, 8]), "power-up count (241 option 2) went from 7 to 8"),
+    (Esc(run_times=[100, 110, 3]), "went back from 110 s to 3 s"),
+    (Esc(run_times=[100, 110, 500]), "jumped from 110 s to 500 s"),
+])
+def test_241_shows_a_reset(esc, words):
+    found = only(watch(esc), "resets")
+    assert len(found) == 1 and words in found[0].message
+
+
+def test_the_run_time_may_stand_still_or_count_with_time():
+    assert not watch(Esc(run_times=[100, 100, 110, 120]), 40.0).findings  # 10 s between two reads of option 1
+
+
+def test_the_comm_flag_while_the_stream_runs_is_a_glitch():
+    found = only(watch(Esc(flag_at=40.0)), "comm flag")
+    assert len(found) == 1 and found[0].rules == ("R8", "R19") and "shows the comm-loss flag" in found[0].message
+
+
+def test_an_answer_our_own_stream_delayed_is_not_late():
+    """An answer at the end of its slot, pushed past it by one of the host's stream frames (highest priority) queued
+    ahead of it, is the bench's traffic, not the DUT's lateness; two frames' worth past it is the DUT's."""
+    from ckesc.protocol.frame import frame_bits
+
+    slot_end = 2 * cat.ANSWER_SLOT_S  # node 1's slot ends at 4 ms
+    one = frame_bits(8) / CFG.bitrate
+    assert not watch(Esc(answer_delay=slot_end + one / 2), 3.0).findings
+    found = only(watch(Esc(answer_delay=slot_end + 2 * one), 3.0), "GET_ESC_ID answers")
+    assert "R2" in found[0].rules
+
+
+def test_late_and_missing_answers():
+    found = only(watch(Esc(answer_delay=0.080), 10.0), "GET_ESC_ID answers")
+    assert len(found) == 10 and set(found[0].rules) == {"R2", "4.4.3-4"}
+    m = watch(Esc(no_answer_at=20.005), 30.0)
+    found = only(m, "GET_ESC_ID answers")
+    assert len(found) == 1 and "no answer" in found[0].message and found[0].t == pytest.approx(21.005)
+    assert m.answers.missing == 1
+
+
+def test_a_changed_setting():
+    found = only(watch(Esc(led_after=20.0)), "settings")
+    assert len(found) == 1 and "led_color 2 -> 4" in found[0].message
+
+
+def test_frames_the_esc_should_not_send():
+    garbled = WireFrame(encode("msg1", {"speed": 0, "pwm": 0, "status": 0}, source=NODE).arbitration_id,
+                        bytes(6) + b"\xE0", 31.0)  # toggle bit set in a single frame's tail (F2)
+    reply = encode("get_esc_id", {"node_id": NODE, "throttle_channel": 1}, source=NODE, transfer_id=3, layout="reply",
+                   timestamp=32.5)  # an answer to no query
+    m = watch(Esc(extra=[garbled, reply]), 40.0)
+    found = only(m, "unexpected frames")
+    assert [f.rules for f in found] == [("F2",), ("R1",)], [f.line() for f in found]
+
+
+def test_findings_are_bounded():
+    m = watch(Esc(answer_delay=0.080), 60.0)
+    assert len(m.findings) == MAX_FINDINGS_PER_WATCH and m.count == 60 and m.dropped == 60 - MAX_FINDINGS_PER_WATCH
+
+
+def test_the_histogram_streams():
+    h = Histogram(0.001, 10)
+    for v in (0.0005, 0.0015, 0.0025, 0.0035, 0.5):
+        h.add(v)
+    doc = h.to_json()
+    assert doc["count"] == 5 and doc["min_ms"] == 0.5 and doc["max_ms"] == 500.0 and doc["bins"][-1] == 1
+    assert h.percentile(50) == pytest.approx(0.003) and h.percentile(100) == 0.5
+
+
+# ------------------------------------------------------------------------------------------ R19's judgements
+def test_r19_power_ups_wraps_and_grows():
+    assert jd.r19_power_ups(7, 7) is None and jd.r19_power_ups(0xFFFF, 0xFFFF) is None
+    assert jd.r19_power_ups(7, 8).rule == "R19" and jd.r19_power_ups(0xFFFF, 0).what == "power_ups"
+
+
+def test_r19_run_time_back_jump_and_resolution():
+    assert jd.r19_run_time(10, 9, 5.0) is not None
+    assert jd.r19_run_time(10, 16, 5.0) is None  # two whole-second reads 5 s apart differ by up to 6
+    assert jd.r19_run_time(10, 17, 5.0) is not None
+    assert jd.r19_run_time(10, 17, 5.0, error=1.0) is None
+    assert jd.r19_run_time(10, 10, 500.0) is None  # standing still: the motor does not run
+
+
+def test_r19_report_restart():
+    i = MSG1
+    assert jd.r19_report_restart(i, i, jd.f3_step(5, 6)) is None
+    assert jd.r19_report_restart(0.3, i, jd.f3_step(5, 0)) is not None  # a gap and a counter from 0
+    assert jd.r19_report_restart(0.3, i, jd.f3_step(5, 6)) is None  # late, counting on: R9's
+    assert jd.r19_report_restart(3 * i, i, jd.f3_step(5, 8)) is None  # two lost on the bus
+    assert jd.r19_report_restart(1.2 * i, i, jd.f3_step(5, 0)) is None  # within the restart limit: not a gap
