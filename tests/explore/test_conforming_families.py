@@ -19,6 +19,8 @@ import pytest
 
 from ckesc.cli.explore import parse_budget
 from ckesc.emulator import variants
+from ckesc.explore.actions import Action
+from ckesc.explore.runner import Session
 
 #: how long the slow test explores each variant family (wall time, shared by the family's alternatives): the issue's
 #: 30 minutes; the environment variable (a duration as ``--budget`` takes it: 90s, 5m) tries it short
@@ -67,3 +69,24 @@ def test_explore_finds_nothing_on_a_conforming_variant_family(family, tmp_path):
     for i, value in enumerate(alternatives):
         (where := tmp_path / str(i)).mkdir()
         _explore({family: value}, FAMILY_BUDGET_S / len(alternatives), where)
+
+
+#: Set Freq 10/10/10 while suspended, a power cycle, then the same write: the shrunk program of the one false finding
+#: the family test has found (rejected_answer=echo, 142 programs into a 45 s run)
+SUSPENDED_WRITE = [Action("send", "msg_control", {"option": 0, "command": 0x55555555}),
+                   Action("send", "set_freq", {"option": 1, "msg1_interval": 10, "msg2_interval": 10, "msg3_interval": 10}),
+                   Action("power"),
+                   Action("send", "set_freq", {"option": 1, "msg1_interval": 10, "msg2_interval": 10, "msg3_interval": 10})]
+
+
+@pytest.mark.parametrize("answer", ["echo", "current"])
+def test_a_refused_set_freq_answer_does_not_set_the_intervals(answer):
+    """R12: a Set Freq write while reporting is suspended does not take effect, and its answer is free (R10-R12), here
+    the request's values echoed: the bus rules took that answer for the intervals in force and FAILed the DUT's
+    reports at the intervals it kept (R9 R13 report-interval: "msg2 100 ms after the previous one, expected 20 ms")."""
+    session = Session({"emulator_option": [f"rejected_answer={answer}"]})
+    try:
+        outcome = session.run(SUSPENDED_WRITE)
+    finally:
+        session.close()
+    assert not outcome.findings, "\n".join(f.text() for f in outcome.findings)
