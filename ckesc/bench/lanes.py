@@ -8,7 +8,7 @@
   slcan, gs_usb, canalystii), it hands out a copy of each frame it sent (:class:`OwnFrame`, throttle
   streams included) stamped by the host clock at send, so that everything reading the lane (the
   tests, the live rules, the traces) still sees both directions; measurements that use such a time
-  say "host clock" and carry the larger error :data:`HOST_SEND_ERROR_S`.
+  say "host clock" and carry the larger error: the bench's plus :attr:`Lane.host_send_error`.
 
 Tests never read the wall clock or sleep: they ask the lane (through the ``dut`` fixture).
 """
@@ -33,13 +33,10 @@ from ..emulator import sim_bus
 from ..protocol.catalogue import DEFAULT_BITRATE
 from .epochs import PowerEpoch
 from .power import EmulatorPower, PowerControl
+from .profile import DEFAULT_BUS_ERROR_S
 
 _SIM_CHANNELS = itertools.count()
 
-#: How much later than the host clock read at ``send()`` a frame may be on the bus (driver and USB
-#: latency: a full-speed USB adapter polls every 1 ms each way; a TX queue; lost arbitration): the
-#: error of the time a lane without echo gives the host's own frames, on top of the bench's stated one.
-HOST_SEND_ERROR_S = 0.002
 #: How long the lane waits for the echo of its probe frame, and how often it tries while the bus is silent
 ECHO_PROBE_S = 0.25
 ECHO_PROBE_TRIES = 3
@@ -64,8 +61,10 @@ class Lane(ABC):
     echo: bool = True
     #: how the lane found out about the echo (for the reports)
     echo_note: str = "the lane's own bus echoes every frame"
-    #: how much later than the host clock at send a frame may reach the bus (s; see HOST_SEND_ERROR_S)
-    host_send_error: float = HOST_SEND_ERROR_S
+    #: how much later than the host clock read at ``send()`` a frame may be on the bus (s; driver and USB latency, a TX
+    #: queue, lost arbitration): the error of the time a lane without echo gives the host's own frames, on top of the
+    #: bench's stated one; by default a real bench's (:data:`ckesc.bench.profile.DEFAULT_BUS_ERROR_S`)
+    host_send_error: float = DEFAULT_BUS_ERROR_S
     can_change_bitrate: bool = True  # reopen() really moves the host to another bit rate (Set Baud's tests)
     #: the DUT's current power-up as the harness made it (None: unknown, or off); see epochs.py
     epoch: PowerEpoch | None = None
@@ -91,7 +90,7 @@ class Lane(ABC):
     @property
     def host_clock(self) -> tuple[str, float]:
         """The clock that times what the host does when no echo says when it reached the bus (a send),
-        and that time's error (s): the bench's stated error plus :data:`HOST_SEND_ERROR_S`."""
+        and that time's error (s): the bench's stated error plus :attr:`host_send_error`."""
         return "host clock", self.timing_error + self.host_send_error
 
     @property
@@ -262,7 +261,7 @@ class BusLane(Lane):
     clock = "bus timestamp"
 
     def __init__(self, bus_kwargs: dict[str, Any], power: PowerControl, *, timing_error: float,
-                 bitrate_cmd: str | None = None, host_send_error: float = HOST_SEND_ERROR_S, stamp: str = "end") -> None:
+                 bitrate_cmd: str | None = None, host_send_error: float = DEFAULT_BUS_ERROR_S, stamp: str = "end") -> None:
         self.bus_kwargs = dict(bus_kwargs)
         self.stamp = stamp
         self.host_send_error = host_send_error

@@ -71,9 +71,20 @@ class _Capabilities(_Section):
     multi_node: bool = Field(False, description="several ESCs on the bus (the multi-ESC tests)")
 
 
-#: The bench's measurement error taken on a real bus (``--dut bus``) when the profile states none: a SocketCAN
-#: adapter's receive stamps plus the host's scheduling, as the shipped ``ckesc-generic`` profile states it. The run
-#: prints it when it is taken (a bench is never assumed exact)
+#: A real bench's timing error, written here once (issue #28) and imported by everything that takes it: 2 ms, a
+#: full-speed USB adapter's 1 ms poll each way (receive stamps, and a frame sent reaching the bus) plus the host's
+#: scheduling, as the shipped ``ckesc-generic`` profile states it. It is
+#:
+#: * the bench's error on a real bus (``--dut bus``) whose profile states none (:meth:`DutProfile.on_a_real_bus`;
+#:   the run prints it when it is taken: a bench is never assumed exact),
+#: * the real-time emulator lane's least stated error (``ckesc emulate``, its socketcand hub and the suite share one
+#:   machine's scheduler: ``station.py``, ``realtime_lane.py``),
+#: * how much later than the host clock at ``send()`` a frame may reach the bus where the adapter does not echo the
+#:   host's frames (``--host-send-error``'s default, :attr:`ckesc.bench.lanes.Lane.host_send_error`).
+#:
+#: A bench that knows better states its own (the profile's ``[timing] error_s``, ``--host-send-error``); a use that
+#: needs another figure gets its own named constant, with its reason, not a second ``0.002``
+#: (``tests/protocol/test_no_tolerance_literals.py`` fails on one)
 DEFAULT_BUS_ERROR_S = 0.002
 #: Which end of a frame the bench's timestamps mark when the profile does not say: its end, as SocketCAN stamps a
 #: frame when it has been received (and the echo of the host's own frame when it has been sent), socketcand passes

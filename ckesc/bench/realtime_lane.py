@@ -15,6 +15,7 @@ import can
 from ..emulator.variants import FREEDOMS
 from .lanes import BenchGone, BusLane
 from .power import ControlPower
+from .profile import DEFAULT_BUS_ERROR_S
 
 
 class RealtimeEmulatorLane(BusLane):
@@ -24,7 +25,7 @@ class RealtimeEmulatorLane(BusLane):
     name = "realtime"
 
     def __init__(self, *, nodes=(1,), faults=None, flash_path: str | None = None, seed: int = 0,
-                 timing_error: float = 0.002, temp_flash: bool = False, esc_options: dict[str, Any] | None = None) -> None:
+                 timing_error: float = DEFAULT_BUS_ERROR_S, temp_flash: bool = False, esc_options: dict[str, Any] | None = None) -> None:
         cmd = [sys.executable, "-m", "ckesc", "emulate", "--nodes", ",".join(map(str, nodes)), "--socketcand", "0",
                "--control", "0", "--seed", str(seed)]
         for key, value in (esc_options or {}).items():  # conforming variants: --option NAME=VALUE; others (boot_spread):

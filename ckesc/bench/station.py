@@ -27,10 +27,10 @@ from typing import Any
 from ..emulator import variants
 from . import checks, proof
 from .checks import BUS_OPEN_TIMEOUT_S
-from .lanes import HOST_SEND_ERROR_S, BusLane, Lane, SimLane
+from .lanes import BusLane, Lane, SimLane
 from .power import POWER_COMMAND_TIMEOUT_S, PowerControl, Prompt, open_power
 from .power import names as power_names
-from .profile import DutProfile
+from .profile import DEFAULT_BUS_ERROR_S, DutProfile
 from .realtime_lane import RealtimeEmulatorLane
 from .traffic_player import PlayerStats, TrafficPlayer
 
@@ -113,11 +113,11 @@ BENCH_ROWS: tuple[Option, ...] = (
                 "replaced. python-can cannot set a SocketCAN bit rate: e.g. a script running `ip link set can0 down; ip link "
                 "set can0 type can bitrate {bitrate}; ip link set can0 up`, or `ckesc control --port P bitrate {bitrate}` "
                 "for the emulator on vcan0"),
-    Option("host_send_error", type=float, default=HOST_SEND_ERROR_S * 1000, run_default=None, metavar="MS",
+    Option("host_send_error", type=float, default=DEFAULT_BUS_ERROR_S * 1000, run_default=None, metavar="MS",
            rig="host_send_error_ms",
            help="--dut bus, an adapter that does not echo the host's frames: how much later than the host clock at send a "
                 "frame may reach the bus (driver, USB, TX queue), in ms; the error of every time taken from the host's own "
-                f"frames (default {HOST_SEND_ERROR_S * 1000:g})"),
+                f"frames (default {DEFAULT_BUS_ERROR_S * 1000:g})"),
     Option("bus_open_timeout", type=float, default=BUS_OPEN_TIMEOUT_S, metavar="S",
            help="--dut bus: how long the preflight waits for the bus to open (a socketcand daemon or adapter that does not "
                 f"answer) before it stops the run with exit 2 (default {BUS_OPEN_TIMEOUT_S:g})"),
@@ -264,7 +264,7 @@ class Station:
             nodes = checks.node_list(o.nodes or "1")
             if o.lane == "realtime":
                 return RealtimeEmulatorLane(nodes=nodes, faults=faults, temp_flash=True, esc_options=self.played,
-                                            seed=o.emulator_seed, timing_error=max(profile.error_s, 0.002))
+                                            seed=o.emulator_seed, timing_error=max(profile.error_s, DEFAULT_BUS_ERROR_S))
             # in one process the emulated ESCs keep their flash contents across power cycles: no file needed
             lane = SimLane(nodes=nodes, faults=faults, seed=o.emulator_seed, esc_config={"boot_time": 0.25, **self.played})
             # exact timestamps; a profile may still state a bench's error (0 for the emulator's own): margins below it

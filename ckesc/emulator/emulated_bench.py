@@ -127,7 +127,7 @@ class EmulatedBench:
                 targets = self._throttle_targets(name, group)
         changed = False
         for esc in targets:
-            if esc is not sender and esc.powered and esc.bitrate == bitrate:
+            if esc is not sender and esc.powered and esc.state.bitrate == bitrate:
                 if esc.receive(frame, now, decoded=decoded):
                     self._deadlines[self.escs.index(esc)] = _or_inf(esc.next_deadline())
                     changed = True

@@ -31,7 +31,7 @@ class Answers:
     def _on_self_test(self, f: Frame, now: float) -> None:
         if not self._addressed(f) or "self_test_unanswered" in self.faults:
             return
-        failed = self.self_test_fault != 0 and "self_test_always_passes" not in self.faults
+        failed = self.state.self_test_fault != 0 and "self_test_always_passes" not in self.faults
         if "self_test_inverted" in self.faults:
             failed = not failed
         self._respond(f, now, {"status": int(failed)})
@@ -84,15 +84,15 @@ class Answers:
             ups, stops = n["power_ups"], n["stops"]
             if "maintenance_counts_wrong" in self.faults:
                 ups, stops = stops, ups
-            fields = {"power_ups": ups, "stops": stops, "fault_code": self.self_test_fault, "option": 2}
+            fields = {"power_ups": ups, "stops": stops, "fault_code": self.state.self_test_fault, "option": 2}
         else:
             self.counters["rx_ignored"] += 1
             return
         self._respond(f, now, fields, layout=f"response_option_{option}")
         if "maintenance_info_7_missing" in self.faults:  # drop Info_7 from the answer just queued
-            for i, (due, seq, wire) in enumerate(self._outbox):
-                if seq == self._seq:
-                    self._outbox[i] = (due, seq, wire._replace(data=wire.data[:6] + wire.data[7:]))
+            for i, (due, seq, wire) in enumerate(self.state.outbox):
+                if seq == self.state.seq:
+                    self.state.outbox[i] = (due, seq, wire._replace(data=wire.data[:6] + wire.data[7:]))
 
     def _dronecan_node_info(self, msg: Any, now: float) -> bool:
         """Fault 'dronecan_node_info': answer DroneCAN GetNodeInfo (service 1), announcing a
@@ -101,7 +101,7 @@ class Answers:
         if not (can_id & 0x8080 == 0x8080 and (can_id >> 16) & 0xFF == 1 and (can_id >> 8) & 0x7F == self.node_id):
             return False
         due = now + self.config.service_delay
-        status = bytes(7) + bytes((tail_byte(self._tids.next("dronecan341")),))
+        status = bytes(7) + bytes((tail_byte(self.state.tids.next("dronecan341")),))
         self._push(due, WireFrame(message_id(Priority.LOW, 341, self.node_id), status, due))
         answer = bytes(7) + bytes((tail_byte(data[-1] & 0x1F if data else 0),))
         self._push(due, WireFrame(service_id(Priority.LOW, 1, False, can_id & 0x7F, self.node_id), answer, due))
@@ -116,6 +116,6 @@ class Answers:
             direction, source = source, direction
         # one-bit fields: a value stored by throttle_select_accepts_illegal (2, 255) must not crash the model
         self._respond(f, now, {"direction": direction & 1, "throttle_source": source & 1,
-                               "throttle_channel": n["throttle_channel"] & 0x3F, "led_blink": self.led_blink & 0x1F,
-                               "led_color": self.led_color & 0x07, "msg1_interval": n["msg1_interval"],
+                               "throttle_channel": n["throttle_channel"] & 0x3F, "led_blink": self.state.led_blink & 0x1F,
+                               "led_color": self.state.led_color & 0x07, "msg1_interval": n["msg1_interval"],
                                "msg2_interval": n["msg2_interval"], "msg3_interval": n["msg3_interval"]})

@@ -23,43 +23,43 @@ class Motor:
     """Part of :class:`~ckesc.emulator.model.EscModel`: throttle, motor, temperatures, comm loss."""
 
     def _update(self, now: float) -> None:
-        dt = now - self._last_update
+        dt = now - self.state.last_update
         if dt <= 0:
             # no time passed, but a deadline may have come due without it (Throttle Select back to CAN
             # long after the last command): without this the comm-loss deadline stays in the past and
             # the lane polls at the same instant for ever
             self._refresh_throttle(now)
             return
-        self._last_update = now
+        self.state.last_update = now
         self._refresh_throttle(now)
-        target = self.throttle / THROTTLE_MAX * self.config.max_rpm
-        self.rpm += (target - self.rpm) * (1 - math.exp(-dt / self.config.motor_tau))
-        if target == 0 and self.rpm < 1:
-            self.rpm = 0.0
-        load = self.rpm / self.config.max_rpm
-        self.current = 80.0 * load**3
-        thermal_dt = now - self._last_thermal
+        target = self.state.throttle / THROTTLE_MAX * self.config.max_rpm
+        self.state.rpm += (target - self.state.rpm) * (1 - math.exp(-dt / self.config.motor_tau))
+        if target == 0 and self.state.rpm < 1:
+            self.state.rpm = 0.0
+        load = self.state.rpm / self.config.max_rpm
+        self.state.current = 80.0 * load**3
+        thermal_dt = now - self.state.last_thermal
         if thermal_dt >= 0.05:  # temperatures move in seconds: a coarser step costs less
-            self._last_thermal = now
+            self.state.last_thermal = now
             for name, tau, gain, ambient in _THERMAL:
                 goal = ambient + gain * load**2
-                self.temps[name] += (goal - self.temps[name]) * (1 - math.exp(-thermal_dt / tau))
+                self.state.temps[name] += (goal - self.state.temps[name]) * (1 - math.exp(-thermal_dt / tau))
             self._record_temperatures()
-        running = self.rpm >= 1 or self.throttle > 0
+        running = self.state.rpm >= 1 or self.state.throttle > 0
         if running:
-            if now > self._warm_at and "clock_drift_warm" in self.faults:  # seconds of a fast clock
+            if now > self.state.warm_at and "clock_drift_warm" in self.faults:  # seconds of a fast clock
                 dt *= WARM_CLOCK_RATE
-            self.run_time += dt
+            self.state.run_time += dt
             self.nvm["total_run_time"] += dt
-        if running != self.running:
-            self.running = running
+        if running != self.state.running:
+            self.state.running = running
             key = "starts" if running else "stops"
             self.nvm[key] = (self.nvm[key] + 1) & 0xFFFF
             self.nvm_dirty = True
 
     def _record_temperatures(self) -> None:
         for sensor in RECORD_SENSORS:
-            t = self._whole(self.temps[sensor])
+            t = self._whole(self.state.temps[sensor])
             rec = self.nvm["records"][sensor]
             if t > rec["t_max"]:
                 rec.update(t_max=min(t, 255), times=self.nvm["starts"], time=self._whole(self.nvm["total_run_time"]))
@@ -70,16 +70,16 @@ class Motor:
 
     def _refresh_throttle(self, now: float) -> None:
         if self._active_source_is_pwm():
-            self.throttle = min(max(self.pwm_input or 0, 0), THROTTLE_MAX)
-            self.comm_fault = False
-            self._pwm_seen = True
+            self.state.throttle = min(max(self.pwm_input or 0, 0), THROTTLE_MAX)
+            self.state.comm_fault = False
+            self.state.pwm_seen = True
             return
         if self._comm_loss_due(now):
-            self.comm_fault = True
-            self.can_throttle = 0  # lost-signal protection: throttle to zero
-        self.throttle = self.can_throttle
-        if "pwm_no_fallback" in self.faults and self._pwm_seen and self.nvm["throttle_source"] == 1:
-            self.throttle = 0  # the lost PWM signal is not replaced by the CAN throttle
+            self.state.comm_fault = True
+            self.state.can_throttle = 0  # lost-signal protection: throttle to zero
+        self.state.throttle = self.state.can_throttle
+        if "pwm_no_fallback" in self.faults and self.state.pwm_seen and self.nvm["throttle_source"] == 1:
+            self.state.throttle = 0  # the lost PWM signal is not replaced by the CAN throttle
 
     def _comm_loss_timeout(self) -> float | None:
         if "comm_loss_never" in self.faults:
@@ -91,23 +91,23 @@ class Motor:
         return COMM_LOSS_TIMEOUT_S
 
     def _comm_loss_deadline(self) -> float | None:
-        if self.comm_fault or self._active_source_is_pwm():
+        if self.state.comm_fault or self._active_source_is_pwm():
             return None
         timeout = self._comm_loss_timeout()
         if timeout is None:
             return None
-        since = self.last_command if self.last_command is not None else self.ready_at
+        since = self.state.last_command if self.state.last_command is not None else self.state.ready_at
         deadline = since + timeout
         check = self.config.comm_loss_check
-        if check == "timer" or not self._reports_active() or "msg1" not in self._next_report:
+        if check == "timer" or not self._reports_active() or "msg1" not in self.state.next_report:
             return deadline
         # checked on MSG1's grid (each MSG1 due) or on the report timer's 2 ms tick through it: the first
         # point of it at or after the deadline
         period = self._interval("msg1") if check == "msg1" else INTERVAL_UNIT_S
-        grid = self._next_report["msg1"]
+        grid = self.state.next_report["msg1"]
         if period <= 0:
             return deadline
-        if check == "msg1" and self._offset:  # checked when the jittered MSG1 goes out (exactly then: no rounding)
+        if check == "msg1" and self.state.offset:  # checked when the jittered MSG1 goes out (exactly then: no rounding)
             grid = self._jittered("msg1")
             return grid + max(0, math.ceil(round((deadline - grid) / period, 9))) * period
         return round(grid + math.ceil(round((deadline - grid) / period, 9)) * period, 9)
@@ -155,7 +155,7 @@ class Motor:
             elif 4 * group - 3 <= channel <= 4 * group:
                 value = channels[channel - 4 * group + 3]
         else:  # raw_command_10b
-            if self._selected and "throttle_select_drops_10b" in self.faults:
+            if self.state.selected and "throttle_select_drops_10b" in self.faults:
                 return False  # the parser table rebuilt without the 10-bit format
             if "ten_bit_tail_checked" in self.faults and f.fields["tail_bits"] != TAIL_BITS_10B:
                 return False  # the high nibble of payload[7] read as a tail byte, and this one refused
@@ -171,21 +171,21 @@ class Motor:
         if value > THROTTLE_MAX:
             value = self._over_max(THROTTLE_MAX)
         if value < 0:  # over_max_throttle "hold": the frame's value ignored, the command still heard
-            value = self.can_throttle
+            value = self.state.can_throttle
         answered = "throttle_answered" in self.faults
         if answered:  # the broadcast taken for a request: a report at once, as its answer
             self._emit_report("msg1", now + self.config.service_delay)
-        if value == self.can_throttle and not self.comm_fault:
+        if value == self.state.can_throttle and not self.state.comm_fault:
             # the same command again: only the comm-loss deadline moves, and later, so nothing is due
             # earlier than before; the motor's first-order lag integrates exactly over the longer step
-            self.last_command = now
+            self.state.last_command = now
             return answered  # an answer was queued: the ESC's next deadline moved
         self._update(now)
-        self.can_throttle = value  # R6: above 2000 is OBSERVE (over_max_throttle)
-        self.last_command = now
-        sticky = "comm_loss_sticky" in self.faults or (self._resumed and "comm_loss_sticky_after_resume" in self.faults)
-        if self.comm_fault and not sticky:
-            self.comm_fault = False
+        self.state.can_throttle = value  # R6: above 2000 is OBSERVE (over_max_throttle)
+        self.state.last_command = now
+        sticky = "comm_loss_sticky" in self.faults or (self.state.resumed and "comm_loss_sticky_after_resume" in self.faults)
+        if self.state.comm_fault and not sticky:
+            self.state.comm_fault = False
         self._refresh_throttle(now)
 
 
@@ -193,11 +193,11 @@ class Motor:
         """Fault 'reset_after_streaming': a command addressed to this ESC continues the stream (no gap longer than
         the comm-loss time since the last) or starts one; once the stream has run its onset without a break, the
         watchdog resets the ESC (a power-up: what flash holds is kept, RAM is not). True when it reset."""
-        last = self.last_command
-        if self._stream_since is None or last is None or now - last > COMM_LOSS_TIMEOUT_S:
-            self._stream_since = now
+        last = self.state.last_command
+        if self.state.stream_since is None or last is None or now - last > COMM_LOSS_TIMEOUT_S:
+            self.state.stream_since = now
             return False
-        if now - self._stream_since < onset("reset_after_streaming", self.config.onsets):
+        if now - self.state.stream_since < onset("reset_after_streaming", self.config.onsets):
             return False
         self.power_off(now)
         self.power_on(now)
@@ -207,8 +207,8 @@ class Motor:
         """This run's running time in seconds as 241 option 1 and MSG_EXP10 report it (fault 'run_time_wraps': kept
         in a uint16 of 50 ms ticks, so modulo 65536 ticks, or the onset given)."""
         if "run_time_wraps" in self.faults:
-            return self.run_time % onset("run_time_wraps", self.config.onsets)
-        return self.run_time
+            return self.state.run_time % onset("run_time_wraps", self.config.onsets)
+        return self.state.run_time
 
     def _motor_busy(self) -> bool:
-        return (self.running or self.throttle > 0) and "rotation_while_running" not in self.faults
+        return (self.state.running or self.state.throttle > 0) and "rotation_while_running" not in self.faults

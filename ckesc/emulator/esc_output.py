@@ -26,7 +26,7 @@ class Output:
               id_or: int = 0) -> None:
         spec = cat.BY_NAME[name]
         if transfer_id is None:
-            transfer_id = self._tids.peek(name) if "transfer_id_stuck" in self.faults else self._tids.next(name)
+            transfer_id = self.state.tids.peek(name) if "transfer_id_stuck" in self.faults else self.state.tids.next(name)
         if priority is None:
             priority = spec.priority if spec.priority is not None else Priority.MEDIUM
         if kind is Kind.MESSAGE and layout is None and len(spec.layouts) == 1 and spec.has_tail:
@@ -43,8 +43,8 @@ class Output:
         self._push(due, wire)
 
     def _push(self, due: float, wire: WireFrame) -> None:
-        self._seq += 1
-        heapq.heappush(self._outbox, (due, self._seq, wire))
+        self.state.seq += 1
+        heapq.heappush(self.state.outbox, (due, self.state.seq, wire))
 
     def _mangle_tail(self, wire: WireFrame, spec) -> WireFrame:
         if not spec.has_tail:
@@ -90,20 +90,20 @@ class Output:
             return 0.010
         if "answer_at_once" in self.faults:
             return 0.001
-        node = self._boot_node if "answer_slot_from_boot_node" in self.faults else self.node_id
+        node = self.state.boot_node if "answer_slot_from_boot_node" in self.faults else self.node_id
         start = answer_slot_s(node)  # R2
         if self.config.answer_place == "start":
             return start
         # the latest start that still ends inside the slot with one longest frame on the bus ahead of it (the
         # answer frames are shorter than 8 data bytes); at a slow bit rate that may be the slot's start
-        room = max(ANSWER_SLOT_S - 2 * frame_bits(8) / self.bitrate, 0.0)
+        room = max(ANSWER_SLOT_S - 2 * frame_bits(8) / self.state.bitrate, 0.0)
         if self.config.answer_place == "late":
             return start + room
         return start + self._rng.uniform(0.0, room)
 
     def _emit_raw(self, due: float, type_id: int, payload: bytes, priority: int) -> None:
         """A frame the catalogue's layouts cannot express (the faults that send wrong lengths)."""
-        tid = self._tids.next(f"raw{type_id}")
+        tid = self.state.tids.next(f"raw{type_id}")
         self._push(due, WireFrame(message_id(priority, type_id, self.node_id), payload + bytes([tail_byte(tid)]), due))
 
 

@@ -27,23 +27,23 @@ class Settings:
     def _settings_locked(self, fault: str = "") -> bool:
         """R12: parameter changes do not take effect while reporting is suspended (unless ``fault``, the request's
         own fault of taking it then, or ``settings_while_suspended`` is on)."""
-        return self.reporting == SUSPENDED and "settings_while_suspended" not in self.faults and fault not in self.faults
+        return self.state.reporting == SUSPENDED and "settings_while_suspended" not in self.faults and fault not in self.faults
 
     def _in_window(self, now: float, fault: str) -> bool:
         window = CONFIG_WINDOW_S / 2 if "config_window_short" in self.faults else CONFIG_WINDOW_S
-        return now - self.powered_at <= window or fault in self.faults
+        return now - self.state.powered_at <= window or fault in self.faults
 
     def _set_nvm(self, **values: Any) -> None:
         self.nvm.update(values)
         self.nvm_dirty = True
         for key in values:  # its own save puts a clobbered setting right again
-            self._flash_only.pop(key, None)
+            self.state.flash_only.pop(key, None)
 
     def _clobber(self, fault: str, **stale: Any) -> None:
         """An interaction fault's save that also rewrites other settings in flash with ``stale`` values (the RAM
         copies stay: the ESC works on with them until the next power-up)."""
         if fault in self.faults:
-            self._flash_only.update(stale)
+            self.state.flash_only.update(stale)
 
     def _on_set_id(self, f: Frame, now: float) -> None:
         if "set_id_needs_destination" in self.faults and not self._addressed(f):
@@ -73,7 +73,7 @@ class Settings:
             return
         self._set_nvm(baud=code)
         if "set_baud_immediate" in self.faults:
-            self.bitrate = BAUD_RATES.get(code, self.bitrate)
+            self.state.bitrate = BAUD_RATES.get(code, self.state.bitrate)
         self._respond(f, now, {"baud": self.nvm["baud"]})
 
     def _on_set_led(self, f: Frame, now: float) -> None:
@@ -82,20 +82,20 @@ class Settings:
         option, color, blink = f.fields["option"], f.fields["color"], f.fields["blink"]
         no_operation = blink not in cat.LED_BLINK and self.config.led_blink_other == "no_operation"
         if option in (0, 1) and self._settings_locked():  # R12: refused, and its answer free like every refusal's
-            self._respond_rejected(f, now, {"option": option, "color": self.led_color, "blink": self.led_blink})
+            self._respond_rejected(f, now, {"option": option, "color": self.state.led_color, "blink": self.state.led_blink})
             return
         if self.config.has_led and option in (0, 1) and not self._settings_locked() and not no_operation:
             color &= 0x07  # "the lower three bits of Color are valid"
             blink = blink if blink in cat.LED_BLINK else 0  # "other: no operation is performed, no blinking"
-            self.led_color, self.led_blink = color, blink
+            self.state.led_color, self.state.led_blink = color, blink
             if option == 1 or "led_unsaved_persisted" in self.faults:
                 self._set_nvm(led_color=color, led_blink=blink)
             if option == 1:
-                self._clobber("led_save_reverts_rotation", rotation=self._boot["rotation"])
+                self._clobber("led_save_reverts_rotation", rotation=self.state.boot["rotation"])
         if "set_led_no_echo" in self.faults:
             self._respond(f, now, {"option": 0, "color": 0, "blink": 0})
             return
-        self._respond(f, now, {"option": option, "color": self.led_color, "blink": self.led_blink})
+        self._respond(f, now, {"option": option, "color": self.state.led_color, "blink": self.state.led_blink})
 
     def _on_set_rotation(self, f: Frame, now: float) -> None:
         if not self._addressed(f):
@@ -133,16 +133,16 @@ class Settings:
                 self._set_nvm(**legal)
                 defaults = factory_nvm(self.config)
                 self._clobber("freq_save_resets_led", led_color=defaults["led_color"], led_blink=defaults["led_blink"])
-                self._default_timers = False  # a write reloads the report timers
+                self.state.default_timers = False  # a write reloads the report timers
                 if "set_freq_moves_other_stream" in self.faults:
                     if legal.get("msg2_interval", old["msg2_interval"]) != old["msg2_interval"]:
-                        self._timer_from.pop("msg2", None)
+                        self.state.timer_from.pop("msg2", None)
                     elif legal.get("msg1_interval", old["msg1_interval"]) != old["msg1_interval"]:
-                        self._timer_from["msg2"] = "msg1"
+                        self.state.timer_from["msg2"] = "msg1"
                 for which in REPORT_NAMES:
                     key = f"{which}_interval"
                     if key in legal and legal[key] != old[key]:
-                        self._next_report[which] = self._set_freq_next(which, now, old[key] * INTERVAL_UNIT_S)
+                        self.state.next_report[which] = self._set_freq_next(which, now, old[key] * INTERVAL_UNIT_S)
         current = {k: self.nvm[k] for k in names}
         if "set_freq_read_wrong" in self.faults and f.fields["option"] == 0:
             current = dict(cat.DEFAULT_REPORT_INTERVALS)
@@ -161,8 +161,8 @@ class Settings:
             return
         if "throttle_select_ignored" not in self.faults:
             self._set_nvm(throttle_source=source)
-            self._clobber("source_save_reverts_led", led_color=self._boot["led_color"], led_blink=self._boot["led_blink"])
-        self._selected = True
+            self._clobber("source_save_reverts_led", led_color=self.state.boot["led_color"], led_blink=self.state.boot["led_blink"])
+        self.state.selected = True
         self._respond(f, now, {"source": self.nvm["throttle_source"]})
 
 
@@ -182,7 +182,7 @@ class Settings:
             self._send_records(now)
             return
         if command.name == "maintenance":
-            self.test_mode = part == 0x11 if part in (0x10, 0x11) else self.test_mode
+            self.state.test_mode = part == 0x11 if part in (0x10, 0x11) else self.state.test_mode
             return
         if self._settings_locked() or self._motor_busy():
             return  # 4.4.25 clarification 1: motor stopped; R12
@@ -190,8 +190,8 @@ class Settings:
         if n == "direction":
             self._set_nvm(rotation=part - 1)
         elif n == "led":
-            self.led_color = {0: 0, 1: 4, 2: 2, 3: 1}[part]
-            self._set_nvm(led_color=self.led_color)
+            self.state.led_color = {0: 0, 1: 4, 2: 2, 3: 1}[part]
+            self._set_nvm(led_color=self.state.led_color)
         elif n == "control_mode":
             if part in (2, 5):
                 self._set_nvm(throttle_source=1)

@@ -10,7 +10,8 @@ same :class:`EscModel`. One model is one ESC; several share a bus in an :class:`
     esc.next_deadline()                             # when to poll next (None: nothing scheduled)
 
 Persistent settings and counters live in ``esc.nvm`` (a plain dict); ``esc.nvm_dirty`` tells the
-adapter to write them to its flash store. Everything else is lost at power-off (R13).
+adapter to write them to its flash store. What is lost at power-off (R13), the RAM every part of the model shares,
+is ``esc.state`` (:class:`~.esc_state.EscState`, a fresh one at each power-up).
 """
 
 from __future__ import annotations
@@ -27,15 +28,17 @@ from ..protocol.errors import DecodeError, LengthError, TailError, UnknownTypeEr
 from ..protocol.frame import Decoder, Frame, WireFrame, classify
 from ..protocol.ids import Kind
 from ..protocol.transfer import TransferIdCounter, parse_tail, tail_byte
+from . import esc_state
 from .config import REPORT_TIMERS, EscConfig, factory_nvm
 from .esc_answers import Answers
 from .esc_motor import Motor
 from .esc_output import Output
 from .esc_settings import Settings
+from .esc_state import EscState
 from .esc_telemetry import EXP_MODE, REPORT_NAMES, REPORTING, SUSPENDED, Telemetry
 from .faults import onset
 
-__all__ = ["EXP_MODE", "HANDLED", "REPORTING", "REPORT_TIMERS", "SUSPENDED", "THROTTLE_FRAMES", "EscConfig", "EscModel",
+__all__ = ["EXP_MODE", "HANDLED", "REPORTING", "REPORT_TIMERS", "SUSPENDED", "THROTTLE_FRAMES", "EscConfig", "EscModel", "EscState",
            "factory_nvm"]
 
 #: What R13 says survives a power cycle, and the fault that makes each item forget.
@@ -59,7 +62,12 @@ _PERSIST_FAULTS = {
 
 class EscModel(Output, Motor, Telemetry, Settings, Answers):
     """One emulated ESC. See the module docstring for the driving contract; each concern's methods live in
-    the module of its base class (config, esc_output, esc_motor, esc_telemetry, esc_settings, esc_answers)."""
+    the module of its base class (config, esc_output, esc_motor, esc_telemetry, esc_settings, esc_answers), and what
+    they share in RAM is :attr:`state`."""
+
+    #: this power-up's RAM, which every part reads and writes (``esc_state.py``: each field, and which part uses it);
+    #: a fresh one at each power-up. What outlives power-off: :attr:`nvm` (flash), :attr:`config`, :attr:`faults`
+    state: EscState
 
     def __init__(self, config: EscConfig | None = None, nvm: dict[str, Any] | None = None) -> None:
         self.config = config or EscConfig()
@@ -84,67 +92,45 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         self._boot_baud: int | None = None  # the Set Baud code in force at the last power-up
         self._reset_volatile(0.0)
 
+    def __setattr__(self, name: str, value: Any) -> None:
+        # the RAM is self.state's (esc_state.py): a part (a fault added later, say) that sets it on the model itself
+        # would set a copy no other part reads
+        if name in esc_state.FIELDS or name in esc_state.OLD_NAMES:
+            raise AttributeError(f"EscModel.{name}: the ESC's RAM is in self.state "
+                                 f"(self.state.{esc_state.OLD_NAMES.get(name, name)}; ckesc/emulator/esc_state.py)")
+        object.__setattr__(self, name, value)
+
+    def __getattr__(self, name: str) -> Any:  # (only for a name not found: no cost to the rest)
+        if name in esc_state.FIELDS or name in esc_state.OLD_NAMES:
+            raise AttributeError(f"EscModel.{name}: the ESC's RAM is in self.state "
+                                 f"(self.state.{esc_state.OLD_NAMES.get(name, name)}; ckesc/emulator/esc_state.py)")
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
     # ------------------------------------------------------------------------------------------
     # power
 
     def _reset_volatile(self, now: float) -> None:
-        self.powered_at = now
-        self.ready_at = now + self.config.boot_time
-        self.bitrate = BAUD_RATES.get(self.nvm["baud"], cat.DEFAULT_BITRATE)
-        self.reporting = REPORTING
-        self.can_test = False
-        self.can_test_prev = REPORTING
-        self.can_test_count = self._rng.randrange(1 << 31) if self.config.can_test_count == "from_random" else 0
-        self.led_color = self.nvm["led_color"]
-        self.led_blink = self.nvm["led_blink"]
-        self.throttle = 0  # 0..2000 in use
-        self.can_throttle = 0
-        self.last_command: float | None = None
-        self.comm_fault = False
-        self.rpm = 0.0
-        self.running = False
-        self.run_time = 0.0  # motor running seconds in this power session
-        self.temps = {"mos": 25.0, "cap": 25.0, "mcu": 30.0, "motor": 25.0}
-        self.current = 0.0
-        self.self_test_fault = self.config.self_test_fault
-        if "self_test_undefined_code" in self.faults:
-            self.self_test_fault = 0x30  # a failed self-test whose code the attachment does not define
-        self._pwm_seen = False  # a PWM signal was in use (fault 'pwm_no_fallback')
-        self.test_mode = False
-        self._outbox: list[tuple[float, int, WireFrame]] = []
-        self._seq = 0
-        self._tids = TransferIdCounter(
-            (lambda: self._rng.randrange(32)) if self.config.transfer_id_start == "random" else None)
-        self._last_update = now
-        self._last_thermal = now
-        self._next_report: dict[str, float] = {}
-        self._regrid: dict[str, float] = {}  # report_timer "grid": the old grid's next point after a report sent at once
-        # report_jitter_s: each report's offset from its grid point (empty without jitter: the hot path stays as it was),
-        # and the earliest a jittered report may go out (not before the event that set its timer)
-        self._offset: dict[str, float] = {k: self._jitter() for k in REPORT_NAMES} if self.config.report_jitter_s else {}
-        self._report_floor = now
-        self._last_jittered: dict[str, float] = {}  # each report's last jittered time: the next never goes before it
-        self._reports_were_active = True
-        self._next_can_test = 0.0
-        # the interaction faults' state (faults.INTERACTION; all empty / off in a faultless ESC)
-        self._boot = {k: self.nvm[k] for k in _PERSIST_FAULTS}  # the settings as read at power-up
-        self._flash_only: dict[str, Any] = {}  # what a clobbering save wrote to flash, RAM unchanged: in force at power-up
-        self._suspends = 0  # second_suspend_latches: suspends beyond the first, each wanting a resume
-        self._default_timers = False  # resume_reloads_default_intervals
-        self._timer_from: dict[str, str] = {}  # set_freq_moves_other_stream: report -> the report whose interval it takes
-        self._resumed = False  # comm_loss_sticky_after_resume: reporting was suspended and resumed
-        self._selected = False  # throttle_select_drops_10b: a Throttle Select was taken
-        self._boot_node = self.nvm["node_id"]  # answer_slot_from_boot_node: the node id it booted with
-        self._foreign: deque[tuple[float, float]] = deque()  # drops_reports_under_load: (end, bus time) of foreign frames
-        # the soak faults' state (faults.SOAK; each shows only after its onset, counted from here or from the stream)
-        self._stream_since: float | None = None  # reset_after_streaming: when the uninterrupted command stream began
+        """A power-up's RAM, fresh (:class:`EscState`; its fields say what each is)."""
+        rng, config = self._rng, self.config
+        self.state = EscState(
+            powered_at=now, ready_at=now + config.boot_time,
+            bitrate=BAUD_RATES.get(self.nvm["baud"], cat.DEFAULT_BITRATE),
+            can_test_count=rng.randrange(1 << 31) if config.can_test_count == "from_random" else 0,
+            led_color=self.nvm["led_color"], led_blink=self.nvm["led_blink"],
+            # self_test_undefined_code: a failed self-test whose code the attachment does not define
+            self_test_fault=0x30 if "self_test_undefined_code" in self.faults else config.self_test_fault,
+            tids=TransferIdCounter((lambda: rng.randrange(32)) if config.transfer_id_start == "random" else None),
+            last_update=now, last_thermal=now, report_floor=now,
+            boot={k: self.nvm[k] for k in _PERSIST_FAULTS}, boot_node=self.nvm["node_id"])
         self.onsets_moved()
+        if config.report_jitter_s:  # drawn after the CAN Test count, as always: one seed, one ESC
+            self.state.offset = {k: self._jitter() for k in REPORT_NAMES}
 
     def onsets_moved(self) -> None:
         """The soak faults' times from this power-up (again, when ``config.onsets`` changed): when the clock runs fast
         (clock_drift_warm) and the next comm flag glitch (comm_flag_glitch)."""
-        self._warm_at = self.powered_at + onset("clock_drift_warm", self.config.onsets)
-        self._glitch_at = self.powered_at + onset("comm_flag_glitch", self.config.onsets)
+        self.state.warm_at = self.state.powered_at + onset("clock_drift_warm", self.config.onsets)
+        self.state.glitch_at = self.state.powered_at + onset("comm_flag_glitch", self.config.onsets)
 
     def power_on(self, now: float) -> None:
         if self.powered:
@@ -153,19 +139,19 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         self._power_epoch += 1
         self._reset_volatile(now)
         if "can_test_persisted" in self.faults and self.nvm.get("can_test"):
-            self.can_test = True
+            self.state.can_test = True
         if "suspend_persisted" in self.faults and self.nvm.get("suspended"):
-            self.reporting = SUSPENDED
+            self.state.reporting = SUSPENDED
         if "power_up_counter_stuck" not in self.faults:
             twice = "baud_change_counts_power_up_twice" in self.faults and self._boot_baud not in (None, self.nvm["baud"])
             self.nvm["power_ups"] = (self.nvm["power_ups"] + 1 + twice) & 0xFFFF
         self._boot_baud = self.nvm["baud"]
         self.nvm_dirty = True
-        start = self.ready_at + self.config.report_delay
+        start = self.state.ready_at + self.config.report_delay
         stagger = (0.0, 0.007, 0.013) if self.config.report_phase == "staggered" else (0.0, 0.0, 0.0)
-        self._next_report = {k: start + d for k, d in zip(REPORT_NAMES, stagger)}
-        self._report_floor = start
-        self._next_can_test = start
+        self.state.next_report = {k: start + d for k, d in zip(REPORT_NAMES, stagger)}
+        self.state.report_floor = start
+        self.state.next_can_test = start
 
     def power_off(self, now: float) -> None:
         if not self.powered:
@@ -174,12 +160,12 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         for key, fault in _PERSIST_FAULTS.items():  # the faults that make a setting forget
             if fault in self.faults:
                 self.nvm[key] = factory_nvm(self.config)[key]
-        self.nvm.update(self._flash_only)  # a clobbering save (interaction faults): flash differs from RAM
-        self.nvm["can_test"] = self.can_test
-        self.nvm["suspended"] = self.reporting == SUSPENDED
+        self.nvm.update(self.state.flash_only)  # a clobbering save (interaction faults): flash differs from RAM
+        self.nvm["can_test"] = self.state.can_test
+        self.nvm["suspended"] = self.state.reporting == SUSPENDED
         self.nvm_dirty = True
         self.powered = False
-        self._outbox.clear()
+        self.state.outbox.clear()
 
     # ------------------------------------------------------------------------------------------
     # the driving contract
@@ -191,16 +177,16 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
     def next_deadline(self) -> float | None:
         if not self.powered:
             return None
-        times = [self._outbox[0][0]] if self._outbox else []
+        times = [self.state.outbox[0][0]] if self.state.outbox else []
         if self._reports_active():
             times.extend(self._next_report_times())
-        if self.can_test:
-            times.append(self._next_can_test)
+        if self.state.can_test:
+            times.append(self.state.next_can_test)
         cl = self._comm_loss_deadline()
         if cl is not None:
             times.append(cl)
-        if self.rpm > 0.5 or self.throttle:
-            times.append(self._last_update + 0.05)  # motor and temperatures move
+        if self.state.rpm > 0.5 or self.state.throttle:
+            times.append(self.state.last_update + 0.05)  # motor and temperatures move
         return min(times) if times else None
 
     def handle(self, frame: Any | None, now: float) -> tuple[list[WireFrame], float | None]:
@@ -213,7 +199,7 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         """A frame heard on the bus at ``now`` (the adapter has checked the bitrate matches).
         ``decoded``: the frame already decoded (or its DecodeError), when a bench decodes once for all.
         Returns whether the ESC acted on it (its next deadline may have moved)."""
-        if not self.powered or now < self.ready_at:
+        if not self.powered or now < self.state.ready_at:
             return False
         self.counters["rx"] += 1
         if decoded is None:
@@ -292,11 +278,11 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         if not self.powered:
             return []
         self._update(now)
-        if now >= self.ready_at:
+        if now >= self.state.ready_at:
             self._schedule_reports(now)
         out = []
-        while self._outbox and self._outbox[0][0] <= now:
-            out.append(heapq.heappop(self._outbox)[2])  # stamped with its due time when queued
+        while self.state.outbox and self.state.outbox[0][0] <= now:
+            out.append(heapq.heappop(self.state.outbox)[2])  # stamped with its due time when queued
         self.counters["tx"] += len(out)
         return out
 

@@ -415,7 +415,7 @@ class RealtimeEmulator(ControlCommands):
             if t > self._model_time:
                 self._model_time = t
             for esc, w in sent:  # the other ESCs on the bus hear them too (after the sends: off the hot path)
-                self.bench.deliver(w, w.timestamp, esc.bitrate, sender=esc)
+                self.bench.deliver(w, w.timestamp, esc.state.bitrate, sender=esc)
             self._deadlines_stale = True
         if not self._stuck_logged:  # a model whose deadline does not move past a poll: say so once
             self._stuck_logged = True
@@ -423,7 +423,7 @@ class RealtimeEmulator(ControlCommands):
 
     def _transmit(self, esc: EscModel, frames: list[WireFrame]) -> None:
         """One ESC's frames, in due order, onto the bus: lateness counted per frame."""
-        if esc.bitrate != self.bitrate:
+        if esc.state.bitrate != self.bitrate:
             self.counters["tx_other_bitrate"] += len(frames)
             return
         t_send = time.monotonic()

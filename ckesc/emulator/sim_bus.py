@@ -129,7 +129,7 @@ class SimWorld:
                     self._queue(wire, source, bitrate, ready=wire.timestamp)
         if min(self.bench._deadlines) <= t:
             for esc, wire in self.bench.poll(t):
-                self._queue(wire, esc, esc.bitrate, ready=wire.timestamp)
+                self._queue(wire, esc, esc.state.bitrate, ready=wire.timestamp)
         if self._in_flight is None:
             self._start_transmission()
         return True

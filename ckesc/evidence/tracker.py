@@ -258,6 +258,10 @@ class Tracker(Findings):
         self._busy_from = -math.inf
         self.set_bitrate(bitrate)
         self._query_ts: float | None = None  # the last GET_ESC_ID query (its replies' delays, for the plots)
+        #: the host's last MSG Control switch suspended reporting, and no resume nor power switch since: a parameter
+        #: write then does not take effect (R12) and its answer is free (R10-R12: the current values, none, or the
+        #: request's echoed), so a Set Freq write's answer does not say the intervals in force
+        self._suspended = False
         self._paired: set[tuple] = set()  # requests whose answer was recorded (each answer once)
         #: what the tracker paired, for the report's plots: None (the default) records nothing
         self.heard: Heard | None = None
@@ -315,6 +319,7 @@ class Tracker(Findings):
     def power_switched(self, ts: float) -> None:
         """The host switched the DUT's power (off or on) at ``ts``: a pending R9a event is void (the first
         report after a power-up is the boot's, not the command's); the next stretch has R9a-gaps grace."""
+        self._suspended = False  # a suspension is not kept across a power cycle (R13)
         for node in self._nodes.values():
             node.event_ts = None
             node.grace_chain = node.chain + 1  # the stretch after the silence it makes
@@ -357,6 +362,8 @@ class Tracker(Findings):
             switch = REPORTING_SWITCHES.get(type_id)
             if switch is not None and len(data) > switch[0].offset + switch[0].size and field_value(data, switch[0]) in switch[1]:
                 value = field_value(data, switch[0])
+                if type_id == MSG_CONTROL.type_id:
+                    self._suspended = value == cat.MSG_CONTROL_SUSPEND
                 if RESTARTS.get(type_id) == value:  # reporting comes back on every ESC (R9a)
                     what = f"{info.label} {value:#x}"
                     for node in self._nodes.values():
@@ -454,8 +461,11 @@ class Tracker(Findings):
         layout = SET_FREQ.response
         values = [field_value(data, layout.field(k)) for k in INTERVAL_FIELDS]  # type: ignore[union-attr]
         legal = all(layout.field(k).is_legal(v) for k, v in zip(INTERVAL_FIELDS, values))  # type: ignore[union-attr]
-        if not legal:
-            # what an answer to an illegal write says is OBSERVE (R10-answer); whether it was applied is R10's test
+        write = field_value(data, SET_FREQ_OPTION) == SET_FREQ_WRITE
+        if not legal or (write and self._suspended):
+            # what an answer to an illegal write says is OBSERVE (R10-answer), and so is the answer to a write while
+            # reporting is suspended, which does not take effect (R12: it may echo the request, rejected_answer=echo);
+            # whether either was applied is R10's and R12's tests' (read back)
             node.periods = [None] * len(INTERVAL_FIELDS)
             node.floor = False
             node.reset += 1
@@ -465,7 +475,7 @@ class Tracker(Findings):
             node.reset += 1  # (the answer to a write: the write restarted the cadence already, R9a counts from it)
         node.periods = periods
         node.floor = True
-        option = "write" if field_value(data, SET_FREQ_OPTION) == SET_FREQ_WRITE else "read"
+        option = "write" if write else "read"
         node.from_read, node.before_silence = option == "read", False
         node.period_note = f"its Set/Get Freq {option} answer at {ts:.6f} says {'/'.join(map(str, values))}"
 

@@ -99,7 +99,7 @@ class Oracle:
         except DecodeError:
             frame = None
         self.model.receive(msg, t)
-        if self.model.last_command == t:
+        if self.model.state.last_command == t:
             self.commands.append(t)
         self._keep(self.model.poll(t))
         if frame is not None:
@@ -135,9 +135,9 @@ class Oracle:
         m = self.model
         if not m.powered:
             return "off"
-        if m.can_test:
+        if m.state.can_test:
             return "can_test"
-        return {SUSPENDED: "suspended", EXP_MODE: "exp"}.get(m.reporting, "normal")
+        return {SUSPENDED: "suspended", EXP_MODE: "exp"}.get(m.state.reporting, "normal")
 
     def _note(self, t: float, label: str, step: int | None = None) -> None:
         nvm = self.model.nvm
@@ -145,4 +145,4 @@ class Oracle:
         mode = self.mode()
         prev = self.states[-1] if self.states else None
         cause = prev.cause if prev is not None and prev.mode == mode and label not in ("power on", "ready") else label
-        self.states.append(State(t, label, mode, intervals, step, cause, nvm["throttle_source"], self.model.bitrate))
+        self.states.append(State(t, label, mode, intervals, step, cause, nvm["throttle_source"], self.model.state.bitrate))

@@ -324,7 +324,7 @@ case("exp8_power_ups_from_zero", lambda h: exp_reports(h, "msg_exp8")[0].fields[
 def exp_run_times(host) -> tuple:
     host.wait_until(0.3)
     host.esc(1).nvm["total_run_time"] = 12.5  # an ESC with a past: 12.5 s in all, 3.25 s this session
-    host.esc(1).run_time = 3.25
+    host.esc(1).state.run_time = 3.25
     exp9, exp10 = exp_reports(host, ("msg_exp9", "msg_exp10"))
     return exp9.fields["total_run_time"], exp10.fields["run_time"]
 

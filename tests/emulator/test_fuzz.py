@@ -178,7 +178,7 @@ def test_model_survives_random_traffic_and_keeps_reporting(frames):
         assert not names
         node = 0x7D
     else:
-        assert 20050 in names and esc.can_test is False  # MSG1 again
+        assert 20050 in names and esc.state.can_test is False  # MSG1 again
         node = esc.node_id
     esc.receive(_host("self_test", {}, destination=node), now + 1.2)
     answers = run(esc, now + 1.3)
@@ -259,7 +259,7 @@ def test_sim_bus_survives_random_messages(messages):
             if m is not None and m.is_rx:
                 heard.append(m)
         reporting = {m.arbitration_id & 0x7F for m in heard if (m.arbitration_id >> 8) & 0xFFFF == 20050}
-        expected = {e.node_id for e in bus.bench.escs if e.node_id != 0x7D and e.bitrate == 500_000}
+        expected = {e.node_id for e in bus.bench.escs if e.node_id != 0x7D and e.state.bitrate == 500_000}
         assert reporting == expected
         for esc in bus.bench.escs:
             check_settings_legal(esc)

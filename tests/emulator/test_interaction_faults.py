@@ -207,7 +207,7 @@ def _(esc: Esc):
         return esc.call("maintenance_information", {"option": 2})["power_ups"] - before
     plain = counted()
     esc.call("set_baud", {"baud": 2})
-    esc.model.bitrate = 250_000  # (the model's bit rate is the adapter's business: this driver has none)
+    esc.model.state.bitrate = 250_000  # (the model's bit rate is the adapter's business: this driver has none)
     return plain, counted()
 
 

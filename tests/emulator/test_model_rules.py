@@ -914,7 +914,7 @@ def test_get_rec_reports_records_and_clear_rec_clears_them(lane):
     host.send("get_rec", {"payload": []}, destination=1)
     frames = host.collect(host.now + 0.01)
     cleared = _records(frames)
-    now_mos = host.esc(1).temps["mos"]
+    now_mos = host.esc(1).state.temps["mos"]
     assert cleared[2]["t_max"] <= int(now_mos) < recs[2]["t_max"]
 
 

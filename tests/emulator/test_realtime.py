@@ -30,6 +30,7 @@ from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_me
 from ckesc.bench.dut import echo_probe
 from ckesc.bench.lanes import BusLane
 from ckesc.bench.power import NoPower
+from ckesc.bench.profile import DEFAULT_BUS_ERROR_S
 from ckesc.cli import main
 from ckesc.emulator.control import control_request
 from ckesc.emulator.emulated_bench import EmulatedBench
@@ -279,7 +280,7 @@ def test_frames_due_at_one_instant_all_arrive(emulator, echo):
     and no report is missing: each node's MSG1..MSG3 keep their interval throughout."""
     emu = emulator("--nodes", ",".join(map(str, ALIGNED)), "--boot-spread", "0", *(() if echo else ("--no-echo-own",)))
     lane = BusLane({"interface": "socketcand", "host": "127.0.0.1", "port": emu.port, "channel": "can0", "tcp_tune": True,
-                    "ignore_config": True}, NoPower(), timing_error=0.002)
+                    "ignore_config": True}, NoPower(), timing_error=DEFAULT_BUS_ERROR_S)
     try:
         assert lane.find_echo(echo_probe()) is echo, lane.echo_note
         bus = Recorder(lane)  # every frame the lane's recv() hands out

@@ -149,13 +149,13 @@ def test_rejected_answer_answers_an_illegal_or_refused_request_so_and_applies_no
 def test_over_max_throttle(choice, throttle):
     esc = Esc(over_max_throttle=choice)
     esc.send("raw_command_14b", {"channels": [500, 0, 0, 0]}, service=False)
-    assert esc.model.can_throttle == 500
+    assert esc.model.state.can_throttle == 500
     esc.send("raw_command_14b", {"channels": [3000, 0, 0, 0]}, service=False)
-    assert esc.model.can_throttle == throttle
-    assert not esc.model.comm_fault  # the frame still counts as a command
+    assert esc.model.state.can_throttle == throttle
+    assert not esc.model.state.comm_fault  # the frame still counts as a command
     esc.send("raw_command_10b", {"channels": [250, 0, 0, 0, 0, 0]}, service=False)
     esc.send("raw_command_10b", {"channels": [1010, 0, 0, 0, 0, 0]}, service=False)
-    assert esc.model.can_throttle == {"clamp": 2000, "hold": 500, "zero": 0}[choice]
+    assert esc.model.state.can_throttle == {"clamp": 2000, "hold": 500, "zero": 0}[choice]
 
 
 @pytest.mark.parametrize("choice, names, exp1_gap, exp7_gap", [
@@ -180,7 +180,7 @@ def test_exp_frames_chooses_which_msg_exp_frames_come_and_how_often(choice, name
                                                           ("truncate", 25, 5056)])
 def test_value_rounding(choice, temperature, voltage):
     esc = Esc(value_rounding=choice)
-    esc.model.temps["mos"] = 25.6
+    esc.model.state.temps["mos"] = 25.6
     esc.model._electrical = lambda: (50.5678, 0.0)  # a voltage between two hundredths, without noise
     msg2 = [f for f in esc.run(esc.now + 0.11) if f.name == "msg2"][-1]
     assert (msg2.fields["temperature"], msg2.fields["voltage"]) == (temperature, voltage)
@@ -211,7 +211,7 @@ def test_led_blink_other(choice):
     esc.send("set_led", {"option": 0, "color": 4, "blink": 1})
     (answer,) = esc.answers(esc.send("set_led", {"option": 0, "color": 2, "blink": 3}), "set_led")
     expected = (2, 0) if choice == "no_blink" else (4, 1)
-    assert (esc.model.led_color, esc.model.led_blink) == expected
+    assert (esc.model.state.led_color, esc.model.state.led_blink) == expected
     assert (answer.fields["color"], answer.fields["blink"]) == expected
 
 

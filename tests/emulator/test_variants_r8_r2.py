@@ -36,7 +36,7 @@ def _run(esc: EscModel, until: float, trace: list) -> None:
     decoder = Decoder()
     while (t := esc.next_deadline()) is not None and t <= until:
         out = esc.poll(t)
-        trace.append((t, esc.comm_fault, [decoder.decode(w) for w in out]))
+        trace.append((t, esc.state.comm_fault, [decoder.decode(w) for w in out]))
     esc.poll(until)
 
 
@@ -49,7 +49,7 @@ def _flag_onset(check: str, phase: float) -> tuple[float, float]:
     from the last command."""
     esc = _esc(comm_loss_check=check)
     trace: list = []
-    boot = esc.ready_at
+    boot = esc.state.ready_at
     _run(esc, boot + 0.2, trace)
     last = boot + 0.2 + phase
     _run(esc, last, trace)
@@ -96,22 +96,22 @@ def test_an_msg1_check_still_raises_the_flag_while_nothing_is_reported():
     """Reporting suspended (no MSG1 is due): the flag (and the lost-signal throttle cut) comes on its timer."""
     esc = _esc(comm_loss_check="msg1")
     trace: list = []
-    _run(esc, esc.ready_at + 0.1, trace)
-    _command(esc, esc.ready_at + 0.1)
-    esc.receive(encode("msg_control", {"option": 0, "command": 0x55555555}, source=0, transfer_id=0), esc.ready_at + 0.1)
+    _run(esc, esc.state.ready_at + 0.1, trace)
+    _command(esc, esc.state.ready_at + 0.1)
+    esc.receive(encode("msg_control", {"option": 0, "command": 0x55555555}, source=0, transfer_id=0), esc.state.ready_at + 0.1)
     trace.clear()
-    _run(esc, esc.ready_at + 0.4, trace)
+    _run(esc, esc.state.ready_at + 0.4, trace)
     raised = next(t for t, fault, _ in trace if fault)
-    assert abs(raised - (esc.ready_at + 0.1 + COMM_LOSS_TIMEOUT_S)) < 1e-9
+    assert abs(raised - (esc.state.ready_at + 0.1 + COMM_LOSS_TIMEOUT_S)) < 1e-9
 
 
 def _answer_delays(place: str, n: int = 8, bitrate: int = BITRATE) -> list[float]:
     """Request (GET_ESC_ID query) to answer (its due time: when it goes on the bus if the bus is free), ``n`` times."""
     esc = _esc(answer_place=place)
-    esc.bitrate = bitrate
+    esc.state.bitrate = bitrate
     trace: list = []
     out = []
-    t = esc.ready_at + 0.0051
+    t = esc.state.ready_at + 0.0051
     for i in range(n):
         _run(esc, t, trace)
         esc.receive(encode("get_esc_id", {"option": 0}, source=0, transfer_id=i % 32, layout="query"), t)

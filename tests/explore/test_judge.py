@@ -88,7 +88,7 @@ def _judged_against(config: dict, host: list[tuple[str, dict, int | None, float]
         oracle.host_frame(msg)
     run_to(until)
     oracle.finish(until)
-    ends = [w._replace(timestamp=w.timestamp + frame_bits(len(w.data)) / esc.bitrate) for w in sent]  # ends, as on a bus
+    ends = [w._replace(timestamp=w.timestamp + frame_bits(len(w.data)) / esc.state.bitrate) for w in sent]  # ends, as on a bus
     frames = [decoder.decode(w) for w in ends]
     return judge(oracle, frames, 0.0, until, Params()), frames
 

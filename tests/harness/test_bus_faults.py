@@ -26,7 +26,7 @@ from ckesc.bench import lanes
 from ckesc.bench.dut import Dut
 from ckesc.bench.lanes import BenchGone, BusFault, BusLane
 from ckesc.bench.power import NoPower
-from ckesc.bench.profile import DutProfile
+from ckesc.bench.profile import DEFAULT_BUS_ERROR_S, DutProfile
 from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.emulator.realtime import RealtimeEmulator
 
@@ -48,7 +48,7 @@ def flaky(monkeypatch):
         emu_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True, ignore_config=True)
         emu = RealtimeEmulator(EmulatedBench((1,)), bus=emu_bus, own_bus=True).start()
         lane = BusLane({"interface": "flaky-virtual", "channel": channel, "fail_after": fail_after, "recover": recover,
-                        "ignore_config": True}, NoPower(), timing_error=0.002)
+                        "ignore_config": True}, NoPower(), timing_error=DEFAULT_BUS_ERROR_S)
         made.append((emu, lane))
         dut = Dut(lane, DutProfile.load("emulator"), node_id=1)
         assert dut.wait_for("msg1", 3.0) is not None  # the emulated ESC has booted

@@ -16,7 +16,7 @@ widened to 0.3 s so that the queries (one every 128 ms while nothing answers) al
 from __future__ import annotations
 
 from ckesc.bench.dut import Dut
-from ckesc.bench.profile import DutProfile
+from ckesc.bench.profile import DEFAULT_BUS_ERROR_S, DutProfile
 from ckesc.bench.realtime_lane import RealtimeEmulatorLane
 from ckesc.bench.station import MULTI_NODES
 from ckesc.protocol import catalogue as cat
@@ -32,7 +32,7 @@ def esc_id_sources(d: Dut) -> list[int]:
 
 
 def test_a_staggered_bench_is_found_whole_and_waited_for_after_a_power_cycle():
-    lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=0.002, esc_options={"boot_spread": SPREAD_S})
+    lane = RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=DEFAULT_BUS_ERROR_S, esc_options={"boot_spread": SPREAD_S})
     try:
         profile = DutProfile.load("emulator")
         d = Dut(lane, profile, node_id=None)  # right after the bench was switched on: every ESC still booting

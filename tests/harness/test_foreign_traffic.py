@@ -99,7 +99,7 @@ def test_the_esc_ignores_what_is_not_for_it():
             else:
                 assert spec is not None and spec.name in cat.ESC_REPORT_FRAMES, f"the ESC answered a foreign frame: {out}"
     assert esc.nvm == before, "a foreign frame changed a setting"
-    assert esc.last_command is None, "a foreign frame counted as a command (no comm refresh, R17/R8)"
+    assert esc.state.last_command is None, "a foreign frame counted as a command (no comm refresh, R17/R8)"
     assert esc.counters["rx_foreign"] > 0 and esc.counters["rx_malformed"] > 0
     assert len(queries) == 10 and len(replies) == 10
     assert all(0 < r - q <= cat.ANSWER_DELAY_MAX_S for q, r in zip(queries, replies))

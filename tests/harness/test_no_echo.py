@@ -29,7 +29,7 @@ from procs import env as _env
 from ckesc.bench.dut import Dut, echo_probe
 from ckesc.bench.lanes import BusLane, OwnFrame
 from ckesc.bench.power import NoPower
-from ckesc.bench.profile import DutProfile
+from ckesc.bench.profile import DEFAULT_BUS_ERROR_S, DutProfile
 from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.emulator.realtime import RealtimeEmulator
 from ckesc.evidence.live import LaneRules
@@ -49,7 +49,7 @@ def bench():
         emu_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True, ignore_config=True)
         emu = RealtimeEmulator(EmulatedBench((1,)), bus=emu_bus, own_bus=True).start()
         lane = BusLane({"interface": "virtual", "channel": channel, "receive_own_messages": echo, "ignore_config": True},
-                       NoPower(), timing_error=0.002)
+                       NoPower(), timing_error=DEFAULT_BUS_ERROR_S)
         rules = LaneRules(lane)
         lane.listeners.append(rules)
         made.append((emu, lane))
@@ -67,7 +67,7 @@ def test_the_lane_finds_out_whether_its_frames_come_back(bench, echo):
     assert lane.find_echo(echo_probe()) is echo
     assert lane.echo is echo
     assert lane.own_clock == ("bus timestamp" if echo else "host clock")
-    assert lane.own_error == pytest.approx(0.002 if echo else 0.004)
+    assert lane.own_error == pytest.approx(DEFAULT_BUS_ERROR_S if echo else 2 * DEFAULT_BUS_ERROR_S)  # + the host's send error
     assert ("came back" in lane.echo_note) is echo
 
 

@@ -17,6 +17,7 @@ import ast
 from collections import Counter
 from pathlib import Path
 
+from ckesc.bench.profile import DEFAULT_BUS_ERROR_S
 from ckesc.protocol import catalogue as cat
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -29,13 +30,10 @@ _NOISE = "float noise in a comparison or a rounding, not a tolerance"
 _EMULATOR = "the emulator's own behaviour (what it plays), not a limit any judgement holds a DUT to"
 #: (file, literal) -> (how many, why it is not a rule's tolerance)
 ALLOWED: dict[tuple[str, str], tuple[int, str]] = {
-    ("ckesc/bench/lanes.py", "0.002"): (1, "HOST_SEND_ERROR_S: the host clock's stated error at send (a bench's error)"),
-    ("ckesc/bench/profile.py", "0.002"): (1, "DEFAULT_BUS_ERROR_S: the bench's stated timing error a real bus takes when "
-                                                "its profile states none (said in the run), not a rule's tolerance"),
+    ("ckesc/bench/profile.py", "0.002"): (1, "DEFAULT_BUS_ERROR_S: a real bench's timing error, written once "
+                                                "(test_the_bench_error_is_written_once), not a rule's tolerance"),
     ("ckesc/bench/dut.py", "0.2"): (1, "OUTPUT_SETTLE_S: a test allowance for a ramping throttle output, not R8's 200 ms"),
     ("ckesc/bench/link.py", "0.0025"): (1, "throttle_stream's default period: the harness's command rate"),
-    ("ckesc/bench/realtime_lane.py", "0.002"): (1, "the real-time lane's stated timing error (a bench's error)"),
-    ("ckesc/bench/station.py", "0.002"): (1, "the real-time lane's least stated timing error (a bench's error)"),
     ("ckesc/emulator/config.py", "0.0005"): (1, _EMULATOR),
     ("ckesc/emulator/model.py", "0.007"): (1, _EMULATOR),
     ("ckesc/emulator/esc_output.py", "0.001"): (1, _EMULATOR),
@@ -98,8 +96,47 @@ def test_no_tolerance_literal_outside_the_catalogue_and_the_judgements():
     assert not gone, f"allowed literals no longer there (take them out of ALLOWED): {dict(gone)}"
 
 
+#: where a real bench's timing error is written (issue #28): its one owner, with its reason
+BENCH_ERROR_OWNER = "ckesc/bench/profile.py"
+#: keyword arguments that state a bench's error: the project's tests pass the constant, not its value
+ERROR_KEYWORDS = {"timing_error", "host_send_error", "error_s"}
+
+
+def _bench_errors(path: Path, rel: str) -> list[int]:
+    """Lines of ``path`` that write the bench's error as a number: in the package and the suite, its value anywhere
+    (the catalogue's 2 ms are protocol facts: the R2 slot, the report interval's unit); in the project's tests, a
+    number passed as a bench's error (``timing_error=0.002``: the rest of their 2 ms are the R2 slot's)."""
+    value = DEFAULT_BUS_ERROR_S
+    lines = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if rel.startswith("tests/"):
+            if isinstance(node, ast.keyword) and node.arg in ERROR_KEYWORDS and isinstance(node.value, ast.Constant) \
+                    and node.value.value == value:
+                lines.append(node.value.lineno)
+        elif isinstance(node, ast.Constant) and isinstance(node.value, float) and node.value == value:
+            lines.append(node.lineno)
+    return sorted(lines)
+
+
+def test_the_bench_error_is_written_once():
+    """A real bench's 2 ms timing error (the default on a real bus, the real-time lane's least, the host's send error)
+    is :data:`ckesc.bench.profile.DEFAULT_BUS_ERROR_S`, and everything else imports it: a second copy fails here."""
+    found = {}
+    for base in ("ckesc", "conformance", "tests"):
+        for path in sorted((ROOT / base).rglob("*.py")):
+            rel = path.relative_to(ROOT).as_posix()
+            if rel != "ckesc/protocol/catalogue.py" and (lines := _bench_errors(path, rel)):
+                found[rel] = lines
+    assert len(found.pop(BENCH_ERROR_OWNER, [])) == 1, f"{BENCH_ERROR_OWNER} no longer writes DEFAULT_BUS_ERROR_S once"
+    assert not found, (f"the bench's error {DEFAULT_BUS_ERROR_S} written again (import DEFAULT_BUS_ERROR_S from "
+                       f"ckesc.bench.profile, or name another figure with its reason): {found}")
+
+
 def test_the_scan_sees_what_it_counts(tmp_path):
     """The scan itself: each kind it counts is seen (a scan that sees nothing would pass anything)."""
     src = tmp_path / "x.py"
     src.write_text("a = b <= 0.001\nc = gaps[2:]\nd = 1.25 * x\ne = t > 0.064\nf = 0.5\ng = s[1:]\n")
     assert sorted(_found(src)) == sorted(["0.001", "[2:]", "1.25 *", "0.064"])
+    assert _bench_errors(src, "ckesc/x.py") == [] and _bench_errors(src, "tests/x.py") == []
+    src.write_text("a = 0.002\nlane = Lane(timing_error=0.002)\nslot = n * 0.002\n")
+    assert _bench_errors(src, "ckesc/x.py") == [1, 2, 3] and _bench_errors(src, "tests/x.py") == [2]

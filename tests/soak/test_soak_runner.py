@@ -15,7 +15,7 @@ def test_an_interrupted_soak_that_spun_the_motor_leaves_its_throttle_at_zero(tmp
 
     def closing(self: Station) -> None:  # the emulated ESC's throttle as the lane closes
         if self.lane is not None:
-            seen["throttle"] = [esc.can_throttle for esc in self.lane.sim.bench.escs]
+            seen["throttle"] = [esc.state.can_throttle for esc in self.lane.sim.bench.escs]
         close(self)
 
     monkeypatch.setattr(Station, "close", closing)
