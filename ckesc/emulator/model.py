@@ -19,7 +19,6 @@ from __future__ import annotations
 import copy
 import heapq
 import random
-from collections import deque
 from typing import Any, Callable
 
 from ..protocol import catalogue as cat
