@@ -177,7 +177,10 @@ def _modules(doc: dict) -> set[str]:
     return {r["nodeid"].split("::")[0] for r in doc["results"]}
 
 
-@pytest.mark.parametrize("how", ["sections", "relative", "relative-with-test", "absolute", "from-elsewhere"])
+@pytest.mark.parametrize("how", [
+    # CI: a section number and a relative path with a test; the other spellings behind -m slow
+    "sections", pytest.param("relative", marks=pytest.mark.slow), "relative-with-test",
+    pytest.param("absolute", marks=pytest.mark.slow), pytest.param("from-elsewhere", marks=pytest.mark.slow)])
 def test_sections_and_module_paths_select_just_those(tmp_path, how):
     freq = "conformance/test_s4_4_22_set_freq.py"
     args, cwd = {

@@ -268,6 +268,7 @@ def test_a_bench_whose_dut_goes_dark_or_whose_worker_dies_is_reported_and_the_ot
 PLANNED = ("4.4.18", "4.4.19", "4.4.21", "4.4.22")
 
 
+@pytest.mark.slow  # two batches of four sections each; CI keeps the batch's reports, failures and Ctrl-C (above)
 def test_a_bench_in_a_batch_runs_its_plan_as_it_does_alone(tmp_path):
     """Issue #21: each bench of a batch runs in the same order, with the same shared windows and cold boots, as the
     bench alone (the run-order plan in every xdist worker), so its protocol time is the same to the millisecond."""

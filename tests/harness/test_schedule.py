@@ -150,6 +150,7 @@ def test_overlap_order_shares_windows_and_changes_no_verdict(overlap_run, tmp_pa
     assert epochs and all("error" not in e and e["traces"] for e in epochs)
 
 
+@pytest.mark.slow  # a third whole run; CI keeps the plan's order against collection order (above)
 def test_random_order_changes_no_verdict(overlap_run, tmp_path):
     """pytest-randomly shuffles the collection; the plan keeps its kinds apart, and every test's verdict
     is the same as in the plugin's own order."""
@@ -168,7 +169,10 @@ def test_a_window_test_alone_opens_its_own_window(tmp_path):
     assert r["lane_seconds"] > W - 1.0  # it sat the window out, as before
 
 
-@pytest.mark.parametrize("fault", ["config_window_short", "set_id_after_window", "set_baud_after_window"])
+@pytest.mark.parametrize("fault", [
+    # CI: one of the three (a whole-window run each); the other two behind -m slow
+    pytest.param("config_window_short", marks=pytest.mark.slow), "set_id_after_window",
+    pytest.param("set_baud_after_window", marks=pytest.mark.slow)])
 def test_window_faults_are_caught_in_overlap_order(tmp_path, fault):
     doc = _ckesc_run(tmp_path, "4.4.18", "4.4.19", "4.4.20", "--emulator-faults", fault)
     failed = {r["nodeid"].split("::")[1] for r in doc["results"] if r["outcome"] == "FAIL"}

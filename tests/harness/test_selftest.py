@@ -26,6 +26,7 @@ from ckesc.selftest import (
     judge,
     run_suite,
     run_variant,
+    scope_targets,
     selftest,
     table,
     variant_matrix,
@@ -48,8 +49,24 @@ KNOWN: dict[str, str] = {
 SOAK_IN_CI = "comm_flag_glitch"
 
 
-def check(scope: str) -> None:
-    faults = [f for f, spec in FAULTS.items() if spec.kind != SOAK or scope == "full" or f == SOAK_IN_CI]
+def rule_cover() -> list[str]:
+    """CI's representative faults: a greedy cover of every rule some fault breaks (each pick the fault breaking the
+    most rules not yet covered, then the one whose cited modules are fewest, then by name), the faults KNOWN to be
+    caught uncleanly, and the soak fault CI proves missed. Computed from the fault table, so a new rule's fault
+    joins it; the slow full scope runs every fault against the whole suite."""
+    faults = {n: f for n, f in sorted(FAULTS.items()) if f.kind != SOAK}
+    left = {r for f in faults.values() for r in f.rules}
+    picked: list[str] = []
+    while left:
+        best = max(faults, key=lambda n: (len(set(faults[n].rules) & left), -len(scope_targets(n, "cited"))))
+        picked.append(best)
+        left -= set(faults[best].rules)
+    return [*picked, *(set(KNOWN) - set(picked)), SOAK_IN_CI]
+
+
+def check(scope: str, faults: list[str] | None = None) -> None:
+    if faults is None:
+        faults = [f for f, spec in FAULTS.items() if spec.kind != SOAK or scope == "full" or f == SOAK_IN_CI]
     runs = selftest(faults, jobs=os.cpu_count() or 2, scope=scope)
     out = Path(__file__).resolve().parents[2] / "reports" / "selftest"
     out.mkdir(parents=True, exist_ok=True)
@@ -65,6 +82,15 @@ def check(scope: str) -> None:
 
 
 @pytest.mark.timeout(1800)
+def test_a_fault_of_every_rule_is_caught_where_its_rules_are_cited():
+    """CI's subset (:func:`rule_cover`: about a third of the faults' runs, every rule a fault breaks among them)."""
+    faults = rule_cover()
+    assert {r for f in faults for r in FAULTS[f].rules} >= {r for f in FAULTS.values() if f.kind != SOAK for r in f.rules}
+    check("cited", faults)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600)
 def test_every_fault_is_caught_where_its_rules_are_cited():
     check("cited")
 
