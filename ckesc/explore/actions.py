@@ -376,13 +376,14 @@ def malformed(bench: Bench, names: tuple[str, ...] = MALFORMED, toggle: bool = T
     toggle 1 of a frame type the DUT answers (R17-toggle)."""
     from hypothesis import strategies as st
 
-    def forms(name: str) -> list[str]:
-        spec = cat.spec(name)
-        extra = (r17.TOGGLE,) if toggle and name in TOGGLED else ()
-        return [f for f in (*r17.FORMS, *extra) if r17.applies(spec, f)]
+    def names_of(form: str) -> list[str]:
+        return [n for n in (TOGGLED if form == r17.TOGGLE else names) if n in names and r17.applies(cat.spec(n), form)]
 
-    return st.sampled_from(names).flatmap(lambda n: st.builds(
-        lambda fields, form: Action("malformed", n, fields, form=form), _command(n, bench), st.sampled_from(forms(n))))
+    # the class first, then a frame type it applies to: each class as often as another (a request to another node,
+    # a response frame: services only, as often as a start frame, which every frame type with a tail has)
+    forms = [f for f in (*r17.FORMS, *((r17.TOGGLE,) if toggle else ())) if names_of(f)]
+    return st.sampled_from(forms).flatmap(lambda form: st.sampled_from(names_of(form)).flatmap(lambda n: _command(n, bench).map(
+        lambda fields: Action("malformed", n, fields, form=form))))
 
 
 def programs(bench: Bench, max_size: int = 12):

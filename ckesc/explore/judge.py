@@ -287,19 +287,16 @@ def _fields(f: Frame) -> str:
 # ------------------------------------------------------------------------------------------ malformed frames (R17)
 def _r17_answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, paired: set[int]) -> list[Finding]:
     """R17: no answer to a malformed or foreign frame. A frame of the DUT of its type, not a report, within the answer
-    time of it, that answers no host frame (``paired``) and that the model did not send then (its answer to a valid
-    command just before); a response only with the malformed frame's transfer id (F4's pairing)."""
+    time of it, that answers no host frame (``paired``: the valid command's answer, judged or free); a response only
+    with the malformed frame's transfer id (F4's pairing)."""
     out = []
     seen: set[int] = set()
-    model = [(f.timestamp, f.type_id) for f in oracle.out if f.source != p.host_node and _stream_of(f) is None]
     slack = _ECHO_SLACK_S + 2 * p.error if p.error else 0.0
     for m in oracle.malformed:
         for f in _frames_between(dut, m.t - slack, m.t + ANSWER_WAIT_S + 2 * p.error):
             if (id(f) in seen or id(f) in paired or f.type_id != m.type_id or _stream_of(f) is not None
                     or f.kind is Kind.REQUEST or (f.kind is Kind.RESPONSE and m.transfer_id is not None
                                                   and f.transfer_id != m.transfer_id)):
-                continue
-            if any(t_ == f.type_id and abs(t - f.timestamp) <= ANSWER_WAIT_S + 2 * p.error for t, t_ in model):
                 continue
             seen.add(id(f))
             out.append(Finding("answer", ["R17"], f"{f.name} {f.kind.label} to a malformed frame: {m.what}",

@@ -397,7 +397,7 @@ class Session:
         dut.wait(cat.ANSWER_DELAY_MAX_S + 0.006 + 2 * self.lane.timing_error)
         if action.form == r17.TOGGLE and bads:
             b = bads[0]
-            answered = any(f.source == node and f.name == action.name and f.kind is not Kind.REQUEST
+            answered = any(f.source != dut.host_node and f.name == action.name  # (Set ID answers from its new id) and f.kind is not Kind.REQUEST
                            and (f.kind is Kind.MESSAGE or f.transfer_id == b.transfer_id) for f in dut.trace[heard:])
             entries = self._malformed.get(keys[0], [])
             if answered and entries:

@@ -20,6 +20,7 @@ from typing import Callable, Iterable
 from . import catalogue as cat
 from .frame import WireFrame, encode
 from .ids import ESC_NODE_IDS, Kind, parse_can_id, service_id
+from .judgements import asked_node
 from .transfer import TRANSFER_ID_MODULO, multi_frame, tail_byte
 
 #: classic CAN's most data bytes (a frame one byte longer than its table is sent where it fits)
@@ -97,7 +98,9 @@ def applies(spec: cat.FrameSpec, form: str) -> bool:
         return bool(layout.size)
     if form == LONG:
         return layout.size is not None and layout.size + spec.has_tail < MAX_DATA
-    if form in (OTHER_NODE, RESPONSE):
+    if form == OTHER_NODE:  # (Set ID ignores the destination, R11: a pseudo-broadcast, taken from any)
+        return spec.service and asked_node(spec.name, 0) is not None
+    if form == RESPONSE:
         return spec.service
     return form == EMPTY
 
