@@ -244,7 +244,9 @@ def test_the_budget_bounds_shrinking_too():
     (a clock that ticks once per program: deterministic, whatever the machine's load): a finding shown early
     in a budget too short to shrink it is kept as found so far and says so, the run ends within the budget (and
     the program running when it ran out), and the shrinking was announced with the time it has (~2 s)."""
-    session = Session({"emulator_faults": "second_suspend_latches"})
+    # a fault seed 1 shows early (after 6 programs, in a 33-step program: since the explorer draws R17's malformed
+    # frames, second_suspend_latches shows after 29)
+    session = Session({"emulator_faults": "short_raw_command_padded"})
     ran = [0]
     run = session.run
 
