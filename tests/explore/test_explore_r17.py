@@ -3,7 +3,7 @@
 The model ignores a malformed frame (R17), so whatever the DUT does on one is a finding citing R17: an answer, a
 setting or mode changed, a comm refresh, a reset. Here: each R17 fault of the emulator shows on a one-step program
 (the explorer's shrunk program for it, run on the DUT), and not on the faultless emulator; exploration from a fixed
-seed finds each R17 fault (in CI the one seed 1 finds soonest, the others ``slow``); a single frame with toggle 1
+seed finds each R17 fault (in CI one, from the seed that finds it soonest; every one from seed 1 ``slow``); a single frame with toggle 1
 (R17-toggle, OBSERVE) is followed as the DUT took it, and the faultless emulator and the variant that takes it give
 no finding for any R17 class of any frame type (random programs on both: ``test_explore.py``'s conforming runs).
 """
@@ -81,10 +81,10 @@ def test_each_r17_fault_shows_as_a_finding_citing_r17(fault):
     assert any(words in f.what for f in findings), "\n".join(f.text() for f in findings)
 
 
-def _found(fault: str, max_programs: int, shrink_s: float | None = None) -> None:
+def _found(fault: str, max_programs: int, shrink_s: float | None = None, seed: int = SEED) -> None:
     session = Session({"emulator_faults": fault})
     try:
-        found, stats = explore(session, seed=SEED, database=None, budget_s=600, max_programs=max_programs,
+        found, stats = explore(session, seed=seed, database=None, budget_s=600, max_programs=max_programs,
                                stop_at_first=True, shrink_s=shrink_s)
     finally:
         session.close()
@@ -96,14 +96,16 @@ def _found(fault: str, max_programs: int, shrink_s: float | None = None) -> None
 
 # fault -> programs within which seed 1 finds it (found after, 2026-11-27: reset_on_multi_frame_start 7,
 # destination_low_bits 7, takes_multi_frame_start 27, wrong_length_taken 54, short_raw_command_padded 171)
-R17_FAST = {"destination_low_bits": 40}
-R17_SLOW = {"reset_on_multi_frame_start": 40, "takes_multi_frame_start": 100, "wrong_length_taken": 150,
-            "short_raw_command_padded": 400}
+R17_SLOW = {"reset_on_multi_frame_start": 40, "destination_low_bits": 40, "takes_multi_frame_start": 100,
+            "wrong_length_taken": 150, "short_raw_command_padded": 400}
+#: in CI: one fault, from the seed that finds it in the fewest wall seconds (seed 3: after 8 programs, about 7 s)
+R17_FAST = {"reset_on_multi_frame_start": (3, 40)}
 
 
 @pytest.mark.parametrize("fault", sorted(R17_FAST))
 def test_explore_finds_an_r17_fault(fault):
-    _found(fault, R17_FAST[fault], shrink_s=3.0)  # found is the point here; shrinking costs CI time
+    seed, max_programs = R17_FAST[fault]
+    _found(fault, max_programs, shrink_s=1.0, seed=seed)  # found is the point here; shrinking costs CI time
 
 
 @pytest.mark.slow
