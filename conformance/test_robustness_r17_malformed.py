@@ -32,10 +32,11 @@ import pytest
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import Kind, Status
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.frame import WireFrame, encode
-from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, ESC_NODE_IDS, parse_can_id, service_id
+from ckesc.protocol import malformed as r17
+from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, parse_can_id
 from ckesc.protocol.judgements import r8_flag_due
-from ckesc.protocol.transfer import TRANSFER_ID_MODULO, multi_frame, tail_byte
+from ckesc.protocol.malformed import Bad
+from ckesc.protocol.transfer import TRANSFER_ID_MODULO
 
 from .answers import answers_another_node, esc_ids, original, put_back
 from .baud import RATES, cycle, rate0
@@ -53,24 +54,12 @@ rate0 = rate0  # fixture: the DUT and the host put back at their bit rate after 
 WINDOW_WRITERS = frozenset(s.writer for s in cat.PERSISTED_SETTINGS if s.window)
 #: taking it erases the ESC's temperature records, which nothing reads back
 DESTRUCTIVE = frozenset({"clear_rec"})
-#: classic CAN's most data bytes (a frame one byte longer than its table is sent where it fits)
-MAX_DATA = 8
-TID_MASK = TRANSFER_ID_MODULO - 1
-#: the bits of a node id (F1: seven, 1..127)
-NODE_ID_BITS = max(ESC_NODE_IDS).bit_length()
 #: a read of the temperature records (Expand Set Part): taking it shows as MSG_EXP12 frames
 READ_RECORDS = next(c for c in cat.EXPAND_COMMANDS.values() if c.name == "read_temperature_records")
 
 
-def _host_layout(spec: cat.FrameSpec) -> cat.Layout | None:
-    """The layout of what the host sends of ``spec`` (None: the ESC takes no such frame from the host)."""
-    if spec.service:
-        return spec.request
-    return next((lay for lay in spec.layouts if lay.sender != "esc"), None)
-
-
 #: every frame type the ESC takes from the host, in the catalogue's order, less those not sent (module docstring)
-TAKEN = [s.name for s in cat.CATALOGUE if _host_layout(s) is not None and s.name not in WINDOW_WRITERS | DESTRUCTIVE]
+TAKEN = [s.name for s in cat.CATALOGUE if r17.host_layout(s) is not None and s.name not in WINDOW_WRITERS | DESTRUCTIVE]
 #: the persisted setting each writer moves
 _WRITES = {cat.PERSISTED[name].writer: name for name in NEIGHBOURS}
 
@@ -100,74 +89,16 @@ def command(dut, name: str, s: dict, value: int = 0) -> dict | None:
     return _COMMANDS[name](dut, s)
 
 
-@dataclass
-class Bad:
-    """One malformed frame (or a whole multi-frame transfer: several frames) and what it is."""
-
-    what: str
-    frames: list[WireFrame]
-    transfer_id: int | None
-
-    def __str__(self) -> str:
-        return f"{self.what} ({' '.join(str(w) for w in self.frames)})"
-
-
 def _other_nodes(dut) -> list[int]:
-    """Node ids no ESC of the bench has, each one bit away from the DUT's: an ESC that decodes fewer than the seven
-    bits of a destination takes a request to one of them."""
-    near = (dut.node_id ^ (1 << bit) for bit in range(NODE_ID_BITS))
-    return [n for n in dict.fromkeys(near) if n in ESC_NODE_IDS and n not in dut.nodes]
+    """Node ids no ESC of the bench has, each one bit away from the DUT's (:func:`ckesc.protocol.malformed.other_nodes`)."""
+    return r17.other_nodes(dut.node_id, dut.nodes)
 
 
 def malformed(dut, name: str, fields: dict, *, toggle_only: bool = False) -> list[Bad]:
-    """``name``'s command ``fields`` in every malformed form R17 names, each with its own transfer id; only the single
-    frame with toggle 1 (R17-toggle) when ``toggle_only``."""
-    spec = cat.spec(name)
-    kind = Kind.REQUEST if spec.service else Kind.MESSAGE
-    layout = "query" if name == "get_esc_id" else None
-    tids = iter(range(TRANSFER_ID_MODULO))
-
-    def wire(tid: int, destination: int | None = None) -> WireFrame:
-        node = (dut.node_id if destination is None else destination) if spec.service else None
-        return encode(spec, fields, kind=kind, source=dut.host_node, destination=node, transfer_id=tid, layout=layout,
-                      nibble_order=dut.profile.nibble_order)
-
-    def bad(what: str, data=lambda d: d, *, destination: int | None = None, response: bool = False,
-            whole: bool = False) -> Bad:
-        tid = next(tids)
-        w = wire(tid, destination)
-        can_id = w.arbitration_id
-        if response:  # the same frame with the request bit clear, from another node: a response the ESC never asked
-            i = parse_can_id(can_id)  # (from node 0 a bench whose echo is not told apart would take it for the DUT's)
-            can_id = service_id(i.priority, i.type_id, False, dut.node_id, _other_nodes(dut)[0])
-        # a whole transfer as DroneCAN splits it (7 bytes a frame), but that no frame of it has the table's 8 bytes:
-        # an ESC that takes a start frame would read the CRC as a command (a throttle, with no --allow-motor-spin)
-        chunk = MAX_DATA - 2 if len(w.data) == MAX_DATA else MAX_DATA - 1
-        datas = multi_frame(w.data[:-1], tid, chunk=chunk) if whole else [data(w.data)]
-        return Bad(what, [WireFrame(can_id, d) for d in datas], tid if spec.has_tail else None)
-
-    def tail(start: bool, end: bool, toggle: bool):
-        return lambda d: d[:-1] + bytes((tail_byte(d[-1] & TID_MASK, start=start, end=end, toggle=toggle),))
-
-    if toggle_only:
-        return [bad("single frame, toggle 1", tail(True, True, True))] if spec.has_tail else []
-    out: list[Bad] = []
-    if spec.has_tail:
-        out += [bad("multi-frame start frame (start=1 end=0)", tail(True, False, False)),
-                bad("multi-frame middle frame (start=0 end=0 toggle=1)", tail(False, False, True)),
-                bad("multi-frame end frame (start=0 end=1 toggle=1)", tail(False, True, True)),
-                bad("whole multi-frame transfer with DroneCAN's CRC", whole=True)]
-    out.append(bad("empty", lambda d: b""))
-    size = _host_layout(spec).size
-    if size is not None:  # Get Rec's payload is free: no wrong length
-        if size:  # Self Test's is empty: its tail byte alone, and "empty" is one byte short of it
-            out.append(bad("one byte short", lambda d: d[:-2] + d[-1:] if spec.has_tail else d[:-1]))
-        if len(wire(0).data) < MAX_DATA:
-            out.append(bad("one byte long", lambda d: d[:-1] + bytes(1) + d[-1:] if spec.has_tail else d + bytes(1)))
-    if spec.service and (others := _other_nodes(dut)):  # (none: every node id one bit away is an ESC of the bench)
-        out += [bad(f"request to node {n}", destination=n) for n in others]
-        out.append(bad(f"response frame from node {others[0]}", response=True))
-    return out
+    """``name``'s command ``fields`` in every malformed form R17 names (:func:`ckesc.protocol.malformed.malformed`),
+    each with its own transfer id; only the single frame with toggle 1 (R17-toggle) when ``toggle_only``."""
+    return r17.malformed(name, fields, source=dut.host_node, node_id=dut.node_id, others=_other_nodes(dut),
+                         nibble_order=dut.profile.nibble_order, toggle_only=toggle_only)
 
 
 def _status_bits(f) -> int:
@@ -389,8 +320,11 @@ def _elsewhere(dut, b: Bad) -> bool:
 
 
 def window_malformed(dut, name: str, fields: dict) -> list[Bad]:
-    """:func:`malformed`, less a pseudo-broadcast's (Set ID's) request to another node: that one it takes (R11)."""
-    return [b for b in malformed(dut, name, fields) if name not in cat.PSEUDO_BROADCAST or not _elsewhere(dut, b)]
+    """:func:`malformed` of a window writer: a pseudo-broadcast's (Set ID's) request to another node is one it takes
+    (R11), so the builders leave it out (``malformed.applies``)."""
+    bads = malformed(dut, name, fields)
+    assert name not in cat.PSEUDO_BROADCAST or not any(_elsewhere(dut, b) for b in bads)
+    return bads
 
 
 def _set_id_look(dut, request) -> tuple[list[Bad], list[str]]:

@@ -1,8 +1,10 @@
 """Host actions an exploration program is made of, generated from the frame catalogue (sans-IO).
 
 An :class:`Action` is plain data (JSON in a replay file): send one frame of the catalogue with given fields,
-start or stop a zero-throttle RawCommand stream, cycle the power, wait, or wait out the 120 s Set ID / Set
-Baud window (R11). :func:`programs` is the Hypothesis strategy of whole programs; the values of every
+send a command malformed or foreign in one of R17's classes (:mod:`ckesc.protocol.malformed`: a multi-frame
+fragment or transfer, a wrong length, a request to another node, a response frame; or, R17-toggle, a single frame
+with toggle 1), start or stop a zero-throttle RawCommand stream, cycle the power, wait, or wait out the 120 s Set
+ID / Set Baud window (R11). :func:`programs` is the Hypothesis strategy of whole programs; the values of every
 request field come from the catalogue (:func:`ckesc.protocol.legality.field_cases`: each legal code, the
 boundaries and their illegal neighbours) plus a random legal value, never written here by hand.
 
@@ -10,6 +12,9 @@ What is left out, and why (safety and what the oracle can follow):
 - non-zero throttle (the explorer never spins a motor; ``allow_motor_spin`` is not used yet);
 - Expand Set Part (222) and Clear Rec (224): they change motor settings or erase the temperature records,
   which no restore can put back; Get Rec (223): its payload and answer are OBSERVE (R15);
+- Set Baud malformed (a DUT that took one would move to another bit rate, which the host cannot follow: the model
+  never does), and a single frame with toggle 1 of CAN Test or a RawCommand (R17-toggle leaves taking it free, and
+  only an answer tells the runner which the DUT chose, so that the model follows it);
 - Set Baud to another legal code where the host cannot follow the DUT to it (a real bus without
   ``--can-bitrate-cmd``, or no power control to bring it back); where it can (the simulated lane, a bit-rate
   command), it is sent, and the runner moves the host to the DUT's new rate at the power-up that brings it into
@@ -27,6 +32,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Iterable
 
 from ..protocol import catalogue as cat
+from ..protocol import malformed as r17
 from ..protocol.ids import DEFAULT_ESC_NODE_ID
 from ..protocol.legality import field_cases
 
@@ -40,18 +46,25 @@ BROADCASTS = ("msg_control", "can_test", "get_esc_id")
 #: Fields a request always carries as the catalogue's default (one meaning only)
 _FIXED = {"get_major_configuration": {"option": 0}, "get_esc_id": {"option": 0}, "esc_information": {"option": 0},
           "msg_control": {"option": 0}, "can_test": {"count": 0}, "self_test": {"option": 0}}
+#: Frame types a program may send malformed or foreign (R17), each with a command that would show if taken
+MALFORMED = tuple(n for n in (*BROADCASTS, *SERVICES, *STREAMS) if n != "set_baud")
+#: Frame types whose single frame with toggle 1 a program may send (R17-toggle): those the DUT answers when it takes
+#: one (the runner follows its choice)
+TOGGLED = tuple(n for n in MALFORMED if n not in ("can_test", *STREAMS))
 #: Codes a field must keep inside (what the document leaves free elsewhere; see the module docstring)
 _ONLY = {("set_led", "blink"): tuple(cat.LED_BLINK)}
 
 
 @dataclass(frozen=True)
 class Action:
-    """One step of a program. ``op``: send | stream | stop | power | wait | window."""
+    """One step of a program. ``op``: send | malformed | stream | stop | power | wait | window. ``malformed``: the
+    command ``name`` ``fields`` sent in R17's class ``form`` (:mod:`ckesc.protocol.malformed`)."""
 
     op: str
     name: str = ""
     fields: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
+    form: str = ""
 
     def to_json(self) -> dict[str, Any]:
         return {k: v for k, v in asdict(self).items() if v not in ("", {}, 0.0) or k == "op"}
@@ -59,11 +72,13 @@ class Action:
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Action:
         return cls(op=data["op"], name=data.get("name", ""), fields=dict(data.get("fields", {})),
-                   seconds=float(data.get("seconds", 0.0)))
+                   seconds=float(data.get("seconds", 0.0)), form=data.get("form", ""))
 
     @property
     def feature(self) -> str:
         """What feature the step exercises, for the 'feature pairs exercised' count: the frame and its mode."""
+        if self.op == "malformed":
+            return f"malformed:{self.form}"
         if self.op != "send":
             return self.op
         for key in ("command", "option", "source", "rotation"):
@@ -75,6 +90,9 @@ class Action:
         if self.op == "send":
             shown = ", ".join(f"{k}={_show(v)}" for k, v in self.fields.items())
             return f"{self.name}({shown})"
+        if self.op == "malformed":
+            shown = ", ".join(f"{k}={_show(v)}" for k, v in self.fields.items())
+            return f"{self.name}({shown}) sent as: {r17.DESCRIPTIONS[self.form]}"
         if self.op == "stream":
             return f"stream {self.name} (zero throttle)"
         if self.op == "wait":
@@ -270,6 +288,8 @@ def families(bench: Bench) -> dict[str, Any]:
         "streams": one(st.sampled_from(STREAMS).map(lambda n: Action("stream", n)), st.just(Action("stop"))),
         "waits": one(st.sampled_from(bench.waits).map(lambda s: Action("wait", seconds=s))),
         "episodes": st.one_of(*episodes(bench)).filter(lambda ep: all(claimed(a) for a in ep)),
+        # R17: a command that would show if taken, sent in one of the classes the ESC ignores (or toggle 1)
+        "malformed": malformed(bench).map(lambda a: [a]),
     }
     if bench.power:
         out["power"] = one(st.just(Action("power")), *([st.just(Action("window"))] if bench.window_waits else []))
@@ -316,6 +336,11 @@ def episodes(bench: Bench) -> list[Any]:
     formats = [step for n in STREAMS for step in (Action("stream", n), Action("wait", seconds=0.3))]
     same = st.sampled_from(settings).flatmap(lambda n: legal_write(n, bench, same=True))
     decode = st.one_of(write, same).map(lambda w: [w, *formats, Action("stop")])
+    # R17 and R8: a comm loss, then a malformed zero-throttle RawCommand; one taken clears the flag (a comm refresh)
+    refresh = st.sampled_from(STREAMS).flatmap(
+        lambda n: malformed(bench, names=(n,), toggle=False).map(
+            lambda bad: [Action("stream", n), Action("wait", seconds=0.25), Action("stop"), Action("wait", seconds=0.6),
+                         bad, Action("wait", seconds=0.25)]))
     out = [comm_loss, suspend, exp, can_test, decode]
     if bench.power:
         counters = Action("send", "maintenance_information", {"option": 2})
@@ -323,7 +348,43 @@ def episodes(bench: Bench) -> list[Any]:
         # one or two saves, then a power-up: a save that clobbers the other's flash word shows after it
         save = st.sampled_from(saves).flatmap(lambda n: legal_write(n, bench, save=True))
         out.append(st.lists(save, min_size=1, max_size=2).map(lambda writes: [*writes, Action("power"), counters]))
+    out.append(refresh)
     return out
+
+
+def _command(name: str, bench: Bench):
+    """A Hypothesis strategy of a command of ``name`` that shows if it is taken: a mode change, a settings write (or
+    any request, its boundaries and illegal values), a read that is answered, zero on every channel."""
+    from hypothesis import strategies as st
+
+    if name in STREAMS:
+        return st.just(stream_fields(name))
+    if name == "msg_control":  # each answered (R2): a DUT that took one shows by its answer, R17-toggle's by it too
+        return st.sampled_from([cat.MSG_CONTROL_SUSPEND, cat.MSG_CONTROL_RESUME, cat.MSG_CONTROL_RESUME_EXP]).map(
+            lambda c: {"option": 0, "command": c})
+    if name == "can_test":
+        return st.sampled_from([cat.CAN_TEST_ON, cat.CAN_TEST_OFF]).map(lambda o: {"option": o, "count": 0})
+    sent = _request_fields(name, bench)
+    if name in ("set_freq", "set_rotation", "set_led", "throttle_select", "set_id"):
+        return st.one_of(legal_write(name, bench).map(lambda a: a.fields), legal_write(name, bench).map(lambda a: a.fields),
+                         sent)
+    return sent
+
+
+def malformed(bench: Bench, names: tuple[str, ...] = MALFORMED, toggle: bool = True):
+    """A Hypothesis strategy of one malformed step: a command of one of ``names`` (:func:`_command`) in one of R17's
+    classes that applies to it (:func:`ckesc.protocol.malformed.applies`), or with ``toggle`` a single frame with
+    toggle 1 of a frame type the DUT answers (R17-toggle)."""
+    from hypothesis import strategies as st
+
+    def names_of(form: str) -> list[str]:
+        return [n for n in (TOGGLED if form == r17.TOGGLE else names) if n in names and r17.applies(cat.spec(n), form)]
+
+    # the class first, then a frame type it applies to: each class as often as another (a request to another node,
+    # a response frame: services only, as often as a start frame, which every frame type with a tail has)
+    forms = [f for f in (*r17.FORMS, *((r17.TOGGLE,) if toggle else ())) if names_of(f)]
+    return st.sampled_from(forms).flatmap(lambda form: st.sampled_from(names_of(form)).flatmap(lambda n: _command(n, bench).map(
+        lambda fields: Action("malformed", n, fields, form=form))))
 
 
 def programs(bench: Bench, max_size: int = 12):
@@ -333,7 +394,7 @@ def programs(bench: Bench, max_size: int = 12):
     from hypothesis import strategies as st
 
     strategies = families(bench)
-    names = sorted(strategies)
+    names = sorted(n for n in strategies if n != "malformed") + ["malformed"]  # (R17's last: the order seed 1 was counted in)
 
     def from_subset(chosen: frozenset[str]):
         # an episode is a whole round trip where a single step is one action: drawn twice as often as one family

@@ -16,6 +16,12 @@ Observations compared (each a :class:`Finding` when they differ):
   with a frame's bus access, over the gaps; the DUT's jitter never widens the mean).
 - **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only), 13 and 8 against the model's MSG1s within one interval
   (R8's window for bit 13: the flag may come up to one MSG1 interval after the model's).
+- **malformed and foreign frames** (R17): the model ignores them, so whatever the DUT does on one differs: an
+  answer to one (a frame of its type, not a report, within the answer time, and for a response with its transfer
+  id), a restart of its reports across one (a report's transfer id not counting on, F3, or a gap longer than R9a's
+  restart bound: the ESC reset), and any other finding after the first of them in the program, which
+  :func:`cite_r17` makes cite R17 too (a setting, mode, suspension, LED or comm-loss flag the DUT changed on one
+  shows as its read-back, stream or MSG1 status finding; a power-up count grown, as 241's answer).
 The live bus rules (``evidence/live.py``) run beside this and are findings of their own (runner).
 """
 
@@ -42,7 +48,7 @@ from ..protocol.judgements import (
 )
 from ..protocol.requirements import requirement
 from .actions import asks_only
-from .oracle import Oracle, State
+from .oracle import Malformed, Oracle, State
 
 #: MSG1 status bits compared (R7): direction, throttle source, comm fault (R8), running
 STATUS_MASK = int(cat.STATUS_STATE_BITS)
@@ -84,7 +90,7 @@ _MIN_GAPS = 3
 
 @dataclass
 class Finding:
-    kind: str  # answer | stream | interval | status | bus_rule
+    kind: str  # answer | stream | interval | status | reset | bus_rule
     requirements: list[str]
     what: str
     dut: str
@@ -139,9 +145,12 @@ class Params:
 def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[Finding]:
     """Every disagreement between the DUT's frames (decoded, from the ESC, bus timestamps) and the model's."""
     dut = sorted((f for f in dut if f.source != p.host_node and f.timestamp is not None), key=lambda f: f.timestamp)
-    out = _answers(oracle, dut, t0, p)
+    paired: set[int] = set()
+    out = _answers(oracle, dut, t0, p, paired)
     out += _streams(oracle, dut, t0, t_end, p)
     out += _status(oracle, dut, t0, p)
+    out += _r17_answers(oracle, dut, t0, p, paired)
+    out += _r17_restarts(oracle, dut, t0, t_end, p)
     return [f for f in out if f.strength != "OBSERVE"]
 
 
@@ -201,7 +210,8 @@ def _refusals(oracle: Oracle) -> list[tuple[float, str]]:
     return out
 
 
-def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Finding]:
+def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, paired: set[int] | None = None) -> list[Finding]:
+    """``paired``: filled with the ids of the DUT's frames that answer a host frame (judged or not)."""
     out = []
     refused = _refusals(oracle)
     model = [f for f in oracle.out if f.source != p.host_node]
@@ -218,6 +228,8 @@ def _answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Fin
                          since=req.timestamp - (_ECHO_SLACK_S + 2 * p.error if p.error else 0.0), taken=taken)
         if got is not None and req.kind is Kind.REQUEST:  # the DUT's answer to this request, judged or not
             taken.add(id(got))
+        if got is not None and paired is not None:
+            paired.add(id(got))
         if not _answered(req) or (req.name, req.transfer_id or 0) in oracle.free:
             continue
         want = _answer_of(model, req, req.timestamp + ANSWER_WAIT_S)
@@ -270,6 +282,90 @@ def _slot(req: Frame, got: Frame, want: Frame, step: int | None, t0: float, p: P
 def _fields(f: Frame) -> str:
     return "{" + ", ".join(f"{k}={v:#x}" if isinstance(v, int) and v > 0xFFFF else f"{k}={v}"
                            for k, v in f.fields.items()) + "}"
+
+
+# ------------------------------------------------------------------------------------------ malformed frames (R17)
+def _r17_answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, paired: set[int]) -> list[Finding]:
+    """R17: no answer to a malformed or foreign frame. A frame of the DUT of its type, not a report, within the answer
+    time of it, that answers no host frame (``paired``: the valid command's answer, judged or free); a response only
+    with the malformed frame's transfer id (F4's pairing)."""
+    out = []
+    seen: set[int] = set()
+    slack = _ECHO_SLACK_S + 2 * p.error if p.error else 0.0
+    for m in oracle.malformed:
+        for f in _frames_between(dut, m.t - slack, m.t + ANSWER_WAIT_S + 2 * p.error):
+            if (id(f) in seen or id(f) in paired or f.type_id != m.type_id or _stream_of(f) is not None
+                    or f.kind is Kind.REQUEST or (f.kind is Kind.RESPONSE and m.transfer_id is not None
+                                                  and f.transfer_id != m.transfer_id)):
+                continue
+            seen.add(id(f))
+            out.append(Finding("answer", ["R17"], f"{f.name} {f.kind.label} to a malformed frame: {m.what}",
+                               f"{f.kind.label} {_fields(f)} (transfer id {f.transfer_id})",
+                               "no answer (R17: a malformed or foreign frame gets none)", f.timestamp - t0, m.step,
+                               subject=f"{m.name} answered, {m.form}"))
+    return out
+
+
+def _r17_restarts(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[Finding]:
+    """R17: a malformed frame never resets the ESC. After one, in normal reporting and with no event of the model's
+    around it that restarts reports (a power switch, a mode, a Set Freq write), each report goes on: the DUT's next
+    one comes within R9a's restart bound of its interval (a reset's boot stops it longer), and its transfer id counts
+    on from the one before (F3: a restart begins it anew)."""
+    out: list[Finding] = []
+    marks = {m.t for m in oracle.malformed}
+    frame_s = frame_bits(8) / p.bitrate
+    others = [st for st in oracle.states if st.t not in marks]
+    said: set[str] = set()
+    for m in oracle.malformed:
+        state = _state_at(oracle, m.t)
+        if state.mode != "normal":
+            continue
+        longest = cat.restart_limit_s(max(state.intervals.values())) + p.boot_s + 2 * p.error
+        # (a Set Freq read, or a write that changed nothing, restarts nothing; the program's start is no restart)
+        restarts = [st.t for st in others if st.label in _RESTARTS - {"start", "set_freq"} or st.label == "power off"
+                    or st.mode != state.mode or st.intervals != state.intervals]
+        for stream in cat.REPORT_FRAMES:
+            limit = cat.restart_limit_s(state.intervals[stream]) + 2 * p.error + p.jitter + frame_s
+            if m.t + limit > t_end - 2 * p.error or stream in said or _between(restarts, m.t - longest, m.t + limit):
+                continue
+            mine = [f for f in dut if f.name == stream and f.kind is Kind.MESSAGE]
+            k = bisect.bisect_right([f.timestamp for f in mine], m.t)
+            before, after = (mine[k - 1] if k else None), (mine[k] if k < len(mine) else None)
+            late = after is None or after.timestamp - m.t > limit
+            jump = (not late and before is not None and before.transfer_id is not None and after.transfer_id is not None
+                    and (before.transfer_id + 1) % 32 != after.transfer_id)
+            if not late and not jump:
+                continue
+            said.add(stream)
+            got = (f"no {stream.upper()} for {limit * 1000:.1f} ms after it" if late else
+                   f"{stream.upper()} transfer id {before.transfer_id} -> {after.transfer_id}")
+            out.append(Finding("reset", ["R17"], f"{stream.upper()} restarted after a malformed frame: {m.what}", got,
+                               f"{stream.upper()} every {state.intervals[stream] * 1000:g} ms, its transfer id counting "
+                               "on (R17: a malformed frame never resets the ESC)", m.t - t0, m.step,
+                               subject=f"{stream} restarted, {m.form}"))
+    return out
+
+
+def cite_r17(findings: list[Finding], oracle: Oracle, t0: float) -> list[Finding]:
+    """Every finding after a malformed or foreign frame of the program also cites R17 (the model ignored the
+    frame; a DUT that took it differs from then on), and says which came last before it."""
+    if not oracle.malformed:
+        return findings
+    for f in findings:
+        before = [m for m in oracle.malformed if m.t - t0 <= f.at + _ECHO_SLACK_S]
+        if before and "R17" not in f.requirements:
+            f.requirements.append("R17")
+            f.model += f" (R17: the model ignored {_step_of(before[-1])})"
+    return findings
+
+
+def _step_of(m: Malformed) -> str:
+    where = f" at step {m.step + 1}" if m.step is not None else ""
+    return f"the malformed frame{where}: {m.what}"
+
+
+def _frames_between(frames: list[Frame], lo: float, hi: float) -> list[Frame]:
+    return [f for f in frames if lo <= f.timestamp <= hi]
 
 
 # ------------------------------------------------------------------------------------------ streams

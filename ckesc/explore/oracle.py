@@ -10,6 +10,11 @@ The model plays the emulator's default choice of every freedom (``variants.py``)
 what it sends, the judge does not look (an answer to a rejected request, the first reports after a restart,
 which MSG_EXP frames come). A rejected request (R10-R12: whether and how it is answered is free) is noted in
 :attr:`Oracle.free` and gets no predicted answer.
+
+A frame the runner sent malformed or foreign (R17) is given to the model too, which ignores it (that is R17's
+oracle: whatever the DUT does on it is a finding), and kept in :attr:`Oracle.malformed` for the judge; a single frame
+with toggle 1 (R17-toggle, OBSERVE) is given to it as the DUT took it: as a single frame where the DUT answered it,
+else as the malformed frame it is.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from ..emulator.model import EXP_MODE, SUSPENDED, EscConfig, EscModel, factory_n
 from ..protocol import catalogue as cat
 from ..protocol.errors import DecodeError
 from ..protocol.frame import Decoder, Frame
+from ..protocol.ids import Kind, parse_can_id
 
 #: DUT settings (Dut.settings() keys, 242 / 214) -> the model's flash keys: the same names
 SETTING_KEYS = ("rotation", "throttle_source", "throttle_channel", "led_color", "led_blink", *cat.INTERVAL_FIELDS)
@@ -40,6 +46,20 @@ class State:
     bitrate: int = cat.DEFAULT_BITRATE  # the bus's bit rate in force (Set Baud's, from the last power-up)
 
 
+@dataclass(frozen=True)
+class Malformed:
+    """A frame sent malformed or foreign (R17), as the DUT heard it: ``what`` it was (its class and command)."""
+
+    t: float
+    name: str  # the command's frame type
+    form: str  # its class (:mod:`ckesc.protocol.malformed`)
+    what: str
+    kind: Kind
+    type_id: int
+    transfer_id: int | None
+    step: int | None
+
+
 @dataclass
 class Oracle:
     """Drive a faultless model along the DUT's program. ``baseline``: the DUT's node id, settings and counters
@@ -56,6 +76,7 @@ class Oracle:
     states: list[State] = field(default_factory=list)
     host: list[tuple[Frame, int | None]] = field(default_factory=list)  # host frames fed, with the program step
     commands: list[float] = field(default_factory=list)  # when the model's ESC took a RawCommand as its own (R8's clock)
+    malformed: list[Malformed] = field(default_factory=list)  # the frames sent malformed or foreign (R17), in order
 
     def __post_init__(self) -> None:
         b = self.baseline
@@ -106,6 +127,22 @@ class Oracle:
             self.host.append((frame, step))
             if frame.name not in cat.THROTTLE_FRAMES:
                 self._note(t, frame.name, step)
+
+    def malformed_frame(self, msg: Any, name: str, form: str, what: str, step: int | None = None) -> None:
+        """A frame sent malformed or foreign (R17) that the DUT heard at ``msg.timestamp``: the model ignores it (a
+        model that acted on it is the oracle's defect, raised); a stretch of its own starts there for the judge."""
+        t = msg.timestamp
+        self.advance(t)
+        before = (self.model.state.last_command, self.mode(), dict(self.model.nvm))
+        self.model.receive(msg, t)
+        self._keep(self.model.poll(t))
+        if (self.model.state.last_command, self.mode(), dict(self.model.nvm)) != before:
+            raise AssertionError(f"the oracle model took a frame R17 says to ignore: {what} ({msg})")
+        i = parse_can_id(msg.arbitration_id)
+        data = bytes(msg.data)
+        tid = data[-1] & 0x1F if data and cat.spec(name).has_tail else None
+        self.malformed.append(Malformed(t, name, form, what, i.kind, i.type_id, tid, step))
+        self._note(t, f"malformed {name}", step)
 
     def power(self, on: bool, t: float, step: int | None = None) -> None:
         self.advance(t)

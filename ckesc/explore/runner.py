@@ -23,10 +23,12 @@ from ..bench.outcomes import Inconclusive
 from ..bench.station import BENCH_ROWS, BenchOptions, build
 from ..evidence.live import LaneRules
 from ..protocol import catalogue as cat
+from ..protocol import malformed as r17
 from ..protocol.errors import DecodeError
 from ..protocol.frame import Decoder, Frame
+from ..protocol.ids import Kind
 from .actions import Action, Bench, stream_fields
-from .judge import Finding, Params, judge
+from .judge import Finding, Params, cite_r17, judge
 from .oracle import SETTING_KEYS, Oracle
 
 #: The bench options by name (:class:`~ckesc.bench.station.BenchOptions`' fields, ``ckesc run``'s bench options)
@@ -35,6 +37,8 @@ OPTION_NAMES: tuple[str, ...] = tuple(o.dest for o in BENCH_ROWS)
 PROBE = (Action("send", "get_major_configuration", {"option": 0}),
          Action("send", "set_freq", dict(cat.FREQ_READ)),
          Action("send", "get_esc_id", {"option": 0}))
+#: and after a program that sent malformed frames: the counters of 241, whose power-up count shows a reset (R17)
+PROBE_COUNTERS = Action("send", "maintenance_information", {"option": 2})
 STREAM_PERIOD_S = 0.01
 POWER_SETTLE_S = 0.3  # read after a power-up: the reports that should flow (or not) show before the next step
 SETTLE_S = 0.6  # read after the last step, so that what it did shows (MSG1 and MSG2 judged after the settle)
@@ -120,6 +124,9 @@ class Session:
         #: the last program sent Set Baud: the reset looks for the DUT at every rate before anything else
         self._baud_sent = False
         self._dirty = False  # a program ran since the last reset: close() puts the DUT back
+        #: the malformed frames sent and not yet heard back (their echo), by (CAN id, data): how the oracle is to take
+        #: each (its frame type, class and words; for a single frame with toggle 1, whether the DUT took it)
+        self._malformed: dict[tuple[int, bytes], list[tuple[str, str, str, bool]]] = {}
         #: why close() could not put the DUT back into its starting state (None: it did, or nothing ran)
         self.left: str | None = None
         self.params = Params(error=self.lane.timing_error, own_error=self.lane.own_error, jitter=profile.jitter_s, boot_s=profile.boot_s,
@@ -264,11 +271,25 @@ class Session:
         fed = 0
         power_fed = 0
         steps: list[tuple[float, float]] = []
+        self._malformed.clear()
+        foreign: set[int] = set()  # the echoes of the malformed frames: the host's, never the DUT's (for the judge)
 
         def feed(step: int | None) -> None:
             nonlocal fed, power_fed
             events: list[tuple[float, int, Any]] = []
             for msg in rec.messages[fed:]:
+                sent = self._malformed.get((msg.arbitration_id, bytes(msg.data)))
+                if sent and not msg.is_error_frame:  # a malformed frame of ours (a response frame has another source)
+                    name, form, what, taken = sent.pop(0)
+                    foreign.add(id(msg))
+                    if taken:  # a single frame with toggle 1 the DUT took (it answered): the model takes it too
+                        data = bytearray(msg.data)
+                        data[-1] &= ~0x20
+                        events.append((msg.timestamp, 1, can.Message(timestamp=msg.timestamp, arbitration_id=msg.arbitration_id,
+                                                                     data=bytes(data), is_extended_id=True)))
+                    else:
+                        events.append((msg.timestamp, 1, (msg, name, form, what)))
+                    continue
                 # the host's own frames, by their source node (an echo is is_rx False in the simulated lane and on
                 # SocketCAN, True through socketcand)
                 if msg.is_extended_id and (msg.arbitration_id & 0x7F) == dut.host_node \
@@ -278,13 +299,15 @@ class Session:
                 events.append((when, 0, on))
             fed, power_fed = len(rec.messages), len(rec.power)
             for when, kind, what in sorted(events, key=lambda e: (e[0], e[1])):
-                if kind:
+                if kind and isinstance(what, tuple):
+                    oracle.malformed_frame(*what, step=step)
+                elif kind:
                     oracle.host_frame(what, step)
                 else:
                     oracle.power(what, when, step)
             dut.node_id = oracle.node_id  # where the model says the DUT is now (Set ID)
 
-        full = list(program) + list(PROBE)
+        full = list(program) + list(PROBE) + ([PROBE_COUNTERS] if any(a.op == "malformed" for a in program) else [])
         for i, action in enumerate(full):
             start = self.lane.now()
             self._do(action, oracle, powered_at)
@@ -301,7 +324,7 @@ class Session:
         feed(len(full) - 1)
         t_end = self.lane.now()
         oracle.finish(t_end)
-        frames = _decode(rec.messages)
+        frames = _decode([m for m in rec.messages if id(m) not in foreign])
         findings = judge(oracle, frames, t0, t_end, self.params)
         found, _count = self.rules.take()
         for v in found:
@@ -309,7 +332,7 @@ class Session:
             findings.append(Finding("bus_rule", list(v.rules) or ["4.1.1-1"], f"bus rule {v.check}: {v.message}",
                                     str(v), "the rule holds", at, None, strength=v.strength,
                                     subject=f"{' '.join(v.rules)} {v.check}"))
-        findings = [f for f in findings if f.strength != "OBSERVE"]
+        findings = [f for f in cite_r17(findings, oracle, t0) if f.strength != "OBSERVE"]
         return Outcome(list(program), findings, t0, t_end, list(rec.messages), frames, list(oracle.out), steps,
                        {a.feature for a in program})
 
@@ -322,6 +345,8 @@ class Session:
             else:
                 dut.broadcast(action.name, action.fields, **({"layout": "query"} if action.name == "get_esc_id" else {}))
                 dut.wait(cat.ANSWER_DELAY_MAX_S + 0.006 + 2 * self.lane.timing_error)
+        elif action.op == "malformed":
+            self._send_malformed(action, oracle)
         elif action.op == "stream":
             dut.stop_throttle()
             dut.throttle_stream(action.name, stream_fields(action.name), period=STREAM_PERIOD_S)
@@ -343,6 +368,40 @@ class Session:
             dut.read_until(max(self.lane.now(), powered_at + cat.CONFIG_WINDOW_S + 1.0 + 2 * self.lane.timing_error))
         else:
             raise ValueError(f"unknown action {action.op!r}")
+
+
+    def _send_malformed(self, action: Action, oracle: Oracle) -> None:
+        """Send ``action``'s command in its R17 class (to the node id the model says the DUT has, each frame with
+        the next transfer id of its type, so that an answer names it), then wait for what it may answer. A single
+        frame with toggle 1 (R17-toggle: taking it is free) counts as taken when the DUT answered it."""
+        dut = self.dut
+        spec = cat.spec(action.name)
+        kind = Kind.REQUEST if spec.service else Kind.MESSAGE
+        node = oracle.node_id
+
+        def tid(destination: int | None) -> int:  # one counter for the step's frames, whatever their destination:
+            return dut.proto.tids.next((kind, action.name), node if spec.service else None)  # an answer names its frame
+
+        bads = r17.build(action.name, action.fields, action.form, source=dut.host_node, node_id=node,
+                         others=r17.other_nodes(node, dut.nodes), transfer_id=tid,
+                         nibble_order=self.profile.nibble_order)
+        heard = len(dut.trace)
+        keys = []
+        command = action.describe().split(" sent as: ")[0]
+        for bad in bads:
+            for w in bad.frames:
+                keys.append((w.arbitration_id, bytes(w.data)))
+                self._malformed.setdefault(keys[-1], []).append(
+                    (action.name, action.form, f"{command} as {bad}", False))
+                dut.send_wire(w)
+        dut.wait(cat.ANSWER_DELAY_MAX_S + 0.006 + 2 * self.lane.timing_error)
+        if action.form == r17.TOGGLE and bads:
+            b = bads[0]
+            answered = any(f.source != dut.host_node and f.name == action.name  # (Set ID answers from its new id) and f.kind is not Kind.REQUEST
+                           and (f.kind is Kind.MESSAGE or f.transfer_id == b.transfer_id) for f in dut.trace[heard:])
+            entries = self._malformed.get(keys[0], [])
+            if answered and entries:
+                entries[-1] = (*entries[-1][:3], True)
 
 
 def _decode(messages) -> list[Frame]:

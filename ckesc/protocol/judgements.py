@@ -300,7 +300,7 @@ def f4_pairs(mismatches: Sequence[str]) -> bool:
 def asked_node(name: str, destination: int) -> int | None:
     """The node an answer to request ``name`` sent to ``destination`` must come from (None: any, Set ID answers from
     its new id, R11)."""
-    return None if name == "set_id" else destination
+    return None if name in cat.PSEUDO_BROADCAST else destination
 
 
 # ------------------------------------------------------------------------------------------ R18 a loaded bus

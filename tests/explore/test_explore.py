@@ -66,17 +66,23 @@ def _found_fault(fault: str, max_programs: int) -> None:
 # second_suspend_latches 4, baud_change_counts_power_up_twice 39, resume_reloads_default_intervals 81,
 # comm_loss_sticky_after_resume 240; comm_loss_sticky 0, freq_save_resets_led 3, source_save_reverts_led 3,
 # intervals_not_persisted 3, led_save_reverts_rotation 4, rotation_save_resets_intervals 9, set_id_resets_source 29,
-# suspend_persisted 39, throttle_select_drops_10b 54, set_freq_moves_other_stream 268). FAST: three of the five
+# suspend_persisted 39, throttle_select_drops_10b 54, set_freq_moves_other_stream 268; since the explorer draws R17's
+# malformed frames, 2026-11-27: answer_slot_from_boot_node 28, second_suspend_latches 15,
+# resume_reloads_default_intervals 9, freq_save_resets_led 15, led_save_reverts_rotation 15, source_save_reverts_led
+# 60, set_id_resets_source 68, suspend_persisted 80, comm_loss_sticky 0, intervals_not_persisted 8,
+# rotation_save_resets_intervals 15, report_restart_late 4, settings_while_suspended 48, throttle_select_drops_10b 62,
+# baud_change_counts_power_up_twice 9, can_test_off_resumes_reporting 383; the others not counted
+# again). FAST: three of the five
 # interaction faults the suite's tests do not catch; the other two cost about 20 s each of CI time (Set Baud's like
 # defect in the clean-room ESC is shown in real time in CI by the explorer's shrunk program: test_clean_room_esc.py)
 FAST = {"second_suspend_latches": 40, "resume_reloads_default_intervals": 200, "answer_slot_from_boot_node": 40}
 SLOW = {"comm_loss_sticky_after_resume": 600, "baud_change_counts_power_up_twice": 100, "comm_loss_sticky": 40, "intervals_not_persisted": 40, "set_id_resets_source": 100, "rotation_save_resets_intervals": 40,
-        "freq_save_resets_led": 40, "suspend_persisted": 100, "led_save_reverts_rotation": 40, "source_save_reverts_led": 40,
+        "freq_save_resets_led": 40, "suspend_persisted": 100, "led_save_reverts_rotation": 40, "source_save_reverts_led": 100,
         "throttle_select_drops_10b": 150, "set_freq_moves_other_stream": 700,
         # faults that are not interaction faults, found in a sequence (found after: report_restart_late 3,
         # settings_while_suspended 4, can_test_off_resumes_reporting 105, set_id_after_window 166)
-        "report_restart_late": 40, "set_id_after_window": 420, "can_test_off_resumes_reporting": 270,
-        "settings_while_suspended": 40}
+        "report_restart_late": 40, "set_id_after_window": 420, "can_test_off_resumes_reporting": 600,
+        "settings_while_suspended": 100}
 
 
 @pytest.mark.parametrize("fault", sorted(FAST))
@@ -244,7 +250,9 @@ def test_the_budget_bounds_shrinking_too():
     (a clock that ticks once per program: deterministic, whatever the machine's load): a finding shown early
     in a budget too short to shrink it is kept as found so far and says so, the run ends within the budget (and
     the program running when it ran out), and the shrinking was announced with the time it has (~2 s)."""
-    session = Session({"emulator_faults": "second_suspend_latches"})
+    # a fault seed 1 shows early (after 7 programs, in a 12-step program: since the explorer draws R17's malformed
+    # frames, second_suspend_latches shows after 15)
+    session = Session({"emulator_faults": "destination_low_bits"})
     ran = [0]
     run = session.run
 

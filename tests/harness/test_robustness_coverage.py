@@ -11,7 +11,9 @@ import pytest
 
 import conformance.test_robustness_r17_malformed as r17
 from ckesc.protocol import Kind
+from ckesc.protocol import malformed as mf
 from ckesc.protocol import catalogue as cat
+from ckesc.protocol.frame import encode
 from ckesc.protocol.ids import parse_can_id
 from ckesc.protocol.transfer import parse_tail
 
@@ -25,7 +27,7 @@ NOT_SENT = {"clear_rec": "destructive: taken, it erases the temperature records"
 
 
 def _taken_from_host() -> list[str]:
-    return [s.name for s in cat.CATALOGUE if r17._host_layout(s) is not None]
+    return [s.name for s in cat.CATALOGUE if mf.host_layout(s) is not None]
 
 
 def _form(b: r17.Bad, spec: cat.FrameSpec, size: int) -> str:
@@ -55,7 +57,7 @@ def _expected(spec: cat.FrameSpec, size: int | None, valid_len: int) -> set[str]
         out |= {"start", "middle", "end", "whole"}
     if size is not None and size:
         out.add("short")
-    if size is not None and valid_len < r17.MAX_DATA:
+    if size is not None and valid_len < mf.MAX_DATA:
         out.add("long")
     if spec.service:
         out.add("response")
@@ -80,11 +82,11 @@ def _command(name: str) -> dict:
 def test_every_form_r17_names_is_sent(name):
     spec, fields = cat.spec(name), _command(name)
     bads = r17.window_malformed(DUT, name, fields) if name in r17.WINDOW_WRITERS else r17.malformed(DUT, name, fields)
-    valid = len(r17.encode(spec, fields, kind=Kind.REQUEST if spec.service else Kind.MESSAGE, source=DUT.host_node,
+    valid = len(encode(spec, fields, kind=Kind.REQUEST if spec.service else Kind.MESSAGE, source=DUT.host_node,
                            destination=DUT.node_id if spec.service else None, transfer_id=0,
                            layout="query" if name == "get_esc_id" else None).data)
     got = {_form(b, spec, valid) for b in bads}
-    expected = _expected(spec, r17._host_layout(spec).size, valid)
+    expected = _expected(spec, mf.host_layout(spec).size, valid)
     assert got == expected, f"{name}: forms missing {sorted(expected - got)}, unexpected {sorted(got - expected)}"
 
 
