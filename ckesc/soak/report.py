@@ -74,6 +74,9 @@ def summary_text(record: dict[str, Any], where: Path | None = None) -> str:
              f"{host['stream_skipped']} skipped; sent late by p50 {late['p50_ms']} ms, p99 {late['p99_ms']} ms, "
              f"max {late['max_ms']} ms (the host's jitter)",
              "statement:"]
+    if foreign := record.get("foreign_traffic"):
+        lines.insert(2, f"foreign traffic: {foreign['profile']}, {foreign['frames']} frames of other nodes "
+                        f"({foreign['load'] * 100:.1f} % of the bus), not judged as the ESC's")
     lines += [f"  {s['watch']:<20} {s['text']}" for s in record["statement"]]
     findings = record["findings"]
     total = len(findings) + record["findings_not_kept"]

@@ -166,7 +166,9 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
         say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
             f"{dut.node_id}: RawCommand_{plan.format} at {plan.rate_hz:g} Hz on channels "
             f"{','.join(map(str, plan.channels))} ({'throttle profile' if plan.throttle and plan.allow_motor_spin else 'zero throttle'}), "
-            "GET_ESC_ID every second, 241 and 242 read")
+            "GET_ESC_ID every second, 241 and 242 read"
+            + (f"; foreign traffic: {station.foreign.name} (other nodes' frames, not judged as the ESC's)"
+               if station.foreign is not None else ""))
         while True:
             now = lane.now()
             if now >= end:
@@ -191,6 +193,8 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
         try:
             stopped_at = lane.peek_now()
             _zero(lane, player, dut)
+            if station.foreign is not None:
+                station.foreign.stop()  # its figures final for the report (the lane closes after it)
             live.done()
         finally:
             ignore()
@@ -204,7 +208,8 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             "kind": "soak", "status": status, "problem": problem, "started_utc": started_utc,
             "bench": {k: _plain(v) for k, v in (given or {}).items()},
             "lane": lane.name, "clock": lane.clock, "timing_error_s": lane.timing_error, "profile": profile.name,
-            "faults": bench.emulator_faults or "", "node_id": dut.node_id, "host_node": dut.host_node,
+            "faults": bench.emulator_faults or "",
+            "foreign_traffic": station.foreign.report() if station.foreign is not None else None, "node_id": dut.node_id, "host_node": dut.host_node,
             "plan": {"format": plan.format, "rate_hz": plan.rate_hz, "channels": list(plan.channels),
                      "throttle": [list(s) for s in plan.throttle] if plan.allow_motor_spin else [],
                      "allow_motor_spin": plan.allow_motor_spin},

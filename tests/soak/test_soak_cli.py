@@ -104,3 +104,18 @@ def test_an_8_hour_simulated_soak_of_the_faultless_emulator(tmp_path):
     memory = doc["memory"]
     print(f"8 h simulated: {doc['wall_s']} s wall, RSS {memory}")
     assert memory["rss_end_kb"] - memory["rss_start_kb"] < 20_000  # flat: no list grows with the run
+
+
+def test_a_soak_with_a_flight_controllers_traffic_blames_the_esc_for_none_of_it(tmp_path):
+    """--foreign-traffic ardupilot (``ckesc run``'s bench option) in a soak: node 10's GET_ESC_ID queries answered
+    by the ESC, its SafetyState, NodeStatus and RawCommand, a battery's BatteryCells are no finding; the reports say
+    what was played."""
+    done = soak(tmp_path, "--duration", "30s", "--rate", "50", "--foreign-traffic", "ardupilot")
+    assert done.returncode == 0, done.stdout + done.stderr
+    doc, _, summary = reports(tmp_path)
+    assert doc["status"] == "COMPLETED" and doc["findings"] == [] and doc["bench"]["foreign_traffic"] == "ardupilot"
+    foreign = doc["foreign_traffic"]
+    assert foreign["profile"] == "ardupilot" and foreign["frames"] > 400 * 30 and doc["frames"]["other"] > 400 * 30
+    answers = doc["watches"]["GET_ESC_ID answers"]["statistics"]
+    assert answers["other_nodes_queries"] == answers["answers_to_other_nodes"] >= 29 and answers["answers"] == 30
+    assert "foreign traffic: ardupilot" in summary
