@@ -25,9 +25,14 @@ def utc_now() -> str:
     return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
-def write(reports: str | Path, record: dict[str, Any]) -> Path:
-    """The three files of ``record`` in a new run directory under ``reports``; returns it."""
-    where = run_dir(Path(reports), time.time(), "soak")
+def new_dir(reports: str | Path) -> Path:
+    """A new run directory under ``reports`` (made at the start when the run keeps a trace in it)."""
+    return run_dir(Path(reports), time.time(), "soak")
+
+
+def write(reports: str | Path, record: dict[str, Any], where: Path | None = None) -> Path:
+    """The report files of ``record`` in ``where`` (default: a new run directory under ``reports``); returns it."""
+    where = where or new_dir(reports)
     (where / "results.json").write_text(json.dumps(record, indent=1, default=str) + "\n", encoding="utf-8")
     (where / "junit.xml").write_text(junit_xml(record), encoding="utf-8")
     (where / "summary.txt").write_text(summary_text(record, where), encoding="utf-8")

@@ -72,10 +72,11 @@ class Finding:
     message: str
     before: list[str] = field(default_factory=list)
     after: list[str] = field(default_factory=list)
+    file: str | None = None  # the file of the run's trace holding these frames (--trace-budget), once written
 
     def to_json(self) -> dict[str, Any]:
         return {"t_s": round(self.t, 6), "watch": self.watch, "rules": list(self.rules), "message": self.message,
-                "frames_before": self.before, "frames_after": self.after}
+                "frames_before": self.before, "frames_after": self.after, "frames_file": self.file}
 
     def line(self) -> str:
         return f"{clock(self.t)} [{' '.join(self.rules)}] {self.watch}: {self.message}"
@@ -555,6 +556,11 @@ class Monitor:
     @property
     def count(self) -> int:
         return len(self.findings) + self.dropped
+
+    @property
+    def open_findings(self) -> int:
+        """How many findings (the last kept ones) are still collecting the frames after them."""
+        return len(self._open)
 
     @property
     def settled(self) -> bool:
