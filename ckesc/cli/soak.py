@@ -10,6 +10,7 @@ import argparse
 import re
 import sys
 
+from ..soak import trace
 from .common import EXIT_INTERRUPTED, UsageError
 from .explore import parse_budget
 from .run import add_bench_options
@@ -41,6 +42,17 @@ def parse_throttle(text: str) -> tuple[tuple[float, int], ...]:
     return tuple(sorted(steps))
 
 
+def _size(text: str) -> int:
+    try:
+        size = trace.parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if 0 < size < trace.MIN_BUDGET:
+        raise argparse.ArgumentTypeError(f"{text}: at least {trace.MIN_BUDGET} bytes (room for the findings' frames "
+                                         "and the rolling files), or 0 for no trace")
+    return size
+
+
 def add_soak_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "soak",
@@ -65,6 +77,11 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--throttle-profile", type=parse_throttle, default=(), metavar="T:V,...",
                    help="throttle (0..2000) from each time on, e.g. 0:0,1m:200,2h:0; needs --allow-motor-spin "
                         "(PROPELLERS OFF); default zero throttle")
+    s.add_argument("--trace-budget", type=_size, default=trace.DEFAULT_BUDGET, metavar="SIZE",
+                   help="disk the run's trace may take in its report directory: a rolling candump log of every frame "
+                        "(the oldest file deleted as a new one starts) and each finding's frames in a file of its own, "
+                        f"never deleted (200MB, 1GB, 500kB; at least {trace.MIN_BUDGET // 1000}kB; 0: no trace; default "
+                        f"{trace.DEFAULT_BUDGET // 10**6}MB)")
     s.add_argument("--stop-on-finding", action="store_true", help="stop at the first finding (the report written)")
     s.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
     s.add_argument("-q", "--quiet", action="store_true", help="no console lines")
@@ -88,7 +105,8 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
         given = {k: getattr(args, k) for k in runner.OPTION_NAMES if getattr(args, k, None) not in (None, [], "")}
         soak = runner.SoakOptions(duration_s=args.duration, rate_hz=args.rate, format=args.format,
                                   channels=args.channels, throttle=args.throttle_profile,
-                                  stop_on_finding=args.stop_on_finding, reports=args.reports, quiet=args.quiet)
+                                  stop_on_finding=args.stop_on_finding, reports=args.reports, quiet=args.quiet,
+                                  trace_budget=args.trace_budget)
         try:
             outcome = runner.run(BenchOptions.of(vars(args).get), soak, out=sys.stdout, given=given)
         except (PreflightError, BenchError, ValueError) as exc:

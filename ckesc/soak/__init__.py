@@ -5,5 +5,5 @@ The sans-IO core: :mod:`.player` plays a flight controller (a RawCommand stream,
 one owner per property, with streaming statistics only (nothing grows with the run's length but one value per
 minute of the R9 trend); :mod:`.statement` words what a run without findings shows (the rule of three). The IO part,
 :mod:`.runner`, builds the bench as every command does (:func:`ckesc.bench.station.build`), drives the player on
-the lane's clock, feeds the watches and writes the reports (:mod:`.report`).
+the lane's clock, feeds the watches, keeps the trace within its disk budget (:mod:`.trace`) and writes the reports (:mod:`.report`).
 """

@@ -25,9 +25,14 @@ def utc_now() -> str:
     return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
-def write(reports: str | Path, record: dict[str, Any]) -> Path:
-    """The three files of ``record`` in a new run directory under ``reports``; returns it."""
-    where = run_dir(Path(reports), time.time(), "soak")
+def new_dir(reports: str | Path) -> Path:
+    """A new run directory under ``reports`` (made at the start when the run keeps a trace in it)."""
+    return run_dir(Path(reports), time.time(), "soak")
+
+
+def write(reports: str | Path, record: dict[str, Any], where: Path | None = None) -> Path:
+    """The report files of ``record`` in ``where`` (default: a new run directory under ``reports``); returns it."""
+    where = where or new_dir(reports)
     (where / "results.json").write_text(json.dumps(record, indent=1, default=str) + "\n", encoding="utf-8")
     (where / "junit.xml").write_text(junit_xml(record), encoding="utf-8")
     (where / "summary.txt").write_text(summary_text(record, where), encoding="utf-8")
@@ -74,6 +79,9 @@ def summary_text(record: dict[str, Any], where: Path | None = None) -> str:
              f"{host['stream_skipped']} skipped; sent late by p50 {late['p50_ms']} ms, p99 {late['p99_ms']} ms, "
              f"max {late['max_ms']} ms (the host's jitter)",
              "statement:"]
+    if foreign := record.get("foreign_traffic"):
+        lines.insert(2, f"foreign traffic: {foreign['profile']}, {foreign['frames']} frames of other nodes "
+                        f"({foreign['load'] * 100:.1f} % of the bus), not judged as the ESC's")
     lines += [f"  {s['watch']:<20} {s['text']}" for s in record["statement"]]
     findings = record["findings"]
     total = len(findings) + record["findings_not_kept"]

@@ -28,6 +28,7 @@ from ..protocol.frame import WireFrame
 from . import report
 from .player import FORMATS, FlightPlan, Player
 from .statement import Statement, duration_text
+from .trace import DEFAULT_BUDGET, Trace
 from .watches import Histogram, Monitor, WatchConfig
 
 #: lane time read after the closing zero throttle, so that its frames are on the bus before the lane closes
@@ -54,6 +55,7 @@ class SoakOptions:
     stop_on_finding: bool = False
     reports: str = "reports"
     quiet: bool = False
+    trace_budget: int = DEFAULT_BUDGET  # bytes of trace files on disk (0: no trace)
 
 
 @dataclass
@@ -148,6 +150,23 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
                                   bitrate=lane.bitrate, nibble_order=profile.nibble_order,
                                   stream_frames=player.frames_per_tick), t0)
     lateness = Histogram(LATENESS_BIN_S, LATENESS_BINS)
+    where = report.new_dir(soak.reports) if soak.trace_budget else None
+    trace = Trace(where, soak.trace_budget, t0) if where is not None else None
+    written = 0  # findings whose frames are in their trace file
+
+    def feed(msg: can.Message) -> None:
+        monitor.feed(msg)
+        if trace is not None:
+            trace.frame(msg.timestamp, msg.arbitration_id, msg.data)
+
+    def write_findings(final: bool = False) -> None:
+        nonlocal written
+        if trace is None:
+            return
+        kept = monitor.findings
+        while written < len(kept) and (final or written < len(kept) - monitor.open_findings):
+            trace.finding(kept[written])
+            written += 1
     rss_start = _rss_kb()
     end = t0 + soak.duration_s
     live = Live(out, soak.quiet, wall)
@@ -166,7 +185,9 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
         say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
             f"{dut.node_id}: RawCommand_{plan.format} at {plan.rate_hz:g} Hz on channels "
             f"{','.join(map(str, plan.channels))} ({'throttle profile' if plan.throttle and plan.allow_motor_spin else 'zero throttle'}), "
-            "GET_ESC_ID every second, 241 and 242 read")
+            "GET_ESC_ID every second, 241 and 242 read"
+            + (f"; foreign traffic: {station.foreign.name} (other nodes' frames, not judged as the ESC's)"
+               if station.foreign is not None else ""))
         while True:
             now = lane.now()
             if now >= end:
@@ -177,7 +198,9 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
                     lateness.add(max(now - planned.due, 0.0))
             deadline = min(player.next_deadline(), end)
             while (msg := lane.recv(deadline - lane.now())) is not None:
-                monitor.feed(msg)
+                feed(msg)
+            if written < len(monitor.findings):
+                write_findings()
             if soak.stop_on_finding and monitor.count and monitor.settled:  # (the frames after it read)
                 status = STOPPED
                 break
@@ -191,12 +214,17 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
         try:
             stopped_at = lane.peek_now()
             _zero(lane, player, dut)
+            if station.foreign is not None:
+                station.foreign.stop()  # its figures final for the report (the lane closes after it)
             live.done()
         finally:
             ignore()
     ignore = _ignore_interrupts()
     try:
         monitor.close(stopped_at)
+        write_findings(final=True)
+        if trace is not None:
+            trace.close()
         ran = stopped_at - t0
         statements = [Statement(w.name, w.rules, w.what, w.one, w.events, ran, w.statement_unit, w.trials)
                       for w in monitor.watches]
@@ -204,7 +232,8 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             "kind": "soak", "status": status, "problem": problem, "started_utc": started_utc,
             "bench": {k: _plain(v) for k, v in (given or {}).items()},
             "lane": lane.name, "clock": lane.clock, "timing_error_s": lane.timing_error, "profile": profile.name,
-            "faults": bench.emulator_faults or "", "node_id": dut.node_id, "host_node": dut.host_node,
+            "faults": bench.emulator_faults or "",
+            "foreign_traffic": station.foreign.report() if station.foreign is not None else None, "node_id": dut.node_id, "host_node": dut.host_node,
             "plan": {"format": plan.format, "rate_hz": plan.rate_hz, "channels": list(plan.channels),
                      "throttle": [list(s) for s in plan.throttle] if plan.allow_motor_spin else [],
                      "allow_motor_spin": plan.allow_motor_spin},
@@ -218,10 +247,11 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             "watches": {w.name: {"rules": list(w.rules), "events": w.events, "trials": w.trials,
                                  "statistics": w.statistics()} for w in monitor.watches},
             "r9_per_minute_ms": monitor.intervals.series,
+            "trace": trace.to_json() if trace is not None else None,
             "findings": [f.to_json() for f in monitor.findings], "findings_not_kept": monitor.dropped,
             "statement": [s.to_json() for s in statements],
         }
-        where = report.write(soak.reports, record)
+        where = report.write(soak.reports, record, where)
         if not soak.quiet:
             out.write(report.summary_text(record, where))
             out.flush()

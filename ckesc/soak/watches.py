@@ -10,7 +10,8 @@ One owner per watched property (R19), each calling the rule's judgement in :mod:
 * :class:`CommFlagWatch` - the comm flag (MSG1's status, R8) set only when the stream stops
   (:func:`~ckesc.protocol.judgements.r8_flag_due`);
 * :class:`AnswerWatch` - GET_ESC_ID's answers in the node's slot (R2) and within 64 ms (4.4.3-4), their delays as
-  a fixed-bin histogram;
+  a fixed-bin histogram (another node's query, a flight controller's on the bus, is answered too: its answer is
+  neither the host's nor one to no query);
 * :class:`SettingsWatch` - 242's answers unchanged (:func:`~ckesc.protocol.judgements.r13_read_back`);
 * :class:`UnexpectedWatch` - frames the ESC should not send: one that does not decode, or a frame type normal
   reporting never sends and the player never asked for.
@@ -47,6 +48,10 @@ MINUTE_S = 60.0
 #: GET_ESC_ID delay histogram: bins of a quarter slot over twice the 64 ms bound, then one overflow bin
 DELAY_BIN_S = cat.ANSWER_SLOT_S / 4
 DELAY_BINS = 2 * round(cat.ANSWER_DELAY_MAX_S / DELAY_BIN_S)
+#: other nodes' GET_ESC_ID queries kept open (a flight controller asks once a second), and how long one stays open:
+#: the histogram's span, twice the 64 ms bound (an ESC need not answer other hosts, F6)
+FOREIGN_QUERIES = 8
+FOREIGN_ANSWER_S = DELAY_BINS * DELAY_BIN_S
 #: the report frames R9 and the reset watch follow
 REPORTS = cat.REPORT_FRAMES
 #: what normal reporting sends besides the reports, and the answers to what the player asks
@@ -67,10 +72,11 @@ class Finding:
     message: str
     before: list[str] = field(default_factory=list)
     after: list[str] = field(default_factory=list)
+    file: str | None = None  # the file of the run's trace holding these frames (--trace-budget), once written
 
     def to_json(self) -> dict[str, Any]:
         return {"t_s": round(self.t, 6), "watch": self.watch, "rules": list(self.rules), "message": self.message,
-                "frames_before": self.before, "frames_after": self.after}
+                "frames_before": self.before, "frames_after": self.after, "frames_file": self.file}
 
     def line(self) -> str:
         return f"{clock(self.t)} [{' '.join(self.rules)}] {self.watch}: {self.message}"
@@ -394,6 +400,23 @@ class AnswerWatch(Watch):
         #: the host's own stream may delay an answer (never blame the DUT for the bench's traffic): one tick's stream
         #: frames ahead of it on the bus widen the late side of R2's slot and of the 64 ms bound
         self.queueing = self.cfg.stream_frames * frame_bits(8) / self.cfg.bitrate
+        #: other nodes' GET_ESC_ID queries not answered yet (a flight controller's on the bus, R17): the ESC answers
+        #: them with the same broadcast reply, which must not be taken for the host's answer nor for one to no query
+        self.foreign: deque[float] = deque(maxlen=FOREIGN_QUERIES)
+        self.foreign_queries = 0
+        self.foreign_answers = 0
+        #: the bus time (s) other frames took since the host's query: the answer may wait for each of them
+        self.busy = 0.0
+
+    def foreign_asked(self, t: float) -> None:
+        """Another node's GET_ESC_ID query, heard at ``t``."""
+        self.foreign_queries += 1
+        self.foreign.append(t)
+
+    def bus_taken(self, data_bytes: int) -> None:
+        """A frame of another node (or the ESC's answer to another node) on the bus while the host's query waits."""
+        if self.query is not None and not self.answered:
+            self.busy += frame_bits(data_bytes) / self.cfg.bitrate
 
     def asked(self, t: float) -> None:
         if self.query is not None and not self.answered:
@@ -401,9 +424,17 @@ class AnswerWatch(Watch):
             self.missing += 1
             bound = jd.answer_bound(t - self.query, error=self.error, rule="4.4.3-4")
             self.find(t, f"no answer to GET_ESC_ID within {(t - self.query) * 1000:.0f} ms: {bound}", ("4.4.3-4", "R19"))
-        self.query, self.answered = t, False
+        self.query, self.answered, self.busy = t, False, 0.0
 
     def reply(self, frame: Frame, t: float) -> None:
+        foreign = self.foreign
+        while foreign and t - foreign[0] > FOREIGN_ANSWER_S:  # a query the ESC did not answer (F6 leaves it free)
+            foreign.popleft()
+        if foreign and (self.query is None or self.answered or foreign[0] < self.query):
+            foreign.popleft()  # the answer to the earliest query still open, another node's: not the host's to judge
+            self.foreign_answers += 1
+            self.bus_taken(len(frame.data))
+            return
         if self.query is None or self.answered:
             self.monitor.unexpected.find(t, f"a GET_ESC_ID reply that answers no query ({frame.fields})", ("R1",))
             return
@@ -413,14 +444,15 @@ class AnswerWatch(Watch):
         self.delays.add(end)
         start = end - frame_bits(len(frame.data)) / self.cfg.bitrate
         node = self.cfg.node_id
-        late = self.error + self.queueing
+        late = self.error + self.queueing + self.busy
         broken = [j for j in (jd.r2_slot_start(start, node, error=self.error), jd.r2_slot_end(end, node, error=late),
                               jd.answer_bound(end, error=late, rule="4.4.3-4")) if not j.ok]
         if broken:
             self.find(t, "; ".join(str(j) for j in broken), tuple(dict.fromkeys(j.rule for j in broken)))
 
     def statistics(self) -> dict[str, Any]:
-        return {"answers": self.delays.n, "missing": self.missing, "delay": self.delays.to_json()}
+        return {"answers": self.delays.n, "missing": self.missing, "delay": self.delays.to_json(),
+                "other_nodes_queries": self.foreign_queries, "answers_to_other_nodes": self.foreign_answers}
 
 
 # ------------------------------------------------------------------------------------------------ settings
@@ -526,6 +558,11 @@ class Monitor:
         return len(self.findings) + self.dropped
 
     @property
+    def open_findings(self) -> int:
+        """How many findings (the last kept ones) are still collecting the frames after them."""
+        return len(self._open)
+
+    @property
     def settled(self) -> bool:
         """No finding is still collecting the frames after it."""
         return not self._open
@@ -567,6 +604,11 @@ class Monitor:
             return
         if source != cfg.node_id:
             self.other_frames += 1
+            self.answers.bus_taken(len(data))
+            if spec is not None and spec.name == "get_esc_id" and kind is Kind.MESSAGE:
+                frame = self._decode(msg, data, judge=False)
+                if frame is not None and frame.layout is not None and frame.layout.name == "query":
+                    self.answers.foreign_asked(t)
             return
         self.dut_frames += 1
         self.unexpected.trials += 1  # every frame of the DUT is judged by it
@@ -593,7 +635,7 @@ class Monitor:
                 return
         self.unexpected.frame(frame, t)
 
-    def _decode(self, msg: Any, data: bytes) -> Frame | None:
+    def _decode(self, msg: Any, data: bytes, *, judge: bool = True) -> Frame | None:
         """The frame decoded; a message (its layout the frame's own) decoded once per distinct id and bytes: a report
         of the same values differs only in its transfer id, hours long (the cached frame's ``timestamp`` is its
         first's: the watches take the time from the feed)."""
@@ -604,7 +646,7 @@ class Monitor:
         try:
             frame = self.decoder.decode(msg)
         except DecodeError as exc:
-            if (msg.arbitration_id & 0x7F) == self.cfg.node_id:
+            if judge and (msg.arbitration_id & 0x7F) == self.cfg.node_id:
                 self.unexpected.garbled(exc, msg.timestamp)
             return None
         if frame.kind is Kind.MESSAGE and getattr(msg, "is_extended_id", True) and not getattr(msg, "is_error_frame", False) \

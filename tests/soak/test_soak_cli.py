@@ -104,3 +104,46 @@ def test_an_8_hour_simulated_soak_of_the_faultless_emulator(tmp_path):
     memory = doc["memory"]
     print(f"8 h simulated: {doc['wall_s']} s wall, RSS {memory}")
     assert memory["rss_end_kb"] - memory["rss_start_kb"] < 20_000  # flat: no list grows with the run
+
+
+def test_a_soak_with_a_flight_controllers_traffic_blames_the_esc_for_none_of_it(tmp_path):
+    """--foreign-traffic ardupilot (``ckesc run``'s bench option) in a soak: node 10's GET_ESC_ID queries answered
+    by the ESC, its SafetyState, NodeStatus and RawCommand, a battery's BatteryCells are no finding; the reports say
+    what was played."""
+    done = soak(tmp_path, "--duration", "30s", "--rate", "50", "--foreign-traffic", "ardupilot")
+    assert done.returncode == 0, done.stdout + done.stderr
+    doc, _, summary = reports(tmp_path)
+    assert doc["status"] == "COMPLETED" and doc["findings"] == [] and doc["bench"]["foreign_traffic"] == "ardupilot"
+    foreign = doc["foreign_traffic"]
+    assert foreign["profile"] == "ardupilot" and foreign["frames"] > 400 * 30 and doc["frames"]["other"] > 400 * 30
+    answers = doc["watches"]["GET_ESC_ID answers"]["statistics"]
+    assert answers["other_nodes_queries"] == answers["answers_to_other_nodes"] >= 29 and answers["answers"] == 30
+    assert "foreign traffic: ardupilot" in summary
+
+
+def test_the_trace_stays_within_its_budget_and_keeps_each_findings_frames(tmp_path):
+    """--trace-budget: the rolling candump log's oldest files deleted as the run goes on, the files together under the
+    budget, and the finding's frames in a file of its own that survives the rolling; results.json names the files."""
+    import can
+
+    budget = 300_000
+    done = soak(tmp_path, "--duration", "2m", "--rate", "50", "--emulator-faults", "report_interval_wrong",
+                "--trace-budget", "300kB", "-q")
+    assert done.returncode == 1, done.stdout + done.stderr
+    doc, _, _ = reports(tmp_path)
+    (run,) = sorted((tmp_path / "reports").glob("*-soak"))
+    trace = doc["trace"]
+    files = sorted(p.name for p in run.glob("*.log"))
+    assert trace["budget_bytes"] == budget and trace["rolled_away"] > 0 and files == sorted(trace["rolling"] + trace["findings"])
+    assert sum((run / f).stat().st_size for f in files) == trace["bytes"] <= budget
+    first = doc["findings"][0]
+    assert first["t_s"] == pytest.approx(60, abs=1) and first["frames_file"] in trace["findings"]
+    frames = list(can.CanutilsLogReader(run / first["frames_file"]))  # candump's log format
+    assert len(frames) == len(first["frames_before"]) + len(first["frames_after"])
+    assert frames[0].timestamp < first["t_s"] < frames[-1].timestamp  # the frames around it, long rolled out of the log
+    assert min(m.timestamp for m in can.CanutilsLogReader(run / trace["rolling"][0])) > first["t_s"]
+
+
+def test_a_trace_budget_too_small_for_the_findings_is_a_setup_mistake(tmp_path):
+    done = soak(tmp_path, "--trace-budget", "10kB")
+    assert done.returncode == 2 and "--trace-budget" in done.stderr and not (tmp_path / "reports").exists()

@@ -194,6 +194,28 @@ def test_frames_the_esc_should_not_send():
     assert [f.rules for f in found] == [("F2",), ("R1",)], [f.line() for f in found]
 
 
+def test_other_nodes_queries_and_their_answers_are_not_the_hosts():
+    """A flight controller at node 10 asks GET_ESC_ID too (R17's foreign traffic): the ESC's replies to it answer no
+    query of the host's, yet they are no R1 finding, nor the host's answer (one asked 2 ms before the host's is
+    answered first); a reply long after every query still is."""
+    fc = 10
+
+    def query(t: float, tid: int) -> WireFrame:
+        return encode("get_esc_id", {"option": 0}, source=fc, transfer_id=tid, layout="query", timestamp=t)
+
+    def reply(t: float, tid: int) -> WireFrame:
+        return encode("get_esc_id", {"node_id": NODE, "throttle_channel": 1}, source=NODE, transfer_id=tid,
+                      layout="reply", timestamp=t)
+
+    extra = [f for s in range(10) for f in (query(s + 0.633, s), reply(s + 0.6355, s))]
+    extra += [query(5.003, 20), reply(5.0055, 20)]  # just before the host's query at 5.005 (answered at 5.0075)
+    m = watch(Esc(extra=extra), 10.0)
+    assert [f.line() for f in m.findings] == []
+    assert m.answers.foreign_queries == 11 and m.answers.foreign_answers == 11 and m.answers.trials == 10
+    found = only(watch(Esc(extra=[query(3.2, 1), reply(3.5, 1)]), 10.0), "unexpected frames")
+    assert [f.rules for f in found] == [("R1",)]
+
+
 def test_findings_are_bounded():
     m = watch(Esc(answer_delay=0.080), 60.0)
     assert len(m.findings) == MAX_FINDINGS_PER_WATCH and m.count == 60 and m.dropped == 60 - MAX_FINDINGS_PER_WATCH

@@ -1,0 +1,93 @@
+"""``ckesc soak`` in simulated time (issue #31, "How we will know"): each long-run emulator fault at its default
+onset, found by a simulated soak that stops at its first finding (how long into the run, simulated time, and how
+much wall time it took); and an 8-hour soak of the faultless emulator (exit 0, its wall time, the process's memory
+at the start and the end, the trace on disk within its budget). The stream at 50 Hz, as a CI soak runs it
+(docs/soak.md); the run_time_wraps fault counts motor running time, so its soak spins the motor at throttle 200.
+In process, one run after another (``runner.run``, as ``ckesc soak`` calls it); the reports go to a temporary
+directory. A script, not a timed test:
+
+    nice python benchmarks/soak.py [--hours 8] [--faults-only | --faultless-only]
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from ckesc.bench.station import BenchOptions
+from ckesc.emulator.faults import FAULTS, SOAK
+from ckesc.soak import runner
+
+RATE_HZ = 50.0
+#: how long after its onset a fault's soak may run before it counts as missed
+AFTER_ONSET_S = 600.0
+SPIN = {"run_time_wraps"}
+OUT = Path(__file__).parent / "results" / "soak.json"
+
+
+def one(reports: Path, faults: str, duration_s: float, spin: bool, stop: bool) -> tuple[dict, float]:
+    bench = BenchOptions(emulator_faults=faults, allow_motor_spin=spin)
+    options = runner.SoakOptions(duration_s=duration_s, rate_hz=RATE_HZ, throttle=((0.0, 200),) if spin else (),
+                                 stop_on_finding=stop, reports=str(reports), quiet=True)
+    t0 = time.perf_counter()
+    outcome = runner.run(bench, options, out=io.StringIO())
+    wall = time.perf_counter() - t0
+    assert outcome.where is not None
+    return json.loads((outcome.where / "results.json").read_text()), wall
+
+
+def faults(reports: Path) -> dict:
+    out = {}
+    for name in sorted(n for n, f in FAULTS.items() if f.kind == SOAK):
+        onset = FAULTS[name].onset_s
+        doc, wall = one(reports, name, onset + AFTER_ONSET_S, name in SPIN, stop=True)
+        first = doc["findings"][0] if doc["findings"] else None
+        out[name] = {"onset_s": onset, "found": first is not None, "found_at_s": first and round(first["t_s"], 3),
+                     "after_onset_s": first and round(first["t_s"] - onset, 3), "watch": first and first["watch"],
+                     "rules": first and first["rules"], "status": doc["status"], "ran_s": doc["ran_s"],
+                     "wall_s": round(wall, 2), "sim_per_wall": round(doc["ran_s"] / wall, 1)}
+        print(name, json.dumps(out[name]), flush=True)
+    return out
+
+
+def faultless(reports: Path, hours: float) -> dict:
+    doc, wall = one(reports, "", hours * 3600, False, stop=False)
+    mem = doc["memory"]
+    out = {"hours": hours, "status": doc["status"], "findings": len(doc["findings"]) + doc["findings_not_kept"],
+           "exit": 1 if doc["findings"] or doc["findings_not_kept"] else 0, "ran_s": doc["ran_s"],
+           "wall_s": round(wall, 1), "sim_per_wall": round(doc["ran_s"] / wall, 1), "frames": doc["frames"]["total"],
+           "rss_start_mb": round(mem["rss_start_kb"] / 1024, 1), "rss_end_mb": round(mem["rss_end_kb"] / 1024, 1),
+           "peak_rss_mb": round(mem["peak_rss_kb"] / 1024, 1),
+           "trace_mb": round(doc["trace"]["bytes"] / 1e6, 1), "trace_budget_mb": doc["trace"]["budget_bytes"] / 1e6,
+           "trace_rolled_away": doc["trace"]["rolled_away"],
+           "statement": {s["watch"]: s["text"] for s in doc["statement"]}}
+    print("faultless", json.dumps(out), flush=True)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--hours", type=float, default=8.0, help="the faultless soak's length (default 8)")
+    ap.add_argument("--faults-only", action="store_true")
+    ap.add_argument("--faultless-only", action="store_true")
+    args = ap.parse_args()
+    result: dict = json.loads(OUT.read_text()) if OUT.exists() else {}
+    result.update(python=sys.version.split()[0], machine=platform.machine(), rate_hz=RATE_HZ,
+                  date=time.strftime("%Y-%m-%d", time.gmtime()))
+    with tempfile.TemporaryDirectory() as tmp:
+        if not args.faultless_only:
+            result["faults"] = faults(Path(tmp))
+        if not args.faults_only:
+            result["faultless"] = faultless(Path(tmp), args.hours)
+    OUT.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"written {OUT}")
+
+
+if __name__ == "__main__":
+    main()
