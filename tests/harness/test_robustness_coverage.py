@@ -11,8 +11,8 @@ import pytest
 
 import conformance.test_robustness_r17_malformed as r17
 from ckesc.protocol import Kind
-from ckesc.protocol import malformed as mf
 from ckesc.protocol import catalogue as cat
+from ckesc.protocol import malformed as mf
 from ckesc.protocol.frame import encode
 from ckesc.protocol.ids import parse_can_id
 from ckesc.protocol.transfer import parse_tail
