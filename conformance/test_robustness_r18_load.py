@@ -220,7 +220,7 @@ def test_get_esc_id_answered_in_its_slot_under_load(dut, priority):
                                   "4.4.3-4")
 
 
-@pytest.mark.requirement("R18")
+@pytest.mark.requirement("R18", "4.4.2-1", "4.4.2-T", "4.4.21-1", "4.4.21-T")  # R18: the commands obeyed, each its own rule
 @pytest.mark.parametrize("priority", PRIORITIES)
 @pytest.mark.parametrize("share", SHARES, ids=lambda s: f"{s:.0%}")
 def test_commands_obeyed_under_load(dut, share, priority):
