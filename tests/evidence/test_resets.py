@@ -5,6 +5,9 @@ first, then the emulator's reset faults on a simulated bus (sans-IO: every frame
 
 from __future__ import annotations
 
+import can
+
+from ckesc.cli import main
 from ckesc.evidence import BusRules
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import encode
@@ -115,9 +118,10 @@ def test_a_late_report_counting_on_is_no_reset():
 
 
 # ------------------------------------------------------------------------------------------ the emulator's faults
-def emulated(faults, play) -> list[str]:
-    """The checks the bus rules (told of no power switch: none is made) find while ``play`` drives the emulator."""
-    host = ScriptedHost((1,), faults)
+def emulated(faults, play, *, keep: bool = False):
+    """The checks the bus rules (told of no power switch: none is made) find while ``play`` drives the emulator (with
+    ``keep``: and the frames)."""
+    host = ScriptedHost((1,), faults, keep=keep)
     host.run.rules = engine()
     try:
         host.pump(0.5)
@@ -125,7 +129,7 @@ def emulated(faults, play) -> list[str]:
         play(host)
         host.request("maintenance_information", {"option": 2}, 1)
         host.pump(0.1)
-        return checks(host.run.violations)
+        return (checks(host.run.violations), host.run.messages) if keep else checks(host.run.violations)
     finally:
         host.close()
 
@@ -152,3 +156,18 @@ def test_a_reset_on_a_multi_frame_start_is_found():
 def test_a_reset_after_a_stream_is_found():
     assert emulated(("reset_after_streaming=2",), stream_for(1.5)) == []  # before its onset
     assert emulated(("reset_after_streaming=2",), stream_for(2.5)).count("reset") >= 2
+
+
+def test_check_log_reports_a_reset_in_a_capture(tmp_path, capsys):
+    """A capture with a reset: an observation (a power cycle would look the same), a violation with --power-on."""
+    _, messages = emulated(("reset_on_multi_frame_start",), multi_frame_start, keep=True)
+    path = tmp_path / "reset.log"
+    with can.Logger(str(path)) as writer:
+        for msg in messages:
+            writer.on_message_received(msg)
+    assert main(["check-log", str(path), "--complete"]) == 0
+    out = capsys.readouterr().out
+    assert "a reset, unless the power was switched (a capture does not show it): the power-up count" in out, out
+    assert main(["check-log", str(path), "--complete", "--power-on"]) == 1
+    out = capsys.readouterr().out
+    assert "[R19 R17 " in out and "a reset with the power on: the power-up count (241 option 2) went from 1 to 2" in out, out
