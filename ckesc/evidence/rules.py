@@ -405,7 +405,7 @@ class BusRules(Tracker):
         are not reported (a capture, ``power_known`` False) the bench may have switched the power meanwhile: recorded."""
         if self.power_known:
             return self._violation(out, (sign.rule, "R17"), ts, node.id, "reset",
-                                   f"a reset with the power on: {sign.text}", frames)
+                                   f"a reset the host did not make: {sign.text}", frames)
         self._observe((sign.rule, "R17"), ts, node.id, "reset-unjudged",
                       f"a reset, unless the power was switched (a capture does not show it): {sign.text}", frames)
         return out

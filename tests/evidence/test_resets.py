@@ -5,6 +5,10 @@ first, then the emulator's reset faults on a simulated bus (sans-IO: every frame
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import can
 
 from ckesc.cli import main
@@ -154,8 +158,24 @@ def test_a_reset_on_a_multi_frame_start_is_found():
 
 
 def test_a_reset_after_a_stream_is_found():
-    assert emulated(("reset_after_streaming=2",), stream_for(1.5)) == []  # before its onset
-    assert emulated(("reset_after_streaming=2",), stream_for(2.5)).count("reset") >= 2
+    """The soak fault with its onset moved to 5 s of stream (docs/emulator.md)."""
+    assert emulated(("reset_after_streaming=5",), stream_for(4.5)) == []  # before its onset
+    assert emulated(("reset_after_streaming=5",), stream_for(5.5)).count("reset") >= 2
+
+
+def test_a_conformance_run_shows_the_reset_in_results_json(tmp_path):
+    """End to end: R17's malformed-frame test on an ESC that resets on a multi-frame start; results.json names the live
+    rule's reset (its own check FAILs it on R17 too; the bus rules add R19, R17 and the power-up count)."""
+    test = "conformance/test_robustness_r17_malformed.py::test_malformed_frames_are_ignored[can_test]"
+    done = subprocess.run([sys.executable, "-m", "ckesc", "run", "-q", "--trace-format", "none", "--reports", str(tmp_path),
+                           "--emulator-faults", "reset_on_multi_frame_start", test], capture_output=True, text=True,
+                          timeout=600)
+    results = tmp_path / "latest" / "results.json"
+    assert results.is_file(), done.stdout[-3000:] + done.stderr[-3000:]
+    [r] = json.loads(results.read_text())["results"]
+    assert r["outcome"] == "FAIL" and r["bus_rules"] == ["R19", "R17"], r
+    [cause] = [c for c in r["bus_causes"] if c["check"] == "reset"]
+    assert "the power-up count (241 option 2) went from 1 to 2" in cause["first"], cause
 
 
 def test_check_log_reports_a_reset_in_a_capture(tmp_path, capsys):
@@ -170,4 +190,4 @@ def test_check_log_reports_a_reset_in_a_capture(tmp_path, capsys):
     assert "a reset, unless the power was switched (a capture does not show it): the power-up count" in out, out
     assert main(["check-log", str(path), "--complete", "--power-on"]) == 1
     out = capsys.readouterr().out
-    assert "[R19 R17 " in out and "a reset with the power on: the power-up count (241 option 2) went from 1 to 2" in out, out
+    assert "[R19 R17 " in out and "a reset the host did not make: the power-up count (241 option 2) went from 1 to 2" in out, out
