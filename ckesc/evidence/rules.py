@@ -437,12 +437,15 @@ class BusRules(Tracker):
         value = field_value(data, f)
         before = node.counters.get(option)  # type: ignore[arg-type]
         node.counters[option] = (value, asked, self.power_switches, node.moved)  # type: ignore[index]
-        if before is None or before[2:] != (self.power_switches, node.moved):
+        if before is None:
+            return out
+        previous, previous_asked, power, moved = before
+        if (power, moved) != (self.power_switches, node.moved):
             return out
         if f.name == "power_ups":
-            sign = r19_power_ups(before[0], value)
+            sign = r19_power_ups(previous, value)
         else:
-            sign = r19_run_time(before[0], value, ts - before[1], error=2 * self.tolerance)
+            sign = r19_run_time(previous, value, ts - previous_asked, error=2 * self.tolerance)
         if sign is None:
             return out
         return self._reset(out, sign, ts, node, (quote(info.can_id, data, ts, note=f"{info.label}, {f.name} {value}"),))
