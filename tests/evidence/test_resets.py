@@ -16,7 +16,7 @@ from ckesc.evidence import BusRules
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import encode
 
-from .test_rules import BITRATE, checks, feed, msg1, stated, stream
+from .test_rules import BITRATE, checks, feed, stated, stream
 from .traffic import ScriptedHost
 
 
