@@ -428,21 +428,25 @@ class BusRules(Tracker):
 
     def _counters(self, out, info: FrameId, node: Node, data, ts: float, asked: float):
         """R19: a 241 answer (option 2: the power-up count; option 1: the run time) against the node's last one of that
-        option, when no power switch the host reported and no Set ID came between them. The run time's elapsed time
-        is the widest the two readings can be apart: from the earlier one's request to this answer."""
+        option, when no power switch the host reported and no Set ID came between them. A power-up count is judged only
+        across a silence of the node as long as a power cycle may take (:data:`RESTART_SILENCE_S`: a reset boots first).
+        The run time's elapsed time is the widest the two readings can be apart: from the earlier one's request to this
+        answer."""
         option = self._maintenance.get((info.dest, info.source, data[-1] & 0x1F))  # type: ignore[arg-type]
         f = RESET_FIELDS.get(option)  # type: ignore[arg-type]
         if f is None or len(data) <= f.offset + f.size or node.shared:
             return out
         value = field_value(data, f)
         before = node.counters.get(option)  # type: ignore[arg-type]
-        node.counters[option] = (value, asked, self.power_switches, node.moved)  # type: ignore[index]
+        node.counters[option] = (value, asked, self.power_switches, node.moved, node.chain)  # type: ignore[index]
         if before is None:
             return out
-        previous, previous_asked, power, moved = before
+        previous, previous_asked, power, moved, chain = before
         if (power, moved) != (self.power_switches, node.moved):
             return out
         if f.name == "power_ups":
+            if chain == node.chain:  # never silent as long as a boot takes: it did not power up (a count that grew
+                return out  # all the same counts something else: 4.4.27-T's tests judge what it counts)
             sign = r19_power_ups(previous, value)
         else:
             sign = r19_run_time(previous, value, ts - previous_asked, error=2 * self.tolerance)

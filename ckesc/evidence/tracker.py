@@ -165,8 +165,8 @@ class Node:
         self.silences = 0
         self.noted: set[tuple] = set()  # observations made once per node
         #: R19: 241's last power-up count and run time from this node, each (value, when its request went out, the
-        #: tracker's power switches then, the node's Set ID count then): a reset shows against them
-        self.counters: dict[int, tuple[int, float, int, int]] = {}
+        #: tracker's power switches then, the node's Set ID count then, its chain then): a reset shows against them
+        self.counters: dict[int, tuple[int, float, int, int, int]] = {}
 
     @property
     def role(self) -> str:
