@@ -15,9 +15,9 @@ The rules (ids from ``spec/INTERPRETATIONS.md`` / ``ckesc/protocol/requirements.
 * F7  no frame of an ESC from node 0 or the reserved ids 0x7E/0x7F; nothing reported on its own at 0x7D;
 * R9  MSG1/MSG2/MSG3 come every N x 2 ms, N as the node itself last said in a Set/Get Freq answer
   (when no answer was heard: never closer than the shortest legal interval);
-* R19 (and R17) no reset the host did not make: a 241 option 2 answer whose power-up count grew, or an option 1 answer
-  whose run time went back (or jumped), since the node's previous answer of that option; a report gap with a transfer
-  id restart (:func:`~ckesc.protocol.judgements.r19_report_restart`). Never across what the host did that restarts
+* R19 (and R17) no reset the host did not make: a 241 option 2 answer whose power-up count grew across a silence of
+  the node (a reset boots first), or an option 1 answer whose run time went back (or jumped), since the node's
+  previous answer of that option; a report gap with a transfer id restart (:func:`~ckesc.protocol.judgements.r19_report_restart`). Never across what the host did that restarts
   transfer ids or reporting: a power switch it reported (:meth:`BusRules.power_switched`), MSG Control, CAN Test, a Set
   Freq write, Set ID. Where power switches are not reported (a capture: ``power_known`` False) a reset is recorded.
 
