@@ -31,7 +31,8 @@ def _run_check_log(args: argparse.Namespace) -> int:
     if not Path(path).is_file():
         print(f"ckesc check-log: error: no such file: {path}", file=sys.stderr)
         return EXIT_USAGE
-    summary = check_capture(path, bitrate=args.bitrate, tolerance=args.tolerance / 1000, complete=args.complete)
+    summary = check_capture(path, bitrate=args.bitrate, tolerance=args.tolerance / 1000, complete=args.complete,
+                            power_on=args.power_on)
     if summary["frames"] == 0:
         why = summary["damaged"]["first"][0]["reason"] if summary["damaged"]["count"] else "it holds no frame"
         print(f"ckesc check-log: error: nothing readable in {path}: {why}", file=sys.stderr)
@@ -68,6 +69,10 @@ def add_check_log_command(sub: argparse._SubParsersAction) -> None:
                    help=f"timing error of the capture's timestamps in ms (default {DEFAULT_TOLERANCE_S * 1000:g})")
     p.add_argument("--complete", action="store_true",
                    help="the capture holds every frame on the bus (no drops): a missing frame is then the sender's fault")
+    p.add_argument("--power-on", action="store_true",
+                   help="the DUT's power stayed on for the whole capture (a flight): a reset (a power-up count that grew, "
+                        "a report gap with a transfer id restart) is then a violation (R19, R17), not an observation, and "
+                        "a late first report after a resume is judged")
     p.add_argument("--allow-truncated", action="store_true",
                    help="a capture shorter than its header declares (BLF) is judged on what it holds, with a warning, "
                         "instead of exit 2")

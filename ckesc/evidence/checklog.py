@@ -27,9 +27,10 @@ DEFAULT_TOLERANCE_S = timing_tolerance("bus timestamp", USB_ADAPTER_ERROR_S)
 
 
 def check_capture(path: str, *, bitrate: int = cat.DEFAULT_BITRATE, tolerance: float = DEFAULT_TOLERANCE_S,
-                  complete: bool = False) -> dict[str, Any]:
-    """Run the bus rules over the capture at ``path``; the engine's summary plus the capture's damage."""
-    rules = BusRules(tolerance=tolerance, bitrate=bitrate, complete=complete)
+                  complete: bool = False, power_on: bool = False) -> dict[str, Any]:
+    """Run the bus rules over the capture at ``path``; the engine's summary plus the capture's damage. ``power_on``: the
+    DUT's power stayed on for the whole capture (a flight), so a reset is a violation, not an observation."""
+    rules = BusRules(tolerance=tolerance, bitrate=bitrate, complete=complete, power_known=power_on)
     bad: list[dict[str, Any]] = []
     bad_count = 0
 

@@ -14,7 +14,12 @@ The rules (ids from ``spec/INTERPRETATIONS.md`` / ``ckesc/protocol/requirements.
 * F5  an ESC sends each frame at the table's priority (240..242 list none: recorded, F5-unlisted);
 * F7  no frame of an ESC from node 0 or the reserved ids 0x7E/0x7F; nothing reported on its own at 0x7D;
 * R9  MSG1/MSG2/MSG3 come every N x 2 ms, N as the node itself last said in a Set/Get Freq answer
-  (when no answer was heard: never closer than the shortest legal interval).
+  (when no answer was heard: never closer than the shortest legal interval);
+* R19 (and R17) no reset the host did not make: a 241 option 2 answer whose power-up count grew across a silence of
+  the node (a reset boots first), or an option 1 answer whose run time went back (or jumped), since the node's
+  previous answer of that option; a report gap with a transfer id restart (:func:`~ckesc.protocol.judgements.r19_report_restart`). Never across what the host did that restarts
+  transfer ids or reporting: a power switch it reported (:meth:`BusRules.power_switched`), MSG Control, CAN Test, a Set
+  Freq write, Set ID. Where power switches are not reported (a capture: ``power_known`` False) a reset is recorded.
 
 "At all times" means no false alarm on legal traffic, so the engine follows what the traffic says and
 judges only what it can tell:
@@ -64,15 +69,30 @@ import math
 from typing import Any
 
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, priority_name
-from ..protocol.judgements import Addressed, F3Step, f3_holds, f3_step, f4_mismatches, r9_gap, r9a_first, r9a_limit_s
+from ..protocol.judgements import (
+    Addressed,
+    F3Step,
+    Reset,
+    f3_holds,
+    f3_step,
+    f4_mismatches,
+    r9_gap,
+    r9a_first,
+    r9a_limit_s,
+    r19_power_ups,
+    r19_report_restart,
+    r19_run_time,
+)
 from ..protocol.transfer import SINGLE_FRAME, parse_tail
 from .findings import Intervals, Violation, ms, quote
 from .tracker import (
     COMM_BYTE,
     COMM_MASK,
     ESC_VALUE,
+    MAINTENANCE,
     MSG1,
     PSEUDO_BROADCAST,
+    RESET_FIELDS,
     RESPONSE_WINDOW_S,
     RESTART_SILENCE_S,
     SET_FREQ,
@@ -85,6 +105,7 @@ from .tracker import (
     Node,
     Stream,
     Tracker,
+    field_value,
 )
 
 __all__ = ["BusRules", "Intervals", "RESTART_SILENCE_S", "SHORTEST_S", "Violation", "quote"]
@@ -258,6 +279,9 @@ class BusRules(Tracker):
 
     # ------------------------------------------------------------------------------------- F3 and R9
     def _stream(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float, tid: int):
+        if (st.ts is not None and not f3_holds(st.tid, tid) and st.periodic and st.power == self.power_switches
+                and st.moved == node.moved and st.reset == node.reset and not node.shared and ts > node.unsure_until):
+            out = self._report_restart(out, st, info, node, data, ts, start, tid)
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
         if st.ts is not None and st.chain == node.chain and not node.shared and ts > node.unsure_until:
             gap = start - st.start
@@ -287,7 +311,7 @@ class BusRules(Tracker):
                 if st.interval is not None and node.event_ts is not None:
                     out = self._first_report(out, st, info, node, data, ts, start, busy_from)
         st.ts, st.start, st.busy_from, st.tid, st.data, st.can_id = ts, start, busy_from, tid, data, info.can_id
-        st.chain, st.reset, st.moved = node.chain, node.reset, node.moved
+        st.chain, st.reset, st.moved, st.power = node.chain, node.reset, node.moved, self.power_switches
         return out
 
     def _pair(self, st: Stream, info: FrameId, data, ts: float) -> tuple[str, str]:
@@ -371,6 +395,65 @@ class BusRules(Tracker):
                                f"{ms(limit)} +- {ms(tol)} ({node.period_note})",
                                (quote(info.can_id, data, ts, note=st.name),))
 
+    # ------------------------------------------------------------------------------------- R19 (R17): resets
+    def _reset(self, out, sign: Reset, ts: float, node: Node, frames: tuple[str, ...]):
+        """A reset shown (:class:`~ckesc.protocol.judgements.Reset`). It breaks R19 ("no reset" for as long as the test
+        runs: the rule these signs are written for, its judgement's own id) and R17 ("such a frame never resets the
+        ESC"): the bus cannot tell what set it off (a malformed frame, a long stream, nothing), and a reset in the middle
+        of a test that asked for none breaks both, so it cites both, as the soak's reset watch does; the selftest then
+        takes it as a test failing for the fault's rule whichever of the two a reset fault names. Where power cycles
+        are not reported (a capture, ``power_known`` False) the bench may have switched the power meanwhile: recorded."""
+        if self.power_known:
+            return self._violation(out, (sign.rule, "R17"), ts, node.id, "reset",
+                                   f"a reset the host did not make: {sign.text}", frames)
+        self._observe((sign.rule, "R17"), ts, node.id, "reset-unjudged",
+                      f"a reset, unless the power was switched (a capture does not show it): {sign.text}", frames)
+        return out
+
+    def _report_restart(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, tid: int):
+        """R19: a report gap with a transfer id restart, between two reports of one stream with no host event between
+        them that restarts reporting or may re-address the node (MSG Control, CAN Test, a Set Freq write or answer, Set
+        ID: the node's ``reset`` and ``moved`` counts) and no power switch the host reported. The interval is the one
+        the node stated, else the shortest gap seen (none: not judged)."""
+        period = node.periods[st.interval] if st.interval is not None else None
+        if period is None:
+            if st.min_gap == math.inf:
+                return out
+            period = st.min_gap
+        sign = r19_report_restart(start - st.start, period, f3_step(st.tid, tid), error=self.tolerance,
+                                  jitter=self.jitter, what=st.name)
+        if sign is None:
+            return out
+        return self._reset(out, sign, ts, node, self._pair(st, info, data, ts))
+
+    def _counters(self, out, info: FrameId, node: Node, data, ts: float, asked: float):
+        """R19: a 241 answer (option 2: the power-up count; option 1: the run time) against the node's last one of that
+        option, when no power switch the host reported and no Set ID came between them. A power-up count is judged only
+        across a silence of the node as long as a power cycle may take (:data:`RESTART_SILENCE_S`: a reset boots first).
+        The run time's elapsed time is the widest the two readings can be apart: from the earlier one's request to this
+        answer."""
+        option = self._maintenance.get((info.dest, info.source, data[-1] & 0x1F))  # type: ignore[arg-type]
+        f = RESET_FIELDS.get(option)  # type: ignore[arg-type]
+        if f is None or len(data) <= f.offset + f.size or node.shared:
+            return out
+        value = field_value(data, f)
+        before = node.counters.get(option)  # type: ignore[arg-type]
+        node.counters[option] = (value, asked, self.power_switches, node.moved, node.chain)  # type: ignore[index]
+        if before is None:
+            return out
+        previous, previous_asked, power, moved, chain = before
+        if (power, moved) != (self.power_switches, node.moved):
+            return out
+        if f.name == "power_ups":
+            if chain == node.chain:  # never silent as long as a boot takes: it did not power up (a count that grew
+                return out  # all the same counts something else: 4.4.27-T's tests judge what it counts)
+            sign = r19_power_ups(previous, value)
+        else:
+            sign = r19_run_time(previous, value, ts - previous_asked, error=2 * self.tolerance)
+        if sign is None:
+            return out
+        return self._reset(out, sign, ts, node, (quote(info.can_id, data, ts, note=f"{info.label}, {f.name} {value}"),))
+
     @staticmethod
     def _period_rules(node: Node) -> tuple[str, ...]:
         """The other clause an interval mismatch may break: the read answer the period came from
@@ -392,6 +475,8 @@ class BusRules(Tracker):
                 self._paired_answer(info, key, tid, requests, ts)  # type: ignore[arg-type]
             if service == SET_FREQ.type_id:
                 self._set_freq_answer(node, data, ts)
+            elif service == MAINTENANCE.type_id:
+                out = self._counters(out, info, node, data, ts, max(w for t, w in requests if t == tid))
             return out or _NONE
         frames = (quote(info.can_id, data, ts, note=info.label),)
         if asked:

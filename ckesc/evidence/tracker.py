@@ -62,6 +62,12 @@ GET_ESC_ID = cat.spec("get_esc_id")
 MSG_CONTROL_COMMAND = MSG_CONTROL.layouts[0].field("command")
 CAN_TEST = cat.spec("can_test")
 CAN_TEST_OPTION = CAN_TEST.layouts[0].field("option")
+#: 241's answers that show a reset (R19): option 2's power-up count, option 1's run time (the layout is the request's
+#: option's: the answer does not carry it)
+MAINTENANCE = cat.spec("maintenance_information")
+MAINTENANCE_OPTION = MAINTENANCE.request.field("option")  # type: ignore[union-attr]
+RESET_FIELDS = {option: MAINTENANCE.response_for({"option": option}).field(name)  # type: ignore[union-attr]
+                for option, name in ((1, "run_time"), (2, "power_ups"))}
 #: Host broadcasts that start, stop or switch active reporting on every ESC (4.4.1, 4.4.2).
 REPORTING_SWITCHES = {
     MSG_CONTROL.type_id: (MSG_CONTROL_COMMAND, {cat.MSG_CONTROL_SUSPEND, cat.MSG_CONTROL_RESUME, cat.MSG_CONTROL_RESUME_EXP}),
@@ -119,7 +125,8 @@ class Heard:
 class Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
                  "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
-                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until", "moved")
+                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until", "moved",
+                 "counters")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -157,6 +164,9 @@ class Node:
         self.comm_dropped = 0
         self.silences = 0
         self.noted: set[tuple] = set()  # observations made once per node
+        #: R19: 241's last power-up count and run time from this node, each (value, when its request went out, the
+        #: tracker's power switches then, the node's Set ID count then, its chain then): a reset shows against them
+        self.counters: dict[int, tuple[int, float, int, int, int]] = {}
 
     @property
     def role(self) -> str:
@@ -167,7 +177,7 @@ class Stream:
     """One (node, message type) of an ESC: transfer ids (F3) and intervals (R9)."""
 
     __slots__ = ("node", "type_id", "name", "interval", "periodic", "ts", "start", "busy_from", "tid", "data", "can_id",
-                 "chain", "reset", "min_gap", "stats", "nth", "grace", "event", "moved")
+                 "chain", "reset", "min_gap", "stats", "nth", "grace", "event", "moved", "power")
 
     def __init__(self, node: Node, type_id: int, name: str, periodic: bool) -> None:
         self.node = node
@@ -182,6 +192,7 @@ class Stream:
         self.can_id = 0
         self.chain = self.reset = -1
         self.moved = 0  # the node's Set ID count at this stream's last frame
+        self.power = 0  # the tracker's power switches at this stream's last frame (R19: a restart the host made)
         self.min_gap = math.inf
         self.stats = Intervals()
         self.nth = 0  # reports in this stretch (since the chain or the reset changed)
@@ -263,6 +274,10 @@ class Tracker(Findings):
         #: request's echoed), so a Set Freq write's answer does not say the intervals in force
         self._suspended = False
         self._paired: set[tuple] = set()  # requests whose answer was recorded (each answer once)
+        #: how many times the host switched the DUT's power (:meth:`power_switched`): a reset across one is the host's
+        self.power_switches = 0
+        #: 241 requests' options by (requester, node asked, transfer id): their answers' layout (R19's counters)
+        self._maintenance: dict[tuple[int, int | None, int], int] = {}
         #: what the tracker paired, for the report's plots: None (the default) records nothing
         self.heard: Heard | None = None
 
@@ -320,6 +335,7 @@ class Tracker(Findings):
         """The host switched the DUT's power (off or on) at ``ts``: a pending R9a event is void (the first
         report after a power-up is the boot's, not the command's); the next stretch has R9a-gaps grace."""
         self._suspended = False  # a suspension is not kept across a power cycle (R13)
+        self.power_switches += 1
         for node in self._nodes.values():
             node.event_ts = None
             node.grace_chain = node.chain + 1  # the stretch after the silence it makes
@@ -386,6 +402,10 @@ class Tracker(Findings):
             self._set_id_shared(data, ts)
         else:
             key = (info.source, info.dest, type_id)
+            if type_id == MAINTENANCE.type_id and len(data) > MAINTENANCE_OPTION.offset + MAINTENANCE_OPTION.size:
+                if len(self._maintenance) > 4096:
+                    self._maintenance.clear()
+                self._maintenance[(info.source, info.dest, tid)] = field_value(data, MAINTENANCE_OPTION)
             if type_id == SET_FREQ.type_id and field_value(data, SET_FREQ_OPTION) == SET_FREQ_WRITE:
                 dest = self._node(info.dest)  # type: ignore[arg-type]
                 # the new intervals count from the write (its answer tells them), the old ones as the node last said
