@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from .compare import EXTRA_CSS, RunError
+from .compare import EXTRA_CSS, RunError, _letter
 from .htmlkit import CSS, badge, e
 
 #: what a soak record must hold for the comparison (``ckesc soak``'s results.json)
@@ -41,10 +41,6 @@ def parse_soak(doc: dict[str, Any], *, label: str = "", path: str = "") -> SoakR
         raise RunError(f"{path or label}: a soak record without {', '.join(missing) or 'a statement list'} (not one "
                        "this version reads)")
     return SoakRun(label=label or path, path=path, doc=doc)
-
-
-def _letter(i: int) -> str:
-    return chr(ord("A") + i) if i < 26 else f"R{i + 1}"
 
 
 # ------------------------------------------------------------------------------------------ facts of one run
