@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from .compare import EXTRA_CSS, RunError, _letter
+from .compare import EXTRA_CSS, RunError
 from .htmlkit import CSS, badge, e
 
 #: what a soak record must hold for the comparison (``ckesc soak``'s results.json)
@@ -41,6 +41,10 @@ def parse_soak(doc: dict[str, Any], *, label: str = "", path: str = "") -> SoakR
         raise RunError(f"{path or label}: a soak record without {', '.join(missing) or 'a statement list'} (not one "
                        "this version reads)")
     return SoakRun(label=label or path, path=path, doc=doc)
+
+
+def _letter(i: int) -> str:
+    return chr(ord("A") + i) if i < 26 else f"R{i + 1}"
 
 
 # ------------------------------------------------------------------------------------------ facts of one run
@@ -83,8 +87,8 @@ def flags(runs: list[SoakRun]) -> list[str]:
     """What makes the comparison less than like for like, one line each."""
     out = []
     for what, get in (("lanes", lambda d: d.get("lane")), ("DUT profiles", lambda d: d.get("profile")),
-                      ("stream rates", lambda d: (d.get("plan") or {}).get("rate_hz")),
-                      ("durations", lambda d: d.get("duration_s")), ("emulator faults", lambda d: d.get("faults") or "none"),
+                      ("stream rates", lambda d: _num((d.get("plan") or {}).get("rate_hz"), " Hz")),
+                      ("durations", lambda d: _num(d.get("duration_s"), " s")), ("emulator faults", lambda d: d.get("faults") or "none"),
                       ("foreign traffic", lambda d: (d.get("foreign_traffic") or {}).get("profile"))):
         values = [get(r.doc) for r in runs]
         if len({str(v) for v in values}) > 1:
