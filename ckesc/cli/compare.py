@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from ..reporting import compare
+from ..reporting import compare, soak_compare
 from .common import EXIT_OK, EXIT_USAGE
 
 EXIT_REGRESSED = 1
@@ -25,27 +25,42 @@ def _percent(text: str) -> float:
 
 def _run_compare(args: argparse.Namespace) -> int:
     try:
-        runs = [compare.read_run(path) for path in args.runs]
+        docs = [compare.read_doc(path) for path in args.runs]
+        soaks = [soak_compare.is_soak(doc) for _, doc in docs]
+        if any(soaks) and not all(soaks):
+            kinds = ", ".join(f"{path} a {'soak' if s else 'conformance'} run" for path, s in zip(args.runs, soaks))
+            print(f"ckesc compare: error: cannot compare a soak run with a conformance run ({kinds}): give runs of "
+                  "one kind", file=sys.stderr)
+            return EXIT_USAGE
+        if all(soaks):
+            doc = soak_compare.compare([soak_compare.parse_soak(d, label=label, path=str(path))
+                                        for path, (label, d) in zip(args.runs, docs)])
+            render = soak_compare
+        else:
+            doc = compare.compare([compare.parse_run(d, label=label, path=str(path))
+                                   for path, (label, d) in zip(args.runs, docs)], threshold=args.margin_threshold)
+            render = compare
     except compare.RunError as exc:
         print(f"ckesc compare: error: cannot read run {exc}", file=sys.stderr)
         return EXIT_USAGE
-    doc = compare.compare(runs, threshold=args.margin_threshold)
     try:
         if args.json:
             Path(args.json).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         if args.html:
-            Path(args.html).write_text(compare.page(doc), encoding="utf-8")
+            Path(args.html).write_text(render.page(doc), encoding="utf-8")
     except OSError as exc:
         print(f"ckesc compare: error: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
         return EXIT_USAGE
-    print(compare.text(doc))
+    print(render.text(doc))
     return EXIT_REGRESSED if doc["regressed"] else EXIT_OK
 
 
 def add_compare_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compare", help="what changed between runs: regressions, fixes, tests added/removed, shrinking margins",
-                       description=compare.__doc__.split("\n\n:func:")[0] + "\n\nExit 0: nothing regressed; 1: something regressed; 2: a run cannot "
-                                                     "be read, or bad arguments.",
+                       description=compare.__doc__.split("\n\n:func:")[0] + "\n\nSoak runs (ckesc soak's reports) are compared with soak runs: per "
+                       "watched property its findings, the statement's bound, R9 per minute, the answer delays; a "
+                       "property with findings that had none is a regression.\n\nExit 0: nothing regressed; 1: something "
+                       "regressed; 2: a run cannot be read, a soak run given with a conformance run, or bad arguments.",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("runs", nargs="+", metavar="RUN",
                    help="a run's report directory (reports/<timestamp>, reports/latest) or its results.json; two or more, "

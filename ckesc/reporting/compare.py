@@ -65,6 +65,13 @@ class Run:
 def read_run(path: str | Path) -> Run:
     """The run at ``path``: a report directory (``reports/<timestamp>``, ``reports/latest``) or its
     ``results.json``. Raises :class:`RunError`."""
+    label, doc = read_doc(path)
+    return parse_run(doc, label=label, path=str(path))
+
+
+def read_doc(path: str | Path) -> tuple[str, Any]:
+    """The parsed ``results.json`` at ``path`` (a run's directory or the file) and the run's label (its directory's
+    name): a conformance run's or a soak run's (:mod:`.soak_compare`). Raises :class:`RunError`."""
     p = Path(path)
     if p.is_dir():
         if not (p / "results.json").is_file():
@@ -81,7 +88,7 @@ def read_run(path: str | Path) -> Run:
         raise RunError(f"{path}: cannot read {p}: {exc.strerror}") from None
     except (UnicodeDecodeError, ValueError) as exc:
         raise RunError(f"{path}: {p.name} is not JSON: {exc}") from None
-    return parse_run(doc, label=label, path=str(path))
+    return label, doc
 
 
 def parse_run(doc: Any, *, label: str = "", path: str = "") -> Run:
@@ -89,6 +96,8 @@ def parse_run(doc: Any, *, label: str = "", path: str = "") -> Run:
     is not one."""
     where = path or label or "run"
     if not isinstance(doc, RunRecord):
+        if isinstance(doc, dict) and doc.get("kind") == "soak":
+            raise RunError(f"{where}: a soak run (`ckesc soak`), not a conformance run: compare it with soak runs")
         if not isinstance(doc, dict) or not isinstance(doc.get("results"), list) or not isinstance(doc.get("info"), dict):
             raise RunError(f"{where}: not a results record of `ckesc run` (an object with 'info' and 'results')")
         for n, r in enumerate(doc["results"]):

@@ -247,3 +247,59 @@ def test_flags_name_what_differs_and_only_that(runs):
     generic = _doc(runs["generic"])
     assert compare.flags([runs_[1], compare.parse_run({**generic, "info": {**generic["info"], "complete": True}})]) == [
         f"different DUT profiles: A {doc['info']['profile']}, B {generic['info']['profile']}"]
+
+
+# ------------------------------------------------------------------------------------------ soak runs (issue #31 item 6)
+SOAK = ("--duration", "2m", "--rate", "50", "-q")  # two simulated minutes: two R9 minutes per report, a second each
+
+
+@pytest.fixture(scope="module")
+def soaks(tmp_path_factory) -> dict[str, Path]:
+    """A faultless soak, and one whose ESC's clock runs fast from 30 s on (R9's minute means drift: found), run side
+    by side."""
+    base = tmp_path_factory.mktemp("soaks")
+    args = {"clean": (), "drift": ("--emulator-faults", "clock_drift_warm=30")}
+    procs = {name: subprocess.Popen([sys.executable, "-m", "ckesc", "soak", "--reports", str(base / name), *SOAK, *extra],
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             for name, extra in args.items()}
+    for name, proc in procs.items():
+        out, _ = proc.communicate(timeout=600)
+        assert proc.returncode == {"clean": 0, "drift": 1}[name], out
+    return {name: next((base / name).glob("*-soak")) for name in args}
+
+
+def test_two_soak_runs_compared_per_watched_property(soaks, tmp_path):
+    html = tmp_path / "soak.html"
+    done, doc = _compare(tmp_path, soaks["clean"], soaks["drift"], extra=("--html", str(html)))
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert doc["kind"] == "soak" and doc["regressed"]
+    (pair,) = doc["pairs"]
+    assert pair["regressed"] == ["report intervals"] and pair["fixed"] == []
+    rows = {r["watch"]: r for r in pair["properties"]}
+    assert rows["report intervals"]["before"] == 0 and rows["report intervals"]["after"] > 0
+    assert all(r["change"] == "same" for w, r in rows.items() if w != "report intervals")
+    a, b = doc["runs"]
+    # the statement's bound per property, as each run's results.json states it
+    assert a["properties"]["resets"]["bound"] == pytest.approx(90.0) and "0 resets in 2 min" in a["properties"]["resets"]["text"]
+    # R9 per minute: the faultless ESC on its interval; the drifting one fast, its worst minute off by more
+    assert a["r9"]["msg1"]["interval_ms"] == 20 and a["r9"]["msg1"]["worst_error_ms"] == pytest.approx(0, abs=0.01)
+    assert b["r9"]["msg1"]["mean_ms"] < 20 and b["r9"]["msg1"]["worst_error_ms"] < -1
+    assert a["delays"]["answers"] == b["delays"]["answers"] == 120 and a["delays"]["p99_ms"] is not None
+    assert a["resets"]["events"] == b["resets"]["events"] == 0
+    assert any("clock_drift_warm" in f for f in doc["flags"])
+    assert "A -> B: REGRESSED report intervals" in done.stdout and "report intervals: 0 -> " in done.stdout
+    assert "msg1 (every 20 ms): A 20 ms" in done.stdout and "p50 / p90 / p99" in done.stdout
+    page = html.read_text()
+    assert 'data-watch="report intervals"' in page and "REGRESSED" in page
+    back = ckesc("compare", soaks["drift"] / "results.json", soaks["clean"])
+    assert back.returncode == 0 and "fixed report intervals" in back.stdout, back.stdout + back.stderr
+
+
+def test_a_soak_run_with_a_conformance_run_is_exit_2_with_one_line(runs, soaks):
+    done = ckesc("compare", runs["clean"], soaks["clean"])
+    assert done.returncode == 2 and done.stdout == "", done.stdout + done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and "soak run with a conformance run" in done.stderr
+    assert f"{soaks['clean']} a soak run" in done.stderr
+    # and the library refuses a soak record as a conformance one, saying so
+    with pytest.raises(compare.RunError, match="a soak run"):
+        compare.read_run(soaks["clean"])
