@@ -180,13 +180,13 @@ def test_reports_keep_their_intervals_under_load(dut, share, priority):
                           f"priority load, every {ms(interval):g} ms there would be {expected}")
             if mean is None:
                 continue
-        dut.record.measure(f"{which} mean interval error over {len(starts) - 1} gaps under {share:.0%} {priority} load",
+        dut.record.measure(f"{which} mean interval error over {len(starts) - 1} gaps under {share:.0%} load",
                            ms(mean.measured), limit=ms(mean.limit + mean.error), unit="ms", clock=dut.clock,
                            error=ms(mean.error), requirement="R18", strength="READING")
         gaps = [r18_gap(b - a, interval, share=u, bitrate=rate, error=error, jitter=dut.profile.jitter_s,
                         late=load.late, what=which) for a, b in zip(starts, starts[1:])]
         worst = max(gaps, key=lambda j: j.measured - j.limit)
-        dut.record.measure(f"{which} worst single gap's error under {share:.0%} {priority} load", ms(worst.measured),
+        dut.record.measure(f"{which} worst single gap's error under {share:.0%} load", ms(worst.measured),
                            limit=ms(worst.limit + worst.error), unit="ms", clock=dut.clock, error=ms(worst.error),
                            requirement="R18", strength="READING")
     assert not broken, "; ".join(broken) + " (R18: the ESC keeps R9 under load)"
@@ -216,7 +216,7 @@ def test_get_esc_id_answered_in_its_slot_under_load(dut, priority):
                 assert got, (f"query {n + 1}: no GET_ESC_ID reply from node {node} within "
                              f"{ms(answer_window_s(dut)):g} ms under {share:.0%} {priority}-priority load (R18: the ESC "
                              "keeps R2 and the 64 ms bound under load)")
-                check_answer_slot(dut, got[0], sent, node, f"GET_ESC_ID query {n + 1} under {share:.0%} {priority} load",
+                check_answer_slot(dut, got[0], sent, node, f"GET_ESC_ID query {n + 1} under {share:.0%} load",
                                   "4.4.3-4")
 
 

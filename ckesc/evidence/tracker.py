@@ -284,6 +284,10 @@ class Tracker(Findings):
     # ------------------------------------------------------------------------------------- setup
     def set_bitrate(self, bitrate: int) -> None:
         """The bus's bit rate from now on (the host reopened at another rate after Set Baud)."""
+        if hasattr(self, "bitrate") and int(bitrate) != self.bitrate:
+            # while the host listened at another rate it saw nothing of the DUT (Set Baud's rate search may power-cycle
+            # it meanwhile): a restart across the change is not judged a reset (R19), as across a power switch
+            self.power_switches += 1
         self.bitrate = int(bitrate)
         self._dur = [frame_bits(n) / self.bitrate for n in range(9)]
         # a real frame is up to ~20 % longer than its unstuffed length: a frame that starts within that of

@@ -48,6 +48,9 @@ RESTORE_SETTLE_S = 2 * cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S + 0.1
 RESTORE_TRIES = 3
 
 
+#: how long the explorer reads for an answer: the 64 ms bound and a read window past it (the bench's error added)
+ANSWER_READ_S = cat.ANSWER_DELAY_MAX_S + 0.006
+
 class Recorder(can.Listener):
     """Every frame the lane reads (both directions) and every power switch, with lane times."""
 
@@ -344,7 +347,7 @@ class Session:
                 dut.request(action.name, action.fields, destination=oracle.node_id)
             else:
                 dut.broadcast(action.name, action.fields, **({"layout": "query"} if action.name == "get_esc_id" else {}))
-                dut.wait(cat.ANSWER_DELAY_MAX_S + 0.006 + 2 * self.lane.timing_error)
+                dut.wait(ANSWER_READ_S + 2 * self.lane.timing_error)
         elif action.op == "malformed":
             self._send_malformed(action, oracle)
         elif action.op == "stream":
@@ -394,7 +397,7 @@ class Session:
                 self._malformed.setdefault(keys[-1], []).append(
                     (action.name, action.form, f"{command} as {bad}", False))
                 dut.send_wire(w)
-        dut.wait(cat.ANSWER_DELAY_MAX_S + 0.006 + 2 * self.lane.timing_error)
+        dut.wait(ANSWER_READ_S + 2 * self.lane.timing_error)
         if action.form == r17.TOGGLE and bads:
             b = bads[0]
             answered = any(f.source != dut.host_node and f.name == action.name  # (Set ID answers from its new id) and f.kind is not Kind.REQUEST

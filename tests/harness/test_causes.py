@@ -48,7 +48,8 @@ def test_one_broken_rule_is_one_group_and_the_other_faults_are_seen(run):
     assert len(first.tests) > 250 and len(set(first.tests)) == len(first.tests)
     assert first.first.count("\n    (") >= 1, "its first occurrence quotes the frames"
     assert first.traces, "and links the trace of the test it was first seen in"
-    assert len(gs) < 30, f"a few distinct problems, not one per test: {[g.title for g in gs]}"
+    # about 30 causes for ~330 failing tests (the robustness section's R17 and R18 modules add their own few)
+    assert len(gs) < 35, f"a few distinct problems, not one per test: {[g.title for g in gs]}"
     late = [g for g in gs if g.title.startswith("4.4.2-4") or g.title.startswith("4.4.3-4")]
     assert late and all(g.strength == "SHALL" and "answer delay = 80." in g.title for g in late)
     assert {t for g in late for t in g.tests} >= {r["nodeid"] for r in failed if "answer delay" in r["message"]}

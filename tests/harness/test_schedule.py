@@ -134,7 +134,9 @@ def test_overlap_order_shares_windows_and_changes_no_verdict(overlap_run, tmp_pa
     assert set(_verdicts(overlap_run).values()) <= {"PASS", "OBSERVED"}
     assert overlap_run["info"]["order"] == "overlap" and "order" not in serial["info"]
     assert overlap_run["info"]["lane_seconds"] < serial["info"]["lane_seconds"] - 3 * W  # windows overlapped
-    windows = [r for r in overlap_run["results"] if "window" in r["nodeid"]]
+    # the window tests of Set ID and Set Baud (the robustness section's malformed window writes share windows too, but
+    # send no valid write whose moment could be read back)
+    windows = [r for r in overlap_run["results"] if "window" in r["nodeid"] and r["section"] in ("4.4.18", "4.4.19")]
     assert len(windows) == 4
     for r in windows:
         seen = dict(r["observations"])
