@@ -280,7 +280,7 @@ class BusRules(Tracker):
     # ------------------------------------------------------------------------------------- F3 and R9
     def _stream(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float, tid: int):
         if (st.ts is not None and not f3_holds(st.tid, tid) and st.periodic and st.power == self.power_switches
-                and st.moved == node.moved and st.reset == node.reset and not node.shared and ts > node.unsure_until):
+                and self.last_switch_ts < st.ts and st.moved == node.moved and st.reset == node.reset and not node.shared and ts > node.unsure_until):
             out = self._report_restart(out, st, info, node, data, ts, start, tid)
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
         if st.ts is not None and st.chain == node.chain and not node.shared and ts > node.unsure_until:
@@ -442,7 +442,7 @@ class BusRules(Tracker):
         if before is None:
             return out
         previous, previous_asked, power, moved, chain = before
-        if (power, moved) != (self.power_switches, node.moved):
+        if (power, moved) != (self.power_switches, node.moved) or self.last_switch_ts >= previous_asked:
             return out
         if f.name == "power_ups":
             if chain == node.chain:  # never silent as long as a boot takes: it did not power up (a count that grew

@@ -276,6 +276,7 @@ class Tracker(Findings):
         self._paired: set[tuple] = set()  # requests whose answer was recorded (each answer once)
         #: how many times the host switched the DUT's power (:meth:`power_switched`): a reset across one is the host's
         self.power_switches = 0
+        self.last_switch_ts = -math.inf  #: the lane time of the latest power switch the host reported
         #: 241 requests' options by (requester, node asked, transfer id): their answers' layout (R19's counters)
         self._maintenance: dict[tuple[int, int | None, int], int] = {}
         #: what the tracker paired, for the report's plots: None (the default) records nothing
@@ -340,6 +341,9 @@ class Tracker(Findings):
         report after a power-up is the boot's, not the command's); the next stretch has R9a-gaps grace."""
         self._suspended = False  # a suspension is not kept across a power cycle (R13)
         self.power_switches += 1
+        # when: frames are handed over as the host reads them, maybe after the switch was noted (a lane that let
+        # time pass unread): a report stamped before it and read after it still lies before the switch
+        self.last_switch_ts = max(self.last_switch_ts, ts)
         for node in self._nodes.values():
             node.event_ts = None
             node.grace_chain = node.chain + 1  # the stretch after the silence it makes

@@ -98,6 +98,18 @@ def test_a_report_gap_with_a_transfer_id_restart_is_a_reset():
     assert v.rules == ("R19", "R17") and "msg1 stopped for" in v.message and "transfer id 0 after 14" in v.message
 
 
+def test_a_power_switch_noted_before_the_reports_around_it_are_read_is_the_hosts():
+    """A lane hands frames over as the host reads them: ``ckesc explore`` switched the power while the reports
+    stamped before the switch were still unread. The switch's time decides, not the order the engine heard of it."""
+    rules = engine()
+    t = stated(rules, 1, 0.0)
+    assert stream(rules, 1, [t + 0.02 * i for i in range(10)], start_tid=5) == []
+    rules.power_switched(t + 0.3)  # off and on, noted before the last report before it is read
+    rules.power_switched(t + 0.5)
+    assert stream(rules, 1, [t + 0.2], start_tid=15) == []  # stamped before the switch, read after it
+    assert [v for v in stream(rules, 1, [t + 0.75 + 0.02 * i for i in range(3)], start_tid=0) if v.check == "reset"] == []
+
+
 def test_report_restarts_the_host_made_are_not_resets():
     """The same gap and restart across a power switch the host reported, a suspend and resume, CAN Test on and off."""
     def after(event) -> list:
