@@ -121,6 +121,7 @@ def _absent(module: str) -> bool:
 RUNNABLE = [e for page in PAGES for e in examples(page)[0] if e.runs]
 
 
+@pytest.mark.realtime  # some pages run `ckesc emulate` and real-time benches
 @pytest.mark.parametrize("page", sorted({e.page for e in RUNNABLE}), ids=lambda p: str(p.relative_to(DOCS)))
 def test_runnable_examples_run(page, tmp_path):
     (tmp_path / "fixtures").mkdir()  # the repository's fixtures, read-only by way of links: an example writes beside them
@@ -190,6 +191,8 @@ def test_readme_is_one_screen_and_points_at_the_docs():
     installs = re.findall(r'pip install --quiet -e "(\.\[[\w,]+\])"', ci)
     assert installs and f'pip install -e "{installs[0]}" && python -m pytest' in readme, (
         f"README's test command does not install what .ci/run installs ({installs})")
+    (command,) = re.findall(r'&& (python -m pytest[^\n`]*)\n', readme)
+    assert command in ci, f"README's test command {command!r} is not the one .ci/run runs"
 
 
 # ----------------------------------------------------------------------------------------- figures that cannot go stale

@@ -41,6 +41,8 @@ from ckesc.emulator.socketcand import _parse_send, fmt_frame
 from ckesc.protocol import Decoder, Frame, Kind, WireFrame, decode, encode
 from ckesc.protocol import catalogue as cat
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 MSG1_PERIOD = 0.020  # default MSG1 interval: 10 x 2 ms (R9)
 INTERVAL_TOL = 0.001  # |interval - 20 ms| from due-time stamps (exact to ~1 µs; 1 ms allows for --stamp send)
 ANSWER_TOL = 0.002  # |reply stamp - request stamp - (node % 32) x 2 ms| (R2; exact to ~1 µs with due stamps)

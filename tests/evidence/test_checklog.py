@@ -15,6 +15,8 @@ from ckesc.evidence.logs import read_candump
 
 from .traffic import ScriptedHost
 
+pytestmark = pytest.mark.xdist_group(__name__)  # its module-scoped runs are made once: its tests share one worker
+
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "logs" / "field-ardupilot.log"
 
 

@@ -167,6 +167,7 @@ def test_a_finding_replays_and_its_generated_test_reproduces_it(tmp_path):
     assert run.returncode == 0, run.stdout + run.stderr
 
 
+@pytest.mark.realtime
 def test_replay_in_real_time_against_ckesc_emulate():
     """The shrunk program of suspend_persisted, in real time against ``ckesc emulate`` (its own process, socketcand):
     the same finding; and nothing on the faultless one."""

@@ -19,6 +19,8 @@ from ckesc.explore.runner import Session
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol import malformed as r17
 
+pytestmark = pytest.mark.xdist_group(__name__)  # its module-scoped runs are made once: its tests share one worker
+
 SEED = 1
 SUSPEND = {"option": 0, "command": cat.MSG_CONTROL_SUSPEND}
 

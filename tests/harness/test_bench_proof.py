@@ -20,6 +20,8 @@ import pytest
 from procs import CKESC, Emulator
 from procs import env as _env
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 #: what each mistake may take, the interpreter's start and pytest's collection included (issue #29)
 WITHIN_S = 15.0
 

@@ -30,6 +30,8 @@ from ckesc.bench.profile import DEFAULT_BUS_ERROR_S, DutProfile
 from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.emulator.realtime import RealtimeEmulator
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 _channels = itertools.count()
 
 

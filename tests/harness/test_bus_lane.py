@@ -22,6 +22,8 @@ from ckesc.bench import lanes
 from ckesc.bench.lanes import BusLane
 from ckesc.bench.power import NoPower
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 _CHANNELS = itertools.count()
 EXT = {"is_extended_id": True}
 

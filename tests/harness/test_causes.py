@@ -20,6 +20,8 @@ from ckesc.reporting.causes import groups, summary_lines
 from ckesc.reporting.report import summary_text
 from ckesc.reporting.results import Result
 
+pytestmark = pytest.mark.xdist_group(__name__)  # its module-scoped runs are made once: its tests share one worker
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FAULTS = "report_interval_wrong,answer_late"
 

@@ -21,6 +21,8 @@ import pytest
 from procs import CKESC, Emulator, end
 from procs import env as _env
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 ROOT = Path(__file__).resolve().parents[2]
 ESC = ROOT / "tools" / "clean-room-esc" / "clean_room_esc.py"
 PROFILE = ROOT / "tools" / "clean-room-esc" / "clean-room.toml"

@@ -19,6 +19,8 @@ from test_html_report import _chromium, _render
 
 from ckesc.reporting import compare
 
+pytestmark = pytest.mark.xdist_group(__name__)  # its module-scoped runs are made once: its tests share one worker
+
 SELECTION = "test_s4_4_2_msg_control or test_s4_4_26"  # answer-delay margins (R2, 4.4.2-4) and ESC Information
 FAULT = "answer_late"  # MSG Control answered after 80 ms: R2 and 4.4.2-4 FAIL
 

@@ -15,11 +15,14 @@ widened to 0.3 s so that the queries (one every 128 ms while nothing answers) al
 
 from __future__ import annotations
 
+import pytest
 from ckesc.bench.dut import Dut
 from ckesc.bench.profile import DEFAULT_BUS_ERROR_S, DutProfile
 from ckesc.bench.realtime_lane import RealtimeEmulatorLane
 from ckesc.bench.station import MULTI_NODES
 from ckesc.protocol import catalogue as cat
+
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
 
 SPREAD_S = 0.3  # ESC k of 3 boots k x 0.1 s after the first: wider than the 128 ms between discovery's queries
 

@@ -21,6 +21,8 @@ from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import Kind
 from ckesc.protocol.transfer import parse_tail
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 #: a representative part of the suite (GET_ESC_ID's answers and their timing, MSG Control, comm loss, the framing
 #: checks over the whole run's frames): its verdicts with the traffic playing must equal a quiet bus's
 SELECTION = ("conformance/test_s4_4_3_get_esc_id.py::test_reply_comes_in_the_node_slot",

@@ -18,6 +18,8 @@ from ckesc.bench.station import MULTI_NODES
 from ckesc.protocol import catalogue as cat
 from ckesc.reporting.html_report import build
 
+pytestmark = pytest.mark.xdist_group(__name__)  # its module-scoped runs are made once: its tests share one worker
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 #: a few sections with every plot's evidence: answer delays of several nodes (4.4.2, 4.4.3), report
 #: intervals at several targets (4.4.22), and the comm-loss timelines (R8)

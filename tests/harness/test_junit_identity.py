@@ -17,6 +17,8 @@ import ckesc
 from ckesc.protocol.requirements import SECTION_TITLES
 from ckesc.reporting.report import classname, git_revision, suite_properties
 
+pytestmark = pytest.mark.xdist_group(__name__)  # its module-scoped runs are made once: its tests share one worker
+
 REPO = Path(ckesc.__file__).resolve().parents[1]
 SAFE = re.compile(r"ckesc\.[a-z][a-z0-9_]*")  # one dot: Jenkins' package "ckesc", a class per section
 

@@ -23,6 +23,8 @@ import pytest
 from procs import CKESC, Emulator
 from procs import env as _env
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 HAVE_LABGRID = importlib.util.find_spec("labgrid") is not None
 needs_labgrid = pytest.mark.skipif(not HAVE_LABGRID, reason='labgrid is not installed (pip install -e ".[rig]")')
 needs_lab = pytest.mark.skipif(not (HAVE_LABGRID and shutil.which("labgrid-coordinator") and shutil.which("labgrid-exporter")),

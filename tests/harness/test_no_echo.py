@@ -34,6 +34,8 @@ from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.emulator.realtime import RealtimeEmulator
 from ckesc.evidence.live import LaneRules
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 _channels = itertools.count()
 
 

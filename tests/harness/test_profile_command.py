@@ -21,6 +21,8 @@ from procs import CKESC, Emulator, env
 from ckesc.bench.profile import SHIPPED, DutProfile
 from ckesc.bench.statement import Observed, Seen, contradictions
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 
 def ckesc(tmp: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run([*CKESC, *args], cwd=tmp, env=env(tmp), capture_output=True, text=True, timeout=timeout)

@@ -23,6 +23,8 @@ from procs import env as _env
 
 from ckesc.protocol.frame import decode
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 pytest.importorskip("xdist", reason="the batch runs through pytest-xdist: pip install -e '.[rig]'")
 
 SECTIONS = ("4.4.3", "4.4.28")

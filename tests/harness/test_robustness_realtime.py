@@ -23,6 +23,8 @@ from procs import CKESC, Emulator, realtime_profile
 from procs import env as _env
 from test_clean_room_esc import CleanRoom
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 #: the clean-room ESC's R17 defects (tools/clean-room-esc/README.md, "R17: what the robustness section finds"): the
 #: robustness tests that FAIL it, by the frame type they send malformed. Its length checks are ``>=``: a frame one
 #: byte longer than its table is taken (and 240, 242 answer an empty request, CAN Test and MSG Control are taken at

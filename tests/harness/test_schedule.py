@@ -15,6 +15,8 @@ from ckesc.bench.epochs import AFTER, INSIDE, PowerEpoch, unusable
 from ckesc.protocol import catalogue as cat
 from ckesc.session.schedule import LEAD_S, UNKNOWN_S, Plan
 
+pytestmark = pytest.mark.xdist_group(__name__)  # its module-scoped runs are made once: its tests share one worker
+
 W = cat.CONFIG_WINDOW_S
 
 

@@ -23,7 +23,7 @@ VM_TIMEOUT = 240  # the tool's own --timeout: each VM here is up in ~10 s and do
 
 EXIT_MISSING, EXIT_TIMEOUT, EXIT_VM = 69, 124, 125
 
-pytestmark = [pytest.mark.vm, pytest.mark.timeout(VM_TIMEOUT + 180)]
+pytestmark = [pytest.mark.vm, pytest.mark.realtime, pytest.mark.timeout(VM_TIMEOUT + 180)]
 
 
 def vcan_vm(*args: str, cwd: Path = ROOT, timeout: float = VM_TIMEOUT + 60) -> subprocess.CompletedProcess:

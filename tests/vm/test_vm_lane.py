@@ -32,7 +32,7 @@ REPORTS = ROOT / "reports" / "vm"  # the inner run's JUnit lands in reports/vm/<
 LANE_TIMEOUT_S = 600
 EXIT_TIMEOUT, EXIT_VM = 124, 125
 
-pytestmark = [pytest.mark.vm, pytest.mark.timeout(2 * (LANE_TIMEOUT_S + 90) + 60)]  # a second run when the first starved
+pytestmark = [pytest.mark.vm, pytest.mark.realtime, pytest.mark.timeout(2 * (LANE_TIMEOUT_S + 90) + 60)]  # a second run when the first starved
 
 
 def run_lane(vm) -> tuple[subprocess.CompletedProcess, list[Path]]:
