@@ -209,7 +209,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     def line() -> str:
         return live_text(figures())
 
-    send = lane.bus.send
+    send, peek = lane.bus.send, lane.peek_now
     stopped_at = t0
     try:
         say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
@@ -223,7 +223,9 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             if now >= end:
                 break
             for planned in player.due(now):
-                send(_message(planned.wire))
+                wire = planned.wire
+                monitor.sent(wire.arbitration_id, wire.data, peek())  # its echo's stamp: how late the bench stamped it
+                send(_message(wire))
                 if planned.what == "stream":
                     lateness.add(max(now - planned.due, 0.0))
             deadline = min(player.next_deadline(), end)
@@ -274,7 +276,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             "frames": {"total": monitor.frames, "dut": monitor.dut_frames, "host": monitor.own_frames,
                        "other": monitor.other_frames},
             "host": {"stream_frames": player.sent_stream, "stream_skipped": player.skipped,
-                     "send_lateness": lateness.to_json(), "cpu_s": round(cpu_s, 3),
+                     "send_lateness": lateness.to_json(), "bench_stamp_lag": monitor.bench_lag.to_json(), "cpu_s": round(cpu_s, 3),
                      "cpu_percent": round(100 * cpu_s / cpu_wall, 1) if cpu_wall > 0 else None},
             "memory": {"rss_start_kb": rss_start, "rss_end_kb": _rss_kb(), "peak_rss_kb": _peak_rss_kb()},
             "watches": {w.name: {"rules": list(w.rules), "events": w.events, "trials": w.trials,
