@@ -13,7 +13,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "harness"))
 from procs import CKESC, env  # noqa: E402
 
-SECONDS = 10
+SECONDS = 5
 RATE_HZ = 400
 
 
