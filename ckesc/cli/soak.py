@@ -85,6 +85,14 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--stop-on-finding", action="store_true", help="stop at the first finding (the report written)")
     s.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
     s.add_argument("-q", "--quiet", action="store_true", help="no console lines")
+    s.add_argument("--status-file", metavar="FILE", help=argparse.SUPPRESS)  # a rig batch's bench: its live figures
+    r = p.add_argument_group("several benches at once")
+    r.add_argument("--rig", metavar="FILE",
+                   help="a rig file (fixtures/rigs/*.toml): soak every bench of it at once, each a ckesc soak process of "
+                        "its own with the bench's options from the file and the soak options given here; one console "
+                        "line per bench; each bench's report in reports/<UTC>-soak-batch/<bench>/, batch.json and "
+                        "summary.txt beside them; the exit status the worst bench's")
+    r.add_argument("--benches", metavar="A,B", help="--rig: only these benches (default: every bench of the rig)")
 
     def handler(args: argparse.Namespace) -> int:
         from ..bench.dut import DutError
@@ -93,20 +101,25 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
         from ..bench.station import BenchOptions
         from ..soak import runner
 
-        if args.throttle_profile and any(v for _, v in args.throttle_profile) and not args.allow_motor_spin:
+        spin = bool(args.allow_motor_spin) or bool(args.rig)  # (a rig's bench says whether its motor may spin)
+        if args.throttle_profile and any(v for _, v in args.throttle_profile) and not spin:
             raise UsageError("--throttle-profile spins the motor: give --allow-motor-spin too (PROPELLERS OFF)")
         from ..soak.player import FlightPlan
 
         try:  # the stream's own options, checked before the bench is opened
             FlightPlan(0, 1, format=args.format, rate_hz=args.rate, channels=args.channels or (1,),
-                       throttle=args.throttle_profile, allow_motor_spin=bool(args.allow_motor_spin)).check()
+                       throttle=args.throttle_profile, allow_motor_spin=spin).check()
         except ValueError as exc:
             raise UsageError(str(exc)) from None
         given = {k: getattr(args, k) for k in runner.OPTION_NAMES if getattr(args, k, None) not in (None, [], "")}
+        if args.rig:
+            return _batch(args, given)
+        if args.benches:
+            raise UsageError("--benches chooses benches of a rig: it needs --rig FILE")
         soak = runner.SoakOptions(duration_s=args.duration, rate_hz=args.rate, format=args.format,
                                   channels=args.channels, throttle=args.throttle_profile,
                                   stop_on_finding=args.stop_on_finding, reports=args.reports, quiet=args.quiet,
-                                  trace_budget=args.trace_budget)
+                                  trace_budget=args.trace_budget, status_file=args.status_file)
         try:
             outcome = runner.run(BenchOptions.of(vars(args).get), soak, out=sys.stdout, given=given)
         except (PreflightError, BenchError, ValueError) as exc:
@@ -121,3 +134,21 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
         return EXIT_FOUND if outcome.findings else 0
 
     p.set_defaults(handler=handler)
+
+
+def _batch(args: argparse.Namespace, given: dict) -> int:
+    """``ckesc soak --rig``: the soak's own options passed on to every bench's ``ckesc soak``."""
+    from ..soak import batch
+
+    soak = ["--duration", f"{args.duration:g}s", "--rate", f"{args.rate:g}", "--format", args.format,
+            "--trace-budget", str(args.trace_budget), "-q"]
+    if args.channels:
+        soak += ["--channels", ",".join(map(str, args.channels))]
+    if args.throttle_profile:
+        soak += ["--throttle-profile", ",".join(f"{at:g}s:{v}" for at, v in args.throttle_profile)]
+    if args.stop_on_finding:
+        soak.append("--stop-on-finding")
+    try:
+        return batch.run_batch(args.rig, args.benches, soak, args.reports, given=given, quiet=args.quiet)
+    except batch.BatchError as exc:
+        raise UsageError(str(exc)) from None

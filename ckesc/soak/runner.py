@@ -11,6 +11,8 @@ waits. The host's own timing is measured either way: how late each stream frame 
 
 from __future__ import annotations
 
+import json
+import os
 import signal
 import sys
 import time
@@ -56,6 +58,8 @@ class SoakOptions:
     reports: str = "reports"
     quiet: bool = False
     trace_budget: int = DEFAULT_BUDGET  # bytes of trace files on disk (0: no trace)
+    #: a file the live line's figures go to as JSON once a second of wall time (a rig batch's console reads it)
+    status_file: str | None = None
 
 
 @dataclass
@@ -98,6 +102,27 @@ class Live:
         if self.tty and self.shown:
             self.out.write("\n")
             self.out.flush()
+
+
+class StatusFile:
+    """The live line's figures as JSON in a file, rewritten whole (a new file renamed over the old) at most once a
+    second of wall time: how a rig batch (:mod:`.batch`) shows one line per bench without reading the benches'
+    consoles."""
+
+    def __init__(self, path: str | None, clock: Callable[[], float]) -> None:
+        self.path, self.clock = (Path(path) if path else None), clock
+        self.next = clock()
+
+    def maybe(self, figures: Callable[[], dict[str, Any]], *, now: bool = False) -> None:
+        if self.path is None or (not now and self.clock() < self.next):
+            return
+        self.next = self.clock() + LIVE_TTY_S
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        try:
+            tmp.write_text(json.dumps(figures()), encoding="utf-8")
+            os.replace(tmp, self.path)
+        except OSError:  # the console's figures only: the run goes on
+            pass
 
 
 def _raise_interrupt(signum: int, frame: Any) -> None:
@@ -168,18 +193,23 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             trace.finding(kept[written])
             written += 1
     rss_start = _rss_kb()
+    cpu0, cpu_wall0 = _cpu_s(), wall()
     end = t0 + soak.duration_s
     live = Live(out, soak.quiet, wall)
+    status_file = StatusFile(soak.status_file, wall)
     status = COMPLETED
     problem = ""
     say = (lambda text: None) if soak.quiet else (lambda text: print(text, file=out, flush=True))
 
-    def line() -> str:
+    def figures(state: str = "running") -> dict[str, Any]:
         now = lane.peek_now()
-        return (f"soak: {duration_text(max(now - t0, 0))} elapsed, {duration_text(max(end - now, 0))} left, "
-                f"{monitor.frames} frames, {monitor.count} findings")
+        return {"state": state, "elapsed_s": round(max(now - t0, 0), 3), "left_s": round(max(end - now, 0), 3),
+                "frames": monitor.frames, "findings": monitor.count}
 
-    send = lane.bus.send
+    def line() -> str:
+        return live_text(figures())
+
+    send, peek = lane.bus.send, lane.peek_now
     stopped_at = t0
     try:
         say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
@@ -193,7 +223,9 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             if now >= end:
                 break
             for planned in player.due(now):
-                send(_message(planned.wire))
+                wire = planned.wire
+                monitor.sent(wire.arbitration_id, wire.data, peek())  # its echo's stamp: how late the bench stamped it
+                send(_message(wire))
                 if planned.what == "stream":
                     lateness.add(max(now - planned.due, 0.0))
             deadline = min(player.next_deadline(), end)
@@ -205,6 +237,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
                 status = STOPPED
                 break
             live.maybe(line)
+            status_file.maybe(figures)
     except KeyboardInterrupt:
         status = INTERRUPTED
     except (BenchGone, BusFault) as exc:  # the bench failed, not the DUT: the run stops, its report says why
@@ -226,6 +259,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
         if trace is not None:
             trace.close()
         ran = stopped_at - t0
+        cpu_s, cpu_wall = _cpu_s() - cpu0, wall() - cpu_wall0
         statements = [Statement(w.name, w.rules, w.what, w.one, w.events, ran, w.statement_unit, w.trials)
                       for w in monitor.watches]
         record = {
@@ -242,7 +276,8 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             "frames": {"total": monitor.frames, "dut": monitor.dut_frames, "host": monitor.own_frames,
                        "other": monitor.other_frames},
             "host": {"stream_frames": player.sent_stream, "stream_skipped": player.skipped,
-                     "send_lateness": lateness.to_json()},
+                     "send_lateness": lateness.to_json(), "bench_stamp_lag": monitor.bench_lag.to_json(), "cpu_s": round(cpu_s, 3),
+                     "cpu_percent": round(100 * cpu_s / cpu_wall, 1) if cpu_wall > 0 else None},
             "memory": {"rss_start_kb": rss_start, "rss_end_kb": _rss_kb(), "peak_rss_kb": _peak_rss_kb()},
             "watches": {w.name: {"rules": list(w.rules), "events": w.events, "trials": w.trials,
                                  "statistics": w.statistics()} for w in monitor.watches},
@@ -252,12 +287,19 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             "statement": [s.to_json() for s in statements],
         }
         where = report.write(soak.reports, record, where)
+        status_file.maybe(lambda: {**figures(status), "report": str(where)}, now=True)
         if not soak.quiet:
             out.write(report.summary_text(record, where))
             out.flush()
     finally:
         ignore()
     return Outcome(status, monitor.count, where, statements)
+
+
+def live_text(f: dict[str, Any]) -> str:
+    """The live line from its figures (:class:`StatusFile`'s JSON)."""
+    return (f"soak: {duration_text(f['elapsed_s'])} elapsed, {duration_text(f['left_s'])} left, "
+            f"{f['frames']} frames, {f['findings']} findings")
 
 
 def _message(wire: WireFrame) -> can.Message:
@@ -295,9 +337,14 @@ def _rss_kb() -> int | None:
             pages = int(f.read().split()[1])
     except (OSError, ValueError, IndexError):
         return None
-    import os
-
     return pages * os.sysconf("SC_PAGE_SIZE") // 1024
+
+
+def _cpu_s() -> float:
+    """The CPU time (user and system, s) this process has used so far, its own threads' and not its children's (a
+    real-time bench's ``ckesc emulate`` is a process of its own): what the host's side of the run costs."""
+    t = os.times()
+    return t.user + t.system
 
 
 def _peak_rss_kb() -> int | None:

@@ -52,6 +52,12 @@ DELAY_BINS = 2 * round(cat.ANSWER_DELAY_MAX_S / DELAY_BIN_S)
 #: the histogram's span, twice the 64 ms bound (an ESC need not answer other hosts, F6)
 FOREIGN_QUERIES = 8
 FOREIGN_ANSWER_S = DELAY_BINS * DELAY_BIN_S
+#: the host's send times kept per frame (id and bytes) until its echo comes back (the stream's repeat every 32 transfers)
+SENT_KEPT = 8
+#: how late the bench stamped the host's own frames (their echo's time minus the host's send): bins of a tenth of a
+#: millisecond up to 50 ms, then one overflow bin
+LAG_BIN_S = 0.0001
+LAG_BINS = 500
 #: the report frames R9 and the reset watch follow
 REPORTS = cat.REPORT_FRAMES
 #: what normal reporting sends besides the reports, and the answers to what the player asks
@@ -407,6 +413,11 @@ class AnswerWatch(Watch):
         self.foreign_answers = 0
         #: the bus time (s) other frames took since the host's query: the answer may wait for each of them
         self.busy = 0.0
+        #: the worst lag of the bench's stamps on the host's own frames since the query (:meth:`lagged`)
+        self.lag = 0.0
+        self.pending: tuple[Frame, float, float] | None = None  # an answer not judged yet: (frame, time, delay)
+        self.bench_late = 0  # answers late only by the bench's own lag: not judged (not a trial)
+        self.worst_lag = 0.0
 
     def foreign_asked(self, t: float) -> None:
         """Another node's GET_ESC_ID query, heard at ``t``."""
@@ -418,13 +429,27 @@ class AnswerWatch(Watch):
         if self.query is not None and not self.answered:
             self.busy += frame_bits(data_bytes) / self.cfg.bitrate
 
+    def lagged(self, t: float, lag: float) -> None:
+        """One of the host's own frames, stamped at ``t``, ``lag`` after the host sent it: the bench (its bus, a
+        socketcand hub, the adapter) stamped it that late. While the host's query waits, and until the frames
+        stamped with its answer are read, the worst such lag widens the answer's late side: a bench that stamps
+        late stamps the answer late as well, which is the bench's, not the DUT's."""
+        if self.query is not None and t >= self.query and (not self.answered or self.pending is not None):
+            self.lag = max(self.lag, lag)
+
+    def tick(self, t: float) -> None:
+        """A frame stamped at ``t``: the answer waiting for the frames stamped with it is judged once one is later."""
+        if self.pending is not None and t > self.pending[1]:
+            self._judge()
+
     def asked(self, t: float) -> None:
+        self._judge()
         if self.query is not None and not self.answered:
             self.trials += 1
             self.missing += 1
             bound = jd.answer_bound(t - self.query, error=self.error, rule="4.4.3-4")
             self.find(t, f"no answer to GET_ESC_ID within {(t - self.query) * 1000:.0f} ms: {bound}", ("4.4.3-4", "R19"))
-        self.query, self.answered, self.busy = t, False, 0.0
+        self.query, self.answered, self.busy, self.lag = t, False, 0.0, 0.0
 
     def reply(self, frame: Frame, t: float) -> None:
         foreign = self.foreign
@@ -439,19 +464,37 @@ class AnswerWatch(Watch):
             self.monitor.unexpected.find(t, f"a GET_ESC_ID reply that answers no query ({frame.fields})", ("R1",))
             return
         self.answered = True
-        self.trials += 1
         end = t - self.query
         self.delays.add(end)
+        self.pending = (frame, t, end)  # judged once the frames stamped with it are read (tick): their lag counts
+
+    def _judge(self) -> None:
+        if self.pending is None:
+            return
+        frame, t, end = self.pending
+        self.pending = None
         start = end - frame_bits(len(frame.data)) / self.cfg.bitrate
-        node = self.cfg.node_id
         late = self.error + self.queueing + self.busy
-        broken = [j for j in (jd.r2_slot_start(start, node, error=self.error), jd.r2_slot_end(end, node, error=late),
-                              jd.answer_bound(end, error=late, rule="4.4.3-4")) if not j.ok]
+        broken = self._broken(start, end, late)
+        if broken and self.lag and not self._broken(start, end, late + self.lag):
+            self.bench_late += 1  # late only by as much as the bench stamped the host's own frames late: not judged
+            self.worst_lag = max(self.worst_lag, self.lag)
+            return
+        self.trials += 1
         if broken:
             self.find(t, "; ".join(str(j) for j in broken), tuple(dict.fromkeys(j.rule for j in broken)))
 
+    def _broken(self, start: float, end: float, late: float) -> list:
+        node = self.cfg.node_id
+        return [j for j in (jd.r2_slot_start(start, node, error=self.error), jd.r2_slot_end(end, node, error=late),
+                            jd.answer_bound(end, error=late, rule="4.4.3-4")) if not j.ok]
+
+    def close(self, now: float) -> None:
+        self._judge()
+
     def statistics(self) -> dict[str, Any]:
         return {"answers": self.delays.n, "missing": self.missing, "delay": self.delays.to_json(),
+                "not_judged_late_by_the_bench": self.bench_late, "worst_bench_lag_excused_ms": round(self.worst_lag * 1000, 3),
                 "other_nodes_queries": self.foreign_queries, "answers_to_other_nodes": self.foreign_answers}
 
 
@@ -530,6 +573,9 @@ class Monitor:
         self.last_t = t0
         self._ids: dict[int, tuple[Any, ...]] = {}
         self._frames: dict[tuple[int, bytes], Frame] = {}
+        self._sent: dict[tuple[int, bytes], deque[float]] = {}  # the host's send times of frames not echoed yet
+        #: how late the bench stamped the host's own frames after the host sent them (:meth:`sent`)
+        self.bench_lag = Histogram(LAG_BIN_S, LAG_BINS)
         self.resets = ResetWatch(self)
         self.intervals = IntervalWatch(self)
         self.comm = CommFlagWatch(self)
@@ -568,6 +614,17 @@ class Monitor:
         return not self._open
 
     # ------------------------------------------------------------------ frames
+    def sent(self, can_id: int, data: bytes, t: float) -> None:
+        """The host sent this frame at ``t`` (lane time, the host's clock): its echo's stamp says how late the bench
+        stamped it (a lane without echo hands the frame out stamped at the send: no lag)."""
+        key = (can_id, bytes(data))
+        q = self._sent.get(key)
+        if q is None:
+            if len(self._sent) > MAX_IDS:
+                self._sent.clear()
+            q = self._sent[key] = deque(maxlen=SENT_KEPT)
+        q.append(t)
+
     def feed(self, msg: Any) -> None:
         """One frame heard (a ``can.Message`` or anything with its attributes): ``timestamp``, ``arbitration_id``,
         ``data``, ``is_extended_id`` (and the error / remote flags)."""
@@ -576,6 +633,8 @@ class Monitor:
         data = bytes(msg.data)
         self.frames += 1
         self.last_t = t
+        if self.answers.pending is not None:
+            self.answers.tick(t)
         if self._open:
             line = self._line(t, can_id, data)
             still = []
@@ -594,6 +653,10 @@ class Monitor:
         cfg = self.cfg
         if source == cfg.host_node and spec is not None:
             self.own_frames += 1
+            if self._sent and (q := self._sent.get((can_id, data))):
+                lag = max(t - q.popleft(), 0.0)
+                self.bench_lag.add(lag)
+                self.answers.lagged(t, lag)
             name = spec.name
             if name in cat.THROTTLE_FRAMES:
                 self.comm.command(t)

@@ -251,3 +251,37 @@ def test_r19_report_restart():
     assert jd.r19_report_restart(0.3, i, jd.f3_step(5, 6)) is None  # late, counting on: R9's
     assert jd.r19_report_restart(3 * i, i, jd.f3_step(5, 8)) is None  # two lost on the bus
     assert jd.r19_report_restart(1.2 * i, i, jd.f3_step(5, 0)) is None  # within the restart limit: not a gap
+
+
+@pytest.mark.parametrize("stamp_lag, answer_delay, late_by", [
+    (0.0105, 0.0125, None),  # the bench stamped the host's frames 10.5 ms late: an answer 12.5 ms late is the bench's
+    (0.0001, 0.0125, "R2"),  # the bench stamped them at once: the same answer is the DUT's
+    (0.0105, 0.0300, "R2"),  # the bench's lag does not excuse more than itself
+])
+def test_an_answer_as_late_as_the_bench_stamped_the_hosts_own_frames_is_not_the_dut(stamp_lag, answer_delay, late_by):
+    """A loaded bench (a socketcand hub on a busy machine) stamps frames late: the host's own frames show by how much
+    (their echo's stamp against the host's send). An answer late by no more than that is not judged (not a trial, not
+    a finding, counted); one later than that, or with the host's frames stamped on time, is the DUT's."""
+    m = Monitor(CFG, t0=0.0)
+
+    def host(name: str, fields: dict, sent: float, stamp: float, **kw) -> WireFrame:
+        wire = encode(name, fields, source=HOST, transfer_id=int(sent * 1000) % 32, timestamp=stamp, **kw)
+        m.sent(wire.arbitration_id, wire.data, sent)
+        return wire
+
+    query = host("get_esc_id", {"option": 0}, 1.0, 1.0, layout="query")
+    stream = host("raw_command_14b", {"channels": [0] * 4}, 1.002, 1.002 + stamp_lag)
+    answer = encode("get_esc_id", {"node_id": NODE, "throttle_channel": 1}, source=NODE, transfer_id=0, layout="reply",
+                    timestamp=1.0 + answer_delay)
+    after = encode("msg1", {"speed": 0, "pwm": 0, "status": 0}, source=NODE, transfer_id=0, timestamp=1.05)
+    # the hub read the answer and the host's late frame in one go: the answer first, the frame stamped with it after
+    for frame in sorted([query, answer, stream], key=lambda w: w.timestamp) + [after]:
+        m.feed(frame)
+    m.close(1.1)
+    found = [f for f in m.findings if f.watch == "GET_ESC_ID answers"]
+    stats = m.answers.statistics()
+    if late_by is None:
+        assert not found and m.answers.trials == 0 and stats["not_judged_late_by_the_bench"] == 1
+    else:
+        assert len(found) == 1 and late_by in found[0].rules and m.answers.trials == 1
+    assert m.bench_lag.n == 2 and m.bench_lag.hi == pytest.approx(stamp_lag)
