@@ -16,6 +16,7 @@ widened to 0.3 s so that the queries (one every 128 ms while nothing answers) al
 from __future__ import annotations
 
 import pytest
+
 from ckesc.bench.dut import Dut
 from ckesc.bench.profile import DEFAULT_BUS_ERROR_S, DutProfile
 from ckesc.bench.realtime_lane import RealtimeEmulatorLane

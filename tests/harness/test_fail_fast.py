@@ -24,6 +24,8 @@ import pytest
 from procs import CKESC, Emulator
 from procs import env as _env
 
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
+
 
 def ckesc(tmp: Path, *args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run([*CKESC, *args], cwd=tmp, env=_env(tmp), capture_output=True, text=True, timeout=timeout)
