@@ -63,6 +63,8 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         finally:
             _close(session, out)
         print(f"replayed {len(program)} steps in {outcome.seconds:.3f} s of lane time", file=out)
+        for line in outcome.skipped:  # (a step this lane cannot play: a foreign load in real time)
+            print(line, file=out)
         for f in outcome.findings:
             print(f.text(), file=out)
         same = finding is not None and any(f.key == finding.get("key") for f in outcome.findings)
