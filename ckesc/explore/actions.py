@@ -6,7 +6,7 @@ fragment or transfer, a wrong length, a request to another node, a response fram
 with toggle 1), start or stop a zero-throttle RawCommand stream, cycle the power, wait, wait out the 120 s Set
 ID / Set Baud window (R11), or set the foreign load on the bus (R18: :class:`ckesc.protocol.load.LoadSource` at a
 share of the bus's capacity up to half, which holds from then on; above half only for the step's seconds, what the
-DUT does then being OBSERVE), where the lane can play it. :func:`programs` is the Hypothesis strategy of whole programs; the values of every
+DUT does then being OBSERVE), when asked for (``ckesc explore --load``) and where the lane can play it. :func:`programs` is the Hypothesis strategy of whole programs; the values of every
 request field come from the catalogue (:func:`ckesc.protocol.legality.field_cases`: each legal code, the
 boundaries and their illegal neighbours) plus a random legal value, never written here by hand.
 

@@ -12,7 +12,9 @@ A load step (R18) puts a :class:`~ckesc.protocol.load.LoadSource` on the simulat
 by arbitration, as the conformance module's do) and tells the oracle the share, which the judge widens R9 by
 (:func:`~ckesc.protocol.judgements.r18_queueing_s`) and, above half, judges nothing under (R18: OBSERVE; the live
 bus rules' report timing excused meanwhile, as ``test_above_half_load_is_recorded`` does). A lane that cannot play
-a load (real time) draws no load step; one replayed there is skipped, and said so (:attr:`Outcome.skipped`).
+a load (real time) draws no load step; one replayed there is skipped, and said so (:attr:`Outcome.skipped`). Load
+steps are drawn only when asked for (``Session(..., load=True)``, ``ckesc explore --load``); a replayed one is
+played wherever the lane can.
 """
 
 from __future__ import annotations
@@ -105,10 +107,12 @@ class RestoreError(RuntimeError):
 class Session:
     """One bench, open for a whole exploration (many programs)."""
 
-    def __init__(self, options: BenchOptions | Mapping[str, Any]) -> None:
+    def __init__(self, options: BenchOptions | Mapping[str, Any], *, load: bool = False) -> None:
         """Build the bench of ``options`` (:func:`~ckesc.bench.station.build`, as ``ckesc run`` does: a set-up
         mistake is a :class:`PreflightError`) and open its lane; a bench option left out (or None) takes its
-        default."""
+        default. ``load``: programs draw foreign-load steps (R18, ``ckesc explore --load``) where the lane can play
+        them (off by default: the programs a seed gives stay those the self-test's counts were made with)."""
+        self.draw_load = load
         opts = options if isinstance(options, BenchOptions) else BenchOptions.of(dict(options).get)
         if opts.power == "labgrid":
             raise PreflightError("ckesc explore: --power labgrid is not supported yet (use command)")
@@ -152,6 +156,9 @@ class Session:
         self._skipped: list[str] = []
         self._current_load: dict[str, Any] = {}  # the load step in force (a load for a step's seconds only: not)
         self._load_nodes: set[int] = set()
+        #: said once where load steps were asked for and the lane cannot play them (none is drawn)
+        self.load_note = (f"explore: no load step drawn: the {self.lane.name} lane cannot play a foreign load as R18 "
+                          "judges it (only the simulated lane's bus queues it)") if self.draw_load and self._world is None else ""
         self.params = Params(error=self.lane.timing_error, own_error=self.lane.own_error, jitter=profile.jitter_s, boot_s=profile.boot_s,
                              bitrate=self.lane.bitrate, host_node=self.dut.host_node)
 
@@ -160,7 +167,7 @@ class Session:
         return Bench(power=self.lane.power.available, node_id=self.baseline_node, baud_code=self.baud_code,
                      window_waits=self.lane.clock == "simulated", bitrates=self.bitrates,
                      settings=tuple(sorted(self.baseline.items())),
-                     absent=frozenset(self.profile.absent), load=self._world is not None)
+                     absent=frozenset(self.profile.absent), load=self.draw_load and self._world is not None)
 
     def close(self) -> None:
         """Zero throttle, then, after any program, the DUT back into the state the exploration found it in (its
@@ -292,6 +299,7 @@ class Session:
         rec.messages.clear()
         rec.power.clear()
         self.rules.begin()
+        self.rules.excuse(frozenset())  # (a program cut short under a load above half left it excusing)
         t0 = self.lane.now()
         fed = 0
         power_fed = 0

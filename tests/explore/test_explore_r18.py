@@ -4,11 +4,12 @@ A program's load step puts :class:`ckesc.protocol.load.LoadSource` on the simula
 capacity (from then on), takes it off, or plays 70 % for the step's seconds (above half: OBSERVE). The judge holds the
 DUT to R9 widened by R18's queueing, R2 and the 64 ms bound under it, and judges nothing above half. Here: the fault
 ``drops_reports_under_load`` shows on a two-step program and is found from a fixed seed (in CI the seed that finds it
-soonest; shrunk to a program whose load step is needed, ``slow``); the faultless emulator and the variant that drops
+soonest; shrunk to a program whose load step is needed, ``slow``; load steps are drawn when asked for, ``ckesc
+explore --load``); the faultless emulator and the variant that drops
 reports above half load (``above_half_load=drop``, which does drop them there) give no finding with load steps at
 every share; a lane that cannot play a load (real time) draws no load step, and one replayed there is skipped, said so.
-Random programs with load steps on the faultless emulator and every covering variant: ``test_explore.py``'s
-conforming runs (they draw load steps in the simulated lane).
+Random programs with load steps on every conforming variant: ``test_conforming_families.py`` (it explores with
+``--load``).
 """
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ FAST = (4, 20)
 
 
 def _found(seed: int, max_programs: int, shrink_s: float | None):
-    session = Session({"emulator_faults": FAULT})
+    session = Session({"emulator_faults": FAULT}, load=True)
     try:
         found, stats = explore(session, seed=seed, database=None, budget_s=600, max_programs=max_programs,
                                stop_at_first=True, shrink_s=shrink_s)
@@ -110,19 +111,20 @@ def test_explore_shrinks_it_to_a_program_whose_load_step_is_needed():
         session.close()
 
 
-def test_load_steps_are_drawn_only_where_the_lane_can_play_them():
+def test_load_steps_are_drawn_only_when_asked_and_where_the_lane_can_play_them():
     assert "load" in families(Bench(load=True)) and "load" not in families(Bench())
-    session = Session({})
-    try:
-        assert session.bench.load  # the simulated lane
-    finally:
-        session.close()
+    for asked in (True, False):
+        session = Session({}, load=asked)
+        try:
+            assert session.bench.load is asked and not session.load_note  # (the simulated lane plays one)
+        finally:
+            session.close()
 
 
 def test_a_load_step_the_lane_cannot_play_is_skipped_and_said(monkeypatch):
     """A replayed load step on a lane without a bus model (real time, here the simulated lane with its world taken
     away): nothing played, the step skipped and said why, no finding."""
-    session = Session({})
+    session = Session({}, load=True)
     try:
         monkeypatch.setattr(session, "_world", None)
         assert not session.bench.load
