@@ -43,6 +43,9 @@ def add_explore_command(sub: argparse._SubParsersAction) -> None:
     x.add_argument("--max-steps", type=int, default=12, help="the longest program generated (default 12)")
     x.add_argument("--database", metavar="DIR", help="where every finding's program is kept: the next exploration runs them first "
                    "(default: <reports>/explore-db; 'none' for none)")
+    x.add_argument("--load", action="store_true", help="also draw foreign-load steps (R18: the suite's load generator at "
+                   "10, 30 or 50 %% of the bus from then on, or 70 %% for a while, OBSERVE); the simulated lane only "
+                   "(--selftest: for a fault that breaks R18 always)")
     x.add_argument("--first", action="store_true", help="stop at the first finding (once shrunk)")
     x.add_argument("--selftest", metavar="FAULTS", help="the self-test: for each emulator fault (comma-separated, or "
                    "'all'), explore a fresh emulated bench from --seed until it is found or --budget is spent, and "

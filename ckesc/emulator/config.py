@@ -61,6 +61,10 @@ class EscConfig:
     #: a single frame whose tail's toggle bit is 1 (R17-toggle leaves it open): "ignore" it, or "take" it as
     #: DroneCAN's own receiver does
     toggle_single_frame: str = "ignore"
+    #: foreign load above half the bus (R18-above-half leaves what the ESC does free): "keep" reporting, or "drop"
+    #: a report due when foreign frames took more than the bus's share variants.ABOVE_HALF_SHARE of the
+    #: window before it
+    above_half_load: str = "keep"
     service_delay: float = 0.0005  # request to response for services
     # the other freedoms the document leaves (ckesc/emulator/variants.py says what each value does)
     report_phase: str = "together"  # the first MSG1..3 after power-up together, or staggered

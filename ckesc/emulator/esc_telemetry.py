@@ -22,6 +22,7 @@ from ..protocol.ids import DEFAULT_ESC_NODE_ID, Priority, message_id
 from ..protocol.transfer import tail_byte
 from .esc_state import EXP_MODE, REPORTING, SUSPENDED  # the reporting states (MSG Control, 4.4.2)
 from .faults import GLITCH_EVERY_S, WARM_CLOCK_RATE
+from .variants import ABOVE_HALF_SHARE, ABOVE_HALF_WINDOW_S
 
 REPORT_NAMES = cat.REPORT_FRAMES
 #: fault drops_reports_under_load: a report due when foreign frames (types it does not know) took more than this
@@ -149,14 +150,15 @@ class Telemetry:
     def _heard_foreign(self, msg, now: float) -> None:
         """Fault drops_reports_under_load: note a foreign frame heard (its end, its time on the bus)."""
         self.state.foreign.append((now, frame_bits(len(msg.data)) / self.state.bitrate))
-        while self.state.foreign and self.state.foreign[0][0] < now - _FOREIGN_WINDOW_S:
+        while self.state.foreign and self.state.foreign[0][0] < now - max(_FOREIGN_WINDOW_S, ABOVE_HALF_WINDOW_S):
             self.state.foreign.popleft()
 
-    def _starved(self, due: float) -> bool:
-        """Fault drops_reports_under_load: whether foreign frames took more than :data:`_FOREIGN_SHARE` of the bus
-        in the :data:`_FOREIGN_WINDOW_S` before ``due`` (the receive interrupt's software filter starves the loop)."""
-        busy = sum(d for t, d in self.state.foreign if due - _FOREIGN_WINDOW_S <= t <= due)
-        return busy > _FOREIGN_SHARE * _FOREIGN_WINDOW_S
+    def _starved(self, due: float, share: float = _FOREIGN_SHARE, window: float = _FOREIGN_WINDOW_S) -> bool:
+        """Fault drops_reports_under_load: whether foreign frames took more than ``share`` of the bus in the
+        ``window`` before ``due`` (the receive interrupt's software filter starves the loop); the variant
+        above_half_load=drop asks it of :data:`ABOVE_HALF_SHARE` over :data:`ABOVE_HALF_WINDOW_S`."""
+        busy = sum(d for t, d in self.state.foreign if due - window <= t <= due)
+        return busy > share * window
 
     def _emit_report(self, which: str, due: float) -> None:
         prio = Priority.MEDIUM if "wrong_priority" in self.faults else None
@@ -165,6 +167,8 @@ class Telemetry:
             return
         if "drops_reports_under_load" in self.faults and self._starved(due):
             return  # never built: its transfer id is not counted either
+        if self.config.above_half_load == "drop" and self._starved(due, ABOVE_HALF_SHARE, ABOVE_HALF_WINDOW_S):
+            return  # (the variant: likewise)
         if which == "msg1":
             pwm = 0 if "speed_ignores_throttle" in self.faults else self.state.throttle
             status = self.status_word()

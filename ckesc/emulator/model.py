@@ -209,7 +209,7 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         if isinstance(decoded, DecodeError):
             # another protocol's type id (DroneCAN NodeStatus, ...) is foreign; anything else malformed (R17)
             self.counters["rx_foreign" if isinstance(decoded, UnknownTypeError) else "rx_malformed"] += 1
-            if "drops_reports_under_load" in self.faults and isinstance(decoded, UnknownTypeError):
+            if self._counts_foreign and isinstance(decoded, UnknownTypeError):
                 self._heard_foreign(msg, now)
             if self._malformed_faults or self.config.toggle_single_frame != "ignore":
                 taken = self._take_malformed(msg, decoded, now)
@@ -222,7 +222,7 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         frame = decoded
         if frame.spec is None:
             self.counters["rx_foreign"] += 1
-            if "drops_reports_under_load" in self.faults:
+            if self._counts_foreign:
                 self._heard_foreign(msg, now)
             return False
         handler = _HANDLERS.get((frame.kind, frame.name))
@@ -232,6 +232,12 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
         if handler is not EscModel._on_throttle:
             self._update(now)  # throttle frames update only when addressed to this ESC's channel
         return handler(self, frame, now) is not False
+
+    @property
+    def _counts_foreign(self) -> bool:
+        """Whether it keeps the foreign frames it hears (the bus share they took): the fault drops_reports_under_load
+        and the variant above_half_load=drop act on it."""
+        return "drops_reports_under_load" in self.faults or self.config.above_half_load == "drop"
 
     @property
     def _malformed_faults(self) -> bool:

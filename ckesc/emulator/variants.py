@@ -77,6 +77,14 @@ class Freedom:
         return rng.choice(self.choices)
 
 
+#: above_half_load=drop (R18-above-half: what an ESC does above half load is free): a report due when foreign frames
+#: took more than this share of the bus in the window before it is skipped. Between the half R18 judges and the 70 %
+#: the suite plays above it: at half load a window holds at most half of it plus R18_BURST_FRAMES longest frames of
+#: load (4.2 ms at 125 kbit/s, one more for a frame that began before the window: 55 ms of 0.1 s), at 70 % at least
+#: 70 % of it less one burst (2 ms)
+ABOVE_HALF_SHARE = 0.6
+ABOVE_HALF_WINDOW_S = 0.1
+
 # Each freedom names the field of EscConfig it sets; keep one entry per freedom, grouped by where the
 # document leaves it open. New freedoms go in the group of their requirement.
 _FREEDOMS = (
@@ -130,6 +138,10 @@ _FREEDOMS = (
     Freedom("toggle_single_frame", ("R17-toggle",), "a single frame (start=1 end=1) whose toggle bit is 1: ignored "
             "as not a single-frame transfer, or taken as DroneCAN's receiver (libcanard) takes it",
             choices=("ignore", "take")),
+    # a loaded bus (R18: up to half the bus the ESC keeps R9, R2, the 64 ms bound; above half what it does is OBSERVE)
+    Freedom("above_half_load", ("R18-above-half",), "foreign traffic above half the bus: reports kept, or a report "
+            f"dropped when foreign frames took more than {ABOVE_HALF_SHARE:.0%} of the bus in the "
+            f"{ABOVE_HALF_WINDOW_S:g} s before it is due (never at half load or less)", choices=("keep", "drop")),
     # host node (F6: a non-zero host node is OBSERVE)
     Freedom("foreign_host", ("F6",), "commands and requests from a host node other than 0: obeyed, or ignored",
             choices=("accept", "ignore")),

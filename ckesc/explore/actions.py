@@ -3,8 +3,10 @@
 An :class:`Action` is plain data (JSON in a replay file): send one frame of the catalogue with given fields,
 send a command malformed or foreign in one of R17's classes (:mod:`ckesc.protocol.malformed`: a multi-frame
 fragment or transfer, a wrong length, a request to another node, a response frame; or, R17-toggle, a single frame
-with toggle 1), start or stop a zero-throttle RawCommand stream, cycle the power, wait, or wait out the 120 s Set
-ID / Set Baud window (R11). :func:`programs` is the Hypothesis strategy of whole programs; the values of every
+with toggle 1), start or stop a zero-throttle RawCommand stream, cycle the power, wait, wait out the 120 s Set
+ID / Set Baud window (R11), or set the foreign load on the bus (R18: :class:`ckesc.protocol.load.LoadSource` at a
+share of the bus's capacity up to half, which holds from then on; above half only for the step's seconds, what the
+DUT does then being OBSERVE), when asked for (``ckesc explore --load``) and where the lane can play it. :func:`programs` is the Hypothesis strategy of whole programs; the values of every
 request field come from the catalogue (:func:`ckesc.protocol.legality.field_cases`: each legal code, the
 boundaries and their illegal neighbours) plus a random legal value, never written here by hand.
 
@@ -12,6 +14,9 @@ What is left out, and why (safety and what the oracle can follow):
 - non-zero throttle (the explorer never spins a motor; ``allow_motor_spin`` is not used yet);
 - Expand Set Part (222) and Clear Rec (224): they change motor settings or erase the temperature records,
   which no restore can put back; Get Rec (223): its payload and answer are OBSERVE (R15);
+- a foreign load where the lane cannot play one as R18 judges it (a real bus, the real-time emulator: only the
+  simulated lane's bus model queues it by arbitration, with the share exact); a replayed load step there is skipped,
+  and said so;
 - Set Baud malformed (a DUT that took one would move to another bit rate, which the host cannot follow: the model
   never does), and a single frame with toggle 1 of CAN Test or a RawCommand (R17-toggle leaves taking it free, and
   only an answer tells the runner which the DUT chose, so that the model follows it);
@@ -34,6 +39,7 @@ from typing import Any, Iterable
 from ..protocol import catalogue as cat
 from ..protocol import malformed as r17
 from ..protocol.ids import DEFAULT_ESC_NODE_ID
+from ..protocol.judgements import r18_judged
 from ..protocol.legality import field_cases
 
 #: The streams a program may start (zero on every channel; a stopped stream is a comm loss, R8)
@@ -51,14 +57,22 @@ MALFORMED = tuple(n for n in (*BROADCASTS, *SERVICES, *STREAMS) if n != "set_bau
 #: Frame types whose single frame with toggle 1 a program may send (R17-toggle): those the DUT answers when it takes
 #: one (the runner follows its choice)
 TOGGLED = tuple(n for n in MALFORMED if n not in ("can_test", *STREAMS))
+#: R18: the foreign load shares a program sets (of the bus's capacity; each holds until the next load step), and the
+#: share above half it plays for a step's seconds only (OBSERVE: what the DUT does then is free)
+LOAD_SHARES = (0.1, 0.3, 0.5)
+ABOVE_HALF_SHARE = 0.7
+#: how long an above-half load step plays
+ABOVE_HALF_SECONDS = (0.3, 0.6)
 #: Codes a field must keep inside (what the document leaves free elsewhere; see the module docstring)
 _ONLY = {("set_led", "blink"): tuple(cat.LED_BLINK)}
 
 
 @dataclass(frozen=True)
 class Action:
-    """One step of a program. ``op``: send | malformed | stream | stop | power | wait | window. ``malformed``: the
-    command ``name`` ``fields`` sent in R17's class ``form`` (:mod:`ckesc.protocol.malformed`)."""
+    """One step of a program. ``op``: send | malformed | stream | stop | power | wait | window | load. ``malformed``:
+    the command ``name`` ``fields`` sent in R17's class ``form`` (:mod:`ckesc.protocol.malformed`). ``load``: foreign
+    traffic at ``fields["share"]`` of the bus (0: none) and ``fields["priority"]`` (:data:`ckesc.protocol.load.PRIORITIES`)
+    from now on; with ``seconds``, only for that long (then the load before it again)."""
 
     op: str
     name: str = ""
@@ -79,6 +93,8 @@ class Action:
         """What feature the step exercises, for the 'feature pairs exercised' count: the frame and its mode."""
         if self.op == "malformed":
             return f"malformed:{self.form}"
+        if self.op == "load":
+            return f"load:{self.fields.get('share', 0):g}"
         if self.op != "send":
             return self.op
         for key in ("command", "option", "source", "rotation"):
@@ -97,6 +113,13 @@ class Action:
             return f"stream {self.name} (zero throttle)"
         if self.op == "wait":
             return f"wait {self.seconds:g} s"
+        if self.op == "load":
+            share = self.fields.get("share", 0)
+            if not share:
+                return "foreign load off"
+            said = f"foreign load {share:.0%} of the bus, {self.fields.get('priority', 'mixed')} priority"
+            return said + (f", for {self.seconds:g} s" if self.seconds else "") + (
+                " (above half: OBSERVE, R18)" if not r18_judged(share) else "")
         return {"stop": "stop the throttle streams", "power": "power cycle",
                 "window": "wait until the 120 s Set ID / Set Baud window has closed"}.get(self.op, self.op)
 
@@ -143,6 +166,8 @@ class Bench:
     settings: tuple[tuple[str, int], ...] = ()
     absent: frozenset[str] = frozenset()
     waits: tuple[float, ...] = (0.05, 0.25, 0.6, 1.5, 3.0)
+    #: whether the lane can play a foreign load as R18 judges it (the simulated lane: its bus queues it by arbitration)
+    load: bool = False
 
 
 def _request_fields(name: str, bench: Bench):
@@ -293,6 +318,15 @@ def families(bench: Bench) -> dict[str, Any]:
     }
     if bench.power:
         out["power"] = one(st.just(Action("power")), *([st.just(Action("window"))] if bench.window_waits else []))
+    if bench.load:  # R18: a share up to half from now on, the bus quiet again, or above half for a while (OBSERVE)
+        from ..protocol.load import PRIORITIES
+
+        priority = st.sampled_from(PRIORITIES)
+        out["load"] = one(
+            st.builds(lambda s, p: Action("load", fields={"share": s, "priority": p}), st.sampled_from(LOAD_SHARES), priority),
+            st.just(Action("load", fields={"share": 0})),
+            st.builds(lambda t, p: Action("load", fields={"share": ABOVE_HALF_SHARE, "priority": p}, seconds=t),
+                      st.sampled_from(ABOVE_HALF_SECONDS), priority))
     return out
 
 
@@ -394,7 +428,8 @@ def programs(bench: Bench, max_size: int = 12):
     from hypothesis import strategies as st
 
     strategies = families(bench)
-    names = sorted(n for n in strategies if n != "malformed") + ["malformed"]  # (R17's last: the order seed 1 was counted in)
+    # (R17's, then R18's last: the order seed 1 was counted in; a bench that cannot play a load draws as before)
+    names = sorted(n for n in strategies if n not in ("malformed", "load")) + ["malformed"] + (["load"] if "load" in strategies else [])
 
     def from_subset(chosen: frozenset[str]):
         # an episode is a whole round trip where a single step is one action: drawn twice as often as one family

@@ -29,11 +29,11 @@ def bench_options(args: argparse.Namespace) -> dict[str, Any]:
     return {k: getattr(args, k) for k in BENCH_OPTIONS if getattr(args, k, None) is not None}
 
 
-def open_session(options: BenchOptions | dict[str, Any]) -> Session:
-    """The bench of ``options``, built and its DUT found (:class:`Session`); a set-up mistake is a ``ValueError``
-    (exit 2), a bench that cannot be used a :class:`BenchProblem` (exit 3)."""
+def open_session(options: BenchOptions | dict[str, Any], *, load: bool = False) -> Session:
+    """The bench of ``options``, built and its DUT found (:class:`Session`; ``load``: draw foreign-load steps); a
+    set-up mistake is a ``ValueError`` (exit 2), a bench that cannot be used a :class:`BenchProblem` (exit 3)."""
     try:
-        return Session(options)
+        return Session(options, load=load)
     except PreflightError as exc:  # a set-up mistake (options, fault names, profile): a usage error
         raise ValueError(str(exc)) from None
     except (DutError, BenchGone, OSError) as exc:
@@ -63,6 +63,8 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         finally:
             _close(session, out)
         print(f"replayed {len(program)} steps in {outcome.seconds:.3f} s of lane time", file=out)
+        for line in outcome.skipped:  # (a step this lane cannot play: a foreign load in real time)
+            print(line, file=out)
         for f in outcome.findings:
             print(f.text(), file=out)
         same = finding is not None and any(f.key == finding.get("key") for f in outcome.findings)
@@ -71,7 +73,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
                   f"{'reproduced' if same else 'NOT reproduced'}", file=out)
         return 1 if outcome.findings else 0
     options = bench_options(args)
-    session = open_session(options)
+    session = open_session(options, load=bool(getattr(args, "load", False)))
     database = None if args.database == "none" else (args.database or os.path.join(args.reports, "explore-db"))
 
     def progress(stats: Stats) -> None:
@@ -82,6 +84,8 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         print(line, file=out, flush=True)
 
     say(f"explore: a budget of {_duration(args.budget)} wall time, shrinking what it finds included")
+    if session.load_note:
+        say(session.load_note)
     try:
         found, stats = explore(session, budget_s=args.budget, seed=args.seed, database=database,
                                max_size=args.max_steps, stop_at_first=args.first, progress=progress,
@@ -93,7 +97,8 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
     where = run_dir(args.reports)
     info = {"bench": options, "seed": args.seed, "budget_s": args.budget, "lane": session.lane.name,
             "clock": session.lane.clock, "profile": session.profile.name, "faults": options.get("emulator_faults") or "",
-            "emulator_variants": options.get("emulator_variants"), "emulator_option": options.get("emulator_option")}
+            "emulator_variants": options.get("emulator_variants"), "emulator_option": options.get("emulator_option"),
+            "load": session.bench.load}
     write_reports(where, found, stats, info)
     print(summary_text(found, stats, where), file=out)
     return 1 if found else 0
@@ -126,7 +131,7 @@ def selftest_command(args: argparse.Namespace, out: TextIO) -> int:
                 print(f"{row.fault:<34} NOT found within the budget: {row.explored}", file=out, flush=True)
 
     rows = find_faults(names, budget_s=args.budget, seed=args.seed, max_programs=getattr(args, "max_programs", None),
-                       options=options, progress=progress)
+                       options=options, progress=progress, load=True if getattr(args, "load", False) else None)
     text = table(rows)
     print(text, file=out)
     if args.out:

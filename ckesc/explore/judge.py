@@ -22,6 +22,11 @@ Observations compared (each a :class:`Finding` when they differ):
   restart bound: the ESC reset), and any other finding after the first of them in the program, which
   :func:`cite_r17` makes cite R17 too (a setting, mode, suspension, LED or comm-loss flag the DUT changed on one
   shows as its read-back, stream or MSG1 status finding; a power-up count grown, as 241's answer).
+- **a loaded bus** (R18): under a foreign load of up to half the bus (the runner's load steps), R9's mean interval is
+  widened by the queueing the load can put ahead of a report (:func:`~ckesc.protocol.judgements.r18_mean`), and a
+  report's reach (MSG1 status, R8's clock, R17's restart bound) by that queueing
+  (:func:`~ckesc.protocol.judgements.r18_queueing_s`); R2's slot and the answers are not widened (R18 widens R9
+  only). Under a load above half, and in the stretch after one, nothing is judged (R18: OBSERVE).
 The live bus rules (``evidence/live.py``) run beside this and are findings of their own (runner).
 """
 
@@ -45,6 +50,9 @@ from ..protocol.judgements import (
     r9_mean,
     r9a_limit_s,
     r13_read_back,
+    r18_judged,
+    r18_mean,
+    r18_queueing_s,
 )
 from ..protocol.requirements import requirement
 from .actions import asks_only
@@ -151,7 +159,7 @@ def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) 
     out += _status(oracle, dut, t0, p)
     out += _r17_answers(oracle, dut, t0, p, paired)
     out += _r17_restarts(oracle, dut, t0, t_end, p)
-    return [f for f in out if f.strength != "OBSERVE"]
+    return [f for f in out if f.strength != "OBSERVE" and r18_judged(_max_load(oracle, t0 + f.at, t0 + f.at))]
 
 
 # ------------------------------------------------------------------------------------------ answers
@@ -321,11 +329,14 @@ def _r17_restarts(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: 
         if state.mode != "normal":
             continue
         longest = cat.restart_limit_s(max(state.intervals.values())) + p.boot_s + 2 * p.error
+        queueing = _queueing(oracle, m.t - longest, m.t + longest, state.bitrate)
+        if queueing is None:
+            continue  # R18: a load above half around it, its reports OBSERVE
         # (a Set Freq read, or a write that changed nothing, restarts nothing; the program's start is no restart)
         restarts = [st.t for st in others if st.label in _RESTARTS - {"start", "set_freq"} or st.label == "power off"
                     or st.mode != state.mode or st.intervals != state.intervals]
         for stream in cat.REPORT_FRAMES:
-            limit = cat.restart_limit_s(state.intervals[stream]) + 2 * p.error + p.jitter + frame_s
+            limit = cat.restart_limit_s(state.intervals[stream]) + 2 * p.error + p.jitter + frame_s + queueing
             if m.t + limit > t_end - 2 * p.error or stream in said or _between(restarts, m.t - longest, m.t + limit):
                 continue
             mine = [f for f in dut if f.name == stream and f.kind is Kind.MESSAGE]
@@ -356,6 +367,17 @@ def cite_r17(findings: list[Finding], oracle: Oracle, t0: float) -> list[Finding
         if before and "R17" not in f.requirements:
             f.requirements.append("R17")
             f.model += f" (R17: the model ignored {_step_of(before[-1])})"
+    return findings
+
+
+def cite_r18(findings: list[Finding], oracle: Oracle, t0: float) -> list[Finding]:
+    """Every finding while (or just after) a foreign load played also cites R18 (the ESC keeps R9, R2, the 64 ms bound
+    and obeys its commands under it), and says the load."""
+    for f in findings:
+        share = _max_load(oracle, t0 + f.at, t0 + f.at)
+        if share and "R18" not in f.requirements:
+            f.requirements.append("R18")
+            f.model += f" (R18: under {share:.0%} foreign load)"
     return findings
 
 
@@ -403,6 +425,9 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
     for state, before, end in _segments(oracle, t_end):
         if state.label in _RESTARTS and (state.label != "set_freq" or before is None or before.intervals != state.intervals):
             restart, restart_before = state, before  # (a Set Freq read, or a write that changed nothing, restarts nothing)
+        share = max(state.load, before.load if before is not None else 0.0)  # (a load's queue outlasts it a little)
+        if not r18_judged(share):
+            continue  # R18: above half load (and the stretch after one) what the DUT does is OBSERVE
         for stream in STREAMS:
             iv = _interval(state, stream)
             old = _interval(before, stream) if before is not None else iv
@@ -417,7 +442,7 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
                 continue
             d = _between(by[stream][0], lo, hi)
             m = _between(by[stream][1], lo, hi)
-            rids = _stream_reqs(state, stream)
+            rids = _stream_reqs(state, stream) + (["R18"] if share else [])
             on = stream in _FLOWING.get(state.mode, ())
             if on and m and hi - lo >= 2 * iv and not d:
                 if _between(by[stream][0], hi, end + 2 * iv):  # it came, late: the first report after a restart (R9a)
@@ -430,26 +455,31 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
                                    f"{len(d)} frames, the first at t={d[0] - t0:.3f} s", "none", d[0] - t0, state.step,
                                    subject=f"{stream} sent, {state.mode}"))
             elif stream in cat.REPORT_FRAMES and len(m) >= 2:
-                out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, frame_s)
+                out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, frame_s, share)
     return out
 
 
 def _interval_finding(state: State, stream: str, stamps: list[float], end: float, iv: float, t0: float, p: Params,
-                      frame_s: float) -> list[Finding]:
+                      frame_s: float, share: float = 0.0) -> list[Finding]:
     """R9 on the DUT's reports of one stretch, the gap to its third report and on (R9a: the gaps before are
     OBSERVE), on the mean of their gaps (:func:`~ckesc.protocol.judgements.r9_mean`): its stamps are the frames'
-    ends, each late by up to a frame's bus access besides the bench's error."""
+    ends, each late by up to a frame's bus access besides the bench's error. Under a foreign load of ``share`` (R18,
+    up to half), widened by the queueing it can cause (:func:`~ckesc.protocol.judgements.r18_mean`)."""
     seen = r9_judged(_between(stamps, state.t, end - 2 * p.error))
     if len(seen) <= _MIN_GAPS:
         return []
-    j = r9_mean(seen, iv, error=p.error + frame_s)
+    if share:
+        j = r18_mean(seen, iv, share=share, bitrate=state.bitrate, error=p.error + frame_s, what=stream)
+    else:
+        j = r9_mean(seen, iv, error=p.error + frame_s)
     if j is None or j.ok:
         return []
     gaps = len(seen) - 1
     mean = (seen[-1] - seen[0]) / gaps
     tol = j.limit + j.error
-    return [Finding("interval", ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, not {iv * 1000:g} ms "
-                    f"({state.mode} since {state.cause})", f"mean of {gaps} gaps {mean * 1000:.2f} ms",
+    loaded = f", under {share:.0%} load" if share else ""
+    return [Finding("interval", ["R9", "R18"] if share else ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, "
+                    f"not {iv * 1000:g} ms ({state.mode} since {state.cause}{loaded})", f"mean of {gaps} gaps {mean * 1000:.2f} ms",
                     f"{iv * 1000:g} ms (+-{tol * 1000:.2f})", seen[0] - t0, state.step, subject=f"{stream} interval")]
 
 
@@ -490,7 +520,10 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         if _between(host_times, t - cat.ANSWER_DELAY_MAX_S - 2 * p.error, t + _ECHO_SLACK_S + 2 * p.error):
             continue  # a setting just sent (its echo may be stamped late): when within its answer time it shows is not written
         state = _state_at(oracle, t)
-        reach = state.intervals["msg1"] + SCHEDULING_TOLERANCE_S + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate
+        queueing = _queueing(oracle, t - 2 * state.intervals["msg1"], t, state.bitrate)  # R18: a load may hold it back
+        if queueing is None:
+            continue  # R18: above half load, OBSERVE
+        reach = state.intervals["msg1"] + SCHEDULING_TOLERANCE_S + 2 * p.error + p.jitter + frame_bits(8) / p.bitrate + queueing
         near = model[bisect.bisect_left(stamps, t - reach):bisect.bisect_right(stamps, t + reach)]
         if not near:
             continue
@@ -499,7 +532,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
             # bit 14 under PWM+CAN: 4.4.4 names it "throttle signal source" without saying configured or in use
             # (4.2: PWM+CAN falls back to CAN by itself), and ESCs of other makes show either: not compared
             mask &= ~int(cat.Status.THROTTLE_PWM)
-        comm = _comm_fault_expected(t, commands, ups, state, p)
+        comm = _comm_fault_expected(t, commands, ups, state, p, queueing)
         if comm is not None and bool(f.fields["status"] & _COMM) != comm:
             bits = _COMM
             if bits not in seen:
@@ -532,9 +565,11 @@ def _last(stamps: list[float], t: float) -> float:
     return stamps[k - 1] if k else float("-inf")
 
 
-def _comm_fault_expected(t: float, commands: list[float], ups: list[float], state: State, p: Params) -> bool | None:
+def _comm_fault_expected(t: float, commands: list[float], ups: list[float], state: State, p: Params,
+                         queueing: float = 0.0) -> bool | None:
     """What MSG1's comm-loss bit must be at ``t`` (R8), or None where it is free: before any command since the
-    power-up (when its boot ends is the DUT's own), inside R8's window, near a command, or not under CAN throttle."""
+    power-up (when its boot ends is the DUT's own), inside R8's window, near a command, or not under CAN throttle.
+    ``queueing``: how long a foreign load may have held the MSG1 back (R18)."""
     if state.source != 0 or state.mode == "off":
         return None
     up = ups[max(0, bisect.bisect_right(ups, t) - 1)] if ups else float("-inf")
@@ -542,10 +577,27 @@ def _comm_fault_expected(t: float, commands: list[float], ups: list[float], stat
     if last < up:
         return None
     since = t - last
-    error = SCHEDULING_TOLERANCE_S + 2 * p.error + frame_bits(8) / p.bitrate  # MSG1's stamp is its end
+    error = SCHEDULING_TOLERANCE_S + 2 * p.error + frame_bits(8) / p.bitrate + queueing  # MSG1's stamp is its end
     if since < -(error + p.jitter) or abs(since) <= _ECHO_SLACK_S + 2 * p.error:
         return None  # a command as the MSG1 went out: which came first is within the bench's error
     return r8_flag_due(since, state.intervals["msg1"], jitter=p.jitter, error=error)
+
+
+def _max_load(oracle: Oracle, lo: float, hi: float) -> float:
+    """The highest foreign load (R18's share) on the bus between lane times ``lo`` and ``hi``, or in the stretch
+    before (a load's queue outlasts it a little)."""
+    times = [s.t for s in oracle.states]
+    first = max(0, bisect.bisect_right(times, lo) - 2)
+    return max((s.load for s in oracle.states[first:bisect.bisect_right(times, hi)]), default=0.0)
+
+
+def _queueing(oracle: Oracle, lo: float, hi: float, bitrate: int) -> float | None:
+    """How long a foreign load between ``lo`` and ``hi`` may hold a report back (R18's queueing), None above half
+    (R18: OBSERVE)."""
+    share = _max_load(oracle, lo, hi)
+    if not r18_judged(share):
+        return None
+    return r18_queueing_s(share, bitrate) if share else 0.0
 
 
 def _state_at(oracle: Oracle, t: float) -> State:

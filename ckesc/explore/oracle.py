@@ -11,6 +11,9 @@ what it sends, the judge does not look (an answer to a rejected request, the fir
 which MSG_EXP frames come). A rejected request (R10-R12: whether and how it is answered is free) is noted in
 :attr:`Oracle.free` and gets no predicted answer.
 
+A foreign load (R18) is told to it by share (:meth:`Oracle.load`): its ESC does on a loaded bus what it does on a quiet
+one, and the judge widens R9 by the queueing the load can cause.
+
 A frame the runner sent malformed or foreign (R17) is given to the model too, which ignores it (that is R17's
 oracle: whatever the DUT does on it is a finding), and kept in :attr:`Oracle.malformed` for the judge; a single frame
 with toggle 1 (R17-toggle, OBSERVE) is given to it as the DUT took it: as a single frame where the DUT answered it,
@@ -44,6 +47,7 @@ class State:
     cause: str = ""  # the event that put the model's ESC into this mode (the label of the state it changed at)
     source: int = 0  # the throttle source (242): comm loss (R8) is judged under CAN throttle (0) only
     bitrate: int = cat.DEFAULT_BITRATE  # the bus's bit rate in force (Set Baud's, from the last power-up)
+    load: float = 0.0  # the foreign load on the bus, a share of its capacity (R18)
 
 
 @dataclass(frozen=True)
@@ -77,6 +81,7 @@ class Oracle:
     host: list[tuple[Frame, int | None]] = field(default_factory=list)  # host frames fed, with the program step
     commands: list[float] = field(default_factory=list)  # when the model's ESC took a RawCommand as its own (R8's clock)
     malformed: list[Malformed] = field(default_factory=list)  # the frames sent malformed or foreign (R17), in order
+    load_share: float = 0.0  # the foreign load on the bus now (R18): the model's ESC does what it does on a quiet one
 
     def __post_init__(self) -> None:
         b = self.baseline
@@ -152,6 +157,13 @@ class Oracle:
             self.model.power_off(t)
         self._note(t, "power on" if on else "power off", step)
 
+    def load(self, t: float, share: float, step: int | None = None) -> None:
+        """From lane time ``t`` on the bus carries a foreign load of ``share`` of its capacity (R18): a stretch of
+        its own for the judge, which widens R9 by the queueing it can cause (and above half judges nothing)."""
+        self.advance(t)
+        self.load_share = share
+        self._note(t, "load", step)
+
     def mark(self, t: float, label: str, step: int | None = None) -> None:
         """A moment the runner knows of (the DUT ready after a power-up): a stretch of its own for the judge."""
         self.advance(t)
@@ -182,4 +194,5 @@ class Oracle:
         mode = self.mode()
         prev = self.states[-1] if self.states else None
         cause = prev.cause if prev is not None and prev.mode == mode and label not in ("power on", "ready") else label
-        self.states.append(State(t, label, mode, intervals, step, cause, nvm["throttle_source"], self.model.state.bitrate))
+        self.states.append(State(t, label, mode, intervals, step, cause, nvm["throttle_source"], self.model.state.bitrate,
+                                 self.load_share))

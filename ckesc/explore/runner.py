@@ -7,10 +7,19 @@ the settings restored and verified, as the suite's ``dut`` fixture does), runs t
 every host frame and power switch to a fresh :class:`~ckesc.explore.oracle.Oracle` after each step (so that a
 request goes to the node id the model says the DUT has), reads the settings back at the end, and returns an
 :class:`Outcome`.
+
+A load step (R18) puts a :class:`~ckesc.protocol.load.LoadSource` on the simulated lane's bus (its frames contend
+by arbitration, as the conformance module's do) and tells the oracle the share, which the judge widens R9 by
+(:func:`~ckesc.protocol.judgements.r18_queueing_s`) and, above half, judges nothing under (R18: OBSERVE; the live
+bus rules' report timing excused meanwhile, as ``test_above_half_load_is_recorded`` does). A lane that cannot play
+a load (real time) draws no load step; one replayed there is skipped, and said so (:attr:`Outcome.skipped`). Load
+steps are drawn only when asked for (``Session(..., load=True)``, ``ckesc explore --load``); a replayed one is
+played wherever the lane can.
 """
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -27,8 +36,10 @@ from ..protocol import malformed as r17
 from ..protocol.errors import DecodeError
 from ..protocol.frame import Decoder, Frame
 from ..protocol.ids import Kind
+from ..protocol.judgements import r18_judged
+from ..protocol.load import LoadSource
 from .actions import Action, Bench, stream_fields
-from .judge import Finding, Params, cite_r17, judge
+from .judge import Finding, Params, cite_r17, cite_r18, judge
 from .oracle import SETTING_KEYS, Oracle
 
 #: The bench options by name (:class:`~ckesc.bench.station.BenchOptions`' fields, ``ckesc run``'s bench options)
@@ -46,6 +57,8 @@ SETTLE_S = 0.6  # read after the last step, so that what it did shows (MSG1 and 
 RESTORE_SETTLE_S = 2 * cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S + 0.1
 #: restores (each followed by a power cycle where the bench has power control) until the settings hold
 RESTORE_TRIES = 3
+#: what the live bus rules do not hold a DUT to while a load above half plays (R18: OBSERVE): its report timing
+UNJUDGED_ABOVE_HALF = frozenset({"R9", "R9a"})
 
 
 #: how long the explorer reads for an answer: the 64 ms bound and a read window past it (the bench's error added)
@@ -79,6 +92,8 @@ class Outcome:
     model: list[Frame]  # the oracle's frames
     steps: list[tuple[float, float]] = field(default_factory=list)  # each step's start and end (lane s from t0)
     features: set[str] = field(default_factory=set)
+    #: the steps the lane could not play (a load in real time), each said why
+    skipped: list[str] = field(default_factory=list)
 
     @property
     def seconds(self) -> float:
@@ -92,10 +107,12 @@ class RestoreError(RuntimeError):
 class Session:
     """One bench, open for a whole exploration (many programs)."""
 
-    def __init__(self, options: BenchOptions | Mapping[str, Any]) -> None:
+    def __init__(self, options: BenchOptions | Mapping[str, Any], *, load: bool = False) -> None:
         """Build the bench of ``options`` (:func:`~ckesc.bench.station.build`, as ``ckesc run`` does: a set-up
         mistake is a :class:`PreflightError`) and open its lane; a bench option left out (or None) takes its
-        default."""
+        default. ``load``: programs draw foreign-load steps (R18, ``ckesc explore --load``) where the lane can play
+        them (off by default: the programs a seed gives stay those the self-test's counts were made with)."""
+        self.draw_load = load
         opts = options if isinstance(options, BenchOptions) else BenchOptions.of(dict(options).get)
         if opts.power == "labgrid":
             raise PreflightError("ckesc explore: --power labgrid is not supported yet (use command)")
@@ -132,6 +149,16 @@ class Session:
         self._malformed: dict[tuple[int, bytes], list[tuple[str, str, str, bool]]] = {}
         #: why close() could not put the DUT back into its starting state (None: it did, or nothing ran)
         self.left: str | None = None
+        #: the foreign load playing (R18), where the lane can play one (the simulated lane's bus model)
+        self._world = getattr(getattr(self.lane, "sim", None), "world", None)
+        self._load: LoadSource | None = None
+        self._loads = 0  # load sources put on the bus (each its own name)
+        self._skipped: list[str] = []
+        self._current_load: dict[str, Any] = {}  # the load step in force (a load for a step's seconds only: not)
+        self._load_nodes: set[int] = set()
+        #: said once where load steps were asked for and the lane cannot play them (none is drawn)
+        self.load_note = (f"explore: no load step drawn: the {self.lane.name} lane cannot play a foreign load as R18 "
+                          "judges it (only the simulated lane's bus queues it)") if self.draw_load and self._world is None else ""
         self.params = Params(error=self.lane.timing_error, own_error=self.lane.own_error, jitter=profile.jitter_s, boot_s=profile.boot_s,
                              bitrate=self.lane.bitrate, host_node=self.dut.host_node)
 
@@ -140,7 +167,7 @@ class Session:
         return Bench(power=self.lane.power.available, node_id=self.baseline_node, baud_code=self.baud_code,
                      window_waits=self.lane.clock == "simulated", bitrates=self.bitrates,
                      settings=tuple(sorted(self.baseline.items())),
-                     absent=frozenset(self.profile.absent))
+                     absent=frozenset(self.profile.absent), load=self.draw_load and self._world is not None)
 
     def close(self) -> None:
         """Zero throttle, then, after any program, the DUT back into the state the exploration found it in (its
@@ -148,6 +175,7 @@ class Session:
         found it). What could not be put back is kept in :attr:`left` (the command says so) rather than raised:
         the lane is closed either way."""
         try:
+            self._set_load(None)
             self.dut.zero_throttle()
             if self._dirty:
                 try:
@@ -164,6 +192,7 @@ class Session:
         Returns the lane time of its current power-up (its 120 s window's start)."""
         dut = self.dut
         dut.trace.clear()  # what the Dut has read (its lookups scan it): this program's only
+        self._set_load(None)
         dut.stop_throttle()
         powered_at = self.lane.now() - cat.CONFIG_WINDOW_S - 10.0  # no power control: the window is long gone
         try:
@@ -270,11 +299,15 @@ class Session:
         rec.messages.clear()
         rec.power.clear()
         self.rules.begin()
+        self.rules.excuse(frozenset())  # (a program cut short under a load above half left it excusing)
         t0 = self.lane.now()
         fed = 0
         power_fed = 0
         steps: list[tuple[float, float]] = []
         self._malformed.clear()
+        self._skipped = []
+        self._current_load = {}
+        self._load_nodes = set()  # the load's foreign nodes: their frames are neither the DUT's nor the host's
         foreign: set[int] = set()  # the echoes of the malformed frames: the host's, never the DUT's (for the judge)
 
         def feed(step: int | None) -> None:
@@ -313,7 +346,7 @@ class Session:
         full = list(program) + list(PROBE) + ([PROBE_COUNTERS] if any(a.op == "malformed" for a in program) else [])
         for i, action in enumerate(full):
             start = self.lane.now()
-            self._do(action, oracle, powered_at)
+            self._do(action, oracle, powered_at, i, feed)
             feed(i)
             if action.op == "power" and rec.power:
                 powered_at = rec.power[-1][0]
@@ -326,8 +359,10 @@ class Session:
         dut.wait(SETTLE_S)
         feed(len(full) - 1)
         t_end = self.lane.now()
+        self._set_load(None)
         oracle.finish(t_end)
-        frames = _decode([m for m in rec.messages if id(m) not in foreign])
+        frames = _decode([m for m in rec.messages if id(m) not in foreign
+                          and not (self._load_nodes and m.is_extended_id and m.arbitration_id & 0x7F in self._load_nodes)])
         findings = judge(oracle, frames, t0, t_end, self.params)
         found, _count = self.rules.take()
         for v in found:
@@ -335,11 +370,54 @@ class Session:
             findings.append(Finding("bus_rule", list(v.rules) or ["4.1.1-1"], f"bus rule {v.check}: {v.message}",
                                     str(v), "the rule holds", at, None, strength=v.strength,
                                     subject=f"{' '.join(v.rules)} {v.check}"))
-        findings = [f for f in cite_r17(findings, oracle, t0) if f.strength != "OBSERVE"]
+        findings = [f for f in cite_r18(cite_r17(findings, oracle, t0), oracle, t0) if f.strength != "OBSERVE"]
         return Outcome(list(program), findings, t0, t_end, list(rec.messages), frames, list(oracle.out), steps,
-                       {a.feature for a in program})
+                       {a.feature for a in program}, list(self._skipped))
 
-    def _do(self, action: Action, oracle: Oracle, powered_at: float) -> None:
+    def _set_load(self, fields: Mapping[str, Any] | None, step: int | None = None) -> None:
+        """The foreign load from now on (R18): ``fields`` a load step's (share 0 or None: none), its seed the step's
+        (the same program plays the same load)."""
+        if self._load is not None:
+            self._world.remove_source(self._load)
+            self._load = None
+        share = (fields or {}).get("share", 0)
+        if share and self._world is not None:
+            priority = fields.get("priority", "mixed")
+            self._loads += 1
+            self._load = LoadSource(share, self.lane.bitrate, priority=priority,
+                                    seed=zlib.crc32(f"explore {step} {share} {priority}".encode()),
+                                    exclude_nodes=[*self.dut.nodes, self.dut.node_id, self.dut.host_node],
+                                    name=f"explore-load-{self._loads}")
+            self._load_nodes.update(fn.node for fn in self._load.nodes)
+            self._world.add_source(self._load)
+
+    def _play_load(self, action: Action, oracle: Oracle, step: int, feed) -> None:
+        """A load step: the load from now on (the oracle told the share: the judge widens R9 by it); with ``seconds``
+        only that long, then the load before it again, the live rules' report timing excused while a load above half
+        plays and until every report has come once after it (R18: OBSERVE above half)."""
+        if self._world is None:
+            self._skipped.append(f"step {step + 1}, {action.describe()}: skipped, the {self.lane.name} lane cannot "
+                                 "play a foreign load as R18 judges it (only the simulated lane's bus queues it)")
+            return
+        before = dict(self._current_load)
+        above = not r18_judged(action.fields.get("share", 0))
+        if above:
+            self.rules.excuse(UNJUDGED_ABOVE_HALF)
+        self._set_load(action.fields, step)
+        oracle.load(self.lane.now(), action.fields.get("share", 0), step)
+        if not action.seconds:
+            self._current_load = dict(action.fields)
+            return
+        self.dut.wait(action.seconds)
+        self._set_load(before or None, step)
+        if above:  # every report once more after it (one dropped meanwhile makes the gap across its end long)
+            intervals = oracle.states[-1].intervals
+            self.dut.wait(max(intervals.values()) + ANSWER_READ_S)
+            feed(step)
+            self.rules.excuse(frozenset())  # (what it excused: OBSERVE, not kept)
+        oracle.load(self.lane.now(), before.get("share", 0), step)
+
+    def _do(self, action: Action, oracle: Oracle, powered_at: float, step: int = 0, feed=None) -> None:
         dut = self.dut
         if action.op == "send":
             spec = cat.spec(action.name)
@@ -364,9 +442,13 @@ class Session:
                 rate = cat.BAUD_RATES.get(oracle.model.nvm["baud"], self.lane.bitrate)
                 if self.bitrates and rate != self.lane.bitrate:
                     self.lane.reopen(rate)
+                    if self._load is not None:  # the load's share is of the bus's capacity at its new bit rate
+                        self._set_load(self._current_load, step)
                 dut.switch_power(self.profile.off_s, self.profile.boot_s)
         elif action.op == "wait":
             dut.wait(action.seconds)
+        elif action.op == "load":
+            self._play_load(action, oracle, step, feed or (lambda _step: None))
         elif action.op == "window":
             dut.read_until(max(self.lane.now(), powered_at + cat.CONFIG_WINDOW_S + 1.0 + 2 * self.lane.timing_error))
         else:

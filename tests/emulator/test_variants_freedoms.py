@@ -262,3 +262,29 @@ def test_toggle_single_frame(choice):
     esc.model.receive(wire._replace(data=wire.data[:-1] + bytes((tail_byte(3, toggle=True),))), esc.now)
     assert bool(esc.answers(esc.run(esc.now + 0.1), "set_rotation")) is (choice == "take")
     assert esc.model.nvm["rotation"] == (choice == "take")
+
+
+@pytest.mark.parametrize("choice", ["keep", "drop"])
+def test_above_half_load(choice):
+    """R18-above-half: at half load (R18's most, in its worst bursts) every MSG1 comes; at 70 % ``drop`` skips them
+    (the window it measures over filled), ``keep`` does not."""
+    from ckesc.protocol.load import LoadSource
+
+    def msg1s(share: float) -> int:
+        esc = Esc(above_half_load=choice)
+        start = esc.now
+        load = LoadSource(share, esc.model.state.bitrate, priority="high", seed=3, exclude_nodes=[NODE])
+        frames: list[Frame] = []
+        t = 0.0
+        while t < 0.5:  # the load's frames fed at their due times, the ESC run between them
+            t = load.next_due()
+            for w in load.take_due(t):
+                frames += esc.run(start + t)
+                esc.model.receive(w, start + t)
+        return len([f for f in frames if f.name == "msg1" and f.timestamp > start + 0.15])
+
+    from ckesc.protocol.catalogue import INTERVAL_UNIT_S
+
+    expected = int(0.35 / (EscModel(EscConfig()).nvm["msg1_interval"] * INTERVAL_UNIT_S))  # in the 0.35 s counted
+    assert msg1s(0.5) >= expected - 1, f"{choice}: MSG1 dropped at half load"
+    assert (msg1s(0.7) < expected / 2) is (choice == "drop"), f"{choice}: {msg1s(0.7)} MSG1 at 70 %, {expected} due"
