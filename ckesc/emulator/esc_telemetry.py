@@ -34,6 +34,10 @@ _PWM, _CCW, _COMM_FAULT, _RUNNING = (int(Status.THROTTLE_PWM), int(Status.DIRECT
                                      int(Status.RUNNING))
 
 
+#: the settings key of each report's interval
+_INTERVAL_KEYS = {name: f"{name}_interval" for name in REPORT_NAMES}
+
+
 class Telemetry:
     """Part of :class:`~ckesc.emulator.model.EscModel`: the report streams and their timers."""
 
@@ -45,7 +49,7 @@ class Telemetry:
         return self.state.reporting != SUSPENDED
 
     def _interval(self, which: str) -> float:
-        n = self.nvm[f"{which}_interval"]
+        n = self.nvm[_INTERVAL_KEYS.get(which) or f"{which}_interval"]
         if self.state.default_timers:  # interaction faults (faults.INTERACTION): a timer reloaded with the wrong value
             n = cat.DEFAULT_REPORT_INTERVALS[f"{which}_interval"]
         elif self.state.timer_from:

@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 from ..protocol import catalogue as cat
 from ..protocol.frame import WireFrame, encode
 from ..protocol.ids import Kind
-from ..protocol.transfer import TransferIdCounter, tail_byte
+from ..protocol.transfer import TAIL_BYTES, TransferIdCounter
 
 #: RawCommand formats by their command-line name: (frame name, channels per frame)
 FORMATS: dict[str, tuple[str, int]] = {"14b": ("raw_command_14b", 4), "12b": ("raw_command_12b", 4),
@@ -179,8 +179,8 @@ class Player:
         has none, R5)."""
         if self._key is None:
             return wire
-        tid = self.tids.next(self._key)
-        return WireFrame(wire.arbitration_id, wire.data[:-1] + bytes((tail_byte(tid),)), wire.timestamp, wire.is_extended_id)
+        tid = self.tids.next(self._key)  # (0..31: the counter's modulo)
+        return WireFrame(wire.arbitration_id, wire.data[:-1] + TAIL_BYTES[tid], wire.timestamp, wire.is_extended_id)
 
     def _stream_of(self, value: int, due: float) -> list[Planned]:
         plan = self.plan

@@ -154,10 +154,12 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     trace = Trace(where, soak.trace_budget, t0) if where is not None else None
     written = 0  # findings whose frames are in their trace file
 
+    watch, keep = monitor.feed, (trace.frame if trace is not None else None)
+
     def feed(msg: can.Message) -> None:
-        monitor.feed(msg)
-        if trace is not None:
-            trace.frame(msg.timestamp, msg.arbitration_id, msg.data)
+        watch(msg)
+        if keep is not None:
+            keep(msg.timestamp, msg.arbitration_id, msg.data)
 
     def write_findings(final: bool = False) -> None:
         nonlocal written
@@ -179,7 +181,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
         return (f"soak: {duration_text(max(now - t0, 0))} elapsed, {duration_text(max(end - now, 0))} left, "
                 f"{monitor.frames} frames, {monitor.count} findings")
 
-    send = lane.bus.send
+    send, recv, lane_now = lane.bus.send, lane.recv, lane.now
     stopped_at = t0
     try:
         say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
@@ -197,7 +199,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
                 if planned.what == "stream":
                     lateness.add(max(now - planned.due, 0.0))
             deadline = min(player.next_deadline(), end)
-            while (msg := lane.recv(deadline - lane.now())) is not None:
+            while (msg := recv(deadline - lane_now())) is not None:
                 feed(msg)
             if written < len(monitor.findings):
                 write_findings()
