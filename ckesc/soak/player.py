@@ -90,20 +90,18 @@ class FlightPlan:
 class _Every:
     """A periodic duty: due at ``start + k * period``; one that fell behind skips to its next future slot."""
 
-    __slots__ = ("start", "period", "k")
+    __slots__ = ("start", "period", "k", "due")
 
     def __init__(self, start: float, period: float) -> None:
         self.start, self.period, self.k = start, period, 0
-
-    @property
-    def due(self) -> float:
-        return self.start + self.k * self.period
+        self.due = start  #: ``start + k * period``, kept (read on every stream tick)
 
     def take(self, now: float) -> tuple[float, int]:
         """The slot due (at or before ``now``) and how many later slots, also past, are skipped."""
         due = self.due
         behind = max(math.floor((now - self.start) / self.period) - self.k, 0)
         self.k += behind + 1
+        self.due = self.start + self.k * self.period
         return due, behind
 
 
