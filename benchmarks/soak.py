@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import os
 import platform
 import sys
 import tempfile
@@ -31,37 +32,48 @@ SPIN = {"run_time_wraps"}
 OUT = Path(__file__).parent / "results" / "soak.json"
 
 
-def one(reports: Path, faults: str, duration_s: float, spin: bool, stop: bool) -> tuple[dict, float]:
+def one(reports: Path, faults: str, duration_s: float, spin: bool, stop: bool) -> tuple[dict, float, float]:
+    """One soak: its results.json, its wall time and the process's CPU time (s; on a shared machine the wall time
+    grows with the other jobs' load, the CPU time much less)."""
     bench = BenchOptions(emulator_faults=faults, allow_motor_spin=spin)
     options = runner.SoakOptions(duration_s=duration_s, rate_hz=RATE_HZ, throttle=((0.0, 200),) if spin else (),
                                  stop_on_finding=stop, reports=str(reports), quiet=True)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     outcome = runner.run(bench, options, out=io.StringIO())
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     assert outcome.where is not None
-    return json.loads((outcome.where / "results.json").read_text()), wall
+    return json.loads((outcome.where / "results.json").read_text()), wall, cpu
+
+
+def load() -> float:
+    """The machine's load average over the last 5 minutes (the machine is shared: it says how busy it was)."""
+    return round(os.getloadavg()[1], 2)
 
 
 def faults(reports: Path) -> dict:
     out = {}
     for name in sorted(n for n, f in FAULTS.items() if f.kind == SOAK):
         onset = FAULTS[name].onset_s
-        doc, wall = one(reports, name, onset + AFTER_ONSET_S, name in SPIN, stop=True)
+        doc, wall, cpu = one(reports, name, onset + AFTER_ONSET_S, name in SPIN, stop=True)
         first = doc["findings"][0] if doc["findings"] else None
         out[name] = {"onset_s": onset, "found": first is not None, "found_at_s": first and round(first["t_s"], 3),
                      "after_onset_s": first and round(first["t_s"] - onset, 3), "watch": first and first["watch"],
                      "rules": first and first["rules"], "status": doc["status"], "ran_s": doc["ran_s"],
-                     "wall_s": round(wall, 2), "sim_per_wall": round(doc["ran_s"] / wall, 1)}
+                     "wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "sim_per_wall": round(doc["ran_s"] / wall, 1)}
         print(name, json.dumps(out[name]), flush=True)
     return out
 
 
 def faultless(reports: Path, hours: float) -> dict:
-    doc, wall = one(reports, "", hours * 3600, False, stop=False)
+    load_before = load()
+    doc, wall, cpu = one(reports, "", hours * 3600, False, stop=False)
     mem = doc["memory"]
     out = {"hours": hours, "status": doc["status"], "findings": len(doc["findings"]) + doc["findings_not_kept"],
            "exit": 1 if doc["findings"] or doc["findings_not_kept"] else 0, "ran_s": doc["ran_s"],
            "wall_s": round(wall, 1), "sim_per_wall": round(doc["ran_s"] / wall, 1), "frames": doc["frames"]["total"],
+           "cpu_s": round(cpu, 1), "wall_s_per_sim_hour": round(wall / hours, 1), "cpu_s_per_sim_hour": round(cpu / hours, 1),
+           "wall_us_per_frame": round(wall / doc["frames"]["total"] * 1e6, 1),
+           "load_average_5min": [load_before, load()],
            "rss_start_mb": round(mem["rss_start_kb"] / 1024, 1), "rss_end_mb": round(mem["rss_end_kb"] / 1024, 1),
            "peak_rss_mb": round(mem["peak_rss_kb"] / 1024, 1),
            "trace_mb": round(doc["trace"]["bytes"] / 1e6, 1), "trace_budget_mb": doc["trace"]["budget_bytes"] / 1e6,

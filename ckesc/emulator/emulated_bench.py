@@ -19,7 +19,7 @@ from .model import HANDLED, THROTTLE_FRAMES, EscConfig, EscModel
 
 FaultSpec = Iterable[str] | Mapping[int, Iterable[str]] | None
 INF = float("inf")
-#: throttle frames kept decoded (a host sending ever new commands must not grow the memory)
+#: throttle frames kept decoded, and ids kept classified (a host sending ever new ones must not grow the memory)
 _THROTTLE_DECODED_MAX = 1024
 
 
@@ -61,6 +61,8 @@ class EmulatedBench:
         #: throttle frames decoded, by (id, bytes): a stream repeats the same few (its transfer ids cycle through
         #: 32), hours long; a throttle frame's decoding depends on nothing else and no ESC keeps or changes it
         self._throttle_decoded: dict[tuple[int, bytes], Frame] = {}
+        #: each extended id's (kind, catalogue name or None), as classify gives them (every frame on the bus asks)
+        self._classified: dict[int, tuple[Any, str | None]] = {}
 
     def touch(self, esc: EscModel | None = None) -> None:
         """Refresh cached deadlines after changing an ESC from outside (``None``: all of them)."""
@@ -122,9 +124,15 @@ class EmulatedBench:
         plain = type(frame) is WireFrame  # a data frame (the simulated lane's; remote and error frames come as Messages)
         key = None
         if frame.is_extended_id if plain else getattr(frame, "is_extended_id", True):
-            kind, _, _, _, spec = classify(frame.arbitration_id)
-            if spec is not None:
-                name = spec.name
+            can_id = frame.arbitration_id
+            known = self._classified.get(can_id)
+            if known is None:
+                if len(self._classified) >= _THROTTLE_DECODED_MAX:
+                    self._classified.clear()
+                kind, _, _, _, spec = classify(can_id)
+                known = self._classified[can_id] = (kind, spec.name if spec is not None else None)
+            kind, name = known
+            if name is not None:
                 if (kind, name) not in HANDLED:
                     self.ignored += 1  # other ESCs' reports and answers: nobody acts on them, no need to decode
                     return
@@ -177,12 +185,13 @@ class EmulatedBench:
 
     def poll(self, now: float) -> list[tuple[EscModel, WireFrame]]:
         """What the ESCs due by ``now`` send, in due order."""
-        out = []
+        out: list[tuple[EscModel, WireFrame]] = []
         for i, t in enumerate(self._deadlines):
             if t <= now:
                 esc = self.escs[i]
-                out.extend((esc, w) for w in esc.poll(now))
-                self._deadlines[i] = _or_inf(esc.next_deadline())
+                out += [(esc, w) for w in esc.poll(now)]
+                t = esc.next_deadline()
+                self._deadlines[i] = INF if t is None else t
         if len(out) > 1:
             out.sort(key=_stamp)
         return out

@@ -8,7 +8,7 @@ import heapq
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import ANSWER_SLOT_S, answer_slot_s
 from ..protocol.codecs import codec_for
-from ..protocol.frame import Frame, WireFrame, encode, frame_bits
+from ..protocol.frame import Frame, WireFrame, encode, frame_bits, new_wire
 from ..protocol.ids import Kind, Priority, message_id, service_id
 from ..protocol.transfer import TAIL_BYTES, tail_byte
 
@@ -59,7 +59,7 @@ class Output:
                 _IDS[ids] = can_id
             tail = TAIL_BYTES[transfer_id] if type(transfer_id) is int and 0 <= transfer_id < 32 \
                 else bytes((tail_byte(transfer_id),))
-            wire = WireFrame(can_id, payload + tail, due)
+            wire = new_wire((can_id, payload + tail, due, True))
         else:
             wire = encode(spec, fields, kind=kind, source=self.node_id, destination=destination,
                           transfer_id=transfer_id, priority=priority, layout=layout, timestamp=due)

@@ -124,15 +124,18 @@ class Telemetry:
                 if self.state.next_report[k] < now:
                     self.state.next_report[k] = self.state.report_floor = now
         offset = self.state.offset
+        next_report = self.state.next_report
         for which in REPORT_NAMES:
-            while (grid := self.state.next_report[which]) + (offset[which] if offset else 0.0) <= now:
+            if not offset and next_report[which] > now:  # (the hot path: a report not due yet)
+                continue
+            while (grid := next_report[which]) + (offset[which] if offset else 0.0) <= now:
                 if offset:  # jitter: off the grid point by its offset (see _jittered)
                     self._emit_report(which, due := self._jittered(which))
                     self.state.last_jittered[which] = due
                     offset[which] = self._jitter()
                 else:
                     self._emit_report(which, grid)
-                self.state.next_report[which] = self.state.regrid.pop(which, None) or round(grid + self._interval(which), 9)  # no float drift
+                next_report[which] = self.state.regrid.pop(which, None) or round(grid + self._interval(which), 9)  # no float drift
 
     # ------------------------------------------------------------------------------------------
     # reports

@@ -31,7 +31,7 @@ import can
 from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
 
 from ..protocol.catalogue import DEFAULT_BITRATE
-from ..protocol.frame import WireFrame, frame_bits
+from ..protocol.frame import WireFrame, frame_bits, new_wire
 from ..protocol.traffic import TrafficSource
 from .emulated_bench import EmulatedBench
 from .model import EscModel
@@ -183,7 +183,7 @@ class SimWorld:
             st = self.source_stats[origin.name]
             st["frames"] += 1
             st["busy_s"] += frame_bits(len(old.data)) / bitrate
-        wire = WireFrame(old.arbitration_id, old.data, end, old.is_extended_id)  # (not _replace: once per frame)
+        wire = new_wire((old.arbitration_id, old.data, end, old.is_extended_id))  # (not _replace: once per frame)
         sender = origin if isinstance(origin, EscModel) else None
         flags = p.flags
         if not flags:
@@ -227,7 +227,7 @@ class SimWorld:
         if msg.is_remote_frame or msg.is_error_frame:
             flags = {"is_remote_frame": msg.is_remote_frame, "is_error_frame": msg.is_error_frame}
         # the ESCs ignore standard-id, remote and error frames; they still occupy the bus
-        wire = WireFrame(msg.arbitration_id, bytes(msg.data), is_extended_id=msg.is_extended_id)
+        wire = new_wire((msg.arbitration_id, bytes(msg.data), 0.0, msg.is_extended_id))
         self._queue(wire, bus, bus.bitrate, ready=self.now, flags=flags)
 
     # ------------------------------------------------------------------ power

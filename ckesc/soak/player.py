@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 from ..protocol import catalogue as cat
-from ..protocol.frame import WireFrame, encode
+from ..protocol.frame import WireFrame, encode, new_wire
 from ..protocol.ids import Kind
 from ..protocol.transfer import TAIL_BYTES, TransferIdCounter
 
@@ -178,7 +178,7 @@ class Player:
         if self._key is None:
             return wire
         tid = self.tids.next(self._key)  # (0..31: the counter's modulo)
-        return WireFrame(wire.arbitration_id, wire.data[:-1] + TAIL_BYTES[tid], wire.timestamp, wire.is_extended_id)
+        return new_wire((wire.arbitration_id, wire.data[:-1] + TAIL_BYTES[tid], wire.timestamp, wire.is_extended_id))
 
     def _stream_of(self, value: int, due: float) -> list[Planned]:
         plan = self.plan
