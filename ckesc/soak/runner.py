@@ -181,7 +181,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
         return (f"soak: {duration_text(max(now - t0, 0))} elapsed, {duration_text(max(end - now, 0))} left, "
                 f"{monitor.frames} frames, {monitor.count} findings")
 
-    send, recv, lane_now = lane.bus.send, lane.recv, lane.now
+    send, recv_until = lane.bus.send, lane.recv_until
     stopped_at = t0
     try:
         say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
@@ -199,7 +199,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
                 if planned.what == "stream":
                     lateness.add(max(now - planned.due, 0.0))
             deadline = min(player.next_deadline(), end)
-            while (msg := recv(deadline - lane_now())) is not None:
+            while (msg := recv_until(deadline)) is not None:
                 feed(msg)
             if written < len(monitor.findings):
                 write_findings()
