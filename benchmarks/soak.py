@@ -7,6 +7,11 @@ In process, one run after another (``runner.run``, as ``ckesc soak`` calls it); 
 directory. A script, not a timed test:
 
     nice python benchmarks/soak.py [--hours 8] [--faults-only | --faultless-only]
+    nice python benchmarks/soak.py --versus ../main-checkout [--hours 1] [--rounds 2]
+
+``--versus DIR``: the faultless soak side by side with the code of another checkout (before a change, say): a
+simulated hour each, this checkout's and that one's in turn, each in a process of its own (the machine is shared:
+taking turns puts both under the same load), recorded under ``versus``.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import io
 import json
 import os
 import platform
+import subprocess
 import sys
 import tempfile
 import time
@@ -83,20 +89,51 @@ def faultless(reports: Path, hours: float) -> dict:
     return out
 
 
+def versus(other: Path, hours: float, rounds: int) -> dict:
+    """The faultless soak of ``hours``, in turn with this checkout's code and ``other``'s (``rounds`` times each)."""
+    here = Path(__file__).resolve().parents[1]
+    probe = ("import io, json, sys, tempfile, time; import ckesc; from ckesc.bench.station import BenchOptions; "
+             "from ckesc.soak import runner\n"
+             "with tempfile.TemporaryDirectory() as tmp:\n"
+             f"    o = runner.SoakOptions(duration_s={hours * 3600!r}, rate_hz={RATE_HZ!r}, reports=tmp, quiet=True)\n"
+             "    w, c = time.perf_counter(), time.process_time()\n"
+             "    runner.run(BenchOptions(), o, out=io.StringIO())\n"
+             "    print(json.dumps([time.perf_counter() - w, time.process_time() - c, ckesc.__file__]))\n")
+    runs: dict[str, list] = {"this": [], "versus": []}
+    for _ in range(rounds):
+        for name, code in (("versus", other.resolve()), ("this", here)):
+            env = {**os.environ, "PYTHONPATH": str(code)}  # (and run from there: ``-c`` puts the directory first)
+            done = subprocess.run([sys.executable, "-c", probe], env=env, cwd=code, capture_output=True, text=True,
+                                  check=True)
+            wall, cpu, where = json.loads(done.stdout.splitlines()[-1])
+            assert Path(where).resolve().is_relative_to(code), f"{name}: ckesc imported from {where}, not {code}"
+            runs[name].append({"wall_s_per_sim_hour": round(wall / hours, 1), "cpu_s_per_sim_hour": round(cpu / hours, 1),
+                               "load_average_5min": load()})
+            print(name, code, json.dumps(runs[name][-1]), flush=True)
+    return {"hours": hours, "versus": str(other), **runs}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--hours", type=float, default=8.0, help="the faultless soak's length (default 8)")
+    ap.add_argument("--hours", type=float, help="the faultless soak's length (default 8; with --versus 1)")
     ap.add_argument("--faults-only", action="store_true")
     ap.add_argument("--faultless-only", action="store_true")
+    ap.add_argument("--versus", type=Path, help="only the faultless soak side by side with this checkout's code")
+    ap.add_argument("--rounds", type=int, default=2, help="--versus: runs of each (default 2)")
     args = ap.parse_args()
     result: dict = json.loads(OUT.read_text()) if OUT.exists() else {}
     result.update(python=sys.version.split()[0], machine=platform.machine(), rate_hz=RATE_HZ,
                   date=time.strftime("%Y-%m-%d", time.gmtime()))
+    if args.versus is not None:
+        result["versus"] = versus(args.versus, args.hours or 1.0, args.rounds)
+        OUT.write_text(json.dumps(result, indent=1) + "\n")
+        print(f"written {OUT}")
+        return
     with tempfile.TemporaryDirectory() as tmp:
         if not args.faultless_only:
             result["faults"] = faults(Path(tmp))
         if not args.faults_only:
-            result["faultless"] = faultless(Path(tmp), args.hours)
+            result["faultless"] = faultless(Path(tmp), args.hours or 8.0)
     OUT.write_text(json.dumps(result, indent=1) + "\n")
     print(f"written {OUT}")
 
