@@ -110,7 +110,7 @@ def versus(other: Path, hours: float, rounds: int) -> dict:
             runs[name].append({"wall_s_per_sim_hour": round(wall / hours, 1), "cpu_s_per_sim_hour": round(cpu / hours, 1),
                                "load_average_5min": load()})
             print(name, code, json.dumps(runs[name][-1]), flush=True)
-    return {"hours": hours, "versus": str(other), **runs}
+    return {"hours": hours, "other_checkout": str(other), **runs}
 
 
 def main() -> None:
