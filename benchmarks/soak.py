@@ -7,6 +7,11 @@ In process, one run after another (``runner.run``, as ``ckesc soak`` calls it); 
 directory. A script, not a timed test:
 
     nice python benchmarks/soak.py [--hours 8] [--faults-only | --faultless-only]
+    nice python benchmarks/soak.py --versus ../main-checkout [--hours 1] [--rounds 2]
+
+``--versus DIR``: the faultless soak side by side with the code of another checkout (before a change, say): a
+simulated hour each, this checkout's and that one's in turn, each in a process of its own (the machine is shared:
+taking turns puts both under the same load), recorded under ``versus``.
 """
 
 from __future__ import annotations
@@ -14,7 +19,9 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import os
 import platform
+import subprocess
 import sys
 import tempfile
 import time
@@ -31,37 +38,48 @@ SPIN = {"run_time_wraps"}
 OUT = Path(__file__).parent / "results" / "soak.json"
 
 
-def one(reports: Path, faults: str, duration_s: float, spin: bool, stop: bool) -> tuple[dict, float]:
+def one(reports: Path, faults: str, duration_s: float, spin: bool, stop: bool) -> tuple[dict, float, float]:
+    """One soak: its results.json, its wall time and the process's CPU time (s; on a shared machine the wall time
+    grows with the other jobs' load, the CPU time much less)."""
     bench = BenchOptions(emulator_faults=faults, allow_motor_spin=spin)
     options = runner.SoakOptions(duration_s=duration_s, rate_hz=RATE_HZ, throttle=((0.0, 200),) if spin else (),
                                  stop_on_finding=stop, reports=str(reports), quiet=True)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     outcome = runner.run(bench, options, out=io.StringIO())
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     assert outcome.where is not None
-    return json.loads((outcome.where / "results.json").read_text()), wall
+    return json.loads((outcome.where / "results.json").read_text()), wall, cpu
+
+
+def load() -> float:
+    """The machine's load average over the last 5 minutes (the machine is shared: it says how busy it was)."""
+    return round(os.getloadavg()[1], 2)
 
 
 def faults(reports: Path) -> dict:
     out = {}
     for name in sorted(n for n, f in FAULTS.items() if f.kind == SOAK):
         onset = FAULTS[name].onset_s
-        doc, wall = one(reports, name, onset + AFTER_ONSET_S, name in SPIN, stop=True)
+        doc, wall, cpu = one(reports, name, onset + AFTER_ONSET_S, name in SPIN, stop=True)
         first = doc["findings"][0] if doc["findings"] else None
         out[name] = {"onset_s": onset, "found": first is not None, "found_at_s": first and round(first["t_s"], 3),
                      "after_onset_s": first and round(first["t_s"] - onset, 3), "watch": first and first["watch"],
                      "rules": first and first["rules"], "status": doc["status"], "ran_s": doc["ran_s"],
-                     "wall_s": round(wall, 2), "sim_per_wall": round(doc["ran_s"] / wall, 1)}
+                     "wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "sim_per_wall": round(doc["ran_s"] / wall, 1)}
         print(name, json.dumps(out[name]), flush=True)
     return out
 
 
 def faultless(reports: Path, hours: float) -> dict:
-    doc, wall = one(reports, "", hours * 3600, False, stop=False)
+    load_before = load()
+    doc, wall, cpu = one(reports, "", hours * 3600, False, stop=False)
     mem = doc["memory"]
     out = {"hours": hours, "status": doc["status"], "findings": len(doc["findings"]) + doc["findings_not_kept"],
            "exit": 1 if doc["findings"] or doc["findings_not_kept"] else 0, "ran_s": doc["ran_s"],
            "wall_s": round(wall, 1), "sim_per_wall": round(doc["ran_s"] / wall, 1), "frames": doc["frames"]["total"],
+           "cpu_s": round(cpu, 1), "wall_s_per_sim_hour": round(wall / hours, 1), "cpu_s_per_sim_hour": round(cpu / hours, 1),
+           "wall_us_per_frame": round(wall / doc["frames"]["total"] * 1e6, 1),
+           "load_average_5min": [load_before, load()],
            "rss_start_mb": round(mem["rss_start_kb"] / 1024, 1), "rss_end_mb": round(mem["rss_end_kb"] / 1024, 1),
            "peak_rss_mb": round(mem["peak_rss_kb"] / 1024, 1),
            "trace_mb": round(doc["trace"]["bytes"] / 1e6, 1), "trace_budget_mb": doc["trace"]["budget_bytes"] / 1e6,
@@ -71,20 +89,51 @@ def faultless(reports: Path, hours: float) -> dict:
     return out
 
 
+def versus(other: Path, hours: float, rounds: int) -> dict:
+    """The faultless soak of ``hours``, in turn with this checkout's code and ``other``'s (``rounds`` times each)."""
+    here = Path(__file__).resolve().parents[1]
+    probe = ("import io, json, sys, tempfile, time; import ckesc; from ckesc.bench.station import BenchOptions; "
+             "from ckesc.soak import runner\n"
+             "with tempfile.TemporaryDirectory() as tmp:\n"
+             f"    o = runner.SoakOptions(duration_s={hours * 3600!r}, rate_hz={RATE_HZ!r}, reports=tmp, quiet=True)\n"
+             "    w, c = time.perf_counter(), time.process_time()\n"
+             "    runner.run(BenchOptions(), o, out=io.StringIO())\n"
+             "    print(json.dumps([time.perf_counter() - w, time.process_time() - c, ckesc.__file__]))\n")
+    runs: dict[str, list] = {"this": [], "versus": []}
+    for _ in range(rounds):
+        for name, code in (("versus", other.resolve()), ("this", here)):
+            env = {**os.environ, "PYTHONPATH": str(code)}  # (and run from there: ``-c`` puts the directory first)
+            done = subprocess.run([sys.executable, "-c", probe], env=env, cwd=code, capture_output=True, text=True,
+                                  check=True)
+            wall, cpu, where = json.loads(done.stdout.splitlines()[-1])
+            assert Path(where).resolve().is_relative_to(code), f"{name}: ckesc imported from {where}, not {code}"
+            runs[name].append({"wall_s_per_sim_hour": round(wall / hours, 1), "cpu_s_per_sim_hour": round(cpu / hours, 1),
+                               "load_average_5min": load()})
+            print(name, code, json.dumps(runs[name][-1]), flush=True)
+    return {"hours": hours, "other_checkout": str(other), **runs}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--hours", type=float, default=8.0, help="the faultless soak's length (default 8)")
+    ap.add_argument("--hours", type=float, help="the faultless soak's length (default 8; with --versus 1)")
     ap.add_argument("--faults-only", action="store_true")
     ap.add_argument("--faultless-only", action="store_true")
+    ap.add_argument("--versus", type=Path, help="only the faultless soak side by side with this checkout's code")
+    ap.add_argument("--rounds", type=int, default=2, help="--versus: runs of each (default 2)")
     args = ap.parse_args()
     result: dict = json.loads(OUT.read_text()) if OUT.exists() else {}
     result.update(python=sys.version.split()[0], machine=platform.machine(), rate_hz=RATE_HZ,
                   date=time.strftime("%Y-%m-%d", time.gmtime()))
+    if args.versus is not None:
+        result["versus"] = versus(args.versus, args.hours or 1.0, args.rounds)
+        OUT.write_text(json.dumps(result, indent=1) + "\n")
+        print(f"written {OUT}")
+        return
     with tempfile.TemporaryDirectory() as tmp:
         if not args.faultless_only:
             result["faults"] = faults(Path(tmp))
         if not args.faults_only:
-            result["faultless"] = faultless(Path(tmp), args.hours)
+            result["faultless"] = faultless(Path(tmp), args.hours or 8.0)
     OUT.write_text(json.dumps(result, indent=1) + "\n")
     print(f"written {OUT}")
 

@@ -19,6 +19,12 @@ from .model import HANDLED, THROTTLE_FRAMES, EscConfig, EscModel
 
 FaultSpec = Iterable[str] | Mapping[int, Iterable[str]] | None
 INF = float("inf")
+#: throttle frames kept decoded, and ids kept classified (a host sending ever new ones must not grow the memory)
+_THROTTLE_DECODED_MAX = 1024
+
+
+def _stamp(pair: tuple[EscModel, WireFrame]) -> float:
+    return pair[1].timestamp
 
 
 def _or_inf(t: float | None) -> float:
@@ -52,6 +58,11 @@ class EmulatedBench:
         self._deadlines: list[float] = [INF] * len(self.escs)  # INF: nothing scheduled
         self._throttle_index: dict[tuple[str, int | None], list[EscModel]] | None = None
         self.ignored = 0  # frames on the bus that no ESC acts on (other ESCs' reports and answers)
+        #: throttle frames decoded, by (id, bytes): a stream repeats the same few (its transfer ids cycle through
+        #: 32), hours long; a throttle frame's decoding depends on nothing else and no ESC keeps or changes it
+        self._throttle_decoded: dict[tuple[int, bytes], Frame] = {}
+        #: each extended id's (kind, catalogue name or None), as classify gives them (every frame on the bus asks)
+        self._classified: dict[int, tuple[Any, str | None]] = {}
 
     def touch(self, esc: EscModel | None = None) -> None:
         """Refresh cached deadlines after changing an ESC from outside (``None``: all of them)."""
@@ -110,15 +121,34 @@ class EmulatedBench:
 
         Frames no ESC acts on (other ESCs' reports) are only counted, and a throttle frame goes only
         to the ESCs it can address (:meth:`EscModel.throttle_keys`): the hot path of a busy bus."""
-        if getattr(frame, "is_extended_id", True):
-            kind, _, _, _, spec = classify(frame.arbitration_id)
-            if spec is not None and (kind, spec.name) not in HANDLED:
-                self.ignored += 1  # other ESCs' reports and answers: nobody acts on them, no need to decode
-                return
-        try:
-            decoded: Frame | DecodeError = self._decoder.decode(frame)
-        except DecodeError as exc:
-            decoded = exc
+        plain = type(frame) is WireFrame  # a data frame (the simulated lane's; remote and error frames come as Messages)
+        key = None
+        if frame.is_extended_id if plain else getattr(frame, "is_extended_id", True):
+            can_id = frame.arbitration_id
+            known = self._classified.get(can_id)
+            if known is None:
+                if len(self._classified) >= _THROTTLE_DECODED_MAX:
+                    self._classified.clear()
+                kind, _, _, _, spec = classify(can_id)
+                known = self._classified[can_id] = (kind, spec.name if spec is not None else None)
+            kind, name = known
+            if name is not None:
+                if (kind, name) not in HANDLED:
+                    self.ignored += 1  # other ESCs' reports and answers: nobody acts on them, no need to decode
+                    return
+                if plain and name in THROTTLE_FRAMES:
+                    key = (frame.arbitration_id, frame.data)
+        decoded: Frame | DecodeError | None = self._throttle_decoded.get(key) if key is not None else None
+        if decoded is None:
+            try:
+                decoded = self._decoder.decode(frame)
+            except DecodeError as exc:
+                decoded = exc
+            else:
+                if key is not None:
+                    if len(self._throttle_decoded) >= _THROTTLE_DECODED_MAX:
+                        self._throttle_decoded.clear()
+                    self._throttle_decoded[key] = decoded
         targets = self.escs
         if isinstance(decoded, Frame) and decoded.spec is not None:
             name = decoded.spec.name
@@ -129,7 +159,7 @@ class EmulatedBench:
         for esc in targets:
             if esc is not sender and esc.powered and esc.state.bitrate == bitrate:
                 if esc.receive(frame, now, decoded=decoded):
-                    self._deadlines[self.escs.index(esc)] = _or_inf(esc.next_deadline())
+                    self._deadlines[0 if len(self.escs) == 1 else self.escs.index(esc)] = _or_inf(esc.next_deadline())
                     changed = True
         if changed and targets is self.escs:
             self._throttle_index = None  # a service may have changed a node's throttle channel
@@ -155,13 +185,15 @@ class EmulatedBench:
 
     def poll(self, now: float) -> list[tuple[EscModel, WireFrame]]:
         """What the ESCs due by ``now`` send, in due order."""
-        out = []
+        out: list[tuple[EscModel, WireFrame]] = []
         for i, t in enumerate(self._deadlines):
             if t <= now:
                 esc = self.escs[i]
-                out.extend((esc, w) for w in esc.poll(now))
-                self._deadlines[i] = _or_inf(esc.next_deadline())
-        out.sort(key=lambda pair: pair[1].timestamp)
+                out += [(esc, w) for w in esc.poll(now)]
+                t = esc.next_deadline()
+                self._deadlines[i] = INF if t is None else t
+        if len(out) > 1:
+            out.sort(key=_stamp)
         return out
 
     def esc(self, node_id: int) -> EscModel:

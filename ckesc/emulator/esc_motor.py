@@ -33,7 +33,8 @@ class Motor:
         self.state.last_update = now
         self._refresh_throttle(now)
         target = self.state.throttle / THROTTLE_MAX * self.config.max_rpm
-        self.state.rpm += (target - self.state.rpm) * (1 - math.exp(-dt / self.config.motor_tau))
+        if target != self.state.rpm:  # (at the target it stays: a motor at rest, hours long, costs no exp)
+            self.state.rpm += (target - self.state.rpm) * (1 - math.exp(-dt / self.config.motor_tau))
         if target == 0 and self.state.rpm < 1:
             self.state.rpm = 0.0
         load = self.state.rpm / self.config.max_rpm

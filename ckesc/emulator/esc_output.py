@@ -8,14 +8,19 @@ import heapq
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import ANSWER_SLOT_S, answer_slot_s
 from ..protocol.codecs import codec_for
-from ..protocol.frame import Frame, WireFrame, encode, frame_bits
+from ..protocol.frame import Frame, WireFrame, encode, frame_bits, new_wire
 from ..protocol.ids import Kind, Priority, message_id, service_id
-from ..protocol.transfer import tail_byte
+from ..protocol.transfer import TAIL_BYTES, tail_byte
 
 #: unlisted_priority (F5-unlisted): the priority of 240/241/242 answers; "request" keeps the request's
 _UNLISTED_PRIORITY = {"medium": Priority.MEDIUM, "low": Priority.LOW, "lowest": Priority.LOWEST}
 
 _TAIL_FAULTS = frozenset({"tail_toggle_set", "tail_not_single_frame"})
+#: reports' payloads by (layout, fields) and their CAN ids by (priority, type id, node): the same few, hours long
+#: (an ESC at rest reports the same values); bounded, a value that keeps changing must not grow the memory
+_PAYLOADS: dict[tuple, bytes] = {}
+_IDS: dict[tuple[int, int, int], int] = {}
+_CACHE_MAX = 4096
 
 
 class Output:
@@ -30,13 +35,35 @@ class Output:
         if priority is None:
             priority = spec.priority if spec.priority is not None else Priority.MEDIUM
         if kind is Kind.MESSAGE and layout is None and len(spec.layouts) == 1 and spec.has_tail:
-            # reports, the bulk of what an ESC sends: the layout's compiled codec directly
-            data = codec_for(spec.layouts[0]).encode(fields) + bytes((tail_byte(transfer_id),))
-            wire = WireFrame(message_id(priority, spec.type_id, self.node_id), data, due)
+            # reports, the bulk of what an ESC sends: the layout's compiled codec directly, its payload and id
+            # remembered (encoding is a pure function of them; what fails to encode is never remembered)
+            lay = spec.layouts[0]
+            # keyed by the values' types too: True, 1.0 and 1 are equal, and only 1 encodes
+            key: tuple | None = (lay, *fields.items(), *map(type, fields.values()))
+            try:
+                payload = _PAYLOADS.get(key)
+            except TypeError:  # a value that cannot be a key (a list): encoded each time
+                payload = key = None
+            if payload is None:
+                payload = codec_for(lay).encode(fields)
+                if key is not None:
+                    if len(_PAYLOADS) >= _CACHE_MAX:
+                        _PAYLOADS.clear()
+                    _PAYLOADS[key] = payload
+            ids = (priority, spec.type_id, self.node_id)
+            can_id = _IDS.get(ids)
+            if can_id is None:
+                can_id = message_id(*ids)
+                if len(_IDS) >= _CACHE_MAX:
+                    _IDS.clear()
+                _IDS[ids] = can_id
+            tail = TAIL_BYTES[transfer_id] if type(transfer_id) is int and 0 <= transfer_id < 32 \
+                else bytes((tail_byte(transfer_id),))
+            wire = new_wire((can_id, payload + tail, due, True))
         else:
             wire = encode(spec, fields, kind=kind, source=self.node_id, destination=destination,
                           transfer_id=transfer_id, priority=priority, layout=layout, timestamp=due)
-        if self.faults & _TAIL_FAULTS:
+        if not self.faults.isdisjoint(_TAIL_FAULTS):  # (no set built: every frame an ESC sends passes here)
             wire = self._mangle_tail(wire, spec)
         if id_or:
             wire = wire._replace(arbitration_id=wire.arbitration_id | id_or)

@@ -35,6 +35,10 @@ _PWM, _CCW, _COMM_FAULT, _RUNNING = (int(Status.THROTTLE_PWM), int(Status.DIRECT
                                      int(Status.RUNNING))
 
 
+#: the settings key of each report's interval
+_INTERVAL_KEYS = {name: f"{name}_interval" for name in REPORT_NAMES}
+
+
 class Telemetry:
     """Part of :class:`~ckesc.emulator.model.EscModel`: the report streams and their timers."""
 
@@ -46,7 +50,7 @@ class Telemetry:
         return self.state.reporting != SUSPENDED
 
     def _interval(self, which: str) -> float:
-        n = self.nvm[f"{which}_interval"]
+        n = self.nvm[_INTERVAL_KEYS.get(which) or f"{which}_interval"]
         if self.state.default_timers:  # interaction faults (faults.INTERACTION): a timer reloaded with the wrong value
             n = cat.DEFAULT_REPORT_INTERVALS[f"{which}_interval"]
         elif self.state.timer_from:
@@ -121,15 +125,18 @@ class Telemetry:
                 if self.state.next_report[k] < now:
                     self.state.next_report[k] = self.state.report_floor = now
         offset = self.state.offset
+        next_report = self.state.next_report
         for which in REPORT_NAMES:
-            while (grid := self.state.next_report[which]) + (offset[which] if offset else 0.0) <= now:
+            if not offset and next_report[which] > now:  # (the hot path: a report not due yet)
+                continue
+            while (grid := next_report[which]) + (offset[which] if offset else 0.0) <= now:
                 if offset:  # jitter: off the grid point by its offset (see _jittered)
                     self._emit_report(which, due := self._jittered(which))
                     self.state.last_jittered[which] = due
                     offset[which] = self._jitter()
                 else:
                     self._emit_report(which, grid)
-                self.state.next_report[which] = self.state.regrid.pop(which, None) or round(grid + self._interval(which), 9)  # no float drift
+                next_report[which] = self.state.regrid.pop(which, None) or round(grid + self._interval(which), 9)  # no float drift
 
     # ------------------------------------------------------------------------------------------
     # reports

@@ -176,17 +176,24 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
     def next_deadline(self) -> float | None:
         if not self.powered:
             return None
-        times = [self.state.outbox[0][0]] if self.state.outbox else []
+        # the earliest of these, in this order (the first of equal ones, as min() of them): called after every poll
+        # and every frame an ESC acts on, so no list is built
+        state = self.state
+        t = state.outbox[0][0] if state.outbox else None
         if self._reports_active():
-            times.extend(self._next_report_times())
-        if self.state.can_test:
-            times.append(self.state.next_can_test)
+            for due in (self._next_report_times() if state.offset else state.next_report.values()):
+                if t is None or due < t:
+                    t = due
+        if state.can_test and (t is None or state.next_can_test < t):
+            t = state.next_can_test
         cl = self._comm_loss_deadline()
-        if cl is not None:
-            times.append(cl)
-        if self.state.rpm > 0.5 or self.state.throttle:
-            times.append(self.state.last_update + 0.05)  # motor and temperatures move
-        return min(times) if times else None
+        if cl is not None and (t is None or cl < t):
+            t = cl
+        if state.rpm > 0.5 or state.throttle:
+            moves = state.last_update + 0.05  # motor and temperatures move
+            if t is None or moves < t:
+                t = moves
+        return t
 
     def handle(self, frame: Any | None, now: float) -> tuple[list[WireFrame], float | None]:
         """h11-style single entry point: feed one frame (or None for a timer), get what is due."""

@@ -31,7 +31,7 @@ import can
 from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
 
 from ..protocol.catalogue import DEFAULT_BITRATE
-from ..protocol.frame import WireFrame, frame_bits
+from ..protocol.frame import WireFrame, frame_bits, new_wire
 from ..protocol.traffic import TrafficSource
 from .emulated_bench import EmulatedBench
 from .model import EscModel
@@ -91,13 +91,18 @@ class SimWorld:
 
     # ------------------------------------------------------------------ event loop
     def next_event(self) -> float | None:
-        t = min(self.bench._deadlines) if self.bench.escs else INF
-        if self._in_flight is not None:
-            t = min(t, self._in_flight[0])
+        # the hot path of every simulated run (hours of soak): plain comparisons, no min() of pairs
+        deadlines = self.bench._deadlines
+        t = (deadlines[0] if len(deadlines) == 1 else min(deadlines)) if deadlines else INF
+        in_flight = self._in_flight
+        if in_flight is not None:
+            if in_flight[0] < t:
+                t = in_flight[0]
         elif self._ready:
             t = self.now
         elif self._waiting:
-            t = min(t, self._waiting[0][0])
+            if self._waiting[0][0] < t:
+                t = self._waiting[0][0]
         for task in self._tasks:
             if task.next_time < t:
                 t = task.next_time
@@ -119,15 +124,18 @@ class SimWorld:
         self.now = t
         if self._in_flight is not None and self._in_flight[0] <= t:
             self._finish_transmission()
-        for task in self._tasks:
-            if task.next_time <= t:
-                task.fire(t)
-        for source in self._sources:
-            if source.next_due() <= t:
-                bitrate = source.bitrate or self._host_bitrate()
-                for wire in source.take_due(t):
-                    self._queue(wire, source, bitrate, ready=wire.timestamp)
-        if min(self.bench._deadlines) <= t:
+        if self._tasks:
+            for task in self._tasks:
+                if task.next_time <= t:
+                    task.fire(t)
+        if self._sources:
+            for source in self._sources:
+                if source.next_due() <= t:
+                    bitrate = source.bitrate or self._host_bitrate()
+                    for wire in source.take_due(t):
+                        self._queue(wire, source, bitrate, ready=wire.timestamp)
+        deadlines = self.bench._deadlines
+        if deadlines and (deadlines[0] if len(deadlines) == 1 else min(deadlines)) <= t:
             for esc, wire in self.bench.poll(t):
                 self._queue(wire, esc, esc.state.bitrate, ready=wire.timestamp)
         if self._in_flight is None:
@@ -145,11 +153,12 @@ class SimWorld:
             self.step(t)
 
     def _queue(self, wire: WireFrame, origin: Any, bitrate: int, ready: float, flags: dict[str, bool] | None = None) -> None:
-        p = _Pending(max(ready, self.now), next(self._seq), wire, origin, bitrate, flags)
-        if p.ready <= self.now:
-            heapq.heappush(self._ready, (wire.arbitration_id, p.seq, p))
+        now = self.now
+        seq = next(self._seq)
+        if ready <= now:
+            heapq.heappush(self._ready, (wire.arbitration_id, seq, _Pending(now, seq, wire, origin, bitrate, flags)))
         else:
-            heapq.heappush(self._waiting, (p.ready, p.seq, p))
+            heapq.heappush(self._waiting, (ready, seq, _Pending(ready, seq, wire, origin, bitrate, flags)))
 
     def _start_transmission(self) -> None:
         waiting, ready = self._waiting, self._ready
@@ -161,7 +170,7 @@ class SimWorld:
         # arbitration: the lowest id wins (a frame at another bit rate than its listeners' is
         # garbage to them; a mixed-rate bus is broken anyway, so rates do not interact here)
         winner = heapq.heappop(ready)[2]
-        duration = frame_bits(len(winner.wire.data)) / winner.bitrate
+        duration = (67 + 8 * len(winner.wire.data)) / winner.bitrate  # frame_bits, inline: once per frame
         self._in_flight = (round(self.now + duration, 12), winner)
         self.stats["busy_s"] += duration
 
@@ -169,22 +178,29 @@ class SimWorld:
         end, p = self._in_flight  # type: ignore[misc]
         self._in_flight = None
         self.stats["frames"] += 1
-        if isinstance(p.origin, _Shifted):
-            st = self.source_stats[p.origin.name]
+        origin, bitrate, old = p.origin, p.bitrate, p.wire
+        if isinstance(origin, _Shifted):
+            st = self.source_stats[origin.name]
             st["frames"] += 1
-            st["busy_s"] += frame_bits(len(p.wire.data)) / p.bitrate
-        wire = p.wire._replace(timestamp=end)
-        sender = p.origin if isinstance(p.origin, EscModel) else None
-        flags = p.flags or {}
-        heard = wire if not flags else can.Message(timestamp=end, arbitration_id=wire.arbitration_id, data=wire.data,
-                                                   is_extended_id=wire.is_extended_id, **flags)
-        self.bench.deliver(heard, end, p.bitrate, sender=sender)  # the ESCs' decoder rejects remote/error frames
+            st["busy_s"] += frame_bits(len(old.data)) / bitrate
+        wire = new_wire((old.arbitration_id, old.data, end, old.is_extended_id))  # (not _replace: once per frame)
+        sender = origin if isinstance(origin, EscModel) else None
+        flags = p.flags
+        if not flags:
+            self.bench.deliver(wire, end, bitrate, sender=sender)
+            for bus in self.buses:
+                if bus.bitrate == bitrate and (bus is not origin or bus.receive_own_messages):
+                    bus._deliver(wire, bus is not origin)
+            return
+        heard = can.Message(timestamp=end, arbitration_id=wire.arbitration_id, data=wire.data,
+                            is_extended_id=wire.is_extended_id, **flags)
+        self.bench.deliver(heard, end, bitrate, sender=sender)  # the ESCs' decoder rejects remote/error frames
         for bus in self.buses:
-            if bus.bitrate != p.bitrate:
+            if bus.bitrate != bitrate:
                 continue
-            if bus is p.origin and not bus.receive_own_messages:
+            if bus is origin and not bus.receive_own_messages:
                 continue
-            bus._deliver(wire, is_rx=bus is not p.origin, **flags)
+            bus._deliver(wire, is_rx=bus is not origin, **flags)
 
     # ------------------------------------------------------------------ other nodes
     def add_source(self, source: TrafficSource) -> None:
@@ -211,7 +227,7 @@ class SimWorld:
         if msg.is_remote_frame or msg.is_error_frame:
             flags = {"is_remote_frame": msg.is_remote_frame, "is_error_frame": msg.is_error_frame}
         # the ESCs ignore standard-id, remote and error frames; they still occupy the bus
-        wire = WireFrame(msg.arbitration_id, bytes(msg.data), is_extended_id=msg.is_extended_id)
+        wire = new_wire((msg.arbitration_id, bytes(msg.data), 0.0, msg.is_extended_id))
         self._queue(wire, bus, bus.bitrate, ready=self.now, flags=flags)
 
     # ------------------------------------------------------------------ power
@@ -350,7 +366,7 @@ class SimEscBus(can.BusABC):
     def _deliver(self, wire: WireFrame, is_rx: bool, **flags: bool) -> None:
         msg = can.Message(timestamp=wire.timestamp, arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id,
                           data=wire.data, is_rx=is_rx, channel=self.channel, **flags)
-        if self._matches_filters(msg):
+        if self._filters is None or self._matches_filters(msg):
             self._rx.append(msg)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:

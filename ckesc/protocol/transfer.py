@@ -31,6 +31,11 @@ def tail_byte(transfer_id: int, *, start: bool = True, end: bool = True, toggle:
     return int(start) << 7 | int(end) << 6 | int(toggle) << 5 | transfer_id
 
 
+#: a single-frame transfer's tail byte by transfer id, as one byte (``TAIL_BYTES[tid] == bytes((tail_byte(tid),))``):
+#: the hot paths that stamp a frame's transfer id (a report, a stream's command) index it instead of building it
+TAIL_BYTES: tuple[bytes, ...] = tuple(bytes((tail_byte(tid),)) for tid in range(TRANSFER_ID_MODULO))
+
+
 def parse_tail(byte: int) -> Tail:
     return Tail(bool(byte & 0x80), bool(byte & 0x40), bool(byte & 0x20), byte & 0x1F)
 

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 from ..protocol import catalogue as cat
-from ..protocol.frame import WireFrame, encode
+from ..protocol.frame import WireFrame, encode, new_wire
 from ..protocol.ids import Kind
-from ..protocol.transfer import TransferIdCounter, tail_byte
+from ..protocol.transfer import TAIL_BYTES, TransferIdCounter
 
 #: RawCommand formats by their command-line name: (frame name, channels per frame)
 FORMATS: dict[str, tuple[str, int]] = {"14b": ("raw_command_14b", 4), "12b": ("raw_command_12b", 4),
@@ -90,20 +90,18 @@ class FlightPlan:
 class _Every:
     """A periodic duty: due at ``start + k * period``; one that fell behind skips to its next future slot."""
 
-    __slots__ = ("start", "period", "k")
+    __slots__ = ("start", "period", "k", "due")
 
     def __init__(self, start: float, period: float) -> None:
         self.start, self.period, self.k = start, period, 0
-
-    @property
-    def due(self) -> float:
-        return self.start + self.k * self.period
+        self.due = start  #: ``start + k * period``, kept (read on every stream tick)
 
     def take(self, now: float) -> tuple[float, int]:
         """The slot due (at or before ``now``) and how many later slots, also past, are skipped."""
         due = self.due
         behind = max(math.floor((now - self.start) / self.period) - self.k, 0)
         self.k += behind + 1
+        self.due = self.start + self.k * self.period
         return due, behind
 
 
@@ -179,8 +177,8 @@ class Player:
         has none, R5)."""
         if self._key is None:
             return wire
-        tid = self.tids.next(self._key)
-        return WireFrame(wire.arbitration_id, wire.data[:-1] + bytes((tail_byte(tid),)), wire.timestamp, wire.is_extended_id)
+        tid = self.tids.next(self._key)  # (0..31: the counter's modulo)
+        return new_wire((wire.arbitration_id, wire.data[:-1] + TAIL_BYTES[tid], wire.timestamp, wire.is_extended_id))
 
     def _stream_of(self, value: int, due: float) -> list[Planned]:
         plan = self.plan

@@ -179,10 +179,12 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     trace = Trace(where, soak.trace_budget, t0) if where is not None else None
     written = 0  # findings whose frames are in their trace file
 
+    watch, keep = monitor.feed, (trace.frame if trace is not None else None)
+
     def feed(msg: can.Message) -> None:
-        monitor.feed(msg)
-        if trace is not None:
-            trace.frame(msg.timestamp, msg.arbitration_id, msg.data)
+        watch(msg)
+        if keep is not None:
+            keep(msg.timestamp, msg.arbitration_id, msg.data)
 
     def write_findings(final: bool = False) -> None:
         nonlocal written
@@ -209,7 +211,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     def line() -> str:
         return live_text(figures())
 
-    send, peek = lane.bus.send, lane.peek_now
+    send, peek, recv_until = lane.bus.send, lane.peek_now, lane.recv_until
     stopped_at = t0
     try:
         say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
@@ -229,7 +231,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
                 if planned.what == "stream":
                     lateness.add(max(now - planned.due, 0.0))
             deadline = min(player.next_deadline(), end)
-            while (msg := lane.recv(deadline - lane.now())) is not None:
+            while (msg := recv_until(deadline)) is not None:
                 feed(msg)
             if written < len(monitor.findings):
                 write_findings()

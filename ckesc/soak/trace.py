@@ -46,6 +46,13 @@ def candump_line(t: float, can_id: int, data: bytes) -> str:
     return f"({t:.6f}) {INTERFACE} {can_id:08X}#{data.hex().upper()}\n"
 
 
+#: lines held before they are written (one write of many lines costs less than many writes: a soak writes every frame)
+BATCH_LINES = 256
+#: the ids' ``) soak 0CXXXXXX#`` and the payloads' hex kept, as :data:`~.watches.MAX_IDS` bounds the watches' own
+#: (a bus of few ids and few payloads, hours long: the same strings again)
+MAX_CACHED = 4096
+
+
 class Trace:
     """The run's trace in directory ``where`` within ``budget`` bytes (at least :data:`MIN_BUDGET`), times into the
     run from lane time ``t0``: :meth:`frame` each frame heard, :meth:`finding` each finding once its frames after it
@@ -64,10 +71,14 @@ class Trace:
         self.finding_files: list[str] = []
         self._fh: Any = None
         self._size = 0
+        self._lines: list[str] = []
+        self._ids: dict[int, str] = {}
+        self._hex: dict[bytes, str] = {}
         self._roll()
 
     def _roll(self) -> None:
         if self._fh is not None:
+            self._flush()
             self._fh.close()
         if len(self.files) == ROLL_FILES:
             self.files.popleft().unlink(missing_ok=True)
@@ -79,12 +90,32 @@ class Trace:
         self._size = 0
 
     def frame(self, t: float, can_id: int, data: bytes) -> None:
-        line = candump_line(t - self.t0, can_id, data)
+        # candump_line's, with the id's and the payload's text remembered (the hot path of a soak: every frame)
+        ids = self._ids.get(can_id)
+        if ids is None:
+            if len(self._ids) >= MAX_CACHED:
+                self._ids.clear()
+            ids = self._ids[can_id] = f") {INTERFACE} {can_id:08X}#"
+        key = bytes(data)
+        text = self._hex.get(key)
+        if text is None:
+            if len(self._hex) >= MAX_CACHED:
+                self._hex.clear()
+            text = self._hex[key] = key.hex().upper() + "\n"
+        line = f"({t - self.t0:.6f}{ids}{text}"
         if self._size + len(line) > self.file_limit:
             self._roll()
-        self._fh.write(line)
+        lines = self._lines
+        lines.append(line)
+        if len(lines) >= BATCH_LINES:
+            self._flush()
         self._size += len(line)
         self.frames += 1
+
+    def _flush(self) -> None:
+        if self._lines:
+            self._fh.write("".join(self._lines))
+            self._lines.clear()
 
     def finding(self, finding: Finding) -> str:
         """``finding``'s frames (before and after it) in a file of its own; returns its name (also set on the
@@ -102,6 +133,7 @@ class Trace:
 
     def close(self) -> None:
         if self._fh is not None:
+            self._flush()
             self._fh.close()
             self._fh = None
 

@@ -62,6 +62,8 @@ LAG_BINS = 500
 REPORTS = cat.REPORT_FRAMES
 #: what normal reporting sends besides the reports, and the answers to what the player asks
 ANSWERS = ("get_esc_id", "maintenance_information", "get_major_configuration")
+#: MSG1's comm-loss flag (R8) as a plain int
+_COMM_FAULT = int(cat.Status.COMM_FAULT)
 #: a frame that does not decode: the requirement its reason breaks
 DECODE_RULES = {"not-extended-data-frame": "F1", "not-single-frame": "F2", "reserved-node-id": "F7",
                 "unknown-type-id": "4.3.1-1"}
@@ -340,6 +342,8 @@ class CommFlagWatch(Watch):
         interval = self.cfg.intervals.get("msg1")
         #: R8's window opens here after the last command (its judgement's: r8_window_s)
         self._early = jd.r8_window_s(interval, jitter=self.cfg.jitter)[0] if interval else 0.0
+        self._interval = interval
+        self._error = self.cfg.error + self.cfg.own_error
 
     def command(self, t: float) -> None:
         if self.last_command is not None:
@@ -358,13 +362,13 @@ class CommFlagWatch(Watch):
         self.msg1_since_stream += 1
         if self.msg1_since_stream < 2:  # the MSG1 due as the stream began may still show the flag of before it
             return
-        interval = self.cfg.intervals.get("msg1")
+        interval = self._interval
         if interval is None:
             return
-        flag = bool(frame.fields.get("status", 0) & cat.Status.COMM_FAULT)
+        flag = bool(frame.fields.get("status", 0) & _COMM_FAULT)  # (a plain int: IntFlag's & is slow, once per MSG1)
         self.flag_set += flag
         since = t - self.last_command
-        error = self.cfg.error + self.cfg.own_error
+        error = self._error
         if not flag and since < self._early - error:  # well before R8's window, clear: as r8_flag_due wants (hot path)
             self.trials += 1
             self.flagged = False

@@ -92,7 +92,7 @@ def test_ctrl_c_stops_the_soak_with_exit_130_and_an_interrupted_report(tmp_path)
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(2400)  # 8 h simulated: about 150 s of CPU, more wall time on a loaded machine
+@pytest.mark.timeout(2400)  # 8 h simulated: about 120 s of CPU, more wall time on a loaded machine
 def test_an_8_hour_simulated_soak_of_the_faultless_emulator(tmp_path):
     """Issue #31's "how we will know": 8 h in simulated time, exit 0, memory flat (the wall time and the memory at the
     start and the end are in its results.json, and printed here with -s)."""

@@ -1,0 +1,89 @@
+"""What made a simulated soak fast (issue #31: 8 h in under two minutes) changes nothing it judges: the trace's
+remembered and batched lines are candump's own, the simulated lane's ``recv_until`` reads the frames and leaves the
+clock where ``recv`` did, and the emulator's remembered throttle decodings and report payloads act and encode as
+fresh ones. Each test would fail with its shortcut wrong; together they take well under a second."""
+
+from __future__ import annotations
+
+import can
+import pytest
+
+from ckesc.bench.lanes import SimLane
+from ckesc.emulator.emulated_bench import EmulatedBench
+from ckesc.protocol.errors import EncodeError
+from ckesc.protocol.frame import WireFrame, encode
+from ckesc.soak.trace import BATCH_LINES, MIN_BUDGET, ROLL_FILES, Trace, candump_line
+
+
+def test_the_trace_writes_candumps_lines_in_order_across_its_rolls_and_at_its_close(tmp_path):
+    t0 = 1000.0
+    frames = [(t0 + i * 0.001 + 1e-7, 0x0C4E5201 + (i % 3), bytes(((i * 7) % 256, i % 2, 0xC0 | i % 32)))
+              for i in range(7 * BATCH_LINES + 5)]  # not a whole number of batches: the last ones wait for close
+    frames.append((t0 + 9.0, 0x1F, bytearray(b"\x01\x02")))  # a python-can frame's data is a bytearray
+    line = len(candump_line(0.0, frames[0][1], frames[0][2]))
+    trace = Trace(tmp_path, MIN_BUDGET, t0)
+    trace.file_limit = 300 * line  # a few batches a file: it rolls mid-batch
+    for t, can_id, data in frames:
+        trace.frame(t, can_id, data)
+    trace.close()
+    kept = "".join((tmp_path / name).read_text() for name in (p.name for p in trace.files))
+    assert trace.rolled_away > 0 and len(trace.files) == ROLL_FILES
+    expected = "".join(candump_line(t - t0, can_id, bytes(data)) for t, can_id, data in frames)
+    assert expected.endswith(kept) and kept.count("\n") >= 3 * 300 - 1  # the newest files, whole and in order
+    assert sum((tmp_path / p.name).stat().st_size for p in trace.files) == len(kept)
+
+
+def test_the_simulated_lanes_recv_until_reads_what_recv_did(tmp_path):
+    """Two lanes of the same seed side by side, one read with ``recv(deadline - now())``, one with
+    ``recv_until(deadline)``: the same frames at the same times, the clock at the same place after each read."""
+    lanes = [SimLane(seed=3), SimLane(seed=3)]
+    try:
+        seen: list[list[tuple]] = [[], []]
+        for step in range(1, 200):
+            deadline = step * 0.0123
+            for i, lane in enumerate(lanes):
+                if step % 10 == 0:  # a command now and then: the ESC acts on it, its answers and echo read too
+                    wire = throttle(100 * (step % 3), step % 32, node=100)
+                    lane.bus.send(can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True))
+                while (msg := read(i, lane, deadline)) is not None:
+                    seen[i].append((msg.timestamp, msg.arbitration_id, bytes(msg.data), lane.now()))
+                seen[i].append((None, None, None, lane.now()))
+        assert seen[0] == seen[1] and sum(1 for s in seen[0] if s[0] is not None) > 100
+    finally:
+        for lane in lanes:
+            lane.close()
+
+
+def read(i: int, lane: SimLane, deadline: float) -> can.Message | None:
+    return lane.recv(deadline - lane.now()) if i == 0 else lane.recv_until(deadline)
+
+
+def throttle(value: int, tid: int, node: int = 0) -> WireFrame:
+    return encode("raw_command_14b", {"channels": [value, 0, 0, 0]}, source=node, transfer_id=tid)
+
+
+def test_a_throttle_frame_decoded_once_still_reaches_the_esc_each_time_with_its_own_value():
+    bench = EmulatedBench([1])
+    bench.power_on(0.0)
+    esc = bench.escs[0]
+    t = esc.state.ready_at + 0.01
+    for i, value in enumerate([300, 300, 700, 300, 0] * 40):  # transfer ids cycle: the same bytes come again
+        wire = throttle(value, i % 32)
+        bench.deliver(wire._replace(timestamp=t), t, esc.state.bitrate)
+        assert esc.state.can_throttle == value and esc.state.last_command == t
+        t += 0.02
+    assert 0 < len(bench._throttle_decoded) <= 3 * 32
+
+
+def test_a_report_payload_remembered_for_1_is_not_taken_for_true():
+    """The ESC's reports remember their payloads by field values; 1 and True are equal as keys, and only 1 encodes."""
+    bench = EmulatedBench([1])
+    bench.power_on(0.0)
+    esc = bench.escs[0]
+    esc._emit(1.0, "msg1", {"speed": 0, "pwm": 1, "status": 0})
+    with pytest.raises(EncodeError):
+        esc._emit(1.1, "msg1", {"speed": 0, "pwm": True, "status": 0})
+    esc._emit(1.2, "msg1", {"speed": 0, "pwm": 2, "status": 0})
+    sent = [w for _, _, w in sorted(esc.state.outbox)]
+    assert [w.data[:-1] for w in sent] == [encode("msg1", {"speed": 0, "pwm": p, "status": 0}, source=1).data[:-1]
+                                          for p in (1, 2)]
