@@ -12,7 +12,8 @@ TESTS = Path(__file__).resolve().parent
 REAL_TIME = re.compile(r"\bEmulator\(|\bCleanRoom\(|RealtimeEmulatorLane\(|[\"']realtime[\"']|--lane[\"'], [\"']realtime|vm_ready")
 
 #: modules that name the real-time lane without running it
-NAMED_ONLY = {"soak/test_soak_rig.py": "`--lane realtime` only as an option a rig batch refuses"}
+NAMED_ONLY = {"soak/test_soak_rig.py": "`--lane realtime` only as an option a rig batch refuses",
+              "harness/test_rig.py": "a rig file's bench with `lane = \"realtime\"`, read, never run"}
 
 
 def test_modules_that_start_a_real_time_dut_are_marked():

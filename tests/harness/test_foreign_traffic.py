@@ -21,8 +21,6 @@ from ckesc.protocol.frame import classify
 from ckesc.protocol.ids import Kind
 from ckesc.protocol.transfer import parse_tail
 
-pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
-
 #: a representative part of the suite (GET_ESC_ID's answers and their timing, MSG Control, comm loss, the framing
 #: checks over the whole run's frames): its verdicts with the traffic playing must equal a quiet bus's
 SELECTION = ("conformance/test_s4_4_3_get_esc_id.py::test_reply_comes_in_the_node_slot",
@@ -155,6 +153,7 @@ def test_a_fault_that_takes_a_foreign_frame_fails_the_foreign_traffic_test(tmp_p
 
 @pytest.mark.slow  # `ckesc emulate` in its own process, ~20 s
 @pytest.mark.timeout(600)
+@pytest.mark.realtime
 def test_real_time_lane_plays_it_from_its_own_thread(tmp_path):
     """In real time a player sends the traffic on a bus of its own (socketcand to the emulator): the verdicts hold and
     the reports say the load and lateness it reached."""

@@ -21,8 +21,6 @@ from procs import CKESC, Emulator, env
 from ckesc.bench.profile import SHIPPED, DutProfile
 from ckesc.bench.statement import Observed, Seen, contradictions
 
-pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
-
 
 def ckesc(tmp: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run([*CKESC, *args], cwd=tmp, env=env(tmp), capture_output=True, text=True, timeout=timeout)
@@ -93,6 +91,7 @@ def test_init_leaves_out_a_function_the_emulator_lacks(tmp_path, faults, modes, 
         assert f"# {name}: not learnt (kept claimed): cannot tell" in done.stdout
 
 
+@pytest.mark.realtime
 def test_init_through_ckesc_emulate_in_real_time(tmp_path):
     """On a real bus (socketcand) the same: reads only, and multi_node from who answers GET_ESC_ID."""
     with Emulator(tmp_path, "--faults", "get_rec_absent") as emu:

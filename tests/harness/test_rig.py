@@ -12,8 +12,6 @@ from procs import env as _env
 
 from ckesc.rigs import rig as rigs
 
-pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
-
 EXAMPLE = Path(__file__).resolve().parents[2] / "fixtures" / "rigs" / "example.toml"
 
 

@@ -22,8 +22,6 @@ from procs import env as _env
 from ckesc.bench.station import BENCH_ROWS, BenchOptions, Station, build
 from ckesc.session import options
 
-pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
-
 ROOT = Path(__file__).resolve().parents[2]
 #: the layers that hold a real pytest object: the plugin and the conformance modules (pytest hands them theirs)
 PYTEST_LAYERS = ("ckesc/session/", "conformance/")
