@@ -12,9 +12,11 @@ it, and explores each of its defects.
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -178,8 +180,17 @@ def test_explore_s_shrunk_programs_show_the_defects_and_nothing_on_the_correct_e
                     findings = session.run(program).findings
                     if defects:
                         assert key in {f.key for f in findings}, f"{name}: " + "\n".join(f.text() for f in findings)
-                    else:
-                        assert not findings, f"{name} on the correct ESC: " + "\n".join(f.text() for f in findings)
+                        continue
+                    if findings and all(f.kind == "interval" or (f.kind == "bus_rule" and f.requirements[:1] == ["R9"])
+                                        for f in findings):
+                        # report timing alone: the ESC is a Python process on the host's loaded cores, and a stall
+                        # moves a mean of a few gaps (R9 never widens the mean). A false finding of the judge
+                        # comes back on the same program; the machine's stall does not
+                        warnings.warn(f"{name} on the correct ESC at load average {os.getloadavg()[0]:.1f}: "
+                                      + "; ".join(f.text().splitlines()[0] for f in findings) + ": run again",
+                                      stacklevel=1)
+                        findings = session.run(program).findings
+                    assert not findings, f"{name} on the correct ESC: " + "\n".join(f.text() for f in findings)
             finally:
                 session.close()
             assert session.left is None
