@@ -9,6 +9,7 @@ from typing import Any
 import can
 
 from ..emulator import variants
+from ..emulator.socketcand import HANDLES
 from ..protocol.assignments import parse_int
 from .common import EXIT_FRAMES_FAILED, EXIT_OK, UsageError, int_arg
 
@@ -114,7 +115,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
     try:
         emulator = RealtimeEmulator(bench, bus=bus, own_bus=True, socketcand_port=args.socketcand, control_port=args.control,
                                     bitrate=args.bitrate, stamp=args.stamp, frame_stamp=args.frame_stamp,
-                                    echo_own=not args.no_echo_own,
+                                    echo_own=not args.no_echo_own, handles=args.handles,
                                     rt_priority=args.rt_priority)
     except OSError as exc:
         if bus is not None:
@@ -223,5 +224,11 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
                    help="run the scheduler thread SCHED_FIFO at priority N (1..99; needs CAP_SYS_NICE, else a warning): "
                    "on a loaded machine this keeps other processes from delaying frames by milliseconds")
     p.add_argument("--no-echo-own", action="store_true", help="socketcand: do not echo a client's frames back to it")
+    p.add_argument("--handles", choices=HANDLES, default="shared",
+                   help="socketcand: which clients hear each other; the name a client opens is its adapter: shared "
+                   "(default: every client hears every other, as SocketCAN's loopback), separate (the clients that opened "
+                   "one name are handles of one adapter and do not hear each other's frames, as most USB adapters; a "
+                   "client that opened another name, the DUT's own, hears them all) or one (a name is open on one client "
+                   "at a time, a second is refused, as an adapter that allows one handle)")
     p.add_argument("--unpowered", action="store_true", help="start with the power off (switch it on with ckesc control)")
     p.set_defaults(handler=_run_emulate)

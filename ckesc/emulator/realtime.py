@@ -99,6 +99,7 @@ class RealtimeEmulator(ControlCommands):
         stamp: str = "due",
         frame_stamp: str = "end",
         echo_own: bool = True,
+        handles: str = "shared",
         rt_priority: int | None = None,
         log: Callable[[str], None] | None = None,
     ) -> None:
@@ -159,7 +160,7 @@ class RealtimeEmulator(ControlCommands):
         try:
             if socketcand_port is not None:
                 self._socketcand = SocketcandServer(socketcand_port, on_frame=self._host_input, counters=self.counters,
-                                                    log=self._log)
+                                                    log=self._log, handles=handles, echo_own=echo_own)
             if control_port is not None:
                 self._control = ControlServer(control_port, submit=self._submit, log=self._log)
         except OSError:
@@ -436,7 +437,7 @@ class RealtimeEmulator(ControlCommands):
         if sc is not None and sc.conns:
             data = b"".join(fmt_frame(w, (w.timestamp if due_stamps else t_send) + frame_bits(len(w.data)) * bit_s + self.offset)
                             for w in frames)
-            sc.to_clients(data, None, t_send)
+            sc.to_clients(data, t_send)
         for w in frames:
             if self.bus is not None:
                 t_send = time.monotonic()
@@ -481,10 +482,10 @@ class RealtimeEmulator(ControlCommands):
             self._bus_send(item.wire, t + self.offset)
         sc = self._socketcand
         if sc is not None and sc.conns and not getattr(item.msg, "is_remote_frame", False):
-            skip = None if self.echo_own or not isinstance(item.origin, Conn) else item.origin
+            origin = item.origin if isinstance(item.origin, Conn) else None
             # heard at t, its end; stamped at its start one frame earlier where the bench stamps frame starts
             start = frame_bits(len(item.wire.data)) / self.bitrate if self.frame_stamp == "start" else 0.0
-            sc.to_clients(fmt_frame(item.wire, t - start + self.offset), skip, time.monotonic())
+            sc.to_clients(fmt_frame(item.wire, t - start + self.offset), time.monotonic(), origin)
 
     def _read_bus(self) -> None:
         """Helper thread for buses without a file descriptor: only reads and queues."""

@@ -12,6 +12,15 @@ can measure answer delays from bus timestamps at both ends (set ``echo_own=False
 SocketCAN's default, where the sender does not see its own frames). ``< echo >`` is answered;
 other commands are ignored. Classic CAN only.
 
+Which clients hear each other (``handles``, :data:`HANDLES`): the name a client opens is its adapter. With
+``shared`` (the default) every client hears every other client's frames, as SocketCAN's loopback, socketcand and
+python-can's ``virtual`` bus let them. With ``separate`` the clients that opened the same name are handles of one
+adapter and do not hear each other's frames (most USB adapters: a frame one handle sends reaches the bus, and the
+other handles of the adapter never receive it); a client that opened another name (the DUT's own connection, say
+``esc``) is another node on the bus and hears them all. With ``one`` a name is opened by one client at a time, as
+adapters that allow one handle: a second ``< open NAME >`` is refused with ``< error >`` (python-can's client raises
+``CanError``) and its connection closed.
+
 :class:`SocketcandServer` speaks the protocol; the scheduler owns it: it hands each frame a client
 sends to the ESCs (``on_frame``) and decides which frames go out to the clients, and with which stamp
 (:meth:`SocketcandServer.to_clients` with :func:`fmt_frame`).
@@ -28,6 +37,8 @@ from ..protocol.frame import WireFrame
 from .tcp import Conn, TcpServer
 
 RAWMODE_QUIET_S = 0.050  # no frames to a client for this long after its rawmode "< ok >"
+#: which clients hear each other (the module docstring): every one; not the handles of one adapter; one handle each
+HANDLES = ("shared", "separate", "one")
 
 
 def fmt_frame(wire: Any, stamp: float) -> bytes:
@@ -63,10 +74,16 @@ class SocketcandServer(TcpServer):
         on_frame: Callable[[float, can.Message, WireFrame, Conn], None],
         counters: dict[str, int],
         log: Callable[[str], None],
+        handles: str = "shared",
+        echo_own: bool = True,
     ) -> None:
+        if handles not in HANDLES:
+            raise ValueError(f"handles must be one of {', '.join(HANDLES)}, not {handles!r}")
         super().__init__(port, log)
         self._on_frame = on_frame
         self._counters = counters
+        self.handles = handles
+        self.echo_own = echo_own
 
     def accepted(self, conn: Conn) -> None:
         self._counters["clients"] += 1
@@ -98,7 +115,14 @@ class SocketcandServer(TcpServer):
                 msg = can.Message(arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id, data=wire.data)
                 self._on_frame(now, msg, wire, conn)
             elif cmd == "open" and conn.state == "hi" and len(words) == 2:
+                if self.handles == "one" and any(c.channel == words[1] for c in self.conns if c is not conn):
+                    self._counters["refused"] = self._counters.get("refused", 0) + 1
+                    self._log(f"{conn.peer}: {words[1]} is open on another handle (--handles one); refused")
+                    self.write(conn, b"< error >")
+                    self.drop(conn)
+                    return
                 conn.state = "open"
+                conn.channel = words[1]
                 self.write(conn, b"< ok >")
             elif cmd == "rawmode" and conn.state in ("open", "raw"):
                 conn.state = "raw"
@@ -109,11 +133,19 @@ class SocketcandServer(TcpServer):
             # anything else (bcmmode commands, filters, ...) is ignored: python-can never sends it,
             # and an "< error >" line would be read by its client as a CAN error frame
 
-    def to_clients(self, data: bytes, skip: Conn | None, now: float) -> None:
-        """``data`` (formatted frames) to every client in raw mode but ``skip``, unless it is still quiet."""
+    def to_clients(self, data: bytes, now: float, origin: Conn | None = None) -> None:
+        """``data`` (formatted frames) to every client in raw mode that hears it, unless it is still quiet: a frame of
+        the bus's own (``origin`` None) to all; a client's to the others (but the handles of its own adapter where
+        they are not ``shared``) and back to itself where :attr:`echo_own`."""
         for c in list(self.conns):
-            if c is skip or c.state != "raw":
+            if c.state != "raw":
                 continue
+            if origin is not None:
+                if c is origin:
+                    if not self.echo_own:
+                        continue
+                elif self.handles != "shared" and c.channel == origin.channel:
+                    continue
             if now < c.quiet_until:
                 c.dropped += 1
                 continue

@@ -31,7 +31,7 @@ def listen(port: int) -> socket.socket:
 class Conn:
     """A TCP connection served by the loop: input buffer, output backlog."""
 
-    __slots__ = ("sock", "server", "peer", "inbuf", "out", "state", "quiet_until", "rx", "tx", "dropped")
+    __slots__ = ("sock", "server", "peer", "inbuf", "out", "state", "quiet_until", "rx", "tx", "dropped", "channel")
 
     def __init__(self, sock: socket.socket, server: TcpServer) -> None:
         self.sock = sock
@@ -46,6 +46,7 @@ class Conn:
         self.state = "hi"  # socketcand: hi -> open -> raw
         self.quiet_until = 0.0
         self.rx = self.tx = self.dropped = 0
+        self.channel = ""  # socketcand: the name the client opened (its adapter, where handles are told apart)
 
     def fileno(self) -> int:
         return self.sock.fileno()
