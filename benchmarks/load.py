@@ -79,7 +79,7 @@ def run(hub: Hub, bitrate: int, share: float, seconds: float, seed: int) -> dict
         t.start()
     time.sleep(0.2)  # the hub forwards to a client 50 ms after its rawmode
     try:
-        player = TrafficPlayer(player_bus, [source], bitrate=bitrate).start()
+        player = TrafficPlayer(player_bus.send, [source], bitrate=bitrate).start()
         time.sleep(seconds)
         stats = player.stop()
         time.sleep(0.3)  # what is still on its way to the listener

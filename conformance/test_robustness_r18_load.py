@@ -14,9 +14,10 @@ ESC's answers) or below everything the ESC sends ("low"), in random bursts. Unde
 Above half load (70 %) what it does is recorded only (OBSERVE).
 
 The simulated lane puts the load on its bus, where it contends by arbitration and takes its frame time. In real
-time a :class:`~ckesc.bench.traffic_player.TrafficPlayer` plays it on a bus of its own on the bench's channel, and
-the test judges with the load the player reached (its lateness counted as a burst): a player that fell short of the
-share asked is the bench's limit, INCONCLUSIVE, never the DUT's FAIL.
+time a :class:`~ckesc.bench.traffic_player.TrafficPlayer` plays it on the host's own handle of the adapter
+(:meth:`~ckesc.bench.lanes.BusLane.play`: the lane reads every load frame back, by its echo or the lane's copy, as it
+reads the ESC's), and the test judges with the load the player reached (its lateness counted as a burst): a player
+that fell short of the share asked is the bench's limit, INCONCLUSIVE, never the DUT's FAIL.
 """
 
 from __future__ import annotations
@@ -25,7 +26,6 @@ import contextlib
 import zlib
 from dataclasses import dataclass
 
-import can
 import pytest
 
 from ckesc.bench.outcomes import Inconclusive
@@ -35,7 +35,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.judgements import R9_GAPS, r18_gap, r18_judged, r18_mean, r18_queueing_s, r18_reached, r18_tells
 from ckesc.protocol.load import LoadSource
 
-from .answers import answer_window_s, check_answer_slot, settle, slot_node
+from .answers import answer_window_s, check_answer_slot, query_esc_id, settle, slot_node
 from .settings import changes, move_request
 from .telemetry import frame_start, interval_s, ms
 
@@ -105,23 +105,16 @@ def loaded(dut, share: float, priority: str, what: str):
             busy = world.source_stats[source.name]["busy_s"] - busy
             load.reached = busy / elapsed if elapsed > 0 else 0.0
     else:
-        kwargs = getattr(dut.lane, "bus_kwargs", None)
-        assert kwargs is not None, f"harness: the {dut.lane.name} lane has no bus a load player can join"
+        play = getattr(dut.lane, "play", None)
+        assert play is not None, f"harness: the {dut.lane.name} lane has no handle a load player can send on"
+        player = TrafficPlayer(play, [source], bitrate=bitrate).start()  # on the host's one handle: read back
         try:
-            bus = can.Bus(**{**kwargs, "receive_own_messages": False})
-        except (OSError, can.CanError) as exc:
-            raise AssertionError(f"harness: the load player could not open its bus ({exc})") from exc
-        try:
-            player = TrafficPlayer(bus, [source], bitrate=bitrate).start()
-            try:
-                yield load
-            finally:
-                stats = player.stop()
-                load.reached, load.late = stats.load, stats.late_max_s
-                load.played = (f"{stats.frames} frames in {stats.elapsed_s:.3f} s, {stats.send_errors} send errors, "
-                               f"late by up to {ms(stats.late_max_s):g} ms")
+            yield load
         finally:
-            bus.shutdown()
+            stats = player.stop()
+            load.reached, load.late = stats.load, stats.late_max_s
+            load.played = (f"{stats.frames} frames in {stats.elapsed_s:.3f} s, {stats.send_errors} send errors, "
+                           f"late by up to {ms(stats.late_max_s):g} ms")
     dut.record.observe(f"load ({share:.0%}, {priority})", load.describe())
 
 
@@ -204,10 +197,8 @@ def test_get_esc_id_answered_in_its_slot_under_load(dut, priority):
             replies = []
             settle(dut)
             with loaded(dut, share, priority, "get_esc_id") as load:
-                for _ in range(QUERIES):
-                    sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
-                    dut.wait(answer_window_s(dut))
-                    replies.append(sent)
+                for _ in range(QUERIES):  # (asked again where another node's query made its replies ambiguous)
+                    replies.append(query_esc_id(dut, answer_window_s(dut)))
             dut.wait(CATCH_UP_S)
             _bench_reached(load)
             for n, sent in enumerate(replies):

@@ -240,14 +240,23 @@ class _SendTap:
         self._stream = stream  # a periodic task's sends: noted, but they hold no reading of the lane clock
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        t = time.time()  # the kernel stamps the frame (and its echo) after this
-        try:
-            self._bus.send(msg, timeout)
-        except BUS_ERRORS as exc:
-            if not self._stream:  # a stream's task hands it to the lane itself (on_error)
-                self._lane._io_failed(exc)
-            raise
-        self._lane._sent(t, msg, stream=self._stream)
+        self._send(msg, timeout, self._stream)
+
+    def send_played(self, msg: can.Message, timeout: float | None = None) -> None:
+        """A frame the bench plays from a thread of its own (another node's traffic, a load): sent as a stream's
+        are (a failure raised to the player, which counts it; no hold on the lane clock), and seen by the lane."""
+        self._send(msg, timeout, True)
+
+    def _send(self, msg: can.Message, timeout: float | None, stream: bool) -> None:
+        with self._lane._send_lock:  # one frame at a time on the one handle, whichever thread sends it
+            t = time.time()  # the kernel stamps the frame (and its echo) after this
+            try:
+                self._bus.send(msg, timeout)
+            except BUS_ERRORS as exc:
+                if not stream:  # a stream's task hands it to the lane itself (on_error); a player counts it
+                    self._lane._io_failed(exc)
+                raise
+            self._lane._sent(t, msg, stream=stream)
 
     def send_periodic(self, msgs, period: float, duration: float | None = None, store_task: bool = True,
                       autostart: bool = True, modifier_callback=None):
@@ -282,6 +291,7 @@ class BusLane(Lane):
         self._last_ts = -math.inf  # the latest timestamp handed out (an OwnFrame is never stamped before it)
         self._tasks: list[Any] = []  # the throttle streams' thread-based tasks (stopped on close)
         self._stream_lock = threading.Lock()  # one send at a time from the streams' threads
+        self._send_lock = threading.Lock()  # one send at a time on the handle: the test's, a stream's, a player's
         self._fault: BaseException | None = None  # a throttle stream's send failed (in its thread)
         self._hold: float | None = None  # see now(): after a read -inf, after a send its time, else None
         self.rcvbuf: int | None = None  # a SocketCAN socket's receive buffer, as the kernel granted it
@@ -333,6 +343,14 @@ class BusLane(Lane):
         self.echo_note = (f"the probe frame did not come back within {ECHO_PROBE_S * 1000:g} ms ({heard} other frame(s) heard)"
                           if heard else f"the bus stayed silent through {ECHO_PROBE_TRIES} probes: taken as no echo")
         return False
+
+    def play(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send ``msg`` from another thread of the bench (:class:`.traffic_player.TrafficPlayer`: other nodes'
+        traffic, a load) on the host's own handle, so that the lane reads it as every reader of the bus must: by its
+        echo, or without one as an :class:`OwnFrame` stamped at the send. An adapter whose handles do not hear each
+        other (most USB adapters), or that allows one handle, is never opened twice. A failed send raises to the
+        caller (python-can's ``CanError`` or ``OSError``) and is not a fault of the lane."""
+        self.bus.send_played(msg, timeout)
 
     def _sent(self, t: float, msg: can.Message, *, stream: bool = False) -> None:
         if not stream:

@@ -333,8 +333,10 @@ class Station:
 class ForeignPlay:
     """Foreign traffic (:mod:`.foreign`) played on a lane for as long as the lane is open: in the simulated lane a
     source of its bus (:meth:`~ckesc.emulator.sim_bus.SimWorld.add_source`, its frames contending by arbitration),
-    on a real bus or the real-time emulator a :class:`.traffic_player.TrafficPlayer` on a bus of its own on the same
-    channel. :meth:`report` is what the run's reports say: what was played and the load and lateness reached."""
+    on a real bus or the real-time emulator a :class:`.traffic_player.TrafficPlayer` sending on the host's own
+    handle (:meth:`.lanes.BusLane.play`): every reader of the lane hears what was played, by its echo or the lane's
+    copy, on an adapter whose handles do not hear each other too. :meth:`report` is what the run's reports say:
+    what was played and the load and lateness reached."""
 
     def __init__(self, name: str, lane: Lane) -> None:
         from . import foreign  # imports dronecan (about a second): only when foreign traffic is asked for
@@ -354,20 +356,14 @@ class ForeignPlay:
             lane.sim.world.add_source(self.source)
         else:
             assert isinstance(lane, BusLane)
-            import can
-
-            bus = can.Bus(**lane.bus_kwargs)  # its own: the host's bus is read and written by the test's thread only
-            self.player = TrafficPlayer(bus, [self.source], bitrate=lane.bitrate).start()
+            self.player = TrafficPlayer(lane.play, [self.source], bitrate=lane.bitrate).start()
 
     def stop(self) -> None:
         if self._elapsed is not None:
             return
         self._elapsed = self.lane.now() - self._t0
         if self.player is not None:
-            try:
-                self.stats = self.player.stop()
-            finally:
-                self.player.bus.shutdown()
+            self.stats = self.player.stop()
         elif isinstance(self.lane, SimLane):
             self.lane.sim.world.remove_source(self.source)
 

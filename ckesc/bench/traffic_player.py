@@ -7,8 +7,10 @@ reached is measured, not assumed (:class:`PlayerStats`): frames sent, the bus lo
 bus's bit rate, and how late the frames went out (this machine wakes up ~0.3 ms late at p99 and stalls
 for several ms now and then; a late frame goes out late, it is never dropped or bunched silently).
 
-The bus given must be safe to send on from another thread while the caller uses it (SocketCAN and
-python-can's socketcand are); otherwise give the player its own bus on the same channel.
+It sends through the function it is given (``send(msg, timeout)``): on a bench, the lane's
+:meth:`~ckesc.bench.lanes.BusLane.play`, the host's one handle on the adapter, so that the frames it plays are
+read back like every other frame (their echo, or the lane's copy where the adapter does not echo) and no second
+handle is opened on an adapter whose handles do not hear each other, or that allows one.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import can
 
@@ -46,12 +48,18 @@ class PlayerStats:
         return self.late_sum_s / self.frames if self.frames else 0.0
 
 
-class TrafficPlayer:
-    """Plays ``sources`` on ``bus`` at ``bitrate`` (for the load figure; sources with their own bit
-    rate are still sent on this bus). Use as a context manager or :meth:`start` / :meth:`stop`."""
+#: what a failed send raises: python-can's errors, and the OSError of a socket or a device that went away
+SEND_ERRORS = (can.CanError, OSError)
 
-    def __init__(self, bus: can.BusABC, sources: Sequence[TrafficSource], *, bitrate: int) -> None:
-        self.bus = bus
+
+class TrafficPlayer:
+    """Plays ``sources`` through ``send`` (``send(msg, timeout)``: a lane's ``play``, or a bus's ``send``) at
+    ``bitrate`` (for the load figure; sources with their own bit rate are still sent the same way). Use as a
+    context manager or :meth:`start` / :meth:`stop`."""
+
+    def __init__(self, send: Callable[[can.Message, float], None], sources: Sequence[TrafficSource], *,
+                 bitrate: int) -> None:
+        self.send = send
         self.sources = list(sources)
         self.stats = PlayerStats(bitrate=bitrate)
         self._stop = threading.Event()
@@ -94,8 +102,8 @@ class TrafficPlayer:
                     msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data,
                                       is_extended_id=wire.is_extended_id)
                     try:
-                        self.bus.send(msg, timeout=0.1)
-                    except can.CanError:
+                        self.send(msg, 0.1)
+                    except SEND_ERRORS:
                         stats.send_errors += 1
                         continue
                     late = (time.monotonic() - self._t0) - wire.timestamp

@@ -9,8 +9,9 @@ it was due. Nothing here reads a clock or sends anything; the lanes play a sourc
 - the simulated lane: ``SimWorld.add_source(source)`` (:mod:`ckesc.emulator.sim_bus`) queues each frame
   at its due time, where it contends by arbitration and takes its frame time like any other, so the
   queueing a load causes is real there;
-- real time: :class:`ckesc.bench.traffic_player.TrafficPlayer` sends them on a python-can bus at their
-  due times (on the wall clock, from its own thread) and reports how late it was and the load it reached.
+- real time: :class:`ckesc.bench.traffic_player.TrafficPlayer` sends them on the host's own handle of the
+  adapter (the lane's ``play``, read back like every frame) at their due times (on the wall clock, from its own
+  thread) and reports how late it was and the load it reached.
 
 A source's times are on its player's clock, which starts at 0 when the source is added or the player
 starts. ``bitrate``: the bit rate the source's node talks at; None follows the bus (the simulated lane:

@@ -11,7 +11,7 @@ from ckesc.protocol.traffic import PeriodicFrames
 def test_the_player_sends_every_due_frame_once_in_order_and_measures_its_load():
     with can.Bus(interface="virtual", channel="player-test") as tx, can.Bus(interface="virtual", channel="player-test") as rx:
         src = PeriodicFrames("seq", [WireFrame(0x1000 + i, bytes([i])) for i in range(10)], period=0.005, until=0.05)
-        with TrafficPlayer(tx, [src], bitrate=500000) as player:
+        with TrafficPlayer(tx.send, [src], bitrate=500000) as player:
             got = [rx.recv(2.0) for _ in range(10)]
         stats = player.stats
     assert [m.arbitration_id - 0x1000 for m in got] == list(range(10))
@@ -24,7 +24,7 @@ def test_the_player_sends_every_due_frame_once_in_order_and_measures_its_load():
 def test_stop_returns_at_once_when_the_next_frame_is_far_off():
     with can.Bus(interface="virtual", channel="player-test-2") as tx:
         src = PeriodicFrames("slow", [WireFrame(1, b"")], period=3600.0)
-        player = TrafficPlayer(tx, [src], bitrate=500000).start()
+        player = TrafficPlayer(tx.send, [src], bitrate=500000).start()
         stats = player.stop()
     assert stats.frames == 1
     assert not player._thread.is_alive()
