@@ -15,6 +15,7 @@ tests here).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from contextlib import contextmanager
 
 from ckesc.bench.outcomes import Inconclusive
@@ -25,7 +26,7 @@ from ckesc.protocol.ids import Kind
 from ckesc.protocol.judgements import (
     R9_GAPS,
     R9A_UNJUDGED,
-    SCHEDULING_TOLERANCE_S,
+    r9_gaps_needed,
     r9_judged,
     r9_mean,
     r9a_first,
@@ -244,13 +245,13 @@ def restart_limit_s(dut, settings: dict, which: str, old: dict | None = None) ->
                        jitter=dut.profile.jitter_s) + bus_access_s(dut)
 
 
-def mean_gaps(dut, gaps: int | None) -> int:
-    """How many gaps a report's mean interval is judged on: ``gaps``, or (None: R9 is not the test's purpose) two,
-    or more when the DUT declares a jitter: its reports stray up to half of it each way, which moves the mean of
-    n gaps by up to jitter / n: enough gaps that this stays within half the scheduling tolerance."""
-    if gaps is not None:
-        return gaps
-    return max(2, math.ceil(round(2 * dut.profile.jitter_s / SCHEDULING_TOLERANCE_S, 9)))
+def mean_gaps(dut, gaps: int | None, intervals: Iterable[float]) -> int:
+    """How many gaps a report's mean interval is judged on (:func:`~ckesc.protocol.judgements.r9_gaps_needed`, with
+    the bench's error and the DUT's declared jitter, which count at the mean's two ends): where R9 is the test's
+    purpose (``gaps`` given), at least ``gaps`` and as many as keep the mean's bound near 1 ms; otherwise (None) the
+    fewest over which the shortest of ``intervals`` is judged at all (two on an exact bench)."""
+    n = r9_gaps_needed(min(intervals), error=dut.lane.timing_error, jitter=dut.profile.jitter_s, purpose=gaps is not None)
+    return max(n, gaps or 0)
 
 
 def at_report_phase(dut, which: str, settings: dict, fraction: float = 0.5, last: float | None = None) -> None:
@@ -292,13 +293,14 @@ def check_restart(dut, event: float, settings: dict, what: str, names=REPORTS, g
     on top); the gaps up to its second frame are recorded, never judged (R9a-gaps: whether the ESC restarts its
     timer, keeps its grid or lets the report due on the old interval go first is not written); from the third
     frame on, the mean of ``gaps`` gaps (:func:`mean_gaps`) is the interval (R9: 1 ms plus twice the bench's error
-    over the number of gaps; the DUT's jitter never widens it, the live bus rules judge single gaps).
+    and the DUT's declared jitter over the number of gaps, not judged where that exceeds a quarter of the interval;
+    the live bus rules judge single gaps).
     Reads until the first frame of each has come (or its limit passed) and then its next ones.
     ``clock`` / ``error_ms``: what timed ``event`` when not the lane's bus clock (a bench without echo times
     the host's command by the host clock at send, ``Sent.clock`` / ``Sent.error``).
     When none of ``names`` comes back at all, whether reporting resumes is another clause's verdict: INCONCLUSIVE
     naming ``silent_is``'s test (a description), or FAIL when ``silent_is`` is None."""
-    n = mean_gaps(dut, gaps)
+    n = mean_gaps(dut, gaps, (interval_s(settings, w) for w in names))
     limit = {w: restart_limit_s(dut, settings, w, old) for w in names}
     first = _first_reports(dut, event, names, {w: event + limit[w] + react_s(dut) for w in names})
     if not first:
@@ -338,10 +340,15 @@ def check_restart(dut, event: float, settings: dict, what: str, names=REPORTS, g
         single = [b - a for a, b in zip(judged, judged[1:])]
         dut.record.observe(f"{w} gaps from the third after {what} (single gaps: the bus rules')",
                            f"{k} gaps, {ms(min(single))} .. {ms(max(single))} ms, mean {ms(mean)} ms")
-        j = r9_mean(judged, target, error=dut.lane.timing_error)
-        dut.record.measure(f"{w} mean interval error over {k} gaps from the third after {what}", ms(j.measured),  # type: ignore[union-attr]
-                           limit=ms(j.limit + j.error), unit="ms", clock=dut.clock, error=ms(j.error),  # type: ignore[union-attr]
-                           requirement="R9")
+        j = r9_mean(judged, target, error=dut.lane.timing_error, jitter=dut.profile.jitter_s)
+        label = f"{w} mean interval error over {k} gaps from the third after {what}"
+        if not j.judged:  # type: ignore[union-attr]
+            dut.record.observe(label, f"{ms(j.measured)} ms: not judged (R9: over {k} gaps the bench's error and the "  # type: ignore[union-attr]
+                               f"DUT's declared jitter leave a bound of {ms(j.limit + j.error)} ms, more than a quarter "  # type: ignore[union-attr]
+                               f"of the {ms(target)} ms interval)")
+            continue
+        dut.record.measure(label, ms(j.measured), limit=ms(j.limit + j.error), unit="ms", clock=dut.clock,  # type: ignore[union-attr]
+                           error=ms(j.error), requirement="R9")  # type: ignore[union-attr]
     assert not broken, "; ".join(broken)
 
 

@@ -32,7 +32,7 @@ from ckesc.bench.outcomes import Inconclusive
 from ckesc.bench.traffic_player import TrafficPlayer
 from ckesc.evidence.live import LaneRules
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.judgements import R9_GAPS, r18_gap, r18_judged, r18_mean, r18_queueing_s, r18_reached, r18_tells
+from ckesc.protocol.judgements import R9_GAPS, r9_gaps_needed, r18_gap, r18_judged, r18_mean, r18_queueing_s, r18_reached, r18_tells
 from ckesc.protocol.load import LoadSource
 
 from .answers import answer_window_s, check_answer_slot, query_esc_id, settle, slot_node
@@ -149,10 +149,12 @@ def test_reports_keep_their_intervals_under_load(dut, share, priority):
     ahead of a lowest-priority frame (R18)."""
     s = _short_intervals(dut)
     longest = max(interval_s(s, r) for r in cat.REPORT_FRAMES)
+    # enough gaps that R9's bound stays near 1 ms with the bench's error and the DUT's declared jitter at its two ends
+    n = r9_gaps_needed(longest, error=dut.lane.timing_error, jitter=dut.profile.jitter_s)
     with loaded(dut, share, priority, "reports") as load:
         dut.wait(WARM_UP * longest)  # the load established (a player's first frames, a bench's new client) first
         t0 = dut.now()
-        dut.wait((R9_GAPS + 1) * longest + dut.lane.timing_error)
+        dut.wait((n + 1) * longest + dut.lane.timing_error)
         t1 = dut.now()
     dut.wait(CATCH_UP_S)
     _bench_reached(load)
@@ -166,16 +168,20 @@ def test_reports_keep_their_intervals_under_load(dut, share, priority):
     for which in cat.REPORT_FRAMES:
         interval = interval_s(s, which)
         starts = [frame_start(dut, f) for f in dut.frames(which, since=t0, until=t1, source=dut.node_id)]
-        mean = r18_mean(starts, interval, share=u, bitrate=rate, error=error, late=load.late, what=which)
+        mean = r18_mean(starts, interval, share=u, bitrate=rate, error=error, jitter=dut.profile.jitter_s,
+                        late=load.late, what=which)
         expected = int((t1 - t0) / interval)
         if mean is None or len(starts) < expected - 1:
             broken.append(f"[R18 READING] {len(starts)} {which} in {ms(t1 - t0):g} ms under {share:.0%} {priority}-"
                           f"priority load, every {ms(interval):g} ms there would be {expected}")
             if mean is None:
                 continue
-        dut.record.measure(f"{which} mean interval error over {len(starts) - 1} gaps under {share:.0%} load",
-                           ms(mean.measured), limit=ms(mean.limit + mean.error), unit="ms", clock=dut.clock,
-                           error=ms(mean.error), requirement="R18", strength="READING")
+        label = f"{which} mean interval error over {len(starts) - 1} gaps under {share:.0%} load"
+        if mean.judged:
+            dut.record.measure(label, ms(mean.measured), limit=ms(mean.limit + mean.error), unit="ms", clock=dut.clock,
+                               error=ms(mean.error), requirement="R18", strength="READING")
+        else:  # too few gaps for the bench's error and the DUT's jitter at the mean's ends (R9: OBSERVE)
+            dut.record.observe(label, f"{ms(mean.measured):g} ms, not judged over so few gaps")
         gaps = [r18_gap(b - a, interval, share=u, bitrate=rate, error=error, jitter=dut.profile.jitter_s,
                         late=load.late, what=which) for a, b in zip(starts, starts[1:])]
         worst = max(gaps, key=lambda j: j.measured - j.limit)

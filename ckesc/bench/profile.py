@@ -8,7 +8,7 @@ your own is a path, or a name found in ``./fixtures/duts/``.
     [timing]       error_s: the bench's measurement error (host + adapter timestamps); margins below it
                    are INCONCLUSIVE
                    jitter_s: the DUT's report-interval jitter allowance (R9): widens what a single report
-                   interval may do (the live bus rules, R9a's first reports), never the mean a test judges
+                   interval may do (the live bus rules, R9a's first reports) and a mean's two ends, over its gaps
                    boot_s: power-on to first report; off_s: off time of a power cycle
                    stamp: "end" | "start": which end of a frame the bench's timestamps mark
     [readings]     R4 = "lsb" | "swapped"   (12-bit nibble order)
@@ -99,8 +99,9 @@ class _Timing(_Section):
         "**the bench's** measurement error (host + adapter timestamps): a timing margin smaller than it is INCONCLUSIVE"))
     jitter_s: float = Field(0.0, ge=0.0, le=1.0, description=(
         "**the DUT's** report-interval jitter allowance: how far one single report interval (R9) may stray beyond the "
-        "suite's own allowance (the live bus rules; a first report after a restart, R9a, too), never the mean interval "
-        "a test judges (R9: an ESC that reports every 25 ms instead of 20 FAILs however much jitter it declares). It "
+        "suite's own allowance (the live bus rules; a first report after a restart, R9a, too); a mean interval a test "
+        "judges only at its two ends, over its number of gaps, and a test whose purpose is R9 reads enough gaps to keep "
+        "that near 1 ms (R9: an ESC that reports every 25 ms instead of 20 FAILs however much jitter it declares). It "
         "widens what the DUT may do; error_s still decides INCONCLUSIVE around it. The reports state both"))
     boot_s: float = Field(1.0, ge=0.0, le=600.0, description="power-on to first report")
     off_s: float = Field(1.0, ge=0.0, le=600.0, description="off time of a power cycle")

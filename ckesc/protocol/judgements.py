@@ -12,8 +12,11 @@ violation, an explorer finding) from it; it never writes a tolerance of its own.
 * the 64 ms bound (:func:`answer_bound`, 4.4.2-4, 4.4.3-4);
 * R8 (:func:`r8_onset`, :func:`r8_flag_due`): the comm-loss flag comes up no earlier than 200 ms after the last
   command and no later than 200 ms + one MSG1 interval;
-* R9 (:func:`r9_mean`, :func:`r9_gap`): a report's interval is the mean of its gaps, held to the scheduling
-  tolerance (1 ms) plus twice the bench's error over the number of gaps; the DUT's jitter widens a single gap only;
+* R9 (:func:`r9_mean`, :func:`r9_gap`, :func:`r9_gaps_needed`): a report's interval is the mean of its gaps, held to
+  the scheduling tolerance (1 ms) plus twice the bench's error and the DUT's declared jitter over the number of gaps
+  (the mean of n gaps is the span from its first report to its last over n: only the two ends' error and jitter
+  remain); a mean whose bound exceeds a quarter of the interval is not judged (OBSERVE); the jitter widens a single
+  gap in full;
 * R9a (:func:`r9a_limit_s`, :func:`r9a_first`, :func:`r9_judged`): the first report after a restart within the
   catalogue's restart limit; the gaps up to and including the second report after it are not judged;
 * F3 (:func:`f3_step`, :func:`f3_holds`): consecutive frames of one counter (a sender's message type) carry transfer ids +1 modulo 32;
@@ -34,6 +37,7 @@ catalogue's (:mod:`.catalogue`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -67,9 +71,13 @@ class Judgement:
     op: str = "<="
     error: float = 0.0
     text: str = ""
+    #: False: the measurement is too coarse for the rule to be judged (R9's mean over too few gaps): OBSERVE, ``ok``
+    judged: bool = True
 
     @property
     def ok(self) -> bool:
+        if not self.judged:
+            return True
         edge = self.limit + self.error + _NOISE_S if self.op == "<=" else self.limit - self.error - _NOISE_S
         return _OPS[self.op](self.measured, edge)
 
@@ -91,10 +99,30 @@ def timing_tolerance(clock: str, timing_error: float) -> float:
     return 0.0 if clock == "simulated" else timing_error + SCHEDULING_TOLERANCE_S
 
 
-def r9_mean_tolerance_s(gaps: int, error: float) -> float:
+def r9_mean_tolerance_s(gaps: int, error: float, jitter: float = 0.0) -> float:
     """R9: how far the mean of ``gaps`` gaps may stray from the interval: the scheduling tolerance plus twice the
-    bench's error over the number of gaps (the stamps' errors cancel but at the two ends)."""
-    return SCHEDULING_TOLERANCE_S + 2 * error / gaps
+    bench's error and the DUT's declared jitter over the number of gaps (the stamps' errors and the reports' jitter
+    cancel but at the two ends; INTERPRETATIONS R9, amended 2026-12-02)."""
+    return SCHEDULING_TOLERANCE_S + 2 * (error + jitter) / gaps
+
+
+def r9_mean_tells(gaps: int, interval: float, *, error: float = 0.0, jitter: float = 0.0) -> bool:
+    """R9: whether a mean of ``gaps`` gaps is judged at all: its bound (:func:`r9_mean_tolerance_s`) is no more than a
+    quarter of the interval. Over fewer gaps it is OBSERVE."""
+    return r9_mean_tolerance_s(gaps, error, jitter) <= interval / 4 + _NOISE_S
+
+
+def r9_gaps_needed(interval: float, *, error: float = 0.0, jitter: float = 0.0, purpose: bool = True) -> int:
+    """How many gaps a test reads to judge a report's mean interval. Where R9 is its ``purpose``: :data:`R9_GAPS`, or
+    more where the bench's ``error`` and the DUT's declared ``jitter`` need them to keep the mean's bound near the
+    scheduling tolerance (their part, twice their sum over the gaps, no more than it), so that an ESC reporting
+    every 25 ms instead of 20 FAILs on any bench whatever jitter its vendor declares. Otherwise the fewest (two at
+    least) over which the mean is judged at all (:func:`r9_mean_tells`)."""
+    ends = 2 * (error + jitter)
+    spare = interval / 4 - SCHEDULING_TOLERANCE_S
+    if purpose or spare <= 0:
+        return max(R9_GAPS, math.ceil(ends / SCHEDULING_TOLERANCE_S - _NOISE_S))
+    return max(2, math.ceil(ends / spare - _NOISE_S))
 
 
 # ------------------------------------------------------------------------------------------ R9, R9a
@@ -104,16 +132,21 @@ def r9_judged(starts: Sequence[float], after_restart: bool = True) -> list[float
     return list(starts[R9A_UNJUDGED - 1:] if after_restart else starts)
 
 
-def r9_mean(starts: Sequence[float], interval: float, *, error: float = 0.0, what: str = "report") -> Judgement | None:
+def r9_mean(starts: Sequence[float], interval: float, *, error: float = 0.0, jitter: float = 0.0,
+            what: str = "report") -> Judgement | None:
     """R9 on the mean of the gaps between ``starts`` (the reports judged, :func:`r9_judged`): ``measured`` is how far
-    the mean strays from ``interval``, ``limit`` the scheduling tolerance, ``error`` twice the bench's error over the
-    gaps. The DUT's declared jitter never widens the mean. None: fewer than two reports."""
+    the mean strays from ``interval``, ``limit`` the scheduling tolerance and twice the DUT's declared ``jitter`` over
+    the gaps (the DUT's allowance), ``error`` twice the bench's error over the gaps (the measurement's): both count
+    at the two ends only. Over so few gaps that this bound
+    exceeds a quarter of the interval the judgement is not made (:func:`r9_mean_tells`): ``judged`` False, ``ok``
+    True, a consumer records it as OBSERVE. None: fewer than two reports."""
     gaps = len(starts) - 1
     if gaps < 1:
         return None
     mean = (starts[-1] - starts[0]) / gaps
-    return Judgement("R9", abs(mean - interval), SCHEDULING_TOLERANCE_S, "<=", 2 * error / gaps,
-                     f"{what} every {mean * 1000:.3f} ms (mean of {gaps} gaps), not {interval * 1000:g} ms")
+    return Judgement("R9", abs(mean - interval), SCHEDULING_TOLERANCE_S + 2 * jitter / gaps, "<=", 2 * error / gaps,
+                     f"{what} every {mean * 1000:.3f} ms (mean of {gaps} gaps), not {interval * 1000:g} ms",
+                     judged=r9_mean_tells(gaps, interval, error=error, jitter=jitter))
 
 
 def r9_gap(lo: float, hi: float, interval: float, *, tolerance: float, jitter: float = 0.0) -> Judgement:
@@ -360,19 +393,21 @@ def r18_tells(interval: float, share: float, bitrate: int, *, late: float = 0.0)
 
 
 def r18_mean(starts: Sequence[float], interval: float, *, share: float, bitrate: int, error: float = 0.0,
-             late: float = 0.0, what: str = "report") -> Judgement | None:
+             jitter: float = 0.0, late: float = 0.0, what: str = "report") -> Judgement | None:
     """R18 (R9 under load) on the mean of the gaps between ``starts``: held to R9's scheduling tolerance plus the
-    load's queueing (:func:`r18_queueing_s`) over the number of gaps (``limit``), twice the bench's ``error`` over
-    the number of gaps given to the DUT (``error``). The DUT's declared jitter never widens the mean (R9). None:
-    fewer than two reports."""
+    load's queueing (:func:`r18_queueing_s`) and twice the DUT's declared ``jitter`` over the number of gaps
+    (``limit``: R9's two ends), twice the bench's ``error`` over the number of gaps given to the DUT (``error``). Not judged
+    (``judged`` False) where R9's own bound exceeds a quarter of the interval (:func:`r9_mean_tells`). None: fewer
+    than two reports."""
     gaps = len(starts) - 1
     if gaps < 1:
         return None
     mean = (starts[-1] - starts[0]) / gaps
     w = r18_queueing_s(share, bitrate, late=late)
-    return Judgement("R18", abs(mean - interval), SCHEDULING_TOLERANCE_S + w / gaps, "<=", 2 * error / gaps,
+    return Judgement("R18", abs(mean - interval), SCHEDULING_TOLERANCE_S + (w + 2 * jitter) / gaps, "<=", 2 * error / gaps,
                      f"{what} every {mean * 1000:.3f} ms (mean of {gaps} gaps) under {share:.0%} load, not "
-                     f"{interval * 1000:g} ms (R9, each gap widened by up to {w * 1000:.3f} ms of queueing)")
+                     f"{interval * 1000:g} ms (R9, each gap widened by up to {w * 1000:.3f} ms of queueing)",
+                     judged=r9_mean_tells(gaps, interval, error=error, jitter=jitter))
 
 
 def r18_gap(gap: float, interval: float, *, share: float, bitrate: int, error: float = 0.0, jitter: float = 0.0,

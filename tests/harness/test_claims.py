@@ -228,9 +228,11 @@ def test_a_selection_of_nothing_is_one_line_exit_2_never_the_whole_suite(tmp_pat
 
 
 # ----------------------------------------------------------------------------------------- jitter and error
-def test_the_dut_jitter_allowance_widens_single_intervals_never_their_mean(tmp_path):
-    """R9: the DUT's declared jitter widens each single interval (the live bus rules) and never the mean a test
-    judges; the emulator's conforming jitter (report_jitter_s, declared by the emulated DUT) passes."""
+def test_the_dut_jitter_allowance_widens_single_intervals_and_their_mean_only_at_its_ends(tmp_path):
+    """R9: the DUT's declared jitter widens each single interval in full (the live bus rules) and the mean a test
+    judges only at its two ends, over the number of gaps: a test whose purpose is R9 reads enough gaps that the mean's
+    bound stays within twice the scheduling tolerance, so the fault's drift still FAILs it; the emulator's conforming
+    jitter (report_jitter_s, declared by the emulated DUT) passes."""
     reports = tmp_path / "reports"
     strict = run(tmp_path, "4.4.5", "4.4.22", "--emulator-faults", "report_jitter", "--reports", str(reports))
     assert strict.returncode == 1, strict.stdout[-3000:] + strict.stderr
@@ -248,7 +250,8 @@ def test_the_dut_jitter_allowance_widens_single_intervals_never_their_mean(tmp_p
     assert "jitter allowance (the DUT&#x27;s)" in page
     means = [v for r in doc["results"] for k, v in r["properties"].items() if k.endswith(".limit") and "mean interval" in
              r["properties"].get(k.replace("limit", "name"), "")]
-    assert means and all(float(v.split()[1]) <= 1.0 for v in means)  # 1 ms: the jitter never widens the mean
+    # the jitter at the mean's two ends, over as many gaps as keep it within 1 ms more than the scheduling tolerance
+    assert means and all(float(v.split()[1]) <= 2.01 for v in means), means
     fails = [r for r in doc["results"] if r["outcome"] == "FAIL"]  # the fault's +-30 % drifts: its mean is off
     assert wide.returncode == 1 and fails and all("mean interval error" in r["message"] for r in fails)
 

@@ -28,6 +28,7 @@ from procs import env as _env
 from ckesc.bench.dut import echo_probe
 from ckesc.bench.lanes import BusLane, OwnFrame
 from ckesc.bench.power import NoPower
+from ckesc.bench.profile import DEFAULT_BUS_ERROR_S
 from ckesc.bench.traffic_player import TrafficPlayer
 from ckesc.protocol.frame import WireFrame
 from ckesc.protocol.traffic import PeriodicFrames
@@ -97,7 +98,7 @@ def test_frames_played_on_the_lane_are_read_back_by_it(tmp_path, echo):
     args = ["--nodes", "none", "--handles", "one"] + ([] if echo else ["--no-echo-own"])
     with Emulator(tmp_path, *args) as emu:
         lane = BusLane({"interface": "socketcand", "host": "127.0.0.1", "port": emu.port, "channel": "can0",
-                        "tcp_tune": True, "ignore_config": True}, NoPower(), timing_error=0.002)
+                        "tcp_tune": True, "ignore_config": True}, NoPower(), timing_error=DEFAULT_BUS_ERROR_S)
         try:
             lane.find_echo(echo_probe())
             assert lane.echo is echo

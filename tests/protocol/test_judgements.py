@@ -30,11 +30,58 @@ def test_r9_mean_holds_up_to_the_scheduling_tolerance_plus_twice_the_error_over_
 
 
 def test_r9_mean_25_ms_instead_of_20_fails_whatever_the_jitter():
-    """INTERPRETATIONS R9: an ESC that reports every 25 ms instead of 20 FAILs on any bench, however much jitter it
-    declares: the mean takes no jitter at all; with ten gaps a bench of 10 ms error still tells."""
+    """INTERPRETATIONS R9: an ESC that reports every 25 ms instead of 20 FAILs on any bench: with ten gaps a bench of
+    10 ms error still tells (the declared jitter: the test below, which reads as many gaps as it needs)."""
     j = J.r9_mean(_grid(0.025, 11), 0.020, error=0.010)
     assert j is not None and not j.ok and "25.000 ms" in j.text
     assert J.r9_mean([0.0], 0.020) is None  # no gap: nothing to judge
+
+
+def test_r9_mean_takes_the_declared_jitter_at_its_two_ends_over_the_gaps():
+    """INTERPRETATIONS R9 (amended 2026-12-02): the mean of n gaps is the span from its first report to its last over
+    n, so the DUT's declared jitter counts at the two ends, over n. A correct ESC with a jittery timer (15 ms
+    declared), its first report judged late by half of it and its last early by half, over ten 20 ms gaps: a mean
+    1.5 ms short. Without the jitter in the bound it FAILed; with it, it passes."""
+    jitter, gaps = 15 * MS, 10
+    starts = [0.0075] + [k * 0.020 for k in range(1, gaps)] + [gaps * 0.020 - 0.0075]
+    j = J.r9_mean(starts, 0.020, jitter=jitter)
+    assert j is not None and j.judged and j.ok, j
+    assert j.measured == pytest.approx(1.5 * MS)
+    assert j.limit == pytest.approx(J.SCHEDULING_TOLERANCE_S + 2 * jitter / gaps) and j.error == 0.0
+    assert J.r9_mean_tolerance_s(gaps, 0.0, jitter) == pytest.approx(J.SCHEDULING_TOLERANCE_S + 3 * MS)
+    assert not J.r9_mean(starts, 0.020).ok  # the old reading: no jitter at the ends
+
+
+def test_r9_mean_over_too_few_gaps_for_its_bound_is_not_judged():
+    """R9: a judgement over so few gaps that the bound exceeds a quarter of the interval is not made (OBSERVE): ok,
+    judged False, whatever the mean."""
+    j = J.r9_mean(_grid(0.030, 4), 0.020, error=2 * MS, jitter=25 * MS)  # 1 ms + 2 x 27 ms / 3: 19 ms > 5 ms
+    assert j is not None and not j.judged and j.ok
+    assert not J.r9_mean_tells(3, 0.020, error=2 * MS, jitter=25 * MS)
+    assert J.r9_mean_tells(10, 0.020, error=2 * MS)  # 1 + 0.4 ms: judged
+    late = J.r18_mean(_grid(0.030, 4), 0.020, share=0.1, bitrate=500_000, error=2 * MS, jitter=25 * MS)
+    assert late is not None and not late.judged and late.ok  # R18's mean is R9's: the same quarter
+
+
+def test_r9_a_test_whose_purpose_it_is_reads_enough_gaps_that_25_ms_instead_of_20_fails_whatever_the_jitter():
+    """A test whose purpose is R9 reads R9_GAPS gaps, or more where the bench's error and the DUT's declared jitter
+    need them: over that many an ESC reporting every 25 ms instead of 20 FAILs, a correct one with its ends at the
+    edges of its jitter passes. Where R9 is not the purpose, the fewest gaps over which it is judged at all."""
+    for error, jitter in ((0.0, 0.0), (2 * MS, 0.0), (2 * MS, 25 * MS), (10 * MS, 15 * MS)):
+        n = J.r9_gaps_needed(0.020, error=error, jitter=jitter)
+        assert n >= J.R9_GAPS
+        assert J.r9_mean_tolerance_s(n, error, jitter) <= 2 * J.SCHEDULING_TOLERANCE_S + EPS
+        slow = J.r9_mean(_grid(0.025, n + 1), 0.020, error=error, jitter=jitter)
+        assert slow is not None and slow.judged and not slow.ok, (error, jitter, n, slow)
+        edge = error + jitter / 2  # each end's stamp off by the bench's error and half the jitter, inward
+        ends = [edge] + [k * 0.020 for k in range(1, n)] + [n * 0.020 - edge]
+        right = J.r9_mean(ends, 0.020, error=error, jitter=jitter)
+        assert right is not None and right.ok, (error, jitter, n, right)
+    assert J.r9_gaps_needed(0.020, error=2 * MS, jitter=25 * MS) == 54
+    few = J.r9_gaps_needed(0.020, error=2 * MS, jitter=25 * MS, purpose=False)
+    assert J.r9_mean_tells(few, 0.020, error=2 * MS, jitter=25 * MS) and not J.r9_mean_tells(few - 1, 0.020, error=2 * MS,
+                                                                                                 jitter=25 * MS)
+    assert J.r9_gaps_needed(0.5, purpose=False) == 2
 
 
 def test_r9a_gaps_the_first_gap_judged_is_the_second_to_the_third_report():
