@@ -31,8 +31,17 @@ def _run_check_log(args: argparse.Namespace) -> int:
     if not Path(path).is_file():
         print(f"ckesc check-log: error: no such file: {path}", file=sys.stderr)
         return EXIT_USAGE
+    jitter = 0.0
+    if args.profile:
+        from ..bench.profile import DutProfile, ProfileError
+
+        try:
+            jitter = DutProfile.load(args.profile).jitter_s
+        except ProfileError as exc:
+            print(f"ckesc check-log: error: --profile {args.profile}: {exc}", file=sys.stderr)
+            return EXIT_USAGE
     summary = check_capture(path, bitrate=args.bitrate, tolerance=args.tolerance / 1000, complete=args.complete,
-                            power_on=args.power_on)
+                            power_on=args.power_on, jitter=jitter)
     if summary["frames"] == 0:
         why = summary["damaged"]["first"][0]["reason"] if summary["damaged"]["count"] else "it holds no frame"
         print(f"ckesc check-log: error: nothing readable in {path}: {why}", file=sys.stderr)
@@ -73,6 +82,9 @@ def add_check_log_command(sub: argparse._SubParsersAction) -> None:
                    help="the DUT's power stayed on for the whole capture (a flight): a reset (a power-up count that grew, "
                         "a report gap with a transfer id restart) is then a violation (R19, R17), not an observation, and "
                         "a late first report after a resume is judged")
+    p.add_argument("--profile", metavar="NAME|PATH",
+                   help="the DUT's profile (a shipped one by name, or a path, as ckesc run takes it): its [timing] jitter_s "
+                        "widens each single report interval, as in a run or a soak of the same DUT (default: none, 0)")
     p.add_argument("--allow-truncated", action="store_true",
                    help="a capture shorter than its header declares (BLF) is judged on what it holds, with a warning, "
                         "instead of exit 2")

@@ -27,10 +27,12 @@ DEFAULT_TOLERANCE_S = timing_tolerance("bus timestamp", USB_ADAPTER_ERROR_S)
 
 
 def check_capture(path: str, *, bitrate: int = cat.DEFAULT_BITRATE, tolerance: float = DEFAULT_TOLERANCE_S,
-                  complete: bool = False, power_on: bool = False) -> dict[str, Any]:
+                  complete: bool = False, power_on: bool = False, jitter: float = 0.0) -> dict[str, Any]:
     """Run the bus rules over the capture at ``path``; the engine's summary plus the capture's damage. ``power_on``: the
-    DUT's power stayed on for the whole capture (a flight), so a reset is a violation, not an observation."""
-    rules = BusRules(tolerance=tolerance, bitrate=bitrate, complete=complete, power_known=power_on)
+    DUT's power stayed on for the whole capture (a flight), so a reset is a violation, not an observation. ``jitter``:
+    the DUT's declared report-interval jitter (its profile's ``jitter_s``), which the live rules of a run and a soak
+    give it too: the same ESC is judged alike by every mode."""
+    rules = BusRules(tolerance=tolerance, bitrate=bitrate, complete=complete, power_known=power_on, jitter=jitter)
     bad: list[dict[str, Any]] = []
     bad_count = 0
 

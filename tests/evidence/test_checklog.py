@@ -12,6 +12,8 @@ import pytest
 from ckesc.cli import main
 from ckesc.evidence.checklog import check_capture
 from ckesc.evidence.logs import read_candump
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.ids import message_id
 
 from .traffic import ScriptedHost
 
@@ -155,3 +157,24 @@ def test_decode_says_a_binary_file_is_not_candump_text(tmp_path, traffic, capsys
     noise.write_bytes(bytes(range(256)) * 8)
     assert main(["decode", str(noise)]) == 2
     assert "a binary file" in capsys.readouterr().err
+
+
+def test_the_dut_profile_gives_its_declared_jitter_as_a_run_and_a_soak_do(tmp_path, capsys):
+    """A capture of an ESC whose reports wander by its declared jitter (a late MSG1 followed by one on time, as the
+    clean-room ESC's Python timer does): check-log judged it without the jitter its profile declares and found gaps
+    "closer than the shortest legal interval" that the run and the soak of the same bench, given the profile, do
+    not; ``--profile`` gives it the same jitter, so one ESC is judged alike by every mode."""
+    msg1 = cat.spec("msg1")
+    stamps = [0.020 * k for k in range(60)]
+    stamps[30] += 0.008  # one report 8 ms late: a 28 ms gap, then a 12 ms one
+    messages = [can.Message(timestamp=t, arbitration_id=message_id(msg1.priority, msg1.type_id, 1),
+                            data=bytes(7) + bytes([0xC0 | (k % 32)]), is_extended_id=True)
+                for k, t in enumerate(stamps)]
+    log = write(tmp_path / "jittery.log", messages)
+    assert main(["check-log", str(log)]) == 1
+    assert "never closer than the shortest legal interval" in capsys.readouterr().out
+    profile = tmp_path / "jittery.toml"
+    profile.write_text('[dut]\nname = "jittery"\n[timing]\njitter_s = 0.010\n')
+    assert main(["check-log", str(log), "--profile", str(profile)]) == 0, capsys.readouterr().out
+    assert main(["check-log", str(log), "--profile", str(tmp_path / "none.toml")]) == 2
+    assert "--profile" in capsys.readouterr().err

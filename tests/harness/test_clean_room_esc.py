@@ -37,11 +37,13 @@ class CleanRoom:
     """The hub and the clean-room ESC on it, each its own process; ``bench`` is the bench options of ``ckesc run``
     and ``ckesc explore`` that reach it (socketcand, power by signals, the bit rate through a file)."""
 
-    def __init__(self, tmp: Path, *defects: str) -> None:
-        self.hub = Emulator(tmp, "--nodes", "none")
+    def __init__(self, tmp: Path, *defects: str, hub: tuple[str, ...] = ()) -> None:
+        # hub: the hub's own options (--no-echo-own, --handles ...); the ESC opens a name of its own ("esc"): another
+        # node on the bus, not a handle of the host's adapter (which --handles separate|one would keep apart)
+        self.hub = Emulator(tmp, "--nodes", "none", *hub)
         rate = tmp / "bitrate"
         rate.write_text("500000\n")
-        args = [sys.executable, str(ESC), "--interface", "socketcand", "--channel", "can0", "--bus-arg", "host=127.0.0.1",
+        args = [sys.executable, str(ESC), "--interface", "socketcand", "--channel", "esc", "--bus-arg", "host=127.0.0.1",
                 "--bus-arg", f"port={self.hub.port}", "--node", "1", "--flash", str(tmp / "flash.json"),
                 "--bus-bitrate-file", str(rate)]
         for d in defects:
