@@ -32,7 +32,16 @@ from ckesc.bench.outcomes import Inconclusive
 from ckesc.bench.traffic_player import TrafficPlayer
 from ckesc.evidence.live import LaneRules
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.judgements import R9_GAPS, r9_gaps_needed, r18_gap, r18_judged, r18_mean, r18_queueing_s, r18_reached, r18_tells
+from ckesc.protocol.judgements import (
+    R9_GAPS,
+    r9_gaps_needed,
+    r18_gap,
+    r18_judged,
+    r18_mean,
+    r18_queueing_s,
+    r18_reached,
+    r18_tells,
+)
 from ckesc.protocol.load import LoadSource
 
 from .answers import answer_window_s, check_answer_slot, query_esc_id, settle, slot_node

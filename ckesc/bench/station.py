@@ -28,6 +28,7 @@ from ..emulator import variants
 from . import checks, proof
 from .checks import BUS_OPEN_TIMEOUT_S
 from .lanes import BusLane, Lane, SimLane
+from .link import echo_probe
 from .power import POWER_COMMAND_TIMEOUT_S, PowerControl, Prompt, open_power
 from .power import names as power_names
 from .profile import DEFAULT_BUS_ERROR_S, DutProfile
@@ -245,16 +246,23 @@ class Station:
         self.foreign: ForeignPlay | None = None
 
     # ------------------------------------------------------------------ lanes
-    def open_lane(self) -> Lane:
-        """The DUT's lane, opened once and kept (:attr:`lane`) until :meth:`close_lane`."""
+    def open_lane(self, on_open: Callable[[Lane], None] | None = None) -> Lane:
+        """The DUT's lane, opened once and kept (:attr:`lane`) until :meth:`close_lane`: ``on_open(lane)`` first (the
+        caller's listeners: its trace and live rules read every frame from the first), then on a real bus whether the
+        host's own frames come back (:meth:`.lanes.BusLane.find_echo`), and only then the foreign traffic
+        (``--foreign-traffic``), so that without an echo every frame it plays is handed out from its first."""
         if self.lane is None:
             self.lane = self._new_lane()
-            if self.options.foreign_traffic:
-                try:
+            try:
+                if on_open is not None:
+                    on_open(self.lane)
+                if isinstance(self.lane, BusLane):
+                    self.lane.find_echo(echo_probe(nibble_order=self.profile.nibble_order))
+                if self.options.foreign_traffic:
                     self.foreign = ForeignPlay(self.options.foreign_traffic, self.lane)
-                except BaseException:
-                    self.close_lane()
-                    raise
+            except BaseException:
+                self.close_lane()
+                raise
         return self.lane
 
     def _new_lane(self) -> Lane:

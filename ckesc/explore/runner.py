@@ -25,9 +25,9 @@ from typing import Any, Mapping, Sequence
 
 import can
 
-from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
+from ..bench.dut import Dut, DutError, DutUnreachable
 from ..bench.errors import PreflightError
-from ..bench.lanes import BusLane, Lane
+from ..bench.lanes import Lane
 from ..bench.outcomes import Inconclusive
 from ..bench.station import BENCH_ROWS, BenchOptions, build
 from ..evidence.live import LaneRules
@@ -124,15 +124,16 @@ class Session:
             self.station.close()
             raise
 
+    def _listen(self, lane: Lane) -> None:
+        """The explorer's readers of the lane, before anything is sent on it (the echo probe's answers included)."""
+        self.recorder = Recorder(lane)
+        self.rules = LaneRules(lane, jitter=self.profile.jitter_s)
+        lane.listeners.extend([self.recorder, self.rules])
+
     def _open(self) -> None:
         opts, profile = self.options, self.station.profile
         self.profile = profile
-        self.lane = self.station.open_lane()
-        self.recorder = Recorder(self.lane)
-        self.rules = LaneRules(self.lane, jitter=profile.jitter_s)
-        self.lane.listeners.extend([self.recorder, self.rules])
-        if isinstance(self.lane, BusLane):
-            self.lane.find_echo(echo_probe(nibble_order=profile.nibble_order))
+        self.lane = self.station.open_lane(on_open=self._listen)  # (the echo found, then any foreign traffic)
         self.dut = Dut(self.lane, profile, node_id=opts.node_id, allow_motor_spin=bool(opts.allow_motor_spin))
         self.baseline_node = self.dut.node_id
         self.baseline = self.dut.settings()

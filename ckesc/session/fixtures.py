@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from ..bench import statement
-from ..bench.dut import Dut, DutError, DutUnreachable, echo_probe
+from ..bench.dut import Dut, DutError, DutUnreachable
 from ..bench.lanes import BenchGone, BusLane, Lane
 from ..bench.link import Link
 from ..bench.outcomes import Inconclusive
@@ -49,12 +49,15 @@ def ckesc_lane(request: pytest.FixtureRequest):
     station = st.station
     assert station is not None
     profile = station.profile  # with what an emulated ESC's variant declares (its vendor would state it)
-    lane = station.open_lane()
+    watchers = []
+
+    def listen(lane) -> None:  # before the echo probe: the frames it reads go to the listeners
+        trace_lane(config, lane, "")
+        watchers.append(watch_lane(config, lane))
+
+    lane = station.open_lane(on_open=listen)
     st.lane, st.profile = lane, profile
-    trace_lane(config, lane, "")
-    watcher = watch_lane(config, lane)
-    if isinstance(lane, BusLane):  # do the host's own frames come back? (the frames it reads go to the listeners)
-        lane.find_echo(echo_probe(nibble_order=profile.nibble_order))
+    (watcher,) = watchers
     _check_profile(config, lane, profile)
     watcher.begin()  # what the set-up provoked (the echo probe's answers, the profile check's) is no test's
     st.info.update(dut=config.getoption("dut"), lane=lane.name, clock=lane.clock, profile=profile.name,

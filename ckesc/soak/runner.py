@@ -22,8 +22,8 @@ from typing import Any, Callable, TextIO
 
 import can
 
-from ..bench.dut import Dut, echo_probe
-from ..bench.lanes import BenchGone, BusFault, BusLane
+from ..bench.dut import Dut
+from ..bench.lanes import BenchGone, BusFault
 from ..bench.station import BENCH_ROWS, BenchOptions, build
 from ..protocol import catalogue as cat
 from ..protocol.frame import WireFrame
@@ -156,10 +156,8 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
          wall: Callable[[], float]) -> Outcome:
     started_utc = report.utc_now()
     wall0 = wall()
-    lane = station.open_lane()
+    lane = station.open_lane()  # (on a real bus the echo found first, then any foreign traffic)
     profile = station.profile
-    if isinstance(lane, BusLane):
-        lane.find_echo(echo_probe(nibble_order=profile.nibble_order))
     dut = Dut(lane, profile, node_id=bench.node_id, allow_motor_spin=bool(bench.allow_motor_spin))
     settings = dut.settings()
     intervals = {name: settings[field] * cat.INTERVAL_UNIT_S for name, field in cat.REPORT_INTERVAL_FIELDS.items()}
