@@ -24,6 +24,7 @@ from typing import Any
 from ..protocol import catalogue as cat
 from ..protocol.frame import classify, frame_bits
 from ..protocol.ids import ESC_NODE_IDS, HOST_NODE_ID, MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind
+from ..protocol.transfer import tail_transfer_id
 from .findings import KEEP, Findings, Intervals, quote
 
 # ------------------------------------------------------------------------------------------ facts, derived
@@ -397,7 +398,7 @@ class Tracker(Findings):
             return
         if info.kind is not Kind.REQUEST or not data:
             return
-        tid = data[-1] & 0x1F
+        tid = tail_transfer_id(data[-1])
         if type_id in PSEUDO_BROADCAST:
             key = (info.source, None, type_id)
             self._answered.clear()

@@ -40,7 +40,7 @@ from typing import Any, Iterable, Mapping, Sequence
 from . import catalogue as cat
 from .frame import Frame, frame_bits
 from .ids import Kind
-from .transfer import TRANSFER_ID_MODULO
+from .transfer import TRANSFER_ID_MODULO, next_transfer_id
 
 #: R9: how far a report interval's mean may stray from its target besides the bench's error (the ESC's
 #: report scheduling); also the tick a real-time bench's single report may stray by on top of its stated error
@@ -196,7 +196,7 @@ class F3Step:
     @property
     def expected(self) -> int:
         """The transfer id F3 wants after ``previous``: +1, modulo 32."""
-        return (self.previous + 1) % TRANSFER_ID_MODULO
+        return next_transfer_id(self.previous)
 
     @property
     def advance(self) -> int:
@@ -215,7 +215,7 @@ class F3Step:
     def explained_by(self, missing: int) -> bool:
         """Whether ``missing`` frames of the counter lost between the two (a capture's gap) explain the step: it
         moved by one per frame sent, modulo 32, and moved at all."""
-        return self.advance != 0 and self.advance == (missing + 1) % TRANSFER_ID_MODULO
+        return self.advance != 0 and self.advance == next_transfer_id(missing)
 
     def __str__(self) -> str:
         return f"transfer id {self.current} after {self.previous}, expected {self.expected}"
@@ -224,7 +224,7 @@ class F3Step:
 def f3_holds(previous: int, current: int) -> bool:
     """F3: whether ``current`` follows ``previous`` on one counter (+1 modulo 32). The bus rules' hot path asks this
     of every frame and builds the :class:`F3Step` only for one that breaks it."""
-    return current == (previous + 1) % TRANSFER_ID_MODULO
+    return current == next_transfer_id(previous)
 
 
 def f3_step(previous: int, current: int) -> F3Step:
