@@ -204,7 +204,6 @@ class BusRules(Tracker):
             if looks_esc and info.source not in self._host_nodes and not node.host:
                 node.esc = True
                 self._query_reply(info, node, ts)
-                self._answer(node, ts)
         if node.esc and not node.host:
             return self._esc_frame(info, node, data, ts, start, busy_from, remote)
         if not looks_esc:
@@ -531,6 +530,7 @@ class BusRules(Tracker):
             "standard_id_frames": self.standard,
             "error_frames": {"count": self.error_frames, "first": self.error_first},
             "time_jumps": self.time_jumps,
+            "get_esc_id": self.queries.statistics(),  # its replies by the query they answer (pairing.QueryPairing)
             "violations": {"count": self.violations, "by_rule": dict(sorted(self._by_rule.items())),
                            "first": [v.to_json() for v in self.findings()]},
             "observations": [v.to_json() for v in self.findings(observations=True)],

@@ -182,6 +182,24 @@ def answer_bound(end: float, *, error: float = 0.0, rule: str = "4.4.2-4") -> Ju
     return Judgement(rule, end, cat.ANSWER_DELAY_MAX_S, "<=", error, f"answer {end * 1000:.3f} ms after the request")
 
 
+#: R2 pairing: a GET_ESC_ID reply that no query asked for within the 64 ms bound may still be a late answer to one
+#: asked up to this many bounds before it (and judged late, 4.4.3-4), never to an older one
+R2_LATE_BOUNDS = 2
+
+
+def r2_may_answer(delay: float, *, error: float = 0.0) -> bool | None:
+    """R2 read for pairing: whether a GET_ESC_ID reply may answer a query asked ``delay`` before it (a broadcast reply
+    names no query: every ESC answers each query once, within 64 ms). True: within the 64 ms bound with the bench's
+    ``error``, an answer under which the ESC conforms; None: only as a late answer (within :data:`R2_LATE_BOUNDS`
+    bounds); False: not at all (asked after it, or longer before). The slot (:func:`r2_slot_start`) is judged on
+    the answer once paired, never used to pair it."""
+    if delay < 0:
+        return False
+    if delay <= cat.ANSWER_DELAY_MAX_S + error + _NOISE_S:
+        return True
+    return None if delay <= R2_LATE_BOUNDS * cat.ANSWER_DELAY_MAX_S + error + _NOISE_S else False
+
+
 # ------------------------------------------------------------------------------------------ F3
 @dataclass(frozen=True, slots=True)
 class F3Step:
