@@ -12,12 +12,15 @@ the readings it replaced, each failed here where it disagreed:
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import pytest
 
 from ckesc.evidence.pairing import AMBIGUOUS, HOST, NONE, OTHER, QueryPairing
 from ckesc.evidence.rules import BusRules
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import Decoder, encode
+from conformance import answers
 
 FC = 10
 BOUND = cat.ANSWER_DELAY_MAX_S
@@ -102,3 +105,68 @@ def test_two_escs_at_one_node_id_are_still_told():
     for t, w in ((1.0, _wire(1.0, 0)), (1.01, _wire(1.01, 5, reply=True)), (1.0102, _wire(1.0102, 5, reply=True))):
         rules.feed(w.arbitration_id, w.data, t)
     assert [o["check"] for o in rules.summary()["observations"]] == ["shared-node-id"]
+
+
+# ------------------------------------------------------------------------------------------ the suite's reading
+class _Dut:
+    """What ``conformance.answers`` reads of a DUT, over a scripted bus: ``script(t)`` gives the frames that follow a
+    host's GET_ESC_ID query at ``t`` (as WireFrames), which :meth:`wait` lets in."""
+
+    host_node = 0
+
+    def __init__(self, script) -> None:
+        self.script = script
+        self.lane = SimpleNamespace(timing_error=0.0, own_error=0.0)
+        self.trace: list = []
+        self.t = 1.0
+        self._due: list = []
+        self._decoder = Decoder()
+        self.queries = 0
+
+    def now(self) -> float:
+        return self.t
+
+    def broadcast(self, name, fields, layout):
+        self.queries += 1
+        self._due += [_wire(self.t, 0, tid=self.queries % 32), *self.script(self.t)]
+        return SimpleNamespace(time=self.t)
+
+    def wait(self, s: float) -> None:
+        self.t += s
+        self._due.sort(key=lambda w: w.timestamp)
+        while self._due and self._due[0].timestamp <= self.t:
+            self.trace.append(self._decoder.decode(self._due.pop(0)))
+
+    def frames(self, name=None, *, since=None, until=None, source=None, kind=None):
+        return [f for f in self.trace if (name is None or f.name == name) and (since is None or f.timestamp >= since)
+                and (until is None or f.timestamp <= until) and (source is None or f.source == source)]
+
+
+def test_a_flight_controller_querying_while_the_host_reads_is_told_apart_and_the_host_asks_again():
+    """Host at t, flight controller at t + 30 ms, the ESC at node 1 answering each in its 2 ms slot: the first reply
+    answers the host's query only, the second the flight controller's only. The host asks again all the same: its
+    callers read every reply since its query as its own."""
+    dut = _Dut(lambda t: [_wire(t + 0.0025, 1, reply=True), _wire(t + 0.030, FC), _wire(t + 0.0325, 1, reply=True)]
+               if t < 1.1 else [_wire(t + 0.0025, 1, reply=True)])
+    sent = answers.query_esc_id(dut, answers.BROADCAST_WINDOW_S)
+    assert dut.queries == 2 and sent.time > 1.1
+    replies = [f for f in dut.trace if f.layout.name == "reply"]
+    assert [answers.answers_another_node(dut, f) for f in replies] == [False, True, False]
+
+
+def test_the_host_asks_again_while_a_reply_may_answer_another_nodes_query():
+    dut = _Dut(lambda t: [_wire(t - 0.002, FC), _wire(t + 0.0025, 1, reply=True)] if t < 1.1 else
+               [_wire(t + 0.0025, 1, reply=True)])
+    answers.query_esc_id(dut, answers.BROADCAST_WINDOW_S)
+    assert dut.queries == 2
+
+
+def test_a_second_reply_to_a_flight_controllers_query_is_not_its_answer():
+    """A flight controller's query, the ESC's answer 2.5 ms after, and another reply 1 ms later: the second answers
+    no query (each is answered once), though it came within 64 ms of one ("any other node's query within 64 ms
+    before it" passed it for the flight controller's answer, and R17's tests let it go)."""
+    dut = _Dut(lambda t: [])
+    dut._due += [_wire(1.0, FC), _wire(1.0025, 1, reply=True), _wire(1.0035, 1, reply=True, tid=1)]
+    dut.wait(0.1)
+    replies = [f for f in dut.trace if f.layout.name == "reply"]
+    assert [answers.answers_another_node(dut, f) for f in replies] == [True, False]
