@@ -2,21 +2,25 @@
 tests here): the answer slots of R2 (:func:`check_answer_slot`, and :func:`slot_node`, which moves the
 DUT to a node id whose slot a coarse bench can tell), how long to read for an answer to a broadcast, an
 answer a test compares with (:func:`reference`), what came instead of an answer that did not decode
-(:func:`heard_instead`), and who answers GET_ESC_ID (:func:`esc_ids`, :func:`put_back`, used by Set ID's
-tests too).
+(:func:`heard_instead`), which query a GET_ESC_ID reply answers (:func:`esc_id_pairings`, the decision of
+:class:`~ckesc.evidence.pairing.QueryPairing` that the bus rules and the soak take too), and who answers
+GET_ESC_ID (:func:`esc_ids`, :func:`put_back`, used by Set ID's tests too).
 """
 
 from __future__ import annotations
 
 import math
 from contextlib import contextmanager
+from typing import Iterable
+from weakref import WeakKeyDictionary
 
 import pytest
 
 from ckesc.bench.dut import DutError
 from ckesc.bench.outcomes import Inconclusive
+from ckesc.evidence.pairing import QueryPairing, ReplyPairing
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.frame import classify
+from ckesc.protocol.frame import Frame, classify
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, Kind
 from ckesc.protocol.judgements import answer_bound, r2_slot_end, r2_slot_start
 from ckesc.protocol.requirements import Verdict
@@ -43,33 +47,58 @@ def settle(dut) -> None:
 QUERY_TRIES = 3
 
 
-def other_queries(dut, since: float, until: float) -> list[float]:
-    """When another node (a flight controller, F6) broadcast a GET_ESC_ID query between ``since`` and ``until``."""
-    return [f.timestamp or 0.0 for f in dut.frames("get_esc_id", since=since, until=until)
-            if f.layout is not None and f.layout.name == "query" and f.source != dut.host_node]
+def esc_id_pairings(frames: Iterable[Frame], *, host: int, error: float) -> list[tuple[Frame, ReplyPairing]]:
+    """Each GET_ESC_ID reply among ``frames`` (any node's, in time order) with what it answers: the host's query,
+    another node's (a flight controller's, F6), either, or none (:class:`~ckesc.evidence.pairing.QueryPairing`, the
+    decision the bus rules and the soak take too), every query among ``frames`` fed to it."""
+    pairing = QueryPairing(error=error, host=host)
+    out = []
+    for f in sorted((f for f in frames if f.name == "get_esc_id" and f.layout is not None), key=lambda f: f.timestamp or 0.0):
+        if f.layout.name == "query":  # type: ignore[union-attr]
+            pairing.query(f.timestamp or 0.0, f.source)
+        else:
+            out.append((f, pairing.reply(f.timestamp or 0.0, f.source)))
+    return out
+
+
+#: per DUT: (its trace's length and last frame, the pairing of its GET_ESC_ID replies then), made again when it changed
+_PAIRED: WeakKeyDictionary = WeakKeyDictionary()
+
+
+def _pairings(dut) -> dict[int, ReplyPairing]:
+    """:func:`esc_id_pairings` over the DUT's trace, by the reply frame's ``id``."""
+    mark = (len(dut.trace), id(dut.trace[-1]) if dut.trace else None)
+    kept = _PAIRED.get(dut)
+    if kept is None or kept[0] != mark:
+        paired = esc_id_pairings(dut.frames("get_esc_id"), host=dut.host_node, error=delay_error(dut))
+        kept = _PAIRED[dut] = (mark, {id(f): p for f, p in paired}, paired)  # (the frames kept: their ids stay theirs)
+    return kept[1]
 
 
 def query_esc_id(dut, read_s: float):
     """Broadcast the GET_ESC_ID query and read ``read_s``: the host's ``Sent``. A reply is a broadcast that names
-    no query, so where another node's query came within 64 ms before the host's or while it read (a flight
-    controller's, once a second), an ESC's reply may answer that one (R2): the host asks again, at most
-    :data:`QUERY_TRIES` times, and is INCONCLUSIVE if it never had the bus to itself. On a quiet bus: one query."""
+    no query, so where a reply since then may answer another node's query (a flight controller's, once a second,
+    asked within 64 ms before it: :func:`esc_id_pairings`), the replies read are not all the host's: the host asks
+    again, at most :data:`QUERY_TRIES` times, and is INCONCLUSIVE if it never had the bus to itself. On a quiet bus:
+    one query. (A reply that answers no query is the DUT's, judged by the caller.)"""
     for _ in range(QUERY_TRIES):
         sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
         dut.wait(read_s)
-        if not other_queries(dut, sent.time - cat.ANSWER_DELAY_MAX_S, dut.now()):
+        paired = _pairings(dut)
+        if not any(p.may_answer_another(dut.host_node) for f in dut.frames("get_esc_id", since=sent.time)
+                   if (p := paired.get(id(f))) is not None):
             return sent
-    raise Inconclusive(f"another node's GET_ESC_ID queries came within {ms(cat.ANSWER_DELAY_MAX_S)} ms of each of "
-                       f"{QUERY_TRIES} queries: which query a reply answers cannot be told")
+    raise Inconclusive(f"another node's GET_ESC_ID queries came within {ms(cat.ANSWER_DELAY_MAX_S)} ms of the replies "
+                       f"to each of {QUERY_TRIES} queries: which query a reply answers cannot be told")
 
 
 def answers_another_node(dut, f) -> bool:
-    """``f`` is a GET_ESC_ID reply that came within 64 ms (and the lane's error) of another node's query: that
-    node's answer (a flight controller's query, F6), not one to anything the host sent."""
+    """``f`` is a GET_ESC_ID reply that may answer another node's query (a flight controller's, F6), not one to
+    anything the host sent (:func:`esc_id_pairings`; a second reply to a query it answered already is not)."""
     if f.name != "get_esc_id" or f.layout is None or f.layout.name != "reply":
         return False
-    t = f.timestamp or 0.0
-    return bool(other_queries(dut, t - cat.ANSWER_DELAY_MAX_S - dut.lane.timing_error, t))
+    p = _pairings(dut).get(id(f))
+    return p is not None and p.may_answer_another(dut.host_node)
 
 
 def reference(dut, name: str, fields: dict | None = None, *, need: tuple[str, ...] = (), **kw) -> dict:

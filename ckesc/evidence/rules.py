@@ -83,7 +83,7 @@ from ..protocol.judgements import (
     r19_report_restart,
     r19_run_time,
 )
-from ..protocol.transfer import SINGLE_FRAME, parse_tail
+from ..protocol.transfer import SINGLE_FRAME, parse_tail, tail_transfer_id
 from .findings import Intervals, Violation, ms, quote
 from .tracker import (
     COMM_BYTE,
@@ -204,7 +204,6 @@ class BusRules(Tracker):
             if looks_esc and info.source not in self._host_nodes and not node.host:
                 node.esc = True
                 self._query_reply(info, node, ts)
-                self._answer(node, ts)
         if node.esc and not node.host:
             return self._esc_frame(info, node, data, ts, start, busy_from, remote)
         if not looks_esc:
@@ -245,7 +244,7 @@ class BusRules(Tracker):
                 return self._violation(out, ("F2",), ts, node.id, "tail-byte", f"{info.label} with no data: no tail byte",
                                        (quote(info.can_id, data, ts),))
             tail = data[-1]
-            tid = tail & 0x1F
+            tid = tail_transfer_id(tail)
             if tail & 0xE0 != SINGLE_FRAME:
                 out = self._tail(out, info, node, data, ts, tail)
         if info.kind is Kind.RESPONSE:
@@ -316,7 +315,7 @@ class BusRules(Tracker):
 
     def _pair(self, st: Stream, info: FrameId, data, ts: float) -> tuple[str, str]:
         return (quote(st.can_id, st.data, st.ts, note=f"{st.name} tid {st.tid}"),  # type: ignore[arg-type]
-                quote(info.can_id, data, ts, note=f"{st.name} tid {data[-1] & 0x1F}"))
+                quote(info.can_id, data, ts, note=f"{st.name} tid {tail_transfer_id(data[-1])}"))
 
     def _transfer_ids(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, gap: float, step: F3Step,
                       period: float | None):
@@ -432,7 +431,7 @@ class BusRules(Tracker):
         across a silence of the node as long as a power cycle may take (:data:`RESTART_SILENCE_S`: a reset boots first).
         The run time's elapsed time is the widest the two readings can be apart: from the earlier one's request to this
         answer."""
-        option = self._maintenance.get((info.dest, info.source, data[-1] & 0x1F))  # type: ignore[arg-type]
+        option = self._maintenance.get((info.dest, info.source, tail_transfer_id(data[-1])))  # type: ignore[arg-type]
         f = RESET_FIELDS.get(option)  # type: ignore[arg-type]
         if f is None or len(data) <= f.offset + f.size or node.shared:
             return out
@@ -531,6 +530,7 @@ class BusRules(Tracker):
             "standard_id_frames": self.standard,
             "error_frames": {"count": self.error_frames, "first": self.error_first},
             "time_jumps": self.time_jumps,
+            "get_esc_id": self.queries.statistics(),  # its replies by the query they answer (pairing.QueryPairing)
             "violations": {"count": self.violations, "by_rule": dict(sorted(self._by_rule.items())),
                            "first": [v.to_json() for v in self.findings()]},
             "observations": [v.to_json() for v in self.findings(observations=True)],

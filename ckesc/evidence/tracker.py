@@ -3,8 +3,10 @@
 
 * **who is who**: which node is an ESC, which a host (:class:`FrameId` works out each CAN id once);
 * **request/answer pairing**: which requests each node made, so that an answer is matched with the request it
-  answers (same requester, service and transfer id, within :data:`RESPONSE_WINDOW_S`; Set ID, a
-  pseudo-broadcast, from any node) and a broadcast query (GET_ESC_ID) with each ESC's first reply;
+  answers by F4 (same requester, service and transfer id, within :data:`RESPONSE_WINDOW_S`; Set ID, a
+  pseudo-broadcast, from any node), and which GET_ESC_ID query (the host's, another node's) each reply answers
+  (:class:`.pairing.QueryPairing`, the one owner of that decision: a reply from a node id that answers none while
+  queries were open is a second ESC at that id);
 * **report-interval targets**: per node the MSG1..MSG3 intervals it last stated in a Set/Get Freq answer, and
   the events after which a report's cadence restarts (MSG Control, CAN Test, Set ID, Set Freq writes, R9a
   restarts, silences long enough for a power cycle);
@@ -24,7 +26,9 @@ from typing import Any
 from ..protocol import catalogue as cat
 from ..protocol.frame import classify, frame_bits
 from ..protocol.ids import ESC_NODE_IDS, HOST_NODE_ID, MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind
+from ..protocol.transfer import tail_transfer_id
 from .findings import KEEP, Findings, Intervals, quote
+from .pairing import QueryPairing
 
 # ------------------------------------------------------------------------------------------ facts, derived
 #: The reports whose interval Set/Get Freq sets (R9), by type id, with their interval field.
@@ -92,8 +96,8 @@ class Heard:
     """What the tracker paired while :attr:`Tracker.heard` was set, as the report's plots draw it (seconds):
 
     * ``answers``: ``{node: {request: [delay]}}``: each answer matched with the request it answers (its first
-      answer from each node), and each ESC's first reply to a broadcast query (GET_ESC_ID), from the request's
-      timestamp (its end on the bus, the host's own frame by its echo) to the answer's;
+      answer from each node), and each GET_ESC_ID reply that answers one query only (:class:`.pairing.QueryPairing`),
+      from the request's timestamp (its end on the bus, the host's own frame by its echo) to the answer's;
     * ``intervals``: ``{report: {target: [interval]}}``: the MSG1..MSG3 intervals of ``node`` the rules judged
       against the interval the node last stated (start to start of the two frames, as judged; none before
       a stated target, none across a restart of the cadence or within the two reports after an R9a event);
@@ -259,16 +263,15 @@ class Tracker(Findings):
         self._requests: dict[tuple, deque] = {}
         super().__init__()
         self._last_throttle: tuple[float, str, int] | None = None
-        #: answers per node to the open Set ID / GET_ESC_ID broadcasts (more than were asked for: a shared id)
+        #: answers per node to the last Set ID (more than one: a shared id)
         self._answered: dict[int, int] = {}
-        #: the GET_ESC_ID queries still open (within 64 ms: every ESC answers each once, R2), from any node: another
-        #: host on the bus (a flight controller, F6) queries too, and the ESC answers both
-        self._open_queries: list[float] = []
+        #: which GET_ESC_ID query each reply answers, from any node: another host on the bus (a flight controller, F6)
+        #: queries too, and the ESC may answer both (the one owner of that decision)
+        self.queries = QueryPairing(error=self.tolerance, host=min(self._host_nodes, default=HOST_NODE_ID))
         self._set_id_ts = -math.inf  # the last Set ID: a node id not heard since may have been left by its ESC
         self._bus_end = -math.inf
         self._busy_from = -math.inf
         self.set_bitrate(bitrate)
-        self._query_ts: float | None = None  # the last GET_ESC_ID query (its replies' delays, for the plots)
         #: the host's last MSG Control switch suspended reporting, and no resume nor power switch since: a parameter
         #: write then does not take effect (R12) and its answer is free (R10-R12: the current values, none, or the
         #: request's echoed), so a Set Freq write's answer does not say the intervals in force
@@ -378,11 +381,8 @@ class Tracker(Findings):
                     self.heard.commands.append(ts)
                 self._last_throttle = (ts, info.label, type_id)
                 return
-            if type_id == GET_ESC_ID.type_id:  # a query: every ESC answers once (each query still open)
-                self._open_queries = [q for q in self._open_queries if ts - q <= cat.ANSWER_DELAY_MAX_S] + [ts]
-                if len(self._open_queries) == 1:
-                    self._answered.clear()
-                self._query_ts = ts
+            if type_id == GET_ESC_ID.type_id:  # a query: every ESC answers it once
+                self.queries.query(ts, info.source)
             switch = REPORTING_SWITCHES.get(type_id)
             if switch is not None and len(data) > switch[0].offset + switch[0].size and field_value(data, switch[0]) in switch[1]:
                 value = field_value(data, switch[0])
@@ -397,11 +397,10 @@ class Tracker(Findings):
             return
         if info.kind is not Kind.REQUEST or not data:
             return
-        tid = data[-1] & 0x1F
+        tid = tail_transfer_id(data[-1])
         if type_id in PSEUDO_BROADCAST:
             key = (info.source, None, type_id)
             self._answered.clear()
-            self._open_queries = []
             for node in self._nodes.values():  # may re-address any ESC: nobody's intervals are known now
                 node.periods = [None] * len(INTERVAL_FIELDS)
                 node.reset += 1
@@ -446,12 +445,14 @@ class Tracker(Findings):
                           "not compared with one another")
 
     def _answer(self, node: Node, ts: float) -> None:
-        """An answer to a broadcast every ESC answers once (Set ID, GET_ESC_ID): a second one from the same
-        node id means two ESCs share it (Set ID sets every ESC on the bus, 4.4.18-2)."""
+        """An answer to Set ID, which every ESC answers once: a second one from the same node id means two ESCs
+        share it (Set ID sets every ESC on the bus, 4.4.18-2)."""
         count = self._answered[node.id] = self._answered.get(node.id, 0) + 1
-        if count <= max(len(self._open_queries), 1):
-            pass
-        elif not node.shared:
+        if count > 1:
+            self._shared(node, ts)
+
+    def _shared(self, node: Node, ts: float) -> None:
+        if not node.shared:
             node.shared = True
             self._observe(("4.4.18-2",), ts, node.id, "shared-node-id",
                           f"two ESCs answer from node id {node.id}: its reports are not compared with one another")
@@ -473,11 +474,19 @@ class Tracker(Findings):
         self.heard.answer(info.source, info.spec.name, ts - when)  # type: ignore[union-attr]
 
     def _query_reply(self, info: FrameId, node: Node, ts: float) -> None:
-        """An ESC's reply to the broadcast query (GET_ESC_ID): its delay, the first reply of each node only."""
-        n = self._answered.get(node.id, 0)  # its replies so far: this one answers the next open query
-        if self.heard is not None and self._query_ts is not None and n == 0:
-            asked = self._open_queries[0] if self._open_queries else self._query_ts
-            self.heard.answer(node.id, info.spec.name, ts - asked)  # type: ignore[union-attr]
+        """An ESC's GET_ESC_ID reply: the query it answers (:class:`.pairing.QueryPairing`). None while queries it
+        could have answered by time were open: this node id answered them all already, so a second ESC shares it
+        (4.4.18-2); none with no query open (one the capture missed, or nobody's) says nothing of the id. Its delay
+        when it answers one query only."""
+        open_ = bool(self.queries.open(ts))
+        p = self.queries.reply(ts, node.id)
+        if p.none:
+            if open_:
+                self._shared(node, ts)
+            return
+        delay = p.delay()
+        if self.heard is not None and delay is not None:
+            self.heard.answer(node.id, info.spec.name, delay)  # type: ignore[union-attr]
 
     def _heard_interval(self, st: Stream, node: Node, gap: float) -> None:
         """Report interval ``gap`` of ``st``, judged against the interval ``node`` stated (R9), for the plots."""

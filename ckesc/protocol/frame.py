@@ -35,7 +35,7 @@ from .ids import (
     priority_name,
     service_id,
 )
-from .transfer import SINGLE_FRAME, tail_byte
+from .transfer import SINGLE_FRAME, tail_byte, tail_transfer_id
 
 #: Priority used for frames whose table entry lists none (240/241/242, F5: OBSERVE).
 FALLBACK_PRIORITY = Priority.MEDIUM
@@ -218,7 +218,7 @@ class Decoder:
             label = "message type" if kind is Kind.MESSAGE else "service"
             if type_id not in vendor:
                 raise UnknownTypeError(f"{label} id {type_id} is outside the CKESC vendor range [{vendor.start}, {vendor.stop})")
-            tid = data[-1] & 0x1F if data else None
+            tid = tail_transfer_id(data[-1]) if data else None
             return Frame(None, None, kind, type_id, priority, source, destination, tid, {"payload": list(data)}, data, timestamp, anonymous)
 
         if spec.has_tail:
@@ -231,7 +231,7 @@ class Decoder:
                     "a single-frame transfer has start=1 end=1 toggle=0 (F2)",
                     frame=name,
                 )
-            tid: int | None = tail & 0x1F
+            tid: int | None = tail_transfer_id(tail)
             payload = data[:-1]
         else:
             tid = None

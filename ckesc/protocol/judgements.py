@@ -44,7 +44,7 @@ from typing import Any, Iterable, Mapping, Sequence
 from . import catalogue as cat
 from .frame import Frame, frame_bits
 from .ids import Kind
-from .transfer import TRANSFER_ID_MODULO
+from .transfer import TRANSFER_ID_MODULO, next_transfer_id
 
 #: R9: how far a report interval's mean may stray from its target besides the bench's error (the ESC's
 #: report scheduling); also the tick a real-time bench's single report may stray by on top of its stated error
@@ -215,6 +215,24 @@ def answer_bound(end: float, *, error: float = 0.0, rule: str = "4.4.2-4") -> Ju
     return Judgement(rule, end, cat.ANSWER_DELAY_MAX_S, "<=", error, f"answer {end * 1000:.3f} ms after the request")
 
 
+#: R2 pairing: a GET_ESC_ID reply that no query asked for within the 64 ms bound may still be a late answer to one
+#: asked up to this many bounds before it (and judged late, 4.4.3-4), never to an older one
+R2_LATE_BOUNDS = 2
+
+
+def r2_may_answer(delay: float, *, error: float = 0.0) -> bool | None:
+    """R2 read for pairing: whether a GET_ESC_ID reply may answer a query asked ``delay`` before it (a broadcast reply
+    names no query: every ESC answers each query once, within 64 ms). True: within the 64 ms bound with the bench's
+    ``error``, an answer under which the ESC conforms; None: only as a late answer (within :data:`R2_LATE_BOUNDS`
+    bounds); False: not at all (asked after it, or longer before). The slot (:func:`r2_slot_start`) is judged on
+    the answer once paired, never used to pair it."""
+    if delay < 0:
+        return False
+    if delay <= cat.ANSWER_DELAY_MAX_S + error + _NOISE_S:
+        return True
+    return None if delay <= R2_LATE_BOUNDS * cat.ANSWER_DELAY_MAX_S + error + _NOISE_S else False
+
+
 # ------------------------------------------------------------------------------------------ F3
 @dataclass(frozen=True, slots=True)
 class F3Step:
@@ -229,7 +247,7 @@ class F3Step:
     @property
     def expected(self) -> int:
         """The transfer id F3 wants after ``previous``: +1, modulo 32."""
-        return (self.previous + 1) % TRANSFER_ID_MODULO
+        return next_transfer_id(self.previous)
 
     @property
     def advance(self) -> int:
@@ -248,7 +266,7 @@ class F3Step:
     def explained_by(self, missing: int) -> bool:
         """Whether ``missing`` frames of the counter lost between the two (a capture's gap) explain the step: it
         moved by one per frame sent, modulo 32, and moved at all."""
-        return self.advance != 0 and self.advance == (missing + 1) % TRANSFER_ID_MODULO
+        return self.advance != 0 and self.advance == next_transfer_id(missing)
 
     def __str__(self) -> str:
         return f"transfer id {self.current} after {self.previous}, expected {self.expected}"
@@ -257,7 +275,7 @@ class F3Step:
 def f3_holds(previous: int, current: int) -> bool:
     """F3: whether ``current`` follows ``previous`` on one counter (+1 modulo 32). The bus rules' hot path asks this
     of every frame and builds the :class:`F3Step` only for one that breaks it."""
-    return current == (previous + 1) % TRANSFER_ID_MODULO
+    return current == next_transfer_id(previous)
 
 
 def f3_step(previous: int, current: int) -> F3Step:

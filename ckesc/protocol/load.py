@@ -34,7 +34,7 @@ from . import catalogue as cat
 from .frame import WireFrame, classify, frame_bits
 from .ids import MESSAGE_VENDOR_RANGE, RESERVED_NODE_IDS, Kind, Priority, message_id
 from .judgements import R18_BURST_FRAMES
-from .transfer import TRANSFER_ID_MODULO, tail_byte
+from .transfer import next_transfer_id, tail_byte
 
 INF = math.inf
 PRIORITIES = ("high", "low", "mixed")
@@ -134,7 +134,7 @@ class LoadSource:
             fn = rng.choice(pool)
             size = rng.randint(1, MAX_DATA)
             tid = self._tids[fn.node]
-            self._tids[fn.node] = (tid + 1) % TRANSFER_ID_MODULO
+            self._tids[fn.node] = next_transfer_id(tid)
             data = rng.randbytes(size - 1) + bytes((tail_byte(tid),))
             burst.append(WireFrame(message_id(fn.priority, fn.type_id, fn.node), data, timestamp=self._due))
             self._bits += frame_bits(size)

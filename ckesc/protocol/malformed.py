@@ -21,11 +21,10 @@ from . import catalogue as cat
 from .frame import WireFrame, encode
 from .ids import ESC_NODE_IDS, Kind, parse_can_id, service_id
 from .judgements import asked_node
-from .transfer import TRANSFER_ID_MODULO, multi_frame, tail_byte
+from .transfer import TRANSFER_ID_MODULO, multi_frame, tail_byte, tail_transfer_id
 
 #: classic CAN's most data bytes (a frame one byte longer than its table is sent where it fits)
 MAX_DATA = 8
-TID_MASK = TRANSFER_ID_MODULO - 1
 #: the bits of a node id (F1: seven, 1..127)
 NODE_ID_BITS = max(ESC_NODE_IDS).bit_length()
 
@@ -106,7 +105,7 @@ def applies(spec: cat.FrameSpec, form: str) -> bool:
 
 
 def _tail(start: bool, end: bool, toggle: bool) -> Callable[[bytes], bytes]:
-    return lambda d: d[:-1] + bytes((tail_byte(d[-1] & TID_MASK, start=start, end=end, toggle=toggle),))
+    return lambda d: d[:-1] + bytes((tail_byte(tail_transfer_id(d[-1]), start=start, end=end, toggle=toggle),))
 
 
 def build(name: str, fields: dict, form: str, *, source: int, node_id: int, others: list[int],

@@ -11,7 +11,9 @@ from typing import Callable, NamedTuple
 from .errors import EncodeError
 
 SINGLE_FRAME = 0xC0
+#: F2/F3: a transfer id is five bits of the tail byte, and counts modulo 32
 TRANSFER_ID_MODULO = 32
+TRANSFER_ID_MASK = TRANSFER_ID_MODULO - 1
 
 
 class Tail(NamedTuple):
@@ -37,7 +39,17 @@ TAIL_BYTES: tuple[bytes, ...] = tuple(bytes((tail_byte(tid),)) for tid in range(
 
 
 def parse_tail(byte: int) -> Tail:
-    return Tail(bool(byte & 0x80), bool(byte & 0x40), bool(byte & 0x20), byte & 0x1F)
+    return Tail(bool(byte & 0x80), bool(byte & 0x40), bool(byte & 0x20), byte & TRANSFER_ID_MASK)
+
+
+def tail_transfer_id(byte: int) -> int:
+    """The transfer id a tail byte carries (F2), whatever its start/end/toggle bits say."""
+    return byte & TRANSFER_ID_MASK
+
+
+def next_transfer_id(transfer_id: int, step: int = 1) -> int:
+    """The transfer id ``step`` transfers after ``transfer_id`` on one counter (F3: +1 per transfer, modulo 32)."""
+    return (transfer_id + step) % TRANSFER_ID_MODULO
 
 
 class TransferIdCounter:
@@ -56,7 +68,7 @@ class TransferIdCounter:
         tid = self._next.get(slot)
         if tid is None:
             tid = self._first() % TRANSFER_ID_MODULO if self._first else 0
-        self._next[slot] = (tid + 1) % TRANSFER_ID_MODULO
+        self._next[slot] = next_transfer_id(tid)
         return tid
 
     def peek(self, key: object, destination: int | None = None) -> int:

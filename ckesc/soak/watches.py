@@ -10,8 +10,9 @@ One owner per watched property (R19), each calling the rule's judgement in :mod:
 * :class:`CommFlagWatch` - the comm flag (MSG1's status, R8) set only when the stream stops
   (:func:`~ckesc.protocol.judgements.r8_flag_due`);
 * :class:`AnswerWatch` - GET_ESC_ID's answers in the node's slot (R2) and within 64 ms (4.4.3-4), their delays as
-  a fixed-bin histogram (another node's query, a flight controller's on the bus, is answered too: its answer is
-  neither the host's nor one to no query);
+  a fixed-bin histogram; which query a reply answers is :class:`~ckesc.evidence.pairing.QueryPairing`'s (another
+  node's query, a flight controller's on the bus, may be answered too: its answer is neither the host's nor one
+  to no query, and one that may be either is not judged);
 * :class:`SettingsWatch` - 242's answers unchanged (:func:`~ckesc.protocol.judgements.r13_read_back`);
 * :class:`UnexpectedWatch` - frames the ESC should not send: one that does not decode, or a frame type normal
   reporting never sends and the player never asked for.
@@ -28,6 +29,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
+from ..evidence.pairing import ANOTHER_NODE, QueryPairing
 from ..protocol import catalogue as cat
 from ..protocol import judgements as jd
 from ..protocol.errors import DecodeError
@@ -48,10 +50,6 @@ MINUTE_S = 60.0
 #: GET_ESC_ID delay histogram: bins of a quarter slot over twice the 64 ms bound, then one overflow bin
 DELAY_BIN_S = cat.ANSWER_SLOT_S / 4
 DELAY_BINS = 2 * round(cat.ANSWER_DELAY_MAX_S / DELAY_BIN_S)
-#: other nodes' GET_ESC_ID queries kept open (a flight controller asks once a second), and how long one stays open:
-#: the histogram's span, twice the 64 ms bound (an ESC need not answer other hosts, F6)
-FOREIGN_QUERIES = 8
-FOREIGN_ANSWER_S = DELAY_BINS * DELAY_BIN_S
 #: the host's send times kept per frame (id and bytes) until its echo comes back (the stream's repeat every 32 transfers)
 SENT_KEPT = 8
 #: how late the bench stamped the host's own frames (their echo's time minus the host's send): bins of a tenth of a
@@ -405,16 +403,18 @@ class AnswerWatch(Watch):
         self.delays = Histogram(DELAY_BIN_S, DELAY_BINS)
         self.query: float | None = None
         self.answered = True
+        self.maybe = False  # a reply that may answer the host's query or another node's came: it is not missing
         self.missing = 0
         self.error = max(self.cfg.error, self.cfg.own_error)
         #: the host's own stream may delay an answer (never blame the DUT for the bench's traffic): one tick's stream
         #: frames ahead of it on the bus widen the late side of R2's slot and of the 64 ms bound
         self.queueing = self.cfg.stream_frames * frame_bits(8) / self.cfg.bitrate
-        #: other nodes' GET_ESC_ID queries not answered yet (a flight controller's on the bus, R17): the ESC answers
-        #: them with the same broadcast reply, which must not be taken for the host's answer nor for one to no query
-        self.foreign: deque[float] = deque(maxlen=FOREIGN_QUERIES)
+        #: which query each reply answers: the host's, another node's (a flight controller's on the bus, R17, which the
+        #: ESC may answer too), both may (not judged), or none (the one owner of that decision)
+        self.pairing = QueryPairing(error=self.error, host=self.cfg.host_node)
         self.foreign_queries = 0
         self.foreign_answers = 0
+        self.ambiguous = 0
         #: the bus time (s) other frames took since the host's query: the answer may wait for each of them
         self.busy = 0.0
         #: the worst lag of the bench's stamps on the host's own frames since the query (:meth:`lagged`)
@@ -423,10 +423,10 @@ class AnswerWatch(Watch):
         self.bench_late = 0  # answers late only by the bench's own lag: not judged (not a trial)
         self.worst_lag = 0.0
 
-    def foreign_asked(self, t: float) -> None:
+    def foreign_asked(self, t: float, source: int = ANOTHER_NODE) -> None:
         """Another node's GET_ESC_ID query, heard at ``t``."""
         self.foreign_queries += 1
-        self.foreign.append(t)
+        self.pairing.query(t, source)
 
     def bus_taken(self, data_bytes: int) -> None:
         """A frame of another node (or the ESC's answer to another node) on the bus while the host's query waits."""
@@ -448,29 +448,34 @@ class AnswerWatch(Watch):
 
     def asked(self, t: float) -> None:
         self._judge()
-        if self.query is not None and not self.answered:
+        if self.query is not None and not self.answered and not self.maybe:
             self.trials += 1
             self.missing += 1
             bound = jd.answer_bound(t - self.query, error=self.error, rule="4.4.3-4")
             self.find(t, f"no answer to GET_ESC_ID within {(t - self.query) * 1000:.0f} ms: {bound}", ("4.4.3-4", "R19"))
-        self.query, self.answered, self.busy, self.lag = t, False, 0.0, 0.0
+        self.pairing.query(t, self.cfg.host_node)
+        self.query, self.answered, self.maybe, self.busy, self.lag = t, False, False, 0.0, 0.0
 
     def reply(self, frame: Frame, t: float) -> None:
-        foreign = self.foreign
-        while foreign and t - foreign[0] > FOREIGN_ANSWER_S:  # a query the ESC did not answer (F6 leaves it free)
-            foreign.popleft()
-        if foreign and (self.query is None or self.answered or foreign[0] < self.query):
-            foreign.popleft()  # the answer to the earliest query still open, another node's: not the host's to judge
-            self.foreign_answers += 1
-            self.bus_taken(len(frame.data))
-            return
-        if self.query is None or self.answered:
+        p = self.pairing.reply(t, frame.source)
+        host = self.cfg.host_node
+        if p.none:
             self.monitor.unexpected.find(t, f"a GET_ESC_ID reply that answers no query ({frame.fields})", ("R1",))
             return
-        self.answered = True
-        end = t - self.query
-        self.delays.add(end)
-        self.pending = (frame, t, end)  # judged once the frames stamped with it are read (tick): their lag counts
+        current = any(q.source == host and q.t == self.query for q in p.could)
+        if p.answers(host):
+            if current and not self.answered:
+                self.answered = True
+                end = t - self.query  # type: ignore[operator]
+                self.delays.add(end)
+                self.pending = (frame, t, end)  # judged once the frames stamped with it are read (tick): their lag counts
+            return  # (an answer to an earlier query of the host's, already found missing: nothing more)
+        if p.ambiguous(host):  # the host's answer or another node's: neither judged nor missing
+            self.ambiguous += 1
+            self.maybe = self.maybe or current
+        else:  # another node's answer: not the host's to judge
+            self.foreign_answers += 1
+        self.bus_taken(len(frame.data))
 
     def _judge(self) -> None:
         if self.pending is None:
@@ -499,7 +504,8 @@ class AnswerWatch(Watch):
     def statistics(self) -> dict[str, Any]:
         return {"answers": self.delays.n, "missing": self.missing, "delay": self.delays.to_json(),
                 "not_judged_late_by_the_bench": self.bench_late, "worst_bench_lag_excused_ms": round(self.worst_lag * 1000, 3),
-                "other_nodes_queries": self.foreign_queries, "answers_to_other_nodes": self.foreign_answers}
+                "other_nodes_queries": self.foreign_queries, "answers_to_other_nodes": self.foreign_answers,
+                "answers_to_the_host_or_another_node": self.ambiguous}
 
 
 # ------------------------------------------------------------------------------------------------ settings

@@ -7,9 +7,16 @@ fault ``report_interval_wrong``) is R9 to all four; the faultless ESC is R9 to n
 F3 likewise (``judgements.f3_step``): an ESC whose message transfer ids never move (``transfer_id_stuck``) is F3 to
 the suite's check (``conformance/test_s4_1_framing.py``), the bus rules and check-log, with the same words; the
 faultless ESC is F3 to none. The explorer's judge does not judge F3: its runner hears the same frames through the live
-bus rules (``evidence/live.LaneRules``, :class:`~ckesc.evidence.rules.BusRules`), whose F3 finding is the explorer's."""
+bus rules (``evidence/live.LaneRules``, :class:`~ckesc.evidence.rules.BusRules`), whose F3 finding is the explorer's.
+
+GET_ESC_ID pairing likewise (issue #35, :class:`~ckesc.evidence.pairing.QueryPairing`): with a flight controller's
+queries interleaved with the host's, each reply answers the same query to the suite's helper
+(``conformance.answers.esc_id_pairings``), the bus rules, check-log and the soak's AnswerWatch, with the host's own
+frames timed by their echo or without one, the ESC answering the flight controller or not (F6)."""
 
 from __future__ import annotations
+
+import json
 
 import can
 import pytest
@@ -23,6 +30,8 @@ from ckesc.explore.oracle import Oracle
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import Decoder, encode, frame_bits
 from ckesc.protocol.judgements import R9_GAPS, r9_judged, r9_mean
+from ckesc.soak.watches import Monitor, WatchConfig
+from conformance.answers import esc_id_pairings
 from conformance.test_s4_1_framing import counter_streams, counting_problems
 from conformance.wire import Heard
 
@@ -162,3 +171,105 @@ def test_one_trace_the_same_f3_finding_from_the_suite_the_bus_rules_and_check_lo
         "check-log": "F3" in _f3_check_log(ask, heard, tmp_path, capsys),
     }
     assert got == dict.fromkeys(got, expected)
+
+
+# ------------------------------------------------------------------------------------------ GET_ESC_ID pairing
+#: a flight controller (F6) querying GET_ESC_ID beside the host
+FC = 10
+#: (when, who) of each query: alone, 2 ms before the host's, 30 ms after it, 50 and 90 ms before it (node 5's slot is
+#: 10 ms: the ESC that answers both sends the flight controller's answer first)
+QUERIES = ((0.40, FC), (0.60, 0), (0.800, FC), (0.802, 0), (1.000, 0), (1.030, FC), (1.200, FC), (1.250, 0),
+           (1.400, FC), (1.490, 0))
+#: what each reply answers, as the host sees it: the ESC answering the flight controller too, or not (F6 leaves it free)
+PAIRED = {
+    "accept": ["another node", "host", "ambiguous", "host", "host", "another node", "another node", "host",
+               "another node", "host"],
+    # the host's answers: the second may be the flight controller's (2 ms before), the fourth too (50 ms before); the
+    # fifth cannot (90 ms before: only as a late answer, and one that is in time is there)
+    "ignore": ["host", "ambiguous", "host", "ambiguous", "host"],
+}
+
+
+def _pairing_trace(foreign_host: str, echo: bool) -> list[can.Message]:
+    """Everything on the bus while the host and the flight controller query an emulated ESC at node 5, as the host's
+    handle hears it: its own queries (``is_rx`` False) stamped at their end on the bus by their echo, or without an
+    echo at the host's send, one frame's time before."""
+    esc = EscModel(EscConfig(node_id=NODE, boot_time=BOOT_S, foreign_host=foreign_host))
+    esc.power_on(0.0)
+    out: list[can.Message] = []
+
+    def run(until: float) -> None:
+        while (d := esc.next_deadline()) is not None and d <= until:
+            out.extend(as_message(w) for w in esc.poll(d))
+        out.extend(as_message(w) for w in esc.poll(until))
+
+    def as_message(w, **kw) -> can.Message:
+        return can.Message(arbitration_id=w.arbitration_id, data=w.data, is_extended_id=True, timestamp=w.timestamp, **kw)
+
+    queries = []
+    for k, (t, source) in enumerate(QUERIES):
+        wire = encode("get_esc_id", {"option": 0}, source=source, transfer_id=k, layout="query")
+        q = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True, timestamp=t,
+                        is_rx=source != 0)
+        run(t)
+        esc.receive(q, t)
+        queries.append(q)
+    run(END_S)
+    heard, bus_free = [], 0.0  # the ESC's frames on the bus one at a time, stamped at their end
+    for m in sorted(out, key=lambda m: (m.timestamp, m.arbitration_id)):
+        bus_free = max(m.timestamp, bus_free) + frame_bits(len(m.data)) / cat.DEFAULT_BITRATE
+        m.timestamp = bus_free
+        heard.append(m)
+    for q in queries:
+        if not echo and not q.is_rx:
+            q.timestamp -= frame_bits(len(q.data)) / cat.DEFAULT_BITRATE
+        heard.append(q)
+    return sorted(heard, key=lambda m: m.timestamp)
+
+
+def _suite_pairing(heard) -> list[str]:
+    """The suite's helper (``conformance.answers``, which ``query_esc_id`` and the R17 tests ask)."""
+    decoder = Decoder()
+    paired = esc_id_pairings([decoder.decode(m) for m in heard], host=0, error=0.0)
+    return [p.outcome(0) for _, p in paired]
+
+
+def _bus_rules_pairing(heard) -> tuple[list[str], dict]:
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    for m in heard:
+        rules.feed_message(m)
+    return [p.outcome(0) for p in rules.queries.kept], rules.summary()["get_esc_id"]
+
+
+def _soak_pairing(heard) -> list[str]:
+    """The soak's AnswerWatch (the Monitor feeds it every frame, the host's own by its source)."""
+    monitor = Monitor(WatchConfig(node_id=NODE, host_node=0, intervals={}), t0=0.0)
+    for m in heard:
+        monitor.feed(m)
+    assert not [f.line() for f in monitor.findings if f.watch == monitor.answers.name]
+    return [p.outcome(0) for p in monitor.answers.pairing.kept]
+
+
+def _check_log_pairing(heard, tmp_path, capsys) -> dict:
+    out = tmp_path / "summary.json"
+    log = tmp_path / "trace.log"
+    log.write_text("".join(f"({m.timestamp:.6f}) can0 {m.arbitration_id:08X}#{bytes(m.data).hex().upper()}\n" for m in heard))
+    code = cli_main(["check-log", "--complete", "--json", str(out), str(log)])
+    assert code in (0, 1), capsys.readouterr().out
+    return json.loads(out.read_text())["get_esc_id"]
+
+
+@pytest.mark.parametrize("echo", [True, False], ids=["echo", "no echo"])
+@pytest.mark.parametrize("foreign_host", ["accept", "ignore"], ids=["answers the FC", "ignores the FC"])
+def test_one_trace_the_same_get_esc_id_pairing_from_the_suite_the_bus_rules_check_log_and_the_soak(
+        foreign_host, echo, tmp_path, capsys):
+    """A flight controller's GET_ESC_ID queries interleaved with the host's, an ESC answering both or the host's only:
+    each reply answers the same query (the host's, the flight controller's, either, or none) to the suite's helper,
+    the bus rules, check-log and the soak's AnswerWatch, with the host's own queries timed by their echo or not."""
+    heard = _pairing_trace(foreign_host, echo)
+    expected = PAIRED[foreign_host]
+    rules, tally = _bus_rules_pairing(heard)
+    got = {"suite": _suite_pairing(heard), "bus rules": rules, "soak": _soak_pairing(heard)}
+    assert got == dict.fromkeys(got, expected)
+    counts = {k: expected.count(k) for k in ("host", "another node", "ambiguous", "none")}
+    assert tally == _check_log_pairing(heard, tmp_path, capsys) == {"queries": len(QUERIES), **counts}

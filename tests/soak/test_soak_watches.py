@@ -194,25 +194,49 @@ def test_frames_the_esc_should_not_send():
     assert [f.rules for f in found] == [("F2",), ("R1",)], [f.line() for f in found]
 
 
+FC = 10
+
+
+def fc_query(t: float, tid: int) -> WireFrame:
+    return encode("get_esc_id", {"option": 0}, source=FC, transfer_id=tid, layout="query", timestamp=t)
+
+
+def esc_reply(t: float, tid: int) -> WireFrame:
+    return encode("get_esc_id", {"node_id": NODE, "throttle_channel": 1}, source=NODE, transfer_id=tid,
+                  layout="reply", timestamp=t)
+
+
 def test_other_nodes_queries_and_their_answers_are_not_the_hosts():
     """A flight controller at node 10 asks GET_ESC_ID too (R17's foreign traffic): the ESC's replies to it answer no
-    query of the host's, yet they are no R1 finding, nor the host's answer (one asked 2 ms before the host's is
-    answered first); a reply long after every query still is."""
-    fc = 10
-
-    def query(t: float, tid: int) -> WireFrame:
-        return encode("get_esc_id", {"option": 0}, source=fc, transfer_id=tid, layout="query", timestamp=t)
-
-    def reply(t: float, tid: int) -> WireFrame:
-        return encode("get_esc_id", {"node_id": NODE, "throttle_channel": 1}, source=NODE, transfer_id=tid,
-                      layout="reply", timestamp=t)
-
-    extra = [f for s in range(10) for f in (query(s + 0.633, s), reply(s + 0.6355, s))]
-    extra += [query(5.003, 20), reply(5.0055, 20)]  # just before the host's query at 5.005 (answered at 5.0075)
+    query of the host's, yet they are no R1 finding, nor the host's answer. One asked 2 ms before the host's is
+    answered first: that reply may answer either query (not judged), the next one answers the host's (each query is
+    answered once, in order); a reply long after every query still answers none."""
+    extra = [f for s in range(10) for f in (fc_query(s + 0.633, s), esc_reply(s + 0.6355, s))]
+    extra += [fc_query(5.003, 20), esc_reply(5.0055, 20)]  # just before the host's query at 5.005 (answered at 5.0075)
     m = watch(Esc(extra=extra), 10.0)
     assert [f.line() for f in m.findings] == []
-    assert m.answers.foreign_queries == 11 and m.answers.foreign_answers == 11 and m.answers.trials == 10
-    found = only(watch(Esc(extra=[query(3.2, 1), reply(3.5, 1)]), 10.0), "unexpected frames")
+    assert m.answers.foreign_queries == 11 and m.answers.foreign_answers == 10 and m.answers.trials == 10
+    assert m.answers.ambiguous == 1
+    found = only(watch(Esc(extra=[fc_query(3.2, 1), esc_reply(3.5, 1)]), 10.0), "unexpected frames")
+    assert [f.rules for f in found] == [("R1",)]
+
+
+def test_a_flight_controllers_query_the_esc_does_not_answer_does_not_take_the_hosts_answer():
+    """The ESC need not answer another host's query (F6): one asked 2 ms before the host's and left unanswered does
+    not take the host's answer, which then may answer either (not judged), and the host's query is not missing (the
+    first-in-first-out reading gave the reply to the flight controller and found the host's query unanswered)."""
+    extra = [fc_query(s + 0.003, s) for s in range(10)]
+    m = watch(Esc(extra=extra), 10.0)
+    assert [f.line() for f in m.findings] == []
+    assert m.answers.missing == 0 and m.answers.ambiguous == 10 and m.answers.foreign_answers == 0
+
+
+def test_a_second_reply_to_a_flight_controllers_query_answers_none():
+    """Each query is answered once: a second reply 1 ms after the ESC's answer to the flight controller's query
+    answers none (R1), though the query came within 64 ms of it (the reading "any other node's query in the 64 ms
+    before" let it pass)."""
+    extra = [fc_query(3.5, 1), esc_reply(3.5025, 1), esc_reply(3.5035, 2)]
+    found = only(watch(Esc(extra=extra), 10.0), "unexpected frames")
     assert [f.rules for f in found] == [("R1",)]
 
 
