@@ -22,6 +22,7 @@ else as the malformed frame it is.
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -62,6 +63,7 @@ class Malformed:
     type_id: int
     transfer_id: int | None
     step: int | None
+    destination: int | None = None  # a request's (F4: its answer would come from that node)
 
 
 @dataclass
@@ -146,7 +148,7 @@ class Oracle:
         i = parse_can_id(msg.arbitration_id)
         data = bytes(msg.data)
         tid = data[-1] & 0x1F if data and cat.spec(name).has_tail else None
-        self.malformed.append(Malformed(t, name, form, what, i.kind, i.type_id, tid, step))
+        self.malformed.append(Malformed(t, name, form, what, i.kind, i.type_id, tid, step, i.destination))
         self._note(t, f"malformed {name}", step)
 
     def power(self, on: bool, t: float, step: int | None = None) -> None:
@@ -173,6 +175,18 @@ class Oracle:
         self.advance(t)
 
     # ---------------------------------------------------------------- what it predicts
+    def state_at(self, t: float) -> State:
+        """The state the model's ESC is in at lane time ``t``."""
+        times = [s.t for s in self.states]
+        return self.states[max(0, bisect.bisect_right(times, t) - 1)]
+
+    def max_load(self, lo: float, hi: float) -> float:
+        """The highest foreign load (R18's share) on the bus between lane times ``lo`` and ``hi``, or in the stretch
+        before (a load's queue outlasts it a little)."""
+        times = [s.t for s in self.states]
+        first = max(0, bisect.bisect_right(times, lo) - 2)
+        return max((s.load for s in self.states[first:bisect.bisect_right(times, hi)]), default=0.0)
+
     def _keep(self, wires) -> None:
         for w in wires:
             try:

@@ -22,8 +22,8 @@ violation, an explorer finding) from it; it never writes a tolerance of its own.
 * F3 (:func:`f3_step`, :func:`f3_holds`): consecutive frames of one counter (a sender's message type) carry transfer ids +1 modulo 32;
 * R13 read-back (:func:`r13_read_back`): the persisted settings (the catalogue's ``PERSISTED_SETTINGS``) read back,
   at once and after a power cycle, are what was written and saved;
-* F4 (:func:`f4_mismatches`, :func:`f4_pairs`): a response keeps its request's service id and transfer id, has
-  request=0, goes to the requester, comes from the node asked;
+* F4 (:func:`f4_mismatches`, :func:`f4_pairs`, :func:`f4_answers`): a response keeps its request's service id and
+  transfer id, has request=0, goes to the requester, comes from the node asked; it answers the request it carries;
 * R18 (:func:`r18_queueing_s`, :func:`r18_mean`, :func:`r18_gap`, :func:`r18_judged`): under foreign load of up to
   half the bus, R9 with each gap widened by the queueing the load can put ahead of a lowest-priority frame; above
   half load, OBSERVE.
@@ -168,6 +168,13 @@ def r9a_limit_s(interval: float, old: float | None = None, *, jitter: float = 0.
 def r9a_first(delay: float, limit: float, *, error: float = 0.0, what: str = "the first report") -> Judgement:
     """R9a: the first report ``delay`` after a restart is within ``limit`` (:func:`r9a_limit_s`)."""
     return Judgement("R9a", delay, limit, "<=", error, f"{what} {delay * 1000:.3f} ms after the restart")
+
+
+def report_stamp_error_s(*, error: float, bitrate: int, queueing: float = 0.0) -> float:
+    """How far a report's bus stamp may stray from when the ESC's schedule put it, besides its declared jitter: the
+    scheduling tolerance, twice the bench's ``error``, one longest frame's bus access at ``bitrate`` (a stamp is the
+    frame's end) and the ``queueing`` a foreign load can put ahead of it (R18, :func:`r18_queueing_s`)."""
+    return SCHEDULING_TOLERANCE_S + 2 * error + frame_bits(8) / bitrate + queueing
 
 
 # ------------------------------------------------------------------------------------------ R8
@@ -352,6 +359,22 @@ def asked_node(name: str, destination: int) -> int | None:
     """The node an answer to request ``name`` sent to ``destination`` must come from (None: any, Set ID answers from
     its new id, R11)."""
     return None if name in cat.PSEUDO_BROADCAST else destination
+
+
+def f4_answers(frame: Frame | Addressed, requests: Sequence[tuple[int, int | None, int, int | None]]) -> int | None:
+    """F4: which of ``requests`` (each ``(service, transfer id, requester, node asked)``: the requests still open when
+    the response ``frame`` came, in the order sent) it answers: the one whose service id, transfer id and requester
+    it carries, from the node asked; else the first it is off from in at most :data:`F4_PAIRING_SLACK` fields (its
+    answer, failed with the field named). None: it answers none of them. Never by order alone: an answer another
+    request carries is not the open request's before it."""
+    best: tuple[int, int] | None = None
+    for i, (service, transfer_id, requester, asked) in enumerate(requests):
+        if service != frame.type_id:
+            continue
+        off = len(f4_mismatches(frame, service=service, transfer_id=transfer_id, requester=requester, asked=asked))
+        if best is None or off < best[0]:
+            best = (off, i)
+    return best[1] if best is not None and best[0] <= F4_PAIRING_SLACK else None
 
 
 # ------------------------------------------------------------------------------------------ R18 a loaded bus

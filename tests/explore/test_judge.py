@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import can
 
-from ckesc.explore.judge import _answer_of
+from ckesc.explore.answers import Ask, pair
 from ckesc.protocol.frame import Decoder, encode
 
 
@@ -24,17 +24,34 @@ def test_an_answer_an_earlier_request_got_is_not_this_one_s():
         (encode("set_id", first, kind="response", source=2, destination=0, transfer_id=5), 0.004),
         (encode("set_id", second, source=0, destination=2, transfer_id=5), 0.010),
         (encode("set_id", second, kind="response", source=1, destination=0, transfer_id=5), 0.014))
-    dut = [ans1, ans2]
-    look_back = req2.timestamp - 0.009
-    assert _answer_of(dut, req2, 0.1, since=look_back) is ans1  # the mistake the taken set prevents
-    taken = {id(_answer_of(dut, req1, 0.1))}
-    assert _answer_of(dut, req2, 0.1, since=look_back, taken=taken) is ans2
+    asks = [Ask.of(req1), Ask.of(req2)]
+    assert pair(asks, [ans1, ans2], before=0.009, after=0.1) == [ans1, ans2]
+    assert pair(asks[1:], [ans1, ans2], before=0.009, after=0.1) == [ans1]  # (the mistake the pairing prevents)
+
+
+def test_an_answer_answers_the_request_whose_transfer_id_it_carries_not_the_one_before():
+    """F4 (found against the clean-room ESC in real time: 'set_id {node_id=1, throttle_channel=1} not answered',
+    SHALL): Set ID to an illegal node id 0 (R10: whether it is answered is OBSERVE), then a legal one 10 ms later. An
+    ESC that does not answer the first (``rejected_answer`` none, a conforming variant) answers the second with its
+    transfer id; the judge gave that answer to the first request, by order, and found the second unanswered."""
+    host = [("set_id", {"node_id": 0, "throttle_channel": 1}, 1, 0.5),
+            ("set_id", {"node_id": 1, "throttle_channel": 1}, 1, 0.51)]
+    for choice in ("current", "none", "echo"):
+        found, frames = _judged_against({"rejected_answer": choice}, host, 1.5)
+        answered = [f.transfer_id for f in frames if f.name == "set_id"]
+        assert answered == ([1] if choice == "none" else [0, 1]), choice
+        assert [f.text() for f in found] == [], choice
+    # the second request unanswered is still found (and the first's answer, transfer id 0, is not taken for it)
+    found, _ = _judged_against({"rejected_answer": "current"}, host, 1.5,
+                               keep=lambda f: f.name != "set_id" or f.transfer_id == 0)
+    assert [(f.requirements[0], f.subject) for f in found] == [("4.4.18-1", "set_id not answered")]
 
 
 def _slot_case(answer_at: float, node: int = 17, error: float = 0.002):
     """GET_ESC_ID at t=0 to an ESC the model has at ``node`` (moved there by Set ID); the DUT's reply ending at
     ``answer_at`` and the model's ending at its slot's start plus the frame's time."""
-    from ckesc.explore.judge import Params, _slot
+    from ckesc.explore.answers import _slot
+    from ckesc.explore.judge import Params
     from ckesc.protocol import catalogue as cat
     from ckesc.protocol.frame import frame_bits
 
@@ -60,9 +77,9 @@ def test_an_answer_before_the_current_node_s_slot_is_a_finding():
     assert _slot_case(0.034 + frame_s - 0.0001, error=0.0)[0] != []  # the simulated lane: exact
 
 
-def _judged_against(config: dict, host: list[tuple[str, dict, int | None, float]], until: float):
+def _judged_against(config: dict, host: list[tuple[str, dict, int | None, float]], until: float, keep=None):
     """The judge's findings on an emulated ESC with ``config`` (a conforming variant) given ``host``'s frames
-    (name, fields, destination, time), the oracle fed the same."""
+    (name, fields, destination, time), the oracle fed the same; ``keep``: which of the ESC's frames the DUT's are."""
     from ckesc.emulator.model import EscConfig, EscModel, factory_nvm
     from ckesc.explore.judge import Params, judge
     from ckesc.explore.oracle import SETTING_KEYS, Oracle
@@ -89,7 +106,7 @@ def _judged_against(config: dict, host: list[tuple[str, dict, int | None, float]
     run_to(until)
     oracle.finish(until)
     ends = [w._replace(timestamp=w.timestamp + frame_bits(len(w.data)) / esc.state.bitrate) for w in sent]  # ends, as on a bus
-    frames = [decoder.decode(w) for w in ends]
+    frames = [f for f in (decoder.decode(w) for w in ends) if keep is None or keep(f)]
     return judge(oracle, frames, 0.0, until, Params()), frames
 
 
@@ -117,16 +134,16 @@ def test_an_unknown_requirement_id_is_an_error_not_a_dropped_finding(monkeypatch
     and a finding citing one raises: before, it was read as OBSERVE and the finding silently dropped."""
     import pytest
 
-    from ckesc.explore import judge
+    from ckesc.explore import answers, judge
 
-    judge._check_tables()  # the module's own tables pass
-    monkeypatch.setitem(judge.ANSWER_REQ, "set_led", "4.4.20-Tx")
+    answers.check_tables()  # the module's own tables pass
+    monkeypatch.setitem(answers.ANSWER_REQ, "set_led", "4.4.20-Tx")
     with pytest.raises(KeyError, match="4.4.20-Tx"):
-        judge._check_tables()
-    monkeypatch.setitem(judge.ANSWER_REQ, "set_led", "4.4.20-T")
-    monkeypatch.delitem(judge.ANSWER_REQ, "get_rec")
+        answers.check_tables()
+    monkeypatch.setitem(answers.ANSWER_REQ, "set_led", "4.4.20-T")
+    monkeypatch.delitem(answers.ANSWER_REQ, "get_rec")
     with pytest.raises(KeyError, match="get_rec"):
-        judge._check_tables()
+        answers.check_tables()
     with pytest.raises(KeyError, match="R9x"):
         judge.Finding("interval", ["R9x"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0)
     assert judge.Finding("interval", ["R9"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0).strength == "SHALL"

@@ -1,0 +1,66 @@
+"""What the explorer's judge finds (:class:`Finding`), the bench's limits it judges with (:class:`Params`) and the
+report streams it names (:func:`stream_of`)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from ..protocol import catalogue as cat
+from ..protocol.frame import Frame
+from ..protocol.ids import Kind
+from ..protocol.requirements import requirement
+
+
+@dataclass
+class Finding:
+    kind: str  # answer | stream | interval | status | reset | bus_rule
+    requirements: list[str]
+    what: str
+    dut: str
+    model: str
+    at: float  # lane seconds from the program's start
+    step: int | None = None  # the program step it follows (index), None: before any
+    strength: str = field(default="")
+    subject: str = ""  # what disagrees, without the numbers of this occurrence (the problem's key)
+
+    def __post_init__(self) -> None:
+        if not self.strength:
+            strengths = [requirement(r).strength for r in self.requirements]  # an unknown id raises: never dropped
+            self.strength = "SHALL" if "SHALL" in strengths else ("READING" if "READING" in strengths else "OBSERVE")
+
+    @property
+    def key(self) -> str:
+        """The same problem, whatever program shows it (and however it got there): kind and subject."""
+        return f"{self.kind}|{self.subject or self.what}"
+
+    def to_json(self) -> dict[str, Any]:
+        return {**asdict(self), "key": self.key}
+
+    def text(self) -> str:
+        where = f"after step {self.step + 1}" if self.step is not None else "before the first step"
+        return (f"[{' '.join(self.requirements)} {self.strength}] {self.what} ({where}, t={self.at:.3f} s)\n"
+                f"  DUT:   {self.dut}\n  model: {self.model}")
+
+
+@dataclass
+class Params:
+    error: float = 0.0  # the bench's timing error (s)
+    own_error: float = 0.0  # the error of the host's own frames' times (the request an answer's delay counts from)
+    jitter: float = 0.0  # the DUT's declared report jitter (profile jitter_s)
+    boot_s: float = 0.5  # power-on to first report (profile)
+    bitrate: int = cat.DEFAULT_BITRATE
+    host_node: int = 0
+
+
+_EXP = frozenset(cat.EXP_REPORT_FRAMES)
+#: the report streams judged: MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test
+STREAMS = (*cat.REPORT_FRAMES, "exp", "can_test")
+
+
+def stream_of(f: Frame) -> str | None:
+    """The report stream (:data:`STREAMS`) an ESC's frame belongs to, None: not a report."""
+    n = f.name
+    if n in (*cat.REPORT_FRAMES, "can_test"):
+        return n if f.kind is Kind.MESSAGE else None
+    return "exp" if n in _EXP else None
