@@ -3,7 +3,11 @@
 Which frame answers which request is F4's (:func:`~ckesc.protocol.judgements.f4_answers`): a response answers the
 open request whose service id, transfer id and requester it carries (Set ID: from any node, R11), never the one
 before it because it came first; a broadcast's answer (MSG Control, GET_ESC_ID: a message, which names no request)
-is the first message of its type within the query's answer time. Paired so, for the DUT's frames and the model's:
+is the first message of its type within the query's answer time. Where another node queries GET_ESC_ID too (a
+flight controller, F6, with ``--foreign-traffic``), which query a reply answers is the one owner's
+(:class:`~ckesc.evidence.pairing.QueryPairing`, as the suite, the bus rules and the soak take it): a reply that answers
+another node's query is not the host's, and a host query whose reply may answer either is not judged. Paired so, for
+the DUT's frames and the model's:
 
 - every request the model answers must be answered (4.1.1-2; R2 for MSG Control, R1 for GET_ESC_ID), with the
   model's payload: read-backs (214 read, 242, 241 option 2's counters, GET_ESC_ID) and the answers to accepted
@@ -22,6 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Iterable, Sequence
 
+from ..evidence.pairing import HOST, NONE, QueryPairing
 from ..protocol import catalogue as cat
 from ..protocol.frame import Frame, frame_bits
 from ..protocol.ids import Kind
@@ -120,17 +125,50 @@ def _asks(req: Frame) -> bool:
 
 
 # ------------------------------------------------------------------------------------------ answers
-def answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, slack: float) -> list[Finding]:
+def answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, slack: float,
+            queries: Sequence[Frame] = ()) -> list[Finding]:
     """The findings on what the DUT answered (the module's list). ``dut``: the ESC's frames in time order; ``slack``:
-    how much earlier than its request an answer may be stamped (a real bench's late echo)."""
+    how much earlier than its request an answer may be stamped (a real bench's late echo); ``queries``: other nodes'
+    GET_ESC_ID queries heard meanwhile (a flight controller's)."""
     host = [(req, step) for req, step in oracle.host if _asks(req)]
     malformed = [m for m in oracle.malformed if m.kind is Kind.REQUEST]
+    unjudged: set[int] = set()
+    if queries:
+        dut, unjudged = _the_hosts_replies([req for req, _ in host if req.name == "get_esc_id"], queries, dut, p)
     asks = [Ask.of(req) for req, _ in host]
     got = pair(asks + [Ask.malformed(m, p.host_node) for m in malformed], dut, before=slack, after=ANSWER_WAIT_S + 2 * p.error)
     want = pair(asks, [f for f in oracle.out if f.source != p.host_node], before=0.0, after=ANSWER_WAIT_S)
+    for i, (req, _) in enumerate(host):
+        if id(req) in unjudged:  # its reply may answer another node's query as well: which, cannot be told
+            got[i] = want[i] = None
     out = _answered_as_modelled(oracle, host, got, want, t0, p)
     paired = {id(f) for f in got[:len(host)] if f is not None}
     return out + _r17_answers(oracle, dut, t0, p, slack, paired, dict(zip(map(id, malformed), got[len(host):])))
+
+
+def _the_hosts_replies(asked: Sequence[Frame], queries: Sequence[Frame], dut: list[Frame],
+                       p: Params) -> tuple[list[Frame], set[int]]:
+    """``dut`` less the GET_ESC_ID replies that answer another node's query than the host's (``asked``), or may
+    (:class:`~ckesc.evidence.pairing.QueryPairing`: the decision every mode takes), and the ids of the host's
+    queries such an ambiguous reply may answer: they are not judged."""
+    pairing = QueryPairing(error=max(p.error, p.own_error), host=p.host_node)
+    events = sorted([(q.timestamp, 0, q) for q in (*asked, *queries)]
+                    + [(f.timestamp, 1, f) for f in dut if f.name == "get_esc_id" and f.layout is not None
+                       and f.layout.name == "reply"], key=lambda e: (e[0], e[1]))
+    of_query: dict[int, int] = {}
+    others: set[int] = set()
+    unjudged: set[int] = set()
+    for t, is_reply, f in events:
+        if not is_reply:
+            of_query[pairing.query(t, f.source).seq] = id(f)
+            continue
+        paired = pairing.reply(t, f.source)
+        outcome = paired.outcome(p.host_node)
+        if outcome in (HOST, NONE):
+            continue
+        others.add(id(f))
+        unjudged.update(of_query[q.seq] for q in paired.could if q.source == p.host_node)
+    return [f for f in dut if id(f) not in others], unjudged
 
 
 def _answered(req: Frame) -> bool:

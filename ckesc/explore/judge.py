@@ -9,7 +9,8 @@ Observations compared (each a :class:`Finding` when they differ):
   power-up's boot time); which MSG_EXP frames come is OBSERVE (R9-exp), only that some do.
 - **intervals** (R9): from the gap to the third report after the event on (R9a: the gaps before are OBSERVE), the
   mean gap of MSG1/2/3 against the model's interval, held to R9's tolerance (1 ms plus twice the bench's error, here
-  with a frame's bus access, over the gaps; the DUT's jitter never widens the mean).
+  with a frame's bus access, and twice the DUT's declared jitter, over the gaps; a mean whose bound exceeds a quarter
+  of the interval is not judged).
 - **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only), 13 and 8 against the model's MSG1s within
   one interval and a report stamp's error (:func:`~ckesc.protocol.judgements.report_stamp_error_s`; R8's window for
   bit 13: the flag may come up to one MSG1 interval after the model's).
@@ -72,7 +73,11 @@ _MIN_GAPS = 3
 def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[Finding]:
     """Every disagreement between the DUT's frames (decoded, from the ESC, bus timestamps) and the model's."""
     dut = sorted((f for f in dut if f.source != p.host_node and f.timestamp is not None), key=lambda f: f.timestamp)
-    out = answers(oracle, dut, t0, p, _ECHO_SLACK_S + 2 * p.error if p.error else 0.0)
+    # other nodes' GET_ESC_ID queries (a flight controller's, F6): the ESC answers them too, they are none of its frames
+    queries = [f for f in dut if f.name == "get_esc_id" and f.layout is not None and f.layout.name == "query"]
+    if queries:
+        dut = [f for f in dut if f.name != "get_esc_id" or f.layout is None or f.layout.name != "query"]
+    out = answers(oracle, dut, t0, p, _ECHO_SLACK_S + 2 * p.error if p.error else 0.0, queries)
     out += _streams(oracle, dut, t0, t_end, p)
     out += _status(oracle, dut, t0, p)
     out += _r17_restarts(oracle, dut, t0, p)
@@ -226,9 +231,9 @@ def _interval_finding(state: State, stream: str, stamps: list[float], end: float
     if len(seen) <= _MIN_GAPS:
         return []
     if share:
-        j = r18_mean(seen, iv, share=share, bitrate=state.bitrate, error=p.error + frame_s, what=stream)
+        j = r18_mean(seen, iv, share=share, bitrate=state.bitrate, error=p.error + frame_s, jitter=p.jitter, what=stream)
     else:
-        j = r9_mean(seen, iv, error=p.error + frame_s)
+        j = r9_mean(seen, iv, error=p.error + frame_s, jitter=p.jitter)
     if j is None or j.ok:
         return []
     gaps = len(seen) - 1

@@ -186,7 +186,7 @@ def test_explore_s_shrunk_programs_show_the_defects_and_nothing_on_the_correct_e
                     if findings and all(f.kind == "interval" or (f.kind == "bus_rule" and f.requirements[:1] == ["R9"])
                                         for f in findings):
                         # report timing alone: the ESC is a Python process on the host's loaded cores, and a stall
-                        # moves a mean of a few gaps (R9 never widens the mean). A false finding of the judge
+                        # moves a mean of a few gaps beyond its two ends' jitter (R9). A false finding of the judge
                         # comes back on the same program; the machine's stall does not
                         warnings.warn(f"{name} on the correct ESC at load average {os.getloadavg()[0]:.1f}: "
                                       + "; ".join(f.text().splitlines()[0] for f in findings) + ": run again",
