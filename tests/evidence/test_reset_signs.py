@@ -1,0 +1,100 @@
+"""The one reset bookkeeping (R19, R17: :class:`ckesc.evidence.resets.ResetSigns`) that the bus rules, the soak and the
+R17 tests (``conformance/resets.py``) keep. Where their definitions disagreed (issue #35), these say which reading
+won: a transfer id that skips without a gap longer than a restart may take (R9a's limit) is F3's, not a reset; the
+power-up count is a u16, and 65535 then 0 is a power-up."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import pytest
+
+from ckesc.evidence.resets import POWER_UPS, RUN_TIME, ResetSigns
+from ckesc.protocol import judgements as jd
+from conformance.resets import reset_signs
+
+MSG1 = 0.020
+
+
+def reports(signs: ResetSigns, pairs, interval: float = MSG1) -> list:
+    """Each (time, transfer id) of MSG1 fed: (the sign or None, whether its counter started again)."""
+    return [(signs.report("msg1", t, tid, interval), signs.restarted) for t, tid in pairs]
+
+
+def test_a_counter_that_counts_on_or_skips_lost_reports_did_not_restart():
+    signs = ResetSigns()
+    assert reports(signs, [(0.0, 30), (0.02, 31), (0.04, 0), (0.10, 3)]) == [(None, False)] * 4  # a wrap; two lost
+
+
+def test_a_counter_that_starts_again_restarted_and_is_a_reset_only_after_a_gap_beyond_r9a():
+    signs = ResetSigns()
+    (_, _), (within, restarted) = reports(signs, [(0.0, 7), (0.02, 0)])
+    assert within is None and restarted  # R9a's first report after a restart; no gap, so no reset
+    (sign, restarted), = reports(signs, [(0.30, 5)])
+    assert restarted and sign is not None and sign.rule == "R19" and "msg1 stopped for 280.0 ms" in sign.text
+
+
+def test_the_bench_error_and_the_dut_jitter_widen_the_restart_limit_and_judge_false_only_keeps():
+    limit = jd.r9a_limit_s(MSG1)
+    assert reports(ResetSigns(), [(0.0, 7), (limit + 0.002, 0)])[1][0] is not None
+    assert reports(ResetSigns(error=0.001, jitter=0.001), [(0.0, 7), (limit + 0.002, 0)])[1][0] is None
+    signs = ResetSigns()
+    assert signs.report("msg1", 0.0, 7, MSG1) is None and signs.report("msg1", 0.3, 0, MSG1, judge=False) is None
+    assert signs.restarted and signs.report("msg1", 0.32, 1, MSG1) is None  # compared with the one kept
+
+
+def test_241_counters_with_the_bench_error_given_once():
+    signs = ResetSigns(error=0.5)
+    assert signs.counter(RUN_TIME, 10, 0.0) is None
+    assert signs.counter(RUN_TIME, 17, 5.0) is None  # 5 s + 1 count + 2 x 0.5 s: both readings' stamps
+    assert ResetSigns().counter(RUN_TIME, 10, 0.0) is None
+    assert signs.counter(RUN_TIME, 3, 6.0).text.startswith("the run time (241 option 1) went back")
+    assert signs.counter(POWER_UPS, 7, 0.0, key=1) is None and signs.counter(POWER_UPS, 7, 1.0, key=2) is None
+    assert signs.counter(POWER_UPS, 8, 2.0, key=2) is not None and signs.last(POWER_UPS, 1).value == 7  # per key
+    with pytest.raises(ValueError, match="not one a reset shows in"):
+        signs.counter("stops", 1, 0.0)
+        signs.counter("stops", 2, 1.0)
+
+
+# ------------------------------------------------------------------------------------------ the R17 tests' reading
+def dut(error: float = 0.0, jitter: float = 0.0):
+    return SimpleNamespace(lane=SimpleNamespace(timing_error=error), profile=SimpleNamespace(jitter_s=jitter))
+
+
+def msg1(*pairs):
+    return [SimpleNamespace(name="msg1", timestamp=t, transfer_id=tid) for t, tid in pairs]
+
+
+def test_r17_a_transfer_id_that_skips_on_time_is_no_reset():
+    """The R17 tests called any transfer id jump a reset; R19's reading (and the bus rules', the soak's) wants a gap
+    longer than a restart may take with it. A skip on time is F3's (the bus rules judge it in every test)."""
+    assert reset_signs(dut(), msg1((0.0, 5), (0.02, 6), (0.04, 9), (0.06, 10)), MSG1) == []
+    assert reset_signs(dut(), msg1((0.0, 5), (0.02, 6), (0.5, 7)), MSG1) == []  # a stall counting on: R9's
+    [sign] = reset_signs(dut(), msg1((0.0, 5), (0.02, 6), (0.3, 0)), MSG1)
+    assert "came back with transfer id 0 after 6" in sign and sign.endswith("the ESC reset")
+
+
+def test_r17_the_power_up_count_wraps_and_a_wrap_is_a_power_up():
+    """241's power-up count is a u16: 65535 then 0 is one power-up (a reading that asks whether the count grew,
+    after > before, misses it), and an unmoved count across the wrap's width is none."""
+    assert reset_signs(dut(), [], MSG1, ups=(0xFFFF, 0xFFFF)) == []
+    [sign] = reset_signs(dut(), [], MSG1, ups=(0xFFFF, 0))
+    assert "went from 65535 to 0" in sign
+    assert reset_signs(dut(), [], MSG1, ups=(None, 3)) == []  # not read before: nothing to compare
+
+
+def test_r17_foreign_traffic_on_an_esc_whose_transfer_ids_are_stuck_fails_f3_not_as_a_reset(tmp_path):
+    """End to end, the reading that lost: on transfer_id_stuck (an F3 fault: reports on time, their transfer ids never
+    counting) the foreign-traffic test said "MSG1 stopped for 20.0 ms and went on with transfer id 0 after 0 (a
+    reset)", an R17 failure for F3's defect. Now its own check holds and the bus rules fail it on F3."""
+    test = "conformance/test_robustness_r17_foreign.py::test_foreign_traffic_is_ignored"
+    done = subprocess.run([sys.executable, "-m", "ckesc", "run", "-q", "--trace-format", "none", "--reports", str(tmp_path),
+                           "--emulator-faults", "transfer_id_stuck", test], capture_output=True, text=True, timeout=600)
+    results = tmp_path / "latest" / "results.json"
+    assert results.is_file(), done.stdout[-3000:] + done.stderr[-3000:]
+    [r] = json.loads(results.read_text())["results"]
+    assert r["outcome"] == "FAIL" and "F3" in r["bus_rules"], r
+    assert "reset" not in r["message"], r["message"]
