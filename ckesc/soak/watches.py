@@ -28,6 +28,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
+from ..evidence.resets import POWER_UPS, RUN_TIME, ResetSigns
 from ..protocol import catalogue as cat
 from ..protocol import judgements as jd
 from ..protocol.errors import DecodeError
@@ -190,67 +191,101 @@ class ResetWatch(Watch):
 
     def __init__(self, monitor: Monitor) -> None:
         super().__init__(monitor)
-        self.power_ups: int | None = None
-        self.run_time: tuple[int, float] | None = None  # (value, answer time)
-        self.last: dict[str, tuple[float, int | None]] = {}  # report -> (time, transfer id)
-        self.reads = {"power_ups": 0, "run_time": 0}
+        #: the reset bookkeeping the bus rules keep too: the last report of each type, the last 241 readings
+        self.signs = ResetSigns(error=self.cfg.error, jitter=self.cfg.jitter)
+        self.reads = {POWER_UPS: 0, RUN_TIME: 0}
 
-    def report(self, name: str, t: float, tid: int | None) -> None:
-        prev = self.last.get(name)
-        self.last[name] = (t, tid)
-        if prev is None or tid is None or prev[1] is None:
-            return
-        interval = self.cfg.intervals.get(name)
-        if interval is None or jd.f3_holds(prev[1], tid):  # counting on: no restart (the hot path, as F3's)
-            return
-        sign = jd.r19_report_restart(t - prev[0], interval, jd.f3_step(prev[1], tid), error=self.cfg.error,
-                                     jitter=self.cfg.jitter, what=name)
+    def report(self, name: str, t: float, tid: int | None) -> bool:
+        """A report of the ESC: whether its counter started again (the first report after a restart, R9a)."""
+        signs = self.signs
+        sign = signs.report(name, t, tid, self.cfg.intervals.get(name))
         if sign is not None:
             self.find(t, sign.text, (sign.rule, "R17"))
+        return signs.restarted
 
     def maintenance(self, frame: Frame, t: float) -> None:
         f = frame.fields
-        if "power_ups" in f:
-            self.reads["power_ups"] += 1
-            self.trials += 1
-            if self.power_ups is not None and (sign := jd.r19_power_ups(self.power_ups, f["power_ups"])) is not None:
-                self.find(t, sign.text, (sign.rule, "R17"))
-            self.power_ups = f["power_ups"]
-        elif "run_time" in f:
-            self.reads["run_time"] += 1
-            self.trials += 1
-            if self.run_time is not None:
-                before, when = self.run_time
-                sign = jd.r19_run_time(before, f["run_time"], t - when, error=2 * self.cfg.error)
-                if sign is not None:
+        for counter in (POWER_UPS, RUN_TIME):
+            if counter in f:
+                self.reads[counter] += 1
+                self.trials += 1
+                if (sign := self.signs.counter(counter, f[counter], t)) is not None:
                     self.find(t, sign.text, (sign.rule, "R17"))
-            self.run_time = (f["run_time"], t)
+                return
 
     def statistics(self) -> dict[str, Any]:
-        return {"reads_241": self.reads, "power_ups": self.power_ups,
-                "run_time_s": self.run_time[0] if self.run_time else None}
+        ups, run_time = self.signs.last(POWER_UPS), self.signs.last(RUN_TIME)
+        return {"reads_241": self.reads, "power_ups": ups.value if ups else None,
+                "run_time_s": run_time.value if run_time else None}
 
 
 # ------------------------------------------------------------------------------------------------ R9
 class _Span:
-    """One minute's report starts as :func:`~ckesc.protocol.judgements.r9_mean` reads them (the first, the last, how
-    many), without keeping them."""
+    """One report's gaps in the minute being read, without keeping them: the stretch open now (its first and last
+    report, how many) and the stretches a restart closed in this minute (their spans summed, their gaps, how many).
+    A restart (a report whose counter started again) closes the open stretch, and the reports whose gaps R9a leaves
+    unjudged open none (:func:`~ckesc.protocol.judgements.r9_judged`: the gaps up to and including the second report
+    after the restart), so the minute's mean is that of the gaps R9 judges."""
 
-    __slots__ = ("first", "last", "n")
+    __slots__ = ("first", "last", "n", "spanned", "gaps", "stretches", "skip", "heard", "seen")
 
-    def __init__(self, first: float) -> None:
-        self.first = self.last = first
-        self.n = 1
+    def __init__(self) -> None:
+        self.first = self.last = self.spanned = 0.0
+        self.n = self.gaps = self.stretches = self.skip = self.heard = 0
+        self.seen = False  # a report heard in an earlier minute
+
+    def add(self, t: float, restarted: bool) -> None:
+        self.heard += 1
+        if restarted:
+            self._close()
+            self.skip = jd.R9A_UNJUDGED - 1  # the report after which R9 judges the gaps again opens the next stretch
+        if self.skip:
+            self.skip -= 1
+        elif self.n:
+            self.last = t
+            self.n += 1
+        else:
+            self.first = self.last = t
+            self.n = 1
+
+    def _close(self) -> None:
+        if self.n >= 2:
+            self.spanned += self.last - self.first
+            self.gaps += self.n - 1
+            self.stretches += 1
+        self.n = 0
+
+    def minute(self) -> tuple[_Joined, int]:
+        """The minute's judged stretches joined end to end, and how many they are; the open stretch then goes on from
+        its last report (the gap across the minute's end is the next minute's)."""
+        going_on = self.n > 0
+        self._close()
+        joined, stretches = _Joined(self.spanned, self.gaps), self.stretches
+        self.seen = self.seen or self.heard > 0
+        self.spanned, self.gaps, self.stretches, self.heard = 0.0, 0, 0, 0
+        if going_on:
+            self.first, self.n = self.last, 1
+        return joined, stretches
+
+
+class _Joined:
+    """A minute's judged stretches joined end to end, as :func:`~ckesc.protocol.judgements.r9_mean` reads a sequence
+    of report starts (the first, the last, how many): from 0 to the sum of their spans, over the sum of their gaps."""
+
+    __slots__ = ("span", "gaps")
+
+    def __init__(self, span: float, gaps: int) -> None:
+        self.span, self.gaps = span, gaps
 
     def __len__(self) -> int:
-        return self.n
+        return self.gaps + 1
 
     def __getitem__(self, i: int) -> float:
-        if i in (0, -self.n):
-            return self.first
-        if i in (-1, self.n - 1):
-            return self.last
-        raise IndexError("a minute's span keeps its first and last report only")
+        if i in (0, -self.gaps - 1):
+            return 0.0
+        if i in (-1, self.gaps):
+            return self.span
+        raise IndexError("joined stretches keep their ends only")
 
 
 class IntervalWatch(Watch):
@@ -264,48 +299,40 @@ class IntervalWatch(Watch):
         super().__init__(monitor)
         self.t0 = monitor.t0
         self.minute = 0
-        self.spans: dict[str, _Span | None] = dict.fromkeys(REPORTS)
-        self.carry: dict[str, float | None] = dict.fromkeys(REPORTS)  # each report's last start before this minute
+        self.spans = {r: _Span() for r in REPORTS}
         #: the trend: per report, the mean interval (ms) of each minute (None: not judged)
         self.series: dict[str, list[float | None]] = {r: [] for r in REPORTS}
         self.worst: dict[str, float] = {}
 
-    def report(self, name: str, t: float) -> None:
+    def report(self, name: str, t: float, restarted: bool = False) -> None:
+        """A report of the ESC at ``t``; ``restarted``: its counter started again (the first after a restart, R9a)."""
         minute = int((t - self.t0) // MINUTE_S)
         while minute > self.minute:
             self._close_minute(self.t0 + (self.minute + 1) * MINUTE_S)
-        span = self.spans[name]
-        if span is None:
-            carry = self.carry[name]
-            span = self.spans[name] = _Span(carry if carry is not None else t)
-            if carry is None:
-                return
-        span.last = t
-        span.n += 1
+        self.spans[name].add(t, restarted)
 
     def _close_minute(self, end: float, *, partial: bool = False) -> None:
         for name in REPORTS:
             interval = self.cfg.intervals.get(name)
-            span, self.spans[name] = self.spans[name], None
-            prior = self.carry[name]
-            if span is not None:
-                self.carry[name] = span.last
+            span = self.spans[name]
+            silent = not span.heard and span.seen
+            joined, stretches = span.minute()
             if interval is None:
                 self.series[name].append(None)
                 continue
-            if span is None or len(span) < 2:
+            if joined.gaps < 1:
                 self.series[name].append(None)
-                if span is None and prior is not None and not partial:
+                if silent and not partial:
                     self.trials += 1
                     self.find(end, f"no {name} in minute {self.minute + 1} (interval {interval * 1000:g} ms)")
                 continue
-            if partial and len(span) - 1 < jd.R9_GAPS:
+            if partial and joined.gaps < jd.R9_GAPS:
                 self.series[name].append(None)
                 continue
-            judged = jd.r9_mean(span, interval, error=self.cfg.error, what=name)
+            # each stretch's two ends carry the bench's error, as one span's do
+            judged = jd.r9_mean(joined, interval, error=stretches * self.cfg.error, what=name)
             assert judged is not None
-            mean = (span.last - span.first) / (len(span) - 1)
-            self.series[name].append(round(mean * 1000, 4))
+            self.series[name].append(round(joined.span / joined.gaps * 1000, 4))
             self.worst[name] = max(self.worst.get(name, 0.0), judged.measured)
             self.trials += 1
             if not judged.ok:
@@ -685,8 +712,7 @@ class Monitor:
         name = frame.name
         if kind is Kind.MESSAGE:
             if name in REPORTS:
-                self.intervals.report(name, t)
-                self.resets.report(name, t, frame.transfer_id)
+                self.intervals.report(name, t, self.resets.report(name, t, frame.transfer_id))
                 if name == "msg1":
                     self.comm.msg1(frame, t)
                 return

@@ -26,6 +26,7 @@ class Esc:
 
     msg1_interval: float = MSG1
     reset_at: float | None = None  # MSG1 stops for 300 ms and its transfer ids start again at 0
+    reset_all: bool = False  # ... and MSG2 and MSG3 with it, each on a grid from the restart
     flag_at: float | None = None  # one MSG1 shows the comm-loss flag while the stream runs
     answer_delay: float = 0.0025
     no_answer_at: float | None = None
@@ -60,8 +61,11 @@ class Esc:
             t = round(0.001 + k * self.msg1_interval, 9)
         for name, interval, fields in (("msg2", MSG2, {"voltage": 1200, "current": 0, "temperature": 30}),
                                        ("msg3", MSG3, {"mos_t": 30, "cap_t": 30, "motor_t": 30, "mcu_t": 30})):
-            n = 0
-            while (t := 0.003 + n * interval) < seconds:
+            n, origin = 0, 0.003
+            while (t := origin + n * interval) < seconds:
+                if self.reset_all and self.reset_at is not None and origin < self.reset_at <= t:
+                    n, origin, tid[name] = 0, self.reset_at + 0.3 + 0.003, 0
+                    continue
                 out.append(encode(name, fields, source=NODE, transfer_id=nxt(name), timestamp=t))
                 n += 1
         s = 0
@@ -137,6 +141,18 @@ def test_a_reset_shows_as_a_report_gap_with_a_transfer_id_restart():
     assert len(found) == 1 and found[0].rules == ("R19", "R17") and "started again" in found[0].message
     assert found[0].t == pytest.approx(30.3, abs=0.03)
     assert len(found[0].before) > 10 and len(found[0].after) == AFTER_FRAMES  # the frames around it
+
+
+def test_a_reset_is_found_once_as_a_reset_and_its_restart_gaps_leave_the_minutes_mean():
+    """Every report restarts with the ESC (MSG3's gap across it 800 ms, not 500): the resets watch finds it, and the
+    minute's MSG3 mean leaves out the gaps R9a leaves out (to and from the first report after the restart), so it
+    is no R9 finding as well; the minute is still judged, on the gaps before and after."""
+    m = watch(Esc(reset_at=30.0, reset_all=True))
+    assert {f.watch for f in m.findings} == {"resets"}, [f.line() for f in m.findings]
+    assert [f.message.split()[0] for f in m.findings] == ["msg1", "msg2", "msg3"]
+    assert m.intervals.series["msg3"][0] == pytest.approx(500.0) and m.intervals.trials == 3 * 2
+    late = watch(Esc(reset_at=30.0, reset_all=True, msg1_interval=MSG1 + 1.5 * jd.SCHEDULING_TOLERANCE_S))
+    assert [f.watch for f in late.findings if "msg1 every" in f.message] == ["report intervals"] * 2  # still judged
 
 
 @pytest.mark.parametrize("esc, words", [
