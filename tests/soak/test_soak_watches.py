@@ -10,8 +10,10 @@ import pytest
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol import judgements as jd
 from ckesc.protocol.frame import WireFrame, encode
+from ckesc.protocol.histogram import Histogram
 from ckesc.protocol.ids import Kind
-from ckesc.soak.watches import AFTER_FRAMES, MAX_FINDINGS_PER_WATCH, Histogram, Monitor, WatchConfig
+from ckesc.soak.monitor import Monitor
+from ckesc.soak.watch import AFTER_FRAMES, MAX_FINDINGS_PER_WATCH, WatchConfig
 
 HOST, NODE = 0, 1
 MSG1, MSG2, MSG3 = 0.020, 0.100, 0.500
