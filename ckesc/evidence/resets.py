@@ -92,7 +92,3 @@ class ResetSigns:
     def last(self, name: str, key: Hashable = None) -> Reading | None:
         """The last reading of counter ``name`` under ``key`` (None: none yet)."""
         return self._readings.get((key, name))
-
-    def forget(self, key: Hashable) -> None:
-        """Report type ``key``'s last report is not compared with its next (a restart the host made)."""
-        self._reports.pop(key, None)
