@@ -34,7 +34,7 @@ class _Span:
         self.heard += 1
         if restarted:
             self._close()
-            self.skip = jd.R9A_UNJUDGED - 1  # the report after which R9 judges the gaps again opens the next stretch
+            self.skip = jd.R9A_UNJUDGED - 1  # these open no stretch (this one among them): the next report does
         if self.skip:
             self.skip -= 1
         elif self.n:
