@@ -5,11 +5,16 @@
     signs.restarted                                  # ... and whether that report's counter started again (R9a)
     signs.counter("power_ups", value, t)             # each 241 answer (option 2; option 1: "run_time")
 
-Each call keeps the observation (the last report of each type: its time and transfer id; the last reading of each
-241 counter: its value, its time and the caller's ``tag``) and judges it against the one before with the rule's
-judgement in :mod:`ckesc.protocol.judgements` (:func:`~ckesc.protocol.judgements.r19_report_restart`,
+One per ESC. Each call keeps the observation (the last report of each type: its time and transfer id; the last
+reading of each 241 counter: its value, its time and the caller's ``tag``) and judges it against the one before with
+the rule's judgement in :mod:`ckesc.protocol.judgements` (:func:`~ckesc.protocol.judgements.r19_report_restart`,
 :func:`~ckesc.protocol.judgements.r19_power_ups`, :func:`~ckesc.protocol.judgements.r19_run_time`): it adds no
 tolerance of its own, and the bench's error is given here once (the run time's two readings, each stamped with it).
+
+One reset shows several signs (each report type's gap, the power-up count, the run time): ``resets`` counts the
+resets, and ``same`` says whether the sign just returned shows one already counted (a report gap overlapping the
+last reset's, a power-up count grown by no more than the resets shown since its last reading, a run time gone back
+after one). The soak counts resets so; the bus rules report every sign, each a frame that shows one.
 
 Which observations may be compared at all is the consumer's to know and to say with ``judge`` (a power switch or a
 Set ID between them, the host's own restart of reporting): the soak and the R17 tests compare every one, the bus
@@ -22,7 +27,16 @@ from __future__ import annotations
 from collections.abc import Hashable
 from dataclasses import dataclass
 
-from ..protocol.judgements import Reset, f3_holds, f3_step, r19_counter_restarted, r19_power_ups, r19_report_restart, r19_run_time
+from ..protocol.judgements import (
+    POWER_UPS_MODULO,
+    Reset,
+    f3_holds,
+    f3_step,
+    r19_counter_restarted,
+    r19_power_ups,
+    r19_report_restart,
+    r19_run_time,
+)
 
 #: the 241 counters a reset shows in (option 2's and option 1's field)
 POWER_UPS = "power_ups"
@@ -36,19 +50,24 @@ class Reading:
     value: int
     t: float
     tag: Hashable = None
+    resets: int = 0  # the resets shown up to this reading
 
 
 class ResetSigns:
     """The reset bookkeeping (module docstring). ``error``: the bench's timing error of a stamp (s); ``jitter``: the
     DUT's declared report jitter (s)."""
 
-    __slots__ = ("error", "jitter", "restarted", "_reports", "_readings")
+    __slots__ = ("error", "jitter", "restarted", "resets", "same", "_last", "_reports", "_readings")
 
     def __init__(self, *, error: float = 0.0, jitter: float = 0.0) -> None:
         self.error = error
         self.jitter = jitter
         #: the last report fed: its counter started again (the first report after a restart, R9a), a reset or not
         self.restarted = False
+        #: the resets shown so far, and whether the last sign returned shows one already counted
+        self.resets = 0
+        self.same = False
+        self._last: tuple[float, float] | None = None  # the last reset's window: between these it happened
         self._reports: dict[Hashable, tuple[float, int | None]] = {}
         self._readings: dict[Hashable, Reading] = {}
 
@@ -68,27 +87,44 @@ class ResetSigns:
         self.restarted = r19_counter_restarted(gap, interval, step)
         if not self.restarted or not judge or interval is None:
             return None
-        return r19_report_restart(gap, interval, step, error=self.error, jitter=self.jitter,
+        sign = r19_report_restart(gap, interval, step, error=self.error, jitter=self.jitter,
                                   what=str(key) if what is None else what)
+        if sign is not None:
+            last = self._last
+            self.same = last is not None and prev[0] < last[1] and t > last[0]  # the silences overlap: one reset
+            if self.same:
+                self._last = (min(last[0], prev[0]), max(last[1], t))  # type: ignore[index]
+            else:
+                self.resets += 1
+                self._last = (prev[0], t)
+        return sign
 
-    def counter(self, name: str, value: int, t: float, *, key: Hashable = None, since: float | None = None,
-                judge: bool = True, tag: Hashable = None) -> Reset | None:
+    def counter(self, name: str, value: int, t: float, *, since: float | None = None, judge: bool = True,
+                tag: Hashable = None) -> Reset | None:
         """A reading of 241's counter ``name`` (:data:`POWER_UPS` or :data:`RUN_TIME`) of ``value``, answered at ``t``:
-        a :class:`~ckesc.protocol.judgements.Reset` when it shows one against the last reading (under ``key``: one per
-        node where several are watched) and ``judge`` (else None). ``since``: the time this reading is kept with
-        (default ``t``; the bus rules keep its request's, the earliest it can have been read, so that the run time's
-        elapsed time between two readings is the widest it can be); ``tag``: kept with it (:meth:`last`)."""
-        slot = (key, name)
-        before = self._readings.get(slot)
-        self._readings[slot] = Reading(value, t if since is None else since, tag)
-        if before is None or not judge:
-            return None
-        if name == POWER_UPS:
-            return r19_power_ups(before.value, value)
-        if name == RUN_TIME:  # two stamped readings: each stamp's error
-            return r19_run_time(before.value, value, t - before.t, error=2 * self.error)
-        raise ValueError(f"241 counter {name!r}: not one a reset shows in ({POWER_UPS}, {RUN_TIME})")
+        a :class:`~ckesc.protocol.judgements.Reset` when it shows one against the last reading and ``judge`` (else
+        None). ``since``: the time this reading is kept with (default ``t``; the bus rules keep its request's, the
+        earliest it can have been read, so that the run time's elapsed time between two readings is the widest it can
+        be); ``tag``: kept with it (:meth:`last`)."""
+        if name not in (POWER_UPS, RUN_TIME):
+            raise ValueError(f"241 counter {name!r}: not one a reset shows in ({POWER_UPS}, {RUN_TIME})")
+        before = self._readings.get(name)
+        sign = None
+        if before is not None and judge:
+            if name == POWER_UPS:
+                sign = r19_power_ups(before.value, value)
+                new = (value - before.value) % POWER_UPS_MODULO - (self.resets - before.resets)
+            else:  # two stamped readings: each stamp's error
+                sign = r19_run_time(before.value, value, t - before.t, error=2 * self.error)
+                new = 1 - (self.resets - before.resets)
+            if sign is not None:
+                self.same = new <= 0  # no more than the resets shown since the last reading
+                if not self.same:  # it happened between the two readings
+                    self.resets += new
+                    self._last = (before.t, t)
+        self._readings[name] = Reading(value, t if since is None else since, tag, self.resets)
+        return sign
 
-    def last(self, name: str, key: Hashable = None) -> Reading | None:
-        """The last reading of counter ``name`` under ``key`` (None: none yet)."""
-        return self._readings.get((key, name))
+    def last(self, name: str) -> Reading | None:
+        """The last reading of counter ``name`` (None: none yet)."""
+        return self._readings.get(name)

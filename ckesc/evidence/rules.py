@@ -127,8 +127,14 @@ class BusRules(Tracker):
 
     def __init__(self, **kw: Any) -> None:
         super().__init__(**kw)
-        #: R19's bookkeeping (:mod:`.resets`, the soak's too): each ESC stream's last report, each node's 241 counters
-        self.resets = ResetSigns(error=self.tolerance, jitter=self.jitter)
+        #: R19's bookkeeping per node (:mod:`.resets`, the soak's too): its streams' last reports, its 241 counters
+        self._resets: dict[int, ResetSigns] = {}
+
+    def _signs(self, node: Node) -> ResetSigns:
+        signs = self._resets.get(node.id)
+        if signs is None:
+            signs = self._resets[node.id] = ResetSigns(error=self.tolerance, jitter=self.jitter)
+        return signs
 
     # ------------------------------------------------------------------------------------- the hot path
     def feed(self, can_id: int, data, ts: float, extended: bool = True, remote: bool = False, error: bool = False,
@@ -413,17 +419,17 @@ class BusRules(Tracker):
         return out
 
     def _report_restart(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, tid: int):
-        """R19: a report gap with a transfer id restart (every report of a periodic stream kept in :attr:`resets`),
-        judged between two reports of one stream with no host event between them that restarts reporting or may
-        re-address the node (MSG Control, CAN Test, a Set Freq write or answer, Set ID: the node's ``reset`` and
-        ``moved`` counts) and no power switch the host reported. The interval is the one the node stated, else the
-        shortest gap seen (none: not judged)."""
+        """R19: a report gap with a transfer id restart (every report of a periodic stream kept in its node's
+        :class:`~.resets.ResetSigns`), judged between two reports of one stream with no host event between them that
+        restarts reporting or may re-address the node (MSG Control, CAN Test, a Set Freq write or answer, Set ID: the
+        node's ``reset`` and ``moved`` counts) and no power switch the host reported. The interval is the one the node
+        stated, else the shortest gap seen (none: not judged)."""
         judge = (st.ts is not None and st.power == self.power_switches and self.last_switch_ts < st.ts
                  and st.moved == node.moved and st.reset == node.reset and not node.shared and ts > node.unsure_until)
         period = node.periods[st.interval] if st.interval is not None else None
         if period is None and st.min_gap < math.inf:
             period = st.min_gap
-        sign = self.resets.report(info.stream_key, start, tid, period, what=st.name, judge=judge)
+        sign = self._signs(node).report(info.type_id, start, tid, period, what=st.name, judge=judge)
         if sign is None:
             return out
         return self._reset(out, sign, ts, node, self._pair(st, info, data, ts))
@@ -440,14 +446,14 @@ class BusRules(Tracker):
             return out
         value = field_value(data, f)
         # each reading kept with its request's time, the tracker's power switches, the node's Set ID count and chain
-        before = self.resets.last(f.name, node.id)
+        signs = self._signs(node)
+        before = signs.last(f.name)
         judge = (before is not None and before.tag[:2] == (self.power_switches, node.moved)  # type: ignore[index]
                  and self.last_switch_ts < before.t
                  # a power-up count is judged only across a silence as long as a boot takes: one that grew with the
                  # node never silent counts something else (4.4.27-T's tests judge what it counts)
                  and (f.name != POWER_UPS or before.tag[2] != node.chain))  # type: ignore[index]
-        sign = self.resets.counter(f.name, value, ts, key=node.id, since=asked, judge=judge,
-                                   tag=(self.power_switches, node.moved, node.chain))
+        sign = signs.counter(f.name, value, ts, since=asked, judge=judge, tag=(self.power_switches, node.moved, node.chain))
         if sign is None:
             return out
         return self._reset(out, sign, ts, node, (quote(info.can_id, data, ts, note=f"{info.label}, {f.name} {value}"),))

@@ -399,13 +399,13 @@ class Reset:
 
 
 #: 241 option 2's power-up count is a u16: it wraps (the count after 65535 is 0, not a reset)
-_POWER_UPS_MODULO = 1 << 16
+POWER_UPS_MODULO = 1 << 16
 
 
 def r19_power_ups(previous: int, current: int) -> Reset | None:
     """R19: 241 option 2's power-up count, read ``previous`` and later ``current`` with the power left on, has not grown
     (modulo its u16 width). None: no reset shown; else the :class:`Reset`."""
-    grown = (current - previous) % _POWER_UPS_MODULO
+    grown = (current - previous) % POWER_UPS_MODULO
     if not grown:
         return None
     return Reset("power_ups", f"the power-up count (241 option 2) went from {previous} to {current} with the power on")

@@ -52,11 +52,27 @@ def test_241_counters_with_the_bench_error_given_once():
     assert signs.counter(RUN_TIME, 17, 5.0) is None  # 5 s + 1 count + 2 x 0.5 s: both readings' stamps
     assert ResetSigns().counter(RUN_TIME, 10, 0.0) is None
     assert signs.counter(RUN_TIME, 3, 6.0).text.startswith("the run time (241 option 1) went back")
-    assert signs.counter(POWER_UPS, 7, 0.0, key=1) is None and signs.counter(POWER_UPS, 7, 1.0, key=2) is None
-    assert signs.counter(POWER_UPS, 8, 2.0, key=2) is not None and signs.last(POWER_UPS, 1).value == 7  # per key
+    assert signs.counter(POWER_UPS, 7, 0.0) is None and signs.counter(POWER_UPS, 8, 2.0) is not None
+    assert signs.last(POWER_UPS).value == 8 and signs.last(RUN_TIME).value == 3
     with pytest.raises(ValueError, match="not one a reset shows in"):
         signs.counter("stops", 1, 0.0)
-        signs.counter("stops", 2, 1.0)
+
+
+def test_one_reset_is_counted_once_however_many_signs_show_it():
+    """MSG1's and MSG2's gaps across one boot, then the power-up count grown by one: one reset (``same`` for the
+    second and third sign); a second reset later, and a count grown by two across both: two, the second new."""
+    signs = ResetSigns()
+    assert signs.counter(POWER_UPS, 7, 0.0) is None
+    for key, interval, t0 in (("msg1", MSG1, 0.001), ("msg2", 0.1, 0.003)):
+        signs.report(key, t0, 9, interval)
+    assert signs.report("msg1", 0.30, 0, MSG1) is not None and not signs.same and signs.resets == 1
+    assert signs.report("msg2", 0.31, 0, 0.1) is not None and signs.same and signs.resets == 1
+    assert signs.counter(POWER_UPS, 8, 1.0) is not None and signs.same and signs.resets == 1
+    assert signs.report("msg1", 0.32, 1, MSG1) is None and signs.report("msg1", 5.0, 0, MSG1) is not None
+    assert not signs.same and signs.resets == 2  # a silence of its own: another reset
+    assert signs.counter(POWER_UPS, 10, 6.0) is not None and not signs.same and signs.resets == 3  # one more unseen
+    assert signs.counter(RUN_TIME, 50, 6.1) is None and signs.counter(RUN_TIME, 2, 7.0) is not None
+    assert not signs.same and signs.resets == 4  # gone back with no reset shown since its last reading
 
 
 # ------------------------------------------------------------------------------------------ the R17 tests' reading
