@@ -13,8 +13,16 @@ from types import SimpleNamespace
 import pytest
 
 from ckesc.evidence.resets import POWER_UPS, RUN_TIME, ResetSigns
+from ckesc.evidence.rules import BusRules
+from ckesc.protocol import catalogue as cat
 from ckesc.protocol import judgements as jd
+from ckesc.protocol.frame import Decoder
+from ckesc.soak.monitor import Monitor
+from ckesc.soak.watch import WatchConfig
 from conformance.resets import reset_signs
+
+from .test_resets import stream_for
+from .traffic import BITRATE, ScriptedHost
 
 MSG1 = 0.020
 
@@ -114,3 +122,39 @@ def test_r17_foreign_traffic_on_an_esc_whose_transfer_ids_are_stuck_fails_f3_not
     [r] = json.loads(results.read_text())["results"]
     assert r["outcome"] == "FAIL" and "F3" in r["bus_rules"], r
     assert "reset" not in r["message"], r["message"]
+
+
+# ------------------------------------------------------------------------------------------ one trace, three consumers
+def test_one_trace_the_same_reset_for_the_bus_rules_the_soak_and_the_r17_tests():
+    """The emulator's watchdog reset after 5 s of stream, heard once: the bus rules report each sign (MSG1's gap, MSG2's,
+    the power-up count), the soak's resets watch one finding with the first sign's words and time (the others counted
+    with it), and the R17 tests' reading of the same MSG1 reports and counts the same words."""
+    host = ScriptedHost((1,), ("reset_after_streaming=5",), keep=True)
+    host.run.rules = BusRules(bitrate=BITRATE, complete=True, power_known=True)
+    try:
+        host.pump(0.5)
+        host.request("maintenance_information", {"option": 2}, 1)
+        stream_for(5.5)(host)
+        host.request("maintenance_information", {"option": 2}, 1)
+        host.pump(0.1)
+    finally:
+        host.close()
+    signs = [v for v in host.run.violations if v.check == "reset"]
+    assert [v.message.split(": ", 1)[1].split()[0] for v in signs] == ["msg1", "msg2", "the"], signs
+
+    intervals = {r: cat.DEFAULT_REPORT_INTERVALS[f] * cat.INTERVAL_UNIT_S for r, f in cat.REPORT_INTERVAL_FIELDS.items()}
+    monitor = Monitor(WatchConfig(node_id=1, host_node=0, intervals=intervals), t0=0.0)
+    for msg in host.run.messages:
+        monitor.feed(msg)
+    monitor.close(host.run.messages[-1].timestamp)
+    [found] = monitor.findings
+    assert found.watch == "resets" and found.t == signs[0].timestamp
+    assert signs[0].message == f"a reset the host did not make: {found.message}"
+    assert monitor.resets.statistics()["signs_of_resets_found"] == len(signs) - 1
+
+    decoder = Decoder()
+    heard = [(m.timestamp, f) for m in host.run.messages if (f := decoder.decode(m)).source == 1]
+    msg1 = [SimpleNamespace(name=f.name, timestamp=t, transfer_id=f.transfer_id) for t, f in heard if f.name == "msg1"]
+    ups = [f.fields["power_ups"] for _, f in heard if f.name == "maintenance_information"]
+    shown = reset_signs(dut(), msg1, intervals["msg1"], ups=(ups[0], ups[-1]))
+    assert shown == [f"{found.message}: the ESC reset", signs[-1].message.split(": ", 1)[1] + ": the ESC reset"], shown
