@@ -125,6 +125,11 @@ class ResetSigns:
         self._readings[name] = Reading(value, t if since is None else since, tag, self.resets)
         return sign
 
+    @property
+    def since(self) -> float | None:
+        """When the last reset shown began at the latest: the last observation before it (None: none shown)."""
+        return None if self._last is None else self._last[0]
+
     def last(self, name: str) -> Reading | None:
         """The last reading of counter ``name`` (None: none yet)."""
         return self._readings.get(name)

@@ -4,6 +4,8 @@ per minute and report."""
 
 from __future__ import annotations
 
+import math
+from collections import deque
 from typing import TYPE_CHECKING, Any
 
 from ..protocol import judgements as jd
@@ -14,35 +16,80 @@ if TYPE_CHECKING:
 
 #: the R9 minute
 MINUTE_S = 60.0
+#: report times kept of each report's open stretch, to cut it where another report showed a reset (a reset shows
+#: within a boot's time and a slower report's interval: a few of the fastest report's)
+RECENT = 64
 
 
 class _Span:
     """One report's gaps in the minute being read, without keeping them: the stretch open now (its first and last
-    report, how many) and the stretches a restart closed in this minute (their spans summed, their gaps, how many).
-    A restart (a report whose counter started again) closes the open stretch, and the reports whose gaps R9a leaves
-    unjudged open none (:func:`~ckesc.protocol.judgements.r9_judged`: the gaps up to and including the second report
-    after the restart), so the minute's mean is that of the gaps R9 judges."""
+    report, how many, and the times of its last :data:`RECENT`) and the stretches a restart closed in this minute
+    (their spans summed, their gaps, how many). A restart closes the open stretch, and the reports whose gaps R9a
+    leaves unjudged open none (:func:`~ckesc.protocol.judgements.r9_judged`: the gaps up to and including the second
+    report after the restart), so the minute's mean is that of the gaps R9 judges.
 
-    __slots__ = ("first", "last", "n", "spanned", "gaps", "stretches", "skip", "heard", "seen")
+    A restart shows in the report's own counter starting again (:meth:`add`), or in another report's reset
+    (:meth:`reset`): a counter that by chance goes on by one across a reset (one time in 32) shows none of its own."""
+
+    __slots__ = ("first", "last", "n", "recent", "spanned", "gaps", "stretches", "skip", "pending", "heard", "seen",
+                 "restarted_at")
 
     def __init__(self) -> None:
         self.first = self.last = self.spanned = 0.0
         self.n = self.gaps = self.stretches = self.skip = self.heard = 0
+        self.recent: deque[float] = deque(maxlen=RECENT)
+        self.pending = False  # the next report is the first after a restart
         self.seen = False  # a report heard in an earlier minute
+        self.restarted_at = -math.inf  # the first report after the last restart
 
     def add(self, t: float, restarted: bool) -> None:
         self.heard += 1
-        if restarted:
+        if restarted or self.pending:
+            self.pending = False
+            self.restarted_at = t
             self._close()
             self.skip = jd.R9A_UNJUDGED - 1  # these open no stretch (this one among them): the next report does
         if self.skip:
             self.skip -= 1
-        elif self.n:
+        elif self.n:  # (_extend inline: once per report)
+            self.last = t
+            self.n += 1
+            self.recent.append(t)
+        else:
+            self._extend(t)
+
+    def _extend(self, t: float) -> None:
+        if self.n:
             self.last = t
             self.n += 1
         else:
             self.first = self.last = t
             self.n = 1
+        self.recent.append(t)
+
+    def reset(self, since: float) -> None:
+        """The ESC reset after ``since`` (another report's last before its gap): this report's first after ``since``
+        is the first after the restart, unless its own counter said so later. The open stretch is cut there as
+        :meth:`add` would have cut it (or at this report's next one); one with more than :data:`RECENT` reports since
+        then is left as heard."""
+        if self.restarted_at > since:
+            return
+        recent = list(self.recent)
+        after = [t for t in recent if t > since]
+        if not after:
+            self.pending = True
+            return
+        if len(after) == len(recent) < self.n:
+            return
+        self.last, self.n = (recent[-len(after) - 1], self.n - len(after)) if len(after) < len(recent) else (0.0, 0)
+        self._close()
+        self.restarted_at = after[0]
+        self.skip = jd.R9A_UNJUDGED - 1
+        for t in after:  # again, as add() would have taken them
+            if self.skip:
+                self.skip -= 1
+            else:
+                self._extend(t)
 
     def _close(self) -> None:
         if self.n >= 2:
@@ -50,6 +97,7 @@ class _Span:
             self.gaps += self.n - 1
             self.stretches += 1
         self.n = 0
+        self.recent.clear()
 
     def minute(self) -> tuple[_Joined, int]:
         """The minute's judged stretches joined end to end, and how many they are; the open stretch then goes on from
@@ -60,7 +108,7 @@ class _Span:
         self.seen = self.seen or self.heard > 0
         self.spanned, self.gaps, self.stretches, self.heard = 0.0, 0, 0, 0
         if going_on:
-            self.first, self.n = self.last, 1
+            self._extend(self.last)
         return joined, stretches
 
 
@@ -106,6 +154,12 @@ class IntervalWatch(Watch):
         while minute > self.minute:
             self._close_minute(self.t0 + (self.minute + 1) * MINUTE_S)
         self.spans[name].add(t, restarted)
+
+    def reset(self, since: float) -> None:
+        """The ESC reset after ``since`` (another report's gap showed it, :class:`~.reset_watch.ResetWatch`): every
+        report restarted there (R9a), whether its own counter shows it or not."""
+        for span in self.spans.values():
+            span.reset(since)
 
     def _close_minute(self, end: float, *, partial: bool = False) -> None:
         for name in REPORTS:

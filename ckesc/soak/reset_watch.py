@@ -29,6 +29,7 @@ class ResetWatch(Watch):
         self.signs = ResetSigns(error=self.cfg.error, jitter=self.cfg.jitter)
         self.reads = {POWER_UPS: 0, RUN_TIME: 0}
         self.more_signs = 0  # signs of a reset already found
+        self._intervals = self.cfg.intervals
 
     def _sign(self, sign: Reset | None, t: float) -> None:
         if sign is None:
@@ -41,7 +42,11 @@ class ResetWatch(Watch):
     def report(self, name: str, t: float, tid: int | None) -> bool:
         """A report of the ESC: whether its counter started again (the first report after a restart, R9a)."""
         signs = self.signs
-        self._sign(signs.report(name, t, tid, self.cfg.intervals.get(name)), t)
+        sign = signs.report(name, t, tid, self._intervals.get(name))
+        if sign is not None:
+            if not signs.same:  # every report restarted with it (R9a), its counter showing it or not
+                self.monitor.intervals.reset(signs.since)  # type: ignore[arg-type]
+            self._sign(sign, t)
         return signs.restarted
 
     def maintenance(self, frame: Frame, t: float) -> None:

@@ -29,6 +29,8 @@ class Esc:
     msg1_interval: float = MSG1
     reset_at: float | None = None  # MSG1 stops for 300 ms and its transfer ids start again at 0
     reset_all: bool = False  # ... and MSG2 and MSG3 with it, each on a grid from the restart
+    counting_on: tuple[str, ...] = ()  # ... these but for their counters, which go on by one (one time in 32)
+    back_at: float = 0.303  # when MSG2 and MSG3 come back after the reset (MSG1 at 0.301)
     flag_at: float | None = None  # one MSG1 shows the comm-loss flag while the stream runs
     answer_delay: float = 0.0025
     no_answer_at: float | None = None
@@ -66,7 +68,8 @@ class Esc:
             n, origin = 0, 0.003
             while (t := origin + n * interval) < seconds:
                 if self.reset_all and self.reset_at is not None and origin < self.reset_at <= t:
-                    n, origin, tid[name] = 0, self.reset_at + 0.3 + 0.003, 0
+                    n, origin = 0, self.reset_at + self.back_at
+                    tid[name] = tid[name] if name in self.counting_on else 0
                     continue
                 out.append(encode(name, fields, source=NODE, transfer_id=nxt(name), timestamp=t))
                 n += 1
@@ -156,6 +159,15 @@ def test_a_reset_is_found_once_as_a_reset_and_its_restart_gaps_leave_the_minutes
     assert m.intervals.series["msg3"][0] == pytest.approx(500.0) and m.intervals.trials == 3 * 2
     late = watch(Esc(reset_at=30.0, reset_all=True, msg1_interval=MSG1 + 1.5 * jd.SCHEDULING_TOLERANCE_S))
     assert [f.watch for f in late.findings if "msg1 every" in f.message] == ["report intervals"] * 2  # still judged
+
+
+@pytest.mark.parametrize("back_at", [0.303, 0.2995])  # MSG3 back after MSG1 shows the reset, or before it
+def test_a_report_whose_counter_goes_on_across_a_reset_restarts_with_it(back_at):
+    """MSG3's counter goes on by one across the reset (as one in 32 would by chance): it shows no restart of its own,
+    but MSG1's gap shows the reset, and MSG3's gaps across it leave the minute's mean all the same."""
+    m = watch(Esc(reset_at=30.0, reset_all=True, counting_on=("msg3",), back_at=back_at))
+    assert [f.watch for f in m.findings] == ["resets"], [f.line() for f in m.findings]
+    assert m.intervals.series["msg3"][0] == pytest.approx(500.0)
 
 
 @pytest.mark.parametrize("esc, words", [
