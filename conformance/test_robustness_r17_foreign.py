@@ -4,8 +4,8 @@ With ``--foreign-traffic ardupilot`` (docs/robustness.md) the run plays, for its
 controller (node 10) and a smart battery (node 40) send, encoded by the ``dronecan`` package: SafetyState on CAN
 Test's id (20000, a frame shorter than its table), BatteryCells on MSG Control's id (20010, a multi-frame transfer),
 NodeStatus, DroneCAN's own ESC command (zero throttle) and a GET_ESC_ID query once a second. Every other section is
-judged with it playing; this one looks at the traffic itself for a while: the ESC never resets (its MSG1 reports
-go on, their transfer ids counting, and the power-up count of 241 stays), its settings do not change, and it sends
+judged with it playing; this one looks at the traffic itself for a while: the ESC never resets (no MSG1 gap after
+which its transfer ids count anew, 241's power-up count unmoved), its settings do not change, and it sends
 nothing but its reports and its replies to the flight controller's GET_ESC_ID queries (a legitimate query, F6).
 
 On a quiet bus (no ``--foreign-traffic``) the test plays the same traffic itself for its watch and stops it after,
@@ -23,6 +23,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.ids import Kind
 
 from .answers import answers_another_node
+from .resets import reset_signs
 from .settings import changes
 from .telemetry import interval_s, ms
 
@@ -60,14 +61,7 @@ def _watch(dut, played: ForeignPlay) -> None:
     t1 = dut.now()
     problems = []
     msg1 = dut.frames("msg1", since=t0, until=t1, source=dut.node_id)
-    # a reset shows as a silence longer than two intervals and the transfer ids starting again (R17, R13)
-    bound = 2 * interval + dut.interval_tolerance_ms / 1000 + dut.lane.timing_error
-    for a, b in zip(msg1, msg1[1:]):
-        gap = (b.timestamp or 0.0) - (a.timestamp or 0.0)
-        if gap > bound or b.transfer_id != (a.transfer_id + 1) % 32:
-            problems.append(f"MSG1 stopped for {ms(gap)} ms and went on with transfer id {b.transfer_id} after "
-                            f"{a.transfer_id} (a reset)")
-            break
+    problems += reset_signs(dut, msg1, interval)  # a gap with the transfer ids starting again (R17, R19)
     if len(msg1) < WATCH_S / interval / 2:
         problems.append(f"{len(msg1)} MSG1 reports in {WATCH_S:g} s at a {ms(interval)} ms interval")
     sent = sorted({f"{f.name} {f.kind.label}" for f in dut.trace[heard:] if f.source == dut.node_id
@@ -81,8 +75,7 @@ def _watch(dut, played: ForeignPlay) -> None:
     else:
         if changed := changes(s, after):
             problems.append(changed)
-        if ups is not None and ups_after is not None and ups_after != ups:
-            problems.append(f"its power-up count (241) went from {ups} to {ups_after}")
+        problems += reset_signs(dut, [], interval, ups=(ups, ups_after))
     replies = [f for f in dut.trace[heard:] if f.source == dut.node_id and f.name == "get_esc_id" and f.kind is Kind.MESSAGE]
     dut.record.observe("foreign traffic watched", f"{played.name} from nodes {nodes} for {WATCH_S:g} s; GET_ESC_ID "
                        f"replies to the flight controller's queries: {len(replies)}")

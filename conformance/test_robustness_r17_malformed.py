@@ -4,11 +4,11 @@ For every frame type the ESC takes (the host's messages and the requests of the 
 be valid and would show if it were taken (a setting moved, a suspend, CAN Test on, an answer, a comm refresh) is
 sent malformed: as the start, a middle and the end frame of a multi-frame transfer, as a whole multi-frame transfer
 with DroneCAN's CRC, empty, one byte short, one byte long (where CAN's 8 bytes allow), as a request to another node
-and as a response frame. Then: no answer, nothing changed (the settings read, MSG1's state bits), no reset (the
-power-up count of 241 and MSG1's transfer ids continuous, the reports going on), and, for the throttle frames, the
-comm-loss flag raised on time (R8) while only malformed RawCommands arrive. A single frame with toggle 1 may be
-taken or ignored: recorded (OBSERVE). Each malformed frame of a burst has its own transfer id, so that an answer
-names the frame it answers.
+and as a response frame. Then: no answer, nothing changed (the settings read, MSG1's state bits), no reset (241's
+power-up count unmoved, no MSG1 gap after which its transfer ids count anew: ``conformance/resets.py``; the reports
+going on), and, for the throttle frames, the comm-loss flag raised on time (R8) while only malformed RawCommands
+arrive. A single frame with toggle 1 may be taken or ignored: recorded (OBSERVE). Each malformed frame of a burst has
+its own transfer id, so that an answer names the frame it answers.
 
 Set ID and Set Baud take effect only inside the 120 s window after a power-up (R11), so theirs are sent there, in
 tests of their own (``power_cycle``: the run order lets the others run while some window elapses, and they must
@@ -36,10 +36,10 @@ from ckesc.protocol import malformed as r17
 from ckesc.protocol.ids import DEFAULT_ESC_NODE_ID, parse_can_id
 from ckesc.protocol.judgements import r8_flag_due
 from ckesc.protocol.malformed import Bad
-from ckesc.protocol.transfer import TRANSFER_ID_MODULO
 
 from .answers import answers_another_node, esc_ids, original, put_back
 from .baud import RATES, cycle, rate0
+from .resets import reset_signs
 from .settings import NEIGHBOURS, changes, move_request
 from .telemetry import frame_start, interval_s, ms
 from .throttle import STREAM_PERIOD_S, can_throttle, command_for, motor_stopped
@@ -111,7 +111,7 @@ class Effects:
     changed: str
     resets: list[str]
     settings: dict  # the settings before the frames
-    restarted: bool = False  # the power-up count grew, or MSG1's transfer ids jumped
+    restarted: bool = False  # a reset shown (the power-up count moved, or MSG1 came back from a gap counting anew)
 
     def lines(self) -> list[str]:
         return ([f"answered: {'; '.join(self.answers)}"] if self.answers else []) + (
@@ -194,12 +194,8 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     # before t0 may be read after it (read before the frames were sent, it would be missing from both sides: a jump)
     seen = dut.frames("msg1", since=t0 - 2 * interval - dut.lane.timing_error, until=t1, source=dut.node_id)
     before, msg1 = [f for f in seen if f.timestamp < t0], [f for f in seen if f.timestamp >= t0]
-    resets = []
-    seq = [*before[-1:], *msg1]
-    jumps = [(a.transfer_id, b.transfer_id) for a, b in zip(seq, seq[1:])
-             if (a.transfer_id + 1) % TRANSFER_ID_MODULO != b.transfer_id]
-    if jumps:
-        resets.append(f"MSG1 transfer ids jumped ({', '.join(f'{a} -> {b}' for a, b in jumps)}): a restart or lost reports")
+    resets = reset_signs(dut, [*before[-1:], *msg1], interval)  # (a transfer id skipped without a gap: F3's)
+    restarted = bool(resets)
     last = msg1[-1].timestamp if msg1 else None
     if last is None or t1 - last > cat.restart_limit_s(interval) + dut.lane.timing_error:
         resets.append(f"no MSG1 in the last {ms(t1 - (last or t0)):g} ms of the {ms(t1 - t0):g} ms after the first "
@@ -209,13 +205,12 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     _leave_can_test(dut, heard)
     after = dut.settings()
     ups_after = dut.power_up_count() if ups is not None else None
-    if ups_after != ups:
-        resets.insert(0, f"the power-up count (241) went {ups} -> {ups_after}: the ESC reset")
+    grown = reset_signs(dut, [], interval, ups=(ups, ups_after))
+    resets[:0] = grown
     state = []
     if before and msg1 and _status_bits(before[-1]) != _status_bits(msg1[-1]):
         state.append(f"MSG1 state bits 0x{_status_bits(before[-1]):04X} -> 0x{_status_bits(msg1[-1]):04X}")
-    restarted = bool(jumps) or (ups is not None and ups_after != ups)
-    return Effects(answers, ", ".join(filter(None, [changes(s, after), *state])), resets, s, restarted)
+    return Effects(answers, ", ".join(filter(None, [changes(s, after), *state])), resets, s, restarted or bool(grown))
 
 
 def _check(dut, name: str, bads: list[Bad], effects: Effects) -> None:
@@ -344,6 +339,7 @@ def _set_id_look(dut, request) -> tuple[list[Bad], list[str]]:
     answers = heard_answers(dut, heard, t0, bads)
     problems = [f"answered: {'; '.join(answers)}"] if answers else []
     msg1 = dut.frames("msg1", since=t0, until=t1, source=dut.node_id)
+    problems += reset_signs(dut, msg1, interval)
     if not msg1 or t1 - msg1[-1].timestamp > cat.restart_limit_s(interval) + dut.lane.timing_error:
         problems.append(f"no MSG1 in the last {ms(t1 - (msg1[-1].timestamp if msg1 else t0)):g} ms (MSG1 every "
                         f"{ms(interval):g} ms): reporting stopped")
@@ -358,8 +354,8 @@ def _set_id_look(dut, request) -> tuple[list[Bad], list[str]]:
             if (now := esc_ids(dut)) != [(node, channel)]:
                 taken.append(f"{b}: GET_ESC_ID answers {now}")
         problems.append("taken, one at a time: " + ("; ".join(taken) if taken else "none alone"))
-    elif (after := dut.power_up_count()) != ups:
-        problems.append(f"the power-up count (241) went {ups} -> {after}: the ESC reset")
+    else:
+        problems += reset_signs(dut, [], interval, ups=(ups, dut.power_up_count()))
     return bads, problems
 
 

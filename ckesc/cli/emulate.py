@@ -88,7 +88,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
     from ..emulator.emulated_bench import EmulatedBench
     from ..emulator.flash import FlashError
     from ..emulator.realtime import RealtimeEmulator
-    from ..emulator.realtime_timing import stagger_boot
+    from ..emulator.realtime_timing import stagger_boot, summary
 
     if args.list_variants:
         print(variants.table())
@@ -146,7 +146,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    late = emulator.lateness.summary()
+    late = summary(emulator.lateness)
     flash = f"; flash saved to {args.flash_path}" if args.flash_path else ""
     print(f"ckesc emulate: stopped after {time.monotonic() - started:.1f} s: {emulator.counters['tx']} frames sent, "
           f"{emulator.counters['rx']} heard; lateness p50 {late['p50_us']} us, p99 {late['p99_us']} us, "

@@ -58,7 +58,7 @@ from .control import ControlServer, Handler, Reply, dispatch
 from .emulated_bench import EmulatedBench
 from .model import EscModel
 from .realtime_control import ControlCommands
-from .realtime_timing import Histogram, clock_offset, set_timer_slack
+from .realtime_timing import clock_offset, durations, set_timer_slack
 from .socketcand import SocketcandServer, fmt_frame
 from .tcp import Conn
 
@@ -120,8 +120,8 @@ class RealtimeEmulator(ControlCommands):
         self.scheduling = "normal"
         self._log = log or (lambda text: print(f"ckesc emulate: {text}", file=sys.stderr, flush=True))
         self.offset = clock_offset()
-        self.lateness = Histogram()  # per frame: handed to the bus - due
-        self.wakeup = Histogram()  # per timed wake: select() returned - the deadline it waited for
+        self.lateness = durations()  # per frame: handed to the bus - due
+        self.wakeup = durations()  # per timed wake: select() returned - the deadline it waited for
         self.counters = {"tx": 0, "rx": 0, "tx_other_bitrate": 0, "tx_errors": 0, "rx_malformed": 0, "clients": 0}
         self._escs: list[EscModel] = list(bench.escs)
         self._deadlines: list[float | None] = [None] * len(self._escs)
@@ -346,7 +346,7 @@ class RealtimeEmulator(ControlCommands):
             readable, writable, _ = select.select(rlist, wlist, [], timeout)
             now = mono()
             if not readable and not writable and deadline is not None:
-                self.wakeup.add(now - deadline)
+                self.wakeup.add(max(now - deadline, 0.0))
             for c in writable:
                 c.server.flush(c)
             for r in readable:
@@ -442,7 +442,7 @@ class RealtimeEmulator(ControlCommands):
             if self.bus is not None:
                 t_send = time.monotonic()
                 self._bus_send(w, (w.timestamp if due_stamps else t_send) + frame_bits(len(w.data)) * bit_s + self.offset)
-            self.lateness.add(t_send - w.timestamp)
+            self.lateness.add(max(t_send - w.timestamp, 0.0))
         self.counters["tx"] += len(frames)
 
     def _bus_send(self, wire: WireFrame, stamp: float) -> None:

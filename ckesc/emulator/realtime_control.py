@@ -10,6 +10,7 @@ from typing import Any
 
 from . import faults as _faults
 from .control import Reply
+from .realtime_timing import summary
 
 
 class ControlCommands:
@@ -53,8 +54,8 @@ class ControlCommands:
             "socketcand": _addr(self.socketcand_address),
             "clients": 0 if self._socketcand is None else len(self._socketcand.conns),
             "counters": dict(self.counters),
-            "lateness": self.lateness.summary(),
-            "wakeup": self.wakeup.summary(),
+            "lateness": summary(self.lateness),
+            "wakeup": summary(self.wakeup),
             "escs": escs,
         }
 
@@ -132,7 +133,7 @@ class ControlCommands:
         return {"bitrate": value}
 
     def _cmd_stats(self, req: dict, reply: Reply) -> dict:
-        out = {"lateness": self.lateness.summary(), "wakeup": self.wakeup.summary(), "counters": dict(self.counters)}
+        out = {"lateness": summary(self.lateness), "wakeup": summary(self.wakeup), "counters": dict(self.counters)}
         if req.get("reset"):
             self.lateness.reset()
             self.wakeup.reset()

@@ -3,14 +3,12 @@ clock and bus stamps, staggered boots of a bench's ESCs, and the lateness histog
 
 from __future__ import annotations
 
-import bisect
 import ctypes
-import itertools
-import math
 import sys
 import time
 from typing import Any
 
+from ..protocol.histogram import Histogram
 from .emulated_bench import EmulatedBench
 
 _PR_SET_TIMERSLACK = 29
@@ -60,53 +58,28 @@ def clock_offset() -> float:
     return best[1]  # type: ignore[index]
 
 
-class Histogram:
-    """Durations in 1 µs bins up to 10 ms, 1 ms bins up to 1 s (the exact maximum is kept): O(1) to
-    add and cheap to summarise, so a status query never stalls the scheduler with a sort."""
+#: the lateness histograms' bins: 1 µs up to 10 ms, 1 ms up to 1 s, then one bin beyond (the exact maximum is kept)
+FINE_BIN_S, FINE_BINS = 1e-6, 10_000
+COARSE_BIN_S, COARSE_BINS = 0.001, 990
 
-    FINE = 10_000  # 1 µs bins: 0 .. 10 ms
-    COARSE = 990  # 1 ms bins: 10 ms .. 1 s, then one overflow bin
 
-    def __init__(self) -> None:
-        self.reset()
+def durations() -> Histogram:
+    """A lateness histogram (:data:`FINE_BIN_S`, :data:`COARSE_BIN_S`): O(1) to add and cheap to summarise, so a status
+    query never stalls the scheduler with a sort. Durations below 0 are added as 0 by the caller."""
+    return Histogram(FINE_BIN_S, FINE_BINS, (COARSE_BIN_S, COARSE_BINS))
 
-    def reset(self) -> None:
-        self.counts = [0] * (self.FINE + self.COARSE + 1)
-        self.n = 0
-        self.max = 0.0
-        self.total = 0.0
 
-    def add(self, seconds: float) -> None:
-        if seconds < 0.0:
-            seconds = 0.0
-        us = int(seconds * 1e6)
-        if us < self.FINE:
-            self.counts[us] += 1
-        else:
-            self.counts[self.FINE + min(us // 1000 - 10, self.COARSE)] += 1
-        self.n += 1
-        self.total += seconds
-        if seconds > self.max:
-            self.max = seconds
+def summary(h: Histogram) -> dict[str, Any]:
+    """A lateness histogram in µs: count, p50/p90/p99/p99.9 (the upper edge of the bin, never above the maximum),
+    mean and max; over_1ms / over_5ms: how many took 1 ms / 5 ms or more."""
+    def us(v: float | None) -> float | None:
+        return None if v is None else round(v * 1e6, 1)
 
-    def _upper_edge(self, i: int) -> float:
-        if i < self.FINE:
-            return (i + 1) * 1e-6
-        return (i - self.FINE + 11) * 1e-3 if i < self.FINE + self.COARSE else math.inf
-
-    def summary(self) -> dict[str, Any]:
-        """count, mean, p50/p90/p99/p99.9 (the upper edge of the bin, never above the maximum) and max
-        in µs; over_1ms / over_5ms: how many took 1 ms / 5 ms or more."""
-        out: dict[str, Any] = {"count": self.n}
-        cum = list(itertools.accumulate(self.counts))
-        for key, q in (("p50_us", 0.5), ("p90_us", 0.9), ("p99_us", 0.99), ("p999_us", 0.999)):
-            if not self.n:
-                out[key] = None
-                continue
-            i = bisect.bisect_left(cum, max(1, math.ceil(q * self.n)))
-            out[key] = round(min(self._upper_edge(i), self.max) * 1e6, 1)
-        out["mean_us"] = round(self.total / self.n * 1e6, 1) if self.n else None
-        out["max_us"] = round(self.max * 1e6, 1) if self.n else None
-        out["over_1ms"] = self.n - cum[999]
-        out["over_5ms"] = self.n - cum[4999]
-        return out
+    out: dict[str, Any] = {"count": h.n}
+    for key, q in (("p50_us", 0.5), ("p90_us", 0.9), ("p99_us", 0.99), ("p999_us", 0.999)):
+        out[key] = us(h.quantile(q))
+    out["mean_us"] = us(h.total / h.n) if h.n else None
+    out["max_us"] = us(h.hi) if h.n else None
+    out["over_1ms"] = h.beyond(COARSE_BIN_S)
+    out["over_5ms"] = h.beyond(5 * COARSE_BIN_S)
+    return out

@@ -79,12 +79,10 @@ from ..protocol.judgements import (
     r9_gap,
     r9a_first,
     r9a_limit_s,
-    r19_power_ups,
-    r19_report_restart,
-    r19_run_time,
 )
 from ..protocol.transfer import SINGLE_FRAME, parse_tail, tail_transfer_id
 from .findings import Intervals, Violation, ms, quote
+from .resets import POWER_UPS, ResetSigns
 from .tracker import (
     COMM_BYTE,
     COMM_MASK,
@@ -126,6 +124,17 @@ class BusRules(Tracker):
     ``jitter``: the DUT's report-interval jitter allowance (seconds; a DUT profile's ``jitter_s``),
     added to ``tolerance`` in the R9 interval check only.
     """
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(**kw)
+        #: R19's bookkeeping per node (:mod:`.resets`, the soak's too): its streams' last reports, its 241 counters
+        self._resets: dict[int, ResetSigns] = {}
+
+    def _signs(self, node: Node) -> ResetSigns:
+        signs = self._resets.get(node.id)
+        if signs is None:
+            signs = self._resets[node.id] = ResetSigns(error=self.tolerance, jitter=self.jitter)
+        return signs
 
     # ------------------------------------------------------------------------------------- the hot path
     def feed(self, can_id: int, data, ts: float, extended: bool = True, remote: bool = False, error: bool = False,
@@ -278,8 +287,7 @@ class BusRules(Tracker):
 
     # ------------------------------------------------------------------------------------- F3 and R9
     def _stream(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float, tid: int):
-        if (st.ts is not None and not f3_holds(st.tid, tid) and st.periodic and st.power == self.power_switches
-                and self.last_switch_ts < st.ts and st.moved == node.moved and st.reset == node.reset and not node.shared and ts > node.unsure_until):
+        if st.periodic:
             out = self._report_restart(out, st, info, node, data, ts, start, tid)
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
         if st.ts is not None and st.chain == node.chain and not node.shared and ts > node.unsure_until:
@@ -410,17 +418,17 @@ class BusRules(Tracker):
         return out
 
     def _report_restart(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, tid: int):
-        """R19: a report gap with a transfer id restart, between two reports of one stream with no host event between
-        them that restarts reporting or may re-address the node (MSG Control, CAN Test, a Set Freq write or answer, Set
-        ID: the node's ``reset`` and ``moved`` counts) and no power switch the host reported. The interval is the one
-        the node stated, else the shortest gap seen (none: not judged)."""
+        """R19: a report gap with a transfer id restart (every report of a periodic stream kept in its node's
+        :class:`~.resets.ResetSigns`), judged between two reports of one stream with no host event between them that
+        restarts reporting or may re-address the node (MSG Control, CAN Test, a Set Freq write or answer, Set ID: the
+        node's ``reset`` and ``moved`` counts) and no power switch the host reported. The interval is the one the node
+        stated, else the shortest gap seen (none: not judged)."""
+        judge = (st.ts is not None and st.power == self.power_switches and self.last_switch_ts < st.ts
+                 and st.moved == node.moved and st.reset == node.reset and not node.shared and ts > node.unsure_until)
         period = node.periods[st.interval] if st.interval is not None else None
-        if period is None:
-            if st.min_gap == math.inf:
-                return out
+        if period is None and st.min_gap < math.inf:
             period = st.min_gap
-        sign = r19_report_restart(start - st.start, period, f3_step(st.tid, tid), error=self.tolerance,
-                                  jitter=self.jitter, what=st.name)
+        sign = self._signs(node).report(info.type_id, start, tid, period, what=st.name, judge=judge)
         if sign is None:
             return out
         return self._reset(out, sign, ts, node, self._pair(st, info, data, ts))
@@ -436,19 +444,15 @@ class BusRules(Tracker):
         if f is None or len(data) <= f.offset + f.size or node.shared:
             return out
         value = field_value(data, f)
-        before = node.counters.get(option)  # type: ignore[arg-type]
-        node.counters[option] = (value, asked, self.power_switches, node.moved, node.chain)  # type: ignore[index]
-        if before is None:
-            return out
-        previous, previous_asked, power, moved, chain = before
-        if (power, moved) != (self.power_switches, node.moved) or self.last_switch_ts >= previous_asked:
-            return out
-        if f.name == "power_ups":
-            if chain == node.chain:  # never silent as long as a boot takes: it did not power up (a count that grew
-                return out  # all the same counts something else: 4.4.27-T's tests judge what it counts)
-            sign = r19_power_ups(previous, value)
-        else:
-            sign = r19_run_time(previous, value, ts - previous_asked, error=2 * self.tolerance)
+        # each reading kept with its request's time, the tracker's power switches, the node's Set ID count and chain
+        signs = self._signs(node)
+        before = signs.last(f.name)
+        judge = (before is not None and before.tag[:2] == (self.power_switches, node.moved)  # type: ignore[index]
+                 and self.last_switch_ts < before.t
+                 # a power-up count is judged only across a silence as long as a boot takes: one that grew with the
+                 # node never silent counts something else (4.4.27-T's tests judge what it counts)
+                 and (f.name != POWER_UPS or before.tag[2] != node.chain))  # type: ignore[index]
+        sign = signs.counter(f.name, value, ts, since=asked, judge=judge, tag=(self.power_switches, node.moved, node.chain))
         if sign is None:
             return out
         return self._reset(out, sign, ts, node, (quote(info.can_id, data, ts, note=f"{info.label}, {f.name} {value}"),))

@@ -129,8 +129,7 @@ class Heard:
 class Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
                  "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
-                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until", "moved",
-                 "counters")
+                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until", "moved")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -168,9 +167,6 @@ class Node:
         self.comm_dropped = 0
         self.silences = 0
         self.noted: set[tuple] = set()  # observations made once per node
-        #: R19: 241's last power-up count and run time from this node, each (value, when its request went out, the
-        #: tracker's power switches then, the node's Set ID count then, its chain then): a reset shows against them
-        self.counters: dict[int, tuple[int, float, int, int, int]] = {}
 
     @property
     def role(self) -> str:

@@ -27,7 +27,8 @@ violation, an explorer finding) from it; it never writes a tolerance of its own.
 * R18 (:func:`r18_queueing_s`, :func:`r18_mean`, :func:`r18_gap`, :func:`r18_judged`): under foreign load of up to
   half the bus, R9 with each gap widened by the queueing the load can put ahead of a lowest-priority frame; above
   half load, OBSERVE.
-* R19 (R17: never reset) resets (:func:`r19_power_ups`, :func:`r19_run_time`, :func:`r19_report_restart`): the
+* R19 (R17: never reset) resets (:func:`r19_power_ups`, :func:`r19_run_time`, :func:`r19_report_restart`,
+  :func:`r19_counter_restarted`): the
   power-up count of 241 does not grow, its run time does not go back or jump, no report gap with a transfer id
   restart.
 
@@ -474,13 +475,13 @@ class Reset:
 
 
 #: 241 option 2's power-up count is a u16: it wraps (the count after 65535 is 0, not a reset)
-_POWER_UPS_MODULO = 1 << 16
+POWER_UPS_MODULO = 1 << 16
 
 
 def r19_power_ups(previous: int, current: int) -> Reset | None:
     """R19: 241 option 2's power-up count, read ``previous`` and later ``current`` with the power left on, has not grown
     (modulo its u16 width). None: no reset shown; else the :class:`Reset`."""
-    grown = (current - previous) % _POWER_UPS_MODULO
+    grown = (current - previous) % POWER_UPS_MODULO
     if not grown:
         return None
     return Reset("power_ups", f"the power-up count (241 option 2) went from {previous} to {current} with the power on")
@@ -499,6 +500,17 @@ def r19_run_time(previous: int, current: int, elapsed: float, *, error: float = 
     return None
 
 
+def r19_counter_restarted(gap: float, interval: float | None, step: F3Step) -> bool:
+    """R19, R9a: whether a report's counter started again across a ``gap`` between two consecutive reports of one
+    frame type: the transfer id ``step`` (:func:`f3_step`) neither counted on by one nor by the reports the gap's
+    length at ``interval`` says are missing (lost on the bus, F3; ``interval`` None: by one only). Such a report is
+    the first after a restart of the ESC's reporting (R9a: its gap and the next are not judged); with a gap longer
+    than a restart may take, a reset (:func:`r19_report_restart`)."""
+    if step.ok:
+        return False
+    return interval is None or not step.explained_by(max(round(gap / interval) - 1, 0))
+
+
 def r19_report_restart(gap: float, interval: float, step: F3Step, *, error: float = 0.0, jitter: float = 0.0,
                        what: str = "report") -> Reset | None:
     """R19: a report gap with a transfer id restart. ``gap``: the time between two consecutive reports of one frame
@@ -506,9 +518,7 @@ def r19_report_restart(gap: float, interval: float, step: F3Step, *, error: floa
     A reset shows as a gap longer than a restart may take (R9a's restart limit, :func:`r9a_limit_s`, and the bench's
     ``error``) across which the transfer id neither counted on by one (a late report: R9's, not a reset) nor by the
     reports the gap's length says are missing (lost on the bus, F3): a counter that starts again."""
-    if gap <= r9a_limit_s(interval, jitter=jitter) + error + _NOISE_S or step.ok:
-        return None
-    if step.explained_by(max(round(gap / interval) - 1, 0)):
+    if gap <= r9a_limit_s(interval, jitter=jitter) + error + _NOISE_S or not r19_counter_restarted(gap, interval, step):
         return None
     return Reset(what, f"{what} stopped for {gap * 1000:.1f} ms (interval {interval * 1000:g} ms) and came back with "
                  f"{step}: its counter started again")

@@ -1,6 +1,6 @@
 """A soak run, the IO part: the bench built as every command builds it (:func:`ckesc.bench.station.build`), the DUT
 found and its settings read once (:class:`ckesc.bench.dut.Dut`), then the :class:`~.player.Player` driven on the
-lane's clock and every frame read fed to the :class:`~.watches.Monitor`, until the duration has passed, a finding
+lane's clock and every frame read fed to the :class:`~.monitor.Monitor`, until the duration has passed, a finding
 stops it (``stop_on_finding``) or the operator does (Ctrl-C, SIGTERM). On every way out the stream stops and zero
 throttle goes out on every channel in every format (as the suite's exit paths do), then the reports are written.
 
@@ -27,11 +27,13 @@ from ..bench.lanes import BenchGone, BusFault
 from ..bench.station import BENCH_ROWS, BenchOptions, build
 from ..protocol import catalogue as cat
 from ..protocol.frame import WireFrame
+from ..protocol.histogram import Histogram
 from . import report
+from .monitor import Monitor
 from .player import FORMATS, FlightPlan, Player
 from .statement import Statement, duration_text
 from .trace import DEFAULT_BUDGET, Trace
-from .watches import Histogram, Monitor, WatchConfig
+from .watch import WatchConfig
 
 #: lane time read after the closing zero throttle, so that its frames are on the bus before the lane closes
 EXIT_READ_S = 0.01

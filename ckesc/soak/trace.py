@@ -1,7 +1,7 @@
 """A soak's frames on disk within a budget (``--trace-budget``): a rolling candump log of every frame heard, in
 :data:`ROLL_FILES` files (``trace-000001.log``, ...) of which the oldest is deleted as a new one starts, and each
-finding's frames (:class:`~.watches.Finding`: the ring before it and the frames after it) in a file of its own
-(``finding-001.log``), never deleted. Room for :data:`~.watches.MAX_FINDINGS` finding files is set aside from the
+finding's frames (:class:`~.watch.Finding`: the ring before it and the frames after it) in a file of its own
+(``finding-001.log``), never deleted. Room for :data:`~.watch.MAX_FINDINGS` finding files is set aside from the
 budget first; the rest is the rolling log's, so the files together never exceed the budget.
 
 The lines are candump's log format (``candump -L``; python-can's ``CanutilsLogReader`` reads them): ``(time)
@@ -15,7 +15,7 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-from .watches import AFTER_FRAMES, MAX_FINDINGS, RING_FRAMES, Finding
+from .watch import AFTER_FRAMES, MAX_FINDINGS, RING_FRAMES, Finding
 
 #: the rolling log's files: the budget's rolling part split among them, the oldest deleted as the next one starts
 ROLL_FILES = 4
@@ -48,7 +48,7 @@ def candump_line(t: float, can_id: int, data: bytes) -> str:
 
 #: lines held before they are written (one write of many lines costs less than many writes: a soak writes every frame)
 BATCH_LINES = 256
-#: the ids' ``) soak 0CXXXXXX#`` and the payloads' hex kept, as :data:`~.watches.MAX_IDS` bounds the watches' own
+#: the ids' ``) soak 0CXXXXXX#`` and the payloads' hex kept, as :data:`~.watch.MAX_IDS` bounds the watches' own
 #: (a bus of few ids and few payloads, hours long: the same strings again)
 MAX_CACHED = 4096
 

@@ -36,7 +36,7 @@ from ckesc.emulator.control import control_request
 from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.emulator.flash import FlashStore
 from ckesc.emulator.realtime import RealtimeEmulator
-from ckesc.emulator.realtime_timing import Histogram
+from ckesc.emulator.realtime_timing import durations, summary
 from ckesc.emulator.socketcand import _parse_send, fmt_frame
 from ckesc.protocol import Decoder, Frame, Kind, WireFrame, decode, encode
 from ckesc.protocol import catalogue as cat
@@ -505,13 +505,13 @@ def test_socketcand_text_matches_python_can_client():
 
 
 def test_histogram_percentiles():
-    h = Histogram()
+    h = durations()
     for us in range(999):  # 0.5 .. 998.5 µs
         h.add((us + 0.5) * 1e-6)
     h.add(0.25)  # one 250 ms stall
-    s = h.summary()
+    s = summary(h)
     assert s["count"] == 1000 and s["max_us"] == 250000.0
     assert s["p50_us"] == 500.0 and s["p99_us"] == 990.0  # the upper edges of 1 µs bins
     assert s["over_1ms"] == 1 and s["over_5ms"] == 1
     h.reset()
-    assert h.summary()["p50_us"] is None
+    assert summary(h)["p50_us"] is None

@@ -58,3 +58,17 @@ def test_a_simulated_soak_finds_the_fault_at_its_default_onset(tmp_path, fault):
     onset = FAULTS[fault].onset_s
     doc = soak(tmp_path, [fault], onset + 600.0, fault in SPIN)
     assert doc["findings"] and doc["findings"][0]["t_s"] >= onset - 1.0, doc["findings"][:1]
+
+
+def test_a_watchdog_reset_is_found_as_a_reset_and_not_again_as_an_r9_minute(tmp_path):
+    """reset_after_streaming resets the ESC every minute here: each reset is one finding of the resets watch (its other
+    signs, MSG2's gap and the power-up count, counted with it), and no minute's mean is broken by the gaps across it
+    that R9a leaves unjudged (before, MSG3's minute with the reset read 498 ms)."""
+    doc = soak(tmp_path, [f"reset_after_streaming={MOVED_ONSET_S:g}"], 3 * MOVED_ONSET_S, spin=False)
+    by_watch = {f["watch"] for f in doc["findings"]}
+    assert "resets" in by_watch and "report intervals" not in by_watch, [f["message"] for f in doc["findings"]]
+    resets = doc["watches"]["resets"]
+    assert resets["events"] == 2 and [f["watch"] for f in doc["findings"]].count("resets") == 2, resets  # at 1 and 2 min
+    assert resets["statistics"]["signs_of_resets_found"] == 2 * 2, resets  # each: MSG2's gap and the power-up count
+    intervals = doc["watches"]["report intervals"]
+    assert intervals["trials"] == 3 * 3 and intervals["statistics"]["worst_mean_error_ms"]["msg3"] == 0.0, intervals

@@ -10,8 +10,10 @@ import pytest
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol import judgements as jd
 from ckesc.protocol.frame import WireFrame, encode
+from ckesc.protocol.histogram import Histogram
 from ckesc.protocol.ids import Kind
-from ckesc.soak.watches import AFTER_FRAMES, MAX_FINDINGS_PER_WATCH, Histogram, Monitor, WatchConfig
+from ckesc.soak.monitor import Monitor
+from ckesc.soak.watch import AFTER_FRAMES, MAX_FINDINGS_PER_WATCH, WatchConfig
 
 HOST, NODE = 0, 1
 MSG1, MSG2, MSG3 = 0.020, 0.100, 0.500
@@ -26,6 +28,9 @@ class Esc:
 
     msg1_interval: float = MSG1
     reset_at: float | None = None  # MSG1 stops for 300 ms and its transfer ids start again at 0
+    reset_all: bool = False  # ... and MSG2 and MSG3 with it, each on a grid from the restart
+    counting_on: tuple[str, ...] = ()  # ... these but for their counters, which go on by one (one time in 32)
+    back_at: float = 0.303  # when MSG2 and MSG3 come back after the reset (MSG1 at 0.301)
     flag_at: float | None = None  # one MSG1 shows the comm-loss flag while the stream runs
     answer_delay: float = 0.0025
     no_answer_at: float | None = None
@@ -60,8 +65,12 @@ class Esc:
             t = round(0.001 + k * self.msg1_interval, 9)
         for name, interval, fields in (("msg2", MSG2, {"voltage": 1200, "current": 0, "temperature": 30}),
                                        ("msg3", MSG3, {"mos_t": 30, "cap_t": 30, "motor_t": 30, "mcu_t": 30})):
-            n = 0
-            while (t := 0.003 + n * interval) < seconds:
+            n, origin = 0, 0.003
+            while (t := origin + n * interval) < seconds:
+                if self.reset_all and self.reset_at is not None and origin < self.reset_at <= t:
+                    n, origin = 0, self.reset_at + self.back_at
+                    tid[name] = tid[name] if name in self.counting_on else 0
+                    continue
                 out.append(encode(name, fields, source=NODE, transfer_id=nxt(name), timestamp=t))
                 n += 1
         s = 0
@@ -137,6 +146,28 @@ def test_a_reset_shows_as_a_report_gap_with_a_transfer_id_restart():
     assert len(found) == 1 and found[0].rules == ("R19", "R17") and "started again" in found[0].message
     assert found[0].t == pytest.approx(30.3, abs=0.03)
     assert len(found[0].before) > 10 and len(found[0].after) == AFTER_FRAMES  # the frames around it
+
+
+def test_a_reset_is_found_once_as_a_reset_and_its_restart_gaps_leave_the_minutes_mean():
+    """Every report restarts with the ESC (MSG3's gap across it 800 ms, not 500): the resets watch finds it once (the
+    other reports' gaps counted as its signs), and the minute's MSG3 mean leaves out the gaps R9a leaves out (to and from the first report after the restart), so it
+    is no R9 finding as well; the minute is still judged, on the gaps before and after."""
+    m = watch(Esc(reset_at=30.0, reset_all=True))
+    assert [f.watch for f in m.findings] == ["resets"], [f.line() for f in m.findings]
+    assert m.findings[0].message.startswith("msg1 stopped") and m.resets.events == 1
+    assert m.resets.statistics()["signs_of_resets_found"] == 2  # MSG2's and MSG3's gaps: the same reset
+    assert m.intervals.series["msg3"][0] == pytest.approx(500.0) and m.intervals.trials == 3 * 2
+    late = watch(Esc(reset_at=30.0, reset_all=True, msg1_interval=MSG1 + 1.5 * jd.SCHEDULING_TOLERANCE_S))
+    assert [f.watch for f in late.findings if "msg1 every" in f.message] == ["report intervals"] * 2  # still judged
+
+
+@pytest.mark.parametrize("back_at", [0.303, 0.2995])  # MSG3 back after MSG1 shows the reset, or before it
+def test_a_report_whose_counter_goes_on_across_a_reset_restarts_with_it(back_at):
+    """MSG3's counter goes on by one across the reset (as one in 32 would by chance): it shows no restart of its own,
+    but MSG1's gap shows the reset, and MSG3's gaps across it leave the minute's mean all the same."""
+    m = watch(Esc(reset_at=30.0, reset_all=True, counting_on=("msg3",), back_at=back_at))
+    assert [f.watch for f in m.findings] == ["resets"], [f.line() for f in m.findings]
+    assert m.intervals.series["msg3"][0] == pytest.approx(500.0)
 
 
 @pytest.mark.parametrize("esc, words", [

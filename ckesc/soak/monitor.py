@@ -1,0 +1,218 @@
+"""The soak's monitor, sans-IO: every frame of the run in (with its lane timestamp), the watches fed, findings out.
+
+One watch owns each property (R19), each calling its rule's judgement in :mod:`ckesc.protocol.judgements`:
+
+* :class:`~.reset_watch.ResetWatch` - no reset: 241's power-up count does not move, its run time neither goes back
+  nor jumps, no report gap with a transfer id restart (the bus rules' bookkeeping, :mod:`ckesc.evidence.resets`);
+* :class:`~.interval_watch.IntervalWatch` - R9 over every minute, per report (MSG1..3): the mean of that minute's
+  gaps, less those R9a leaves unjudged after a restart (:func:`~ckesc.protocol.judgements.r9_mean`); the trend is
+  one mean per minute and report;
+* :class:`~.comm_watch.CommFlagWatch` - the comm flag (MSG1's status, R8) set only when the stream stops
+  (:func:`~ckesc.protocol.judgements.r8_flag_due`);
+* :class:`~.watches.AnswerWatch` - GET_ESC_ID's answers in the node's slot (R2) and within 64 ms (4.4.3-4), their
+  delays as a fixed-bin histogram (another node's query, a flight controller's on the bus, is answered too: its
+  answer is neither the host's nor one to no query);
+* :class:`~.frame_watches.SettingsWatch` - 242's answers unchanged (:func:`~ckesc.protocol.judgements.r13_read_back`);
+* :class:`~.frame_watches.UnexpectedWatch` - frames the ESC should not send: one that does not decode, or a frame
+  type normal reporting never sends and the player never asked for.
+
+Memory does not grow with the run's length: counters, fixed-bin histograms, the last value of each counter, a ring
+of recent frames (:data:`~.watch.RING_FRAMES`), at most :data:`~.watch.MAX_FINDINGS` findings kept whole (the rest
+counted), and the R9 trend, one value per minute and report (1440 a day: the one thing that grows, as the trend
+plot needs it).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+from ..protocol import catalogue as cat
+from ..protocol.errors import DecodeError
+from ..protocol.frame import Decoder, Frame, classify
+from ..protocol.histogram import Histogram
+from ..protocol.ids import Kind
+from .comm_watch import CommFlagWatch
+from .frame_watches import SettingsWatch, UnexpectedWatch
+from .interval_watch import IntervalWatch
+from .reset_watch import ResetWatch
+from .watch import AFTER_FRAMES, MAX_FINDINGS, MAX_FINDINGS_PER_WATCH, MAX_IDS, REPORTS, RING_FRAMES, Finding, Watch, WatchConfig
+from .watches import AnswerWatch
+
+#: the host's send times kept per frame (id and bytes) until its echo comes back (the stream's repeat every 32 transfers)
+SENT_KEPT = 8
+#: how late the bench stamped the host's own frames (their echo's time minus the host's send): bins of a tenth of a
+#: millisecond up to 50 ms, then one overflow bin
+LAG_BIN_S = 0.0001
+LAG_BINS = 500
+
+
+class Monitor:
+    """Every frame of the run in (:meth:`feed`), in order, the DUT's and the host's own (their echo), with lane
+    timestamps; the watches fed; findings kept (:attr:`findings`, the first :data:`MAX_FINDINGS`) and counted."""
+
+    def __init__(self, cfg: WatchConfig, t0: float) -> None:
+        self.cfg = cfg
+        self.t0 = t0
+        self.decoder = Decoder(nibble_order=cfg.nibble_order)
+        self.ring: deque[tuple[float, int, bytes]] = deque(maxlen=RING_FRAMES)
+        self.findings: list[Finding] = []
+        self.dropped = 0  # findings counted but not kept
+        self._kept: dict[str, int] = {}  # findings kept per watch
+        self._open: list[tuple[Finding, int]] = []  # findings still collecting frames after them
+        self.frames = 0
+        self.dut_frames = 0
+        self.own_frames = 0
+        self.other_frames = 0
+        self.last_t = t0
+        self._ids: dict[int, tuple[Any, ...]] = {}
+        self._frames: dict[tuple[int, bytes], Frame] = {}
+        self._sent: dict[tuple[int, bytes], deque[float]] = {}  # the host's send times of frames not echoed yet
+        #: how late the bench stamped the host's own frames after the host sent them (:meth:`sent`)
+        self.bench_lag = Histogram(LAG_BIN_S, LAG_BINS)
+        self.resets = ResetWatch(self)
+        self.intervals = IntervalWatch(self)
+        self.comm = CommFlagWatch(self)
+        self.answers = AnswerWatch(self)
+        self.settings = SettingsWatch(self)
+        self.unexpected = UnexpectedWatch(self)
+        self.watches: tuple[Watch, ...] = (self.resets, self.intervals, self.comm, self.answers, self.settings,
+                                           self.unexpected)
+
+    # ------------------------------------------------------------------ findings
+    def found(self, watch: Watch, t: float, message: str, rules: tuple[str, ...]) -> None:
+        kept = self._kept.get(watch.name, 0)
+        if len(self.findings) >= MAX_FINDINGS or kept >= MAX_FINDINGS_PER_WATCH:
+            self.dropped += 1
+            return
+        self._kept[watch.name] = kept + 1
+        f = Finding(t - self.t0, watch.name, rules, message, [self._line(*r) for r in self.ring])
+        self.findings.append(f)
+        self._open.append((f, AFTER_FRAMES))
+
+    def _line(self, t: float, can_id: int, data: bytes) -> str:
+        return f"{t - self.t0:12.6f}  {can_id:08X}#{data.hex().upper()}"
+
+    @property
+    def count(self) -> int:
+        return len(self.findings) + self.dropped
+
+    @property
+    def open_findings(self) -> int:
+        """How many findings (the last kept ones) are still collecting the frames after them."""
+        return len(self._open)
+
+    @property
+    def settled(self) -> bool:
+        """No finding is still collecting the frames after it."""
+        return not self._open
+
+    # ------------------------------------------------------------------ frames
+    def sent(self, can_id: int, data: bytes, t: float) -> None:
+        """The host sent this frame at ``t`` (lane time, the host's clock): its echo's stamp says how late the bench
+        stamped it (a lane without echo hands the frame out stamped at the send: no lag)."""
+        key = (can_id, bytes(data))
+        q = self._sent.get(key)
+        if q is None:
+            if len(self._sent) > MAX_IDS:
+                self._sent.clear()
+            q = self._sent[key] = deque(maxlen=SENT_KEPT)
+        q.append(t)
+
+    def feed(self, msg: Any) -> None:
+        """One frame heard (a ``can.Message`` or anything with its attributes): ``timestamp``, ``arbitration_id``,
+        ``data``, ``is_extended_id`` (and the error / remote flags)."""
+        t = msg.timestamp
+        can_id = msg.arbitration_id
+        data = bytes(msg.data)
+        self.frames += 1
+        self.last_t = t
+        if self.answers.pending is not None:
+            self.answers.tick(t)
+        if self._open:
+            line = self._line(t, can_id, data)
+            still = []
+            for f, left in self._open:
+                f.after.append(line)
+                if left > 1:
+                    still.append((f, left - 1))
+            self._open = still
+        self.ring.append((t, can_id, data))
+        info = self._ids.get(can_id)
+        if info is None:
+            if len(self._ids) > MAX_IDS:  # a DUT sending ever new ids must not grow the memory
+                self._ids.clear()
+            info = self._ids[can_id] = classify(can_id) if getattr(msg, "is_extended_id", True) else (None,) * 5
+        kind, type_id, source, _, spec = info
+        cfg = self.cfg
+        if source == cfg.host_node and spec is not None:
+            self.own_frames += 1
+            if self._sent and (q := self._sent.get((can_id, data))):
+                lag = max(t - q.popleft(), 0.0)
+                self.bench_lag.add(lag)
+                self.answers.lagged(t, lag)
+            name = spec.name
+            if name in cat.THROTTLE_FRAMES:
+                self.comm.command(t)
+            elif name == "get_esc_id":
+                self.answers.asked(t)
+            elif kind is Kind.REQUEST:
+                self._decode(msg, data)  # the decoder remembers a 241 request: its answer's layout depends on it
+            return
+        if source != cfg.node_id:
+            self.other_frames += 1
+            self.answers.bus_taken(len(data))
+            if spec is not None and spec.name == "get_esc_id" and kind is Kind.MESSAGE:
+                frame = self._decode(msg, data, judge=False)
+                if frame is not None and frame.layout is not None and frame.layout.name == "query":
+                    self.answers.foreign_asked(t)
+            return
+        self.dut_frames += 1
+        self.unexpected.trials += 1  # every frame of the DUT is judged by it
+        frame = self._decode(msg, data)
+        if frame is None:
+            return
+        name = frame.name
+        if kind is Kind.MESSAGE:
+            if name in REPORTS:
+                self.intervals.report(name, t, self.resets.report(name, t, frame.transfer_id))
+                if name == "msg1":
+                    self.comm.msg1(frame, t)
+                return
+            if name == "get_esc_id" and frame.layout is not None and frame.layout.name == "reply":
+                self.answers.reply(frame, t)
+                return
+        elif kind is Kind.RESPONSE and frame.destination == cfg.host_node:
+            if name == "maintenance_information":
+                self.resets.maintenance(frame, t)
+                return
+            if name == "get_major_configuration":
+                self.settings.read(frame, t)
+                return
+        self.unexpected.frame(frame, t)
+
+    def _decode(self, msg: Any, data: bytes, *, judge: bool = True) -> Frame | None:
+        """The frame decoded; a message (its layout the frame's own) decoded once per distinct id and bytes: a report
+        of the same values differs only in its transfer id, hours long (the cached frame's ``timestamp`` is its
+        first's: the watches take the time from the feed)."""
+        key = (msg.arbitration_id, data)
+        frame = self._frames.get(key)
+        if frame is not None:
+            return frame
+        try:
+            frame = self.decoder.decode(msg)
+        except DecodeError as exc:
+            if judge and (msg.arbitration_id & 0x7F) == self.cfg.node_id:
+                self.unexpected.garbled(exc, msg.timestamp)
+            return None
+        if frame.kind is Kind.MESSAGE and getattr(msg, "is_extended_id", True) and not getattr(msg, "is_error_frame", False) \
+                and not getattr(msg, "is_remote_frame", False):
+            if len(self._frames) > MAX_IDS:
+                self._frames.clear()
+            self._frames[key] = frame
+        return frame
+
+    def close(self, now: float) -> None:
+        """The run ended at lane time ``now``: the watches judge what is still open."""
+        for w in self.watches:
+            w.close(now)
