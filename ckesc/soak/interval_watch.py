@@ -179,9 +179,13 @@ class IntervalWatch(Watch):
             if partial and joined.gaps < jd.R9_GAPS:
                 self.series[name].append(None)
                 continue
-            # each stretch's two ends carry the bench's error, as one span's do
-            judged = jd.r9_mean(joined, interval, error=stretches * self.cfg.error, what=name)
+            # each stretch's two ends carry the bench's error and the DUT's declared jitter, as one span's do (R9)
+            judged = jd.r9_mean(joined, interval, error=stretches * self.cfg.error, jitter=stretches * self.cfg.jitter,
+                                what=name)
             assert judged is not None
+            if not judged.judged:  # too few gaps in this minute for the ends' error and jitter (R9: OBSERVE)
+                self.series[name].append(None)
+                continue
             self.series[name].append(round(joined.span / joined.gaps * 1000, 4))
             self.worst[name] = max(self.worst.get(name, 0.0), judged.measured)
             self.trials += 1

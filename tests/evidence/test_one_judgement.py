@@ -30,7 +30,8 @@ from ckesc.explore.oracle import Oracle
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import Decoder, encode, frame_bits
 from ckesc.protocol.judgements import R9_GAPS, r9_judged, r9_mean
-from ckesc.soak.watches import Monitor, WatchConfig
+from ckesc.soak.monitor import Monitor
+from ckesc.soak.watch import WatchConfig
 from conformance.answers import esc_id_pairings
 from conformance.test_s4_1_framing import counter_streams, counting_problems
 from conformance.wire import Heard
