@@ -800,7 +800,10 @@ def test_every_checked_rule_is_broken_by_some_fault():
 
 #: Rules the document now states that no fault breaks and no test checks yet, each with the issue that builds its
 #: checks: a rule added to INTERPRETATIONS.md is either checked or listed here, never silently left out.
-NOT_YET_CHECKED: dict[str, str] = {}
+NOT_YET_CHECKED: dict[str, str] = {
+    "R20": "issue #36: the bus as CAN hardware (acknowledgement, a host alone on the bus, bus-off and its recovery, a "
+           "node at another bit rate, comm loss with other traffic going on): no lane plays it yet, no test cites it",
+}
 #: Rules of long runs: checked by ``ckesc soak``, not the ten-minute suite; broken by the soak faults (kind soak), which
 #: the suite must miss (tests/emulator/test_soak_faults.py, the self-test).
 SOAK_RULES = {"R19"}
