@@ -96,3 +96,37 @@ def test_the_private_names_check_sees_both_forms(tmp_path, monkeypatch):
     assert _private_uses(pkg / "a.py") == []
     assert sorted(_private_uses(pkg / "b.py")) == [(1, "ckesc.demo.a._own"), (4, "ckesc.demo.a._other"),
                                                   (4, "ckesc.demo.a._own")]
+
+
+# ----------------------------------------------------------------------------------------- import circles
+def _circles(graph) -> list[str]:
+    """Each import circle of ``graph`` (a grimp graph) once, as ``a -> b -> a``: a module that imports another from
+    which a chain of imports leads back to it. Every import counts, at the top of a module, inside a function and
+    under ``TYPE_CHECKING`` alike: a circle hidden in a function is still two modules that cannot be read apart."""
+    found: dict[frozenset[str], str] = {}
+    for module in sorted(graph.modules):
+        for imported in sorted(graph.find_modules_directly_imported_by(module)):
+            if imported != module and graph.chain_exists(importer=imported, imported=module):
+                chain = graph.find_shortest_chain(importer=imported, imported=module)
+                found.setdefault(frozenset(chain), " -> ".join((module, *chain)))
+    return sorted(found.values())
+
+
+def test_no_import_circle_inside_ckesc():
+    """No two modules of ckesc import each other, directly or through others (issue #35): what both need lives in a
+    module below both. The layers contract cannot see a circle inside one layer; this does."""
+    import grimp
+
+    circles = _circles(grimp.build_graph("ckesc"))
+    assert circles == [], "move what both modules need below both:\n" + "\n".join(circles)
+
+
+def test_the_circle_check_sees_a_circle():
+    """The check above finds a circle of two and of three modules (one per circle), and passes a chain."""
+    import grimp
+
+    graph = grimp.ImportGraph()
+    for importer, imported in (("p.a", "p.b"), ("p.b", "p.a"), ("p.c", "p.d"), ("p.d", "p.e"), ("p.e", "p.c"),
+                               ("p.f", "p.a"), ("p.f", "p.g")):
+        graph.add_import(importer=importer, imported=imported)
+    assert _circles(graph) == ["p.a -> p.b -> p.a", "p.c -> p.d -> p.e -> p.c"]

@@ -17,17 +17,15 @@ import shlex
 import shutil
 import socket
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..emulator import variants
 from ..emulator.faults import FAULTS, onsets_in
 from ..protocol.ids import ESC_NODE_IDS
 from .errors import PreflightError
 from .labgrid_power import labgrid_options
+from .options import BUS_OPEN_TIMEOUT_S, BenchOptions
 from .profile import DutProfile, ProfileError
-
-if TYPE_CHECKING:
-    from .station import BenchOptions
 
 
 def node_id(text: str | int, what: str = "node id") -> int:
@@ -108,12 +106,6 @@ def load_profile(options: BenchOptions) -> DutProfile:
         raise PreflightError(str(exc)) from None
     # a real bus is never taken as exact: the limits the profile leaves out are the named defaults, said by the run
     return loaded.on_a_real_bus() if options.dut == "bus" else loaded
-
-
-#: How long the preflight waits for python-can to open the bus before it names the bus as not answering: a
-#: socketcand client retries its connection for 10 s and then may wait for the daemon's greeting for ever; a USB
-#: adapter that is not there fails at once. ``--bus-open-timeout`` gives another.
-BUS_OPEN_TIMEOUT_S = 5.0
 
 
 def bus_where(kwargs: dict[str, Any]) -> str:

@@ -35,14 +35,12 @@ from pathlib import Path
 from typing import Any
 
 from .errors import PreflightError
-from .power import PowerControl
+from .power_control import Option, PowerControl
 
 #: what installs labgrid (the set-up error names it)
 INSTALL_HINT = 'pip install ".[rig]"'
 #: labgrid-client's default coordinator (its ``--coordinator`` help)
 DEFAULT_COORDINATOR = "127.0.0.1:20408"
-
-Option = Callable[[str], Any]
 
 
 def _import_labgrid():

@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import shlex
 import subprocess
-from abc import ABC, abstractmethod
 from collections.abc import Callable
 from importlib.metadata import entry_points
 from typing import Any
 
+from . import labgrid_power
 from .errors import PowerFailed, PreflightError
+from .power_control import Option, PowerControl, Prompt
 
 #: the entry-point group other packages register power backends in
 ENTRY_POINT_GROUP = "ckesc.power"
@@ -32,23 +33,6 @@ ENTRY_POINT_GROUP = "ckesc.power"
 #: well under a second, a Python script (``ckesc control``) in one or two, several on a loaded host in a few; one
 #: that hangs (a network PSU that does not answer) must not hold the run
 POWER_COMMAND_TIMEOUT_S = 10.0
-
-Option = Callable[[str], Any]
-Prompt = Callable[[str], None]
-
-
-class PowerControl(ABC):
-    """Switches the DUT's supply. ``available`` False: tests that need a power cycle are skipped."""
-
-    name = "power"
-    available = True
-
-    @abstractmethod
-    def off(self) -> None: ...
-
-    @abstractmethod
-    def on(self) -> None: ...
-
 
 class EmulatorPower(PowerControl):
     name = "emulator"
@@ -146,9 +130,7 @@ def _command(get: Option, prompt: Prompt) -> PowerControl:
 
 
 def _labgrid(get: Option, prompt: Prompt) -> PowerControl:
-    from .labgrid_power import open_power  # labgrid is the optional extra `rig`: imported only when used
-
-    return open_power(get)
+    return labgrid_power.open_power(get)  # it imports labgrid, the optional extra `rig`, only here
 
 
 def _emulator(get: Option, prompt: Prompt) -> PowerControl:

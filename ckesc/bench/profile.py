@@ -33,6 +33,7 @@ from typing import Any, Literal, TypeVar
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from ..protocol.functions import CORE, OPTIONAL
+from .sections import Section
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -54,16 +55,12 @@ class ProfileError(ValueError):
 
 
 # ----------------------------------------------------------------------------------------- schema
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
-
-
-class _Dut(_Section):
+class _Dut(Section):
     name: str | None = Field(None, description="how the reports name the DUT (default: the file's name)")
     description: str = Field("", description="free text, shown in the reports")
 
 
-class _Capabilities(_Section):
+class _Capabilities(Section):
     led: bool = Field(False, description="an LED Set LED (4.4.20) can drive")
     motor: bool = Field(False, description="a motor attached (spinning it still needs --allow-motor-spin)")
     pwm_input: bool = Field(False, description="a PWM throttle input the bench can drive (Throttle Select, 4.4.23)")
@@ -93,7 +90,7 @@ DEFAULT_STAMP = "end"
 STAMPS = ("end", "start")
 
 
-class _Timing(_Section):
+class _Timing(Section):
     model_config = ConfigDict(extra="forbid", strict=False)  # an int (2) is a float here, a string is not
     error_s: float = Field(0.0, ge=0.0, le=10.0, description=(
         "**the bench's** measurement error (host + adapter timestamps): a timing margin smaller than it is INCONCLUSIVE"))
@@ -111,11 +108,11 @@ class _Timing(_Section):
         "with it. Left out on a real bus, the run prints the default it takes"))
 
 
-class _Readings(_Section):
+class _Readings(Section):
     R4: Literal["lsb", "swapped"] = Field("lsb", description="RawCommand_12b's 12-bit nibble order (R4)")
 
 
-class _Functions(_Section):
+class _Functions(Section):
     absent: list[str] = Field([], description=(
         "optional functions the ESC lacks (R9b): their tests are SKIPPED as \"not claimed\""))
 
@@ -134,7 +131,7 @@ class _Functions(_Section):
         return list(dict.fromkeys(names))
 
 
-class _ProfileDoc(_Section):
+class _ProfileDoc(Section):
     dut: _Dut = _Dut()
     capabilities: _Capabilities = _Capabilities()
     timing: _Timing = _Timing()

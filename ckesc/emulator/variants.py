@@ -6,9 +6,9 @@ ERROR on one is the suite's bug (a reading stricter than the document), never th
 is the one list of those freedoms, each citing the requirement ids (``ckesc/protocol/requirements.toml``:
 ``R..`` from ``spec/INTERPRETATIONS.md``, section clauses) that leave it open.
 
-Each freedom is an :class:`~ckesc.emulator.model.EscConfig` field. Its conforming values are either
-named alternatives (``choices``; the first is what the emulator does by default) or a span of
-seconds (``span``; the default is the field's default). ``--emulator-option NAME=VALUE`` (``ckesc
+Each freedom is an :class:`~ckesc.emulator.config.EscConfig` field, whose default it gives. Its conforming
+values are either named alternatives (``choices``; the first is what the emulator does by default) or a span
+of seconds (``span``, with its ``default`` inside it). ``--emulator-option NAME=VALUE`` (``ckesc
 run``, the pytest plugin) and ``ckesc emulate --option NAME=VALUE`` set one; ``--emulator-variants SEED``
 and ``ckesc emulate --variants SEED`` draw a whole combination from a seed (:func:`draw`), options
 given by name winning over the draw.
@@ -39,6 +39,9 @@ class Freedom:
     #: or: a number of seconds, drawn in [lo, hi]; any value >= 0 is taken (whether it conforms is the DUT profile's
     #: to say, e.g. boot_time + report_delay within its boot_s)
     span: tuple[float, float] | None = None
+    #: what the emulator does by default (EscConfig's field takes it from here): a span's value inside it; a choice
+    #: freedom's is its first choice, never given
+    default: Any = None
     #: a DUT profile [timing] key the emulated DUT declares as this value (what a vendor would state in its
     #: profile for an ESC that behaves so; e.g. its report jitter is its ``jitter_s``)
     declares: str | None = None
@@ -46,6 +49,12 @@ class Freedom:
     def __post_init__(self) -> None:
         if bool(self.choices) == (self.span is not None):
             raise ValueError(f"freedom {self.name}: give either choices or a span")
+        if self.choices:
+            if self.default is not None:
+                raise ValueError(f"freedom {self.name}: a choice's default is its first choice")
+            object.__setattr__(self, "default", self.choices[0])
+        elif self.default is None or not self.span[0] <= self.default <= self.span[1]:  # type: ignore[index]
+            raise ValueError(f"freedom {self.name}: its default must lie in its span")
 
     @property
     def kind(self) -> str:
@@ -91,9 +100,9 @@ _FREEDOMS = (
     # power-up (profile [timing] boot_s: power-on to the first report; the emulator profile says 0.5 s, and the
     # spans drawn from keep boot_time + report_delay + ckesc emulate's --boot-spread inside it)
     Freedom("boot_time", ("1-2",), "power-on to the first answer: the ESC hears nothing before",
-            span=(0.05, 0.3)),
+            span=(0.05, 0.3), default=0.25),
     Freedom("report_delay", ("1-2",), "boot to the first report: an ESC may answer services before it reports",
-            span=(0.0, 0.15)),
+            span=(0.0, 0.15), default=0.0),
     # report timers (R9a)
     Freedom("report_timer", ("R9a",),
             "when reporting comes back (a resume, leaving CAN Test or MSG_EXP mode): restart (the first report at once, "
@@ -109,7 +118,7 @@ _FREEDOMS = (
     Freedom("report_jitter_s", ("R9",),
             "the ESC's own report timing jitter, declared as its profile's jitter_s: each report within +- half of it "
             "of its grid point (one interval strays by at most this much; the mean interval stays exact)",
-            span=(0.0, 0.003), declares="jitter_s"),
+            span=(0.0, 0.003), default=0.0, declares="jitter_s"),
     # comm loss (R8): the flag is set no earlier than 200 ms after the last command, and shows in MSG1 no later
     # than one MSG1 interval after that; where in between the ESC raises it is its own
     Freedom("comm_loss_check", ("R8", "4.4.4-3"),
@@ -146,7 +155,8 @@ _FREEDOMS = (
     Freedom("foreign_host", ("F6",), "commands and requests from a host node other than 0: obeyed, or ignored",
             choices=("accept", "ignore")),
     # service answers (4.4.2-4's 64 ms bound is the longest delay the document names; services name none)
-    Freedom("service_delay", ("4.4.2-4",), "request to answer for services (Set ID .. 242)", span=(0.0002, cat.ANSWER_DELAY_MAX_S)),
+    Freedom("service_delay", ("4.4.2-4",), "request to answer for services (Set ID .. 242)", span=(0.0002, cat.ANSWER_DELAY_MAX_S),
+            default=0.0005),
     # illegal or refused requests (R10: answered or not, and with what, is OBSERVE; R11/R12 refuse without saying
     # what is answered)
     Freedom("rejected_answer", ("R10", "R11", "R12"),
@@ -179,6 +189,11 @@ _FREEDOMS = (
 )
 
 FREEDOMS: Mapping[str, Freedom] = MappingProxyType({f.name: f for f in _FREEDOMS})
+
+
+def default(name: str) -> Any:
+    """What the emulator does for freedom ``name`` unless told otherwise: the default of EscConfig's field."""
+    return FREEDOMS[name].default
 
 
 def freedom(name: str) -> Freedom:
@@ -217,10 +232,7 @@ def draw(seed: int, names: Iterable[str] | None = None) -> dict[str, Any]:
 def alternatives(f: Freedom) -> list[Any]:
     """Every value of a freedom other than the emulator's default: its other choices, or a span's two ends."""
     if f.span is not None:
-        from .model import EscConfig  # (model imports this module)
-
-        default = getattr(EscConfig(), f.name)
-        return [v for v in f.span if v != default]
+        return [v for v in f.span if v != f.default]
     return list(f.choices[1:])
 
 

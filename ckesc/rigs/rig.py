@@ -39,6 +39,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from ..bench.profile import validated
+from ..bench.sections import Section
 from ..protocol.ids import ESC_NODE_IDS
 from ..session.options import command_line
 
@@ -52,10 +53,6 @@ class RigError(ValueError):
 
 
 # ----------------------------------------------------------------------------------------- schema
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
-
-
 Scalar = str | int | float | bool
 
 
@@ -76,17 +73,17 @@ class _Bus(BaseModel):
         return self
 
 
-class _Command(_Section):
+class _Command(Section):
     off: str = Field(min_length=1)
     on: str = Field(min_length=1)
 
 
-class _Labgrid(_Section):
+class _Labgrid(Section):
     env: str = Field(min_length=1)
     target: str = Field(min_length=1)
 
 
-class _PowerTable(_Section):
+class _PowerTable(Section):
     command: _Command | None = None
     labgrid: _Labgrid | None = None
 
@@ -97,7 +94,7 @@ class _PowerTable(_Section):
         return self
 
 
-class _Emulator(_Section):
+class _Emulator(Section):
     nodes: list[Annotated[int, Field(ge=ESC_NODE_IDS.start, le=ESC_NODE_IDS.stop - 1)]] = Field([1], min_length=1)
     faults: list[str] = []
     seed: int = 0
@@ -105,7 +102,7 @@ class _Emulator(_Section):
     variants: int | None = None  # the seed of a drawn conforming combination (ckesc/emulator/variants.py)
 
 
-class _BenchDoc(_Section):
+class _BenchDoc(Section):
     description: str = ""
     dut: Literal["emulator", "bus"] | None = None
     lane: Literal["simulated", "realtime"] | None = None
@@ -151,11 +148,11 @@ class _BenchDoc(_Section):
         return self
 
 
-class _RigHead(_Section):
+class _RigHead(Section):
     description: str = ""
 
 
-class _RigDoc(_Section):
+class _RigDoc(Section):
     rig: _RigHead = _RigHead()
     bench: dict[str, _BenchDoc] = Field(min_length=1)
 
