@@ -8,12 +8,13 @@ from typing import Any
 
 import pytest
 
+from ..protocol.requirements import Verdict
 from ..reporting import report
 from ..reporting.causes import broken_outside_a_fail
 from ..reporting.results import profile_warnings
 from . import trace_hooks
 from .collection import conformance_dir, item_requirements, section_of
-from .state import EXIT_ABORTED, report_dir, state
+from .state import EXIT_ABORTED, RunState, report_dir, state
 
 
 def _module_name(nodeid_or_item) -> str:
@@ -21,6 +22,17 @@ def _module_name(nodeid_or_item) -> str:
     if mod is not None:
         return mod.__name__.rsplit(".", 1)[-1]
     return Path(str(nodeid_or_item).split("::")[0]).stem
+
+
+#: the verdicts a test has only once it ran to its end (its teardown judges the bus rules that ran under it)
+NEEDS_THE_END = (Verdict.PASS, Verdict.OBSERVED)
+
+
+def cut_short(st: RunState) -> list[str]:
+    """The tests the run's end cut (an interrupt, an abort) before their teardown reported, with no finding yet: a
+    test whose phase did not finish is never a PASS (pytest counts it in no outcome either); it is "not run to its
+    end". A FAIL, ERROR, INCONCLUSIVE or SKIPPED decided before the cut stands."""
+    return [n for n, r in st.results.items() if n not in st.finished and r.outcome in NEEDS_THE_END]
 
 
 def _completeness(session: pytest.Session, exitstatus: int) -> tuple[str | None, list[dict[str, Any]]]:
@@ -32,10 +44,15 @@ def _completeness(session: pytest.Session, exitstatus: int) -> tuple[str | None,
         reason = f"stopped: {session.shouldstop}" if isinstance(session.shouldstop, str) else "interrupted"
     if reason is None and session.shouldfail:
         reason = f"stopped: {session.shouldfail} (-x / --maxfail)"
-    why_not = {"aborted": "not run: the run was aborted", "interrupted": "not run: the run was interrupted",
-               "stopped": "not run: the run stopped early"}.get((reason or "").split(":")[0].split(" ")[0], "not run")
+    why = {"aborted": "the run was aborted", "interrupted": "the run was interrupted",
+           "stopped": "the run stopped early"}.get((reason or "").split(":")[0].split(" ")[0])
+    cut = set(cut_short(st))
+    for nodeid in cut:
+        del st.results[nodeid]
     not_run = [{"nodeid": it.nodeid, "name": it.name, "section": section_of(it), "requirements": item_requirements(it),
-                "reason": why_not} for it in st.selected if it.nodeid not in st.results]
+                "reason": (f"not run to its end: {why} while it ran" if why else "not run to its end") if it.nodeid in cut
+                else (f"not run: {why}" if why else "not run")}
+               for it in st.selected if it.nodeid not in st.results]
     not_run += [{"nodeid": n, "name": n.split("::")[-1], "section": "", "requirements": [], "reason": "not run: deselected"}
                 for n in st.deselected]
     where = conformance_dir()

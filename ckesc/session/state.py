@@ -65,6 +65,9 @@ class RunState:
     #: why the run stopped early: "aborted: ..." (the DUT did not answer, the bench went away) or
     #: "interrupted" (Ctrl-C, SIGTERM); None while it runs or when it ran to its end
     stopped: str | None = None
+    #: the tests whose every phase reported (their teardown included): a result of a test not among them was cut
+    #: by the run's end (an interrupt, an abort) and is no verdict (:func:`~.finish.cut_short`)
+    finished: set[str] = field(default_factory=set)
     #: held while a trace file is written out: the first Ctrl-C / SIGTERM waits for it to end
     shield: Shield = field(default_factory=Shield)
 

@@ -65,6 +65,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     if call.excinfo is not None and isinstance(call.excinfo.value, BenchGone):
         _stop(item, f"aborted: {call.excinfo.value}")
     if rep.when == "teardown":
+        state(item.config).finished.add(item.nodeid)
         _watch_silence(item, d)
         _final_report(item, rep)
     return rep
