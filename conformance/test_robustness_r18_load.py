@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import can
 import pytest
 
+from ckesc.bench.errors import HarnessError
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.bench.traffic_player import TrafficPlayer
 from ckesc.evidence.live import LaneRules
@@ -106,11 +107,12 @@ def loaded(dut, share: float, priority: str, what: str):
             load.reached = busy / elapsed if elapsed > 0 else 0.0
     else:
         kwargs = getattr(dut.lane, "bus_kwargs", None)
-        assert kwargs is not None, f"harness: the {dut.lane.name} lane has no bus a load player can join"
+        if kwargs is None:
+            raise HarnessError(f"the {dut.lane.name} lane has no bus a load player can join")
         try:
             bus = can.Bus(**{**kwargs, "receive_own_messages": False})
         except (OSError, can.CanError) as exc:
-            raise AssertionError(f"harness: the load player could not open its bus ({exc})") from exc
+            raise HarnessError(f"the load player could not open its bus ({exc})") from exc
         try:
             player = TrafficPlayer(bus, [source], bitrate=bitrate).start()
             try:
@@ -284,7 +286,8 @@ def test_above_half_load_is_recorded(dut):
             dut.wait(answer_window_s(dut))
             t1 = dut.now()
         dut.wait(CATCH_UP_S + max(interval_s(s, r) for r in cat.REPORT_FRAMES))  # the first gaps after it too
-    assert not load.judged, "harness: a share R18 judges is not above half"
+    if load.judged:
+        raise HarnessError("a share R18 judges is not above half")
     for which in cat.REPORT_FRAMES:
         starts = [frame_start(dut, f) for f in dut.frames(which, since=t0, until=sent.time, source=dut.node_id)]
         gaps = [b - a for a, b in zip(starts, starts[1:])]

@@ -6,14 +6,15 @@ falls silent.
 A phase's verdict is decided in one place, :func:`_outcome`, from the type of what ended it (as pytest decides
 passed, failed or skipped from the exception's type in one hook): :class:`~ckesc.bench.outcomes.Inconclusive` is
 INCONCLUSIVE (a measurement inside the bench's error is one too), any other skip SKIPPED, a harness or bus error
-(``DutError``, ``BusFault``, ``BenchGone``) ERROR; never a word in the message."""
+(:class:`~ckesc.bench.errors.HarnessError`, ``DutError``, ``BusFault``, ``BenchGone``) ERROR; never a word in the
+message."""
 
 from __future__ import annotations
 
 import pytest
 
 from ..bench.dut import Dut, DutError
-from ..bench.errors import BenchError
+from ..bench.errors import HarnessError
 from ..bench.lanes import BenchGone, BusFault
 from ..bench.outcomes import Inconclusive, NotClaimed
 from ..evidence.timing import evidence
@@ -41,11 +42,12 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     ids = item_requirements(item)
     strength = strongest(ids)
     d = dut_of(item)
-    # the bus or the bench (its power control) failed under the test, not the DUT: an ERROR whatever the
-    # requirement's strength
-    harness = call.excinfo is not None and isinstance(call.excinfo.value, BENCH_FAILED)
     raised = call.excinfo.value if call.excinfo is not None else None  # what ended the phase: decides its verdict
-    if rep.when == "call" and not harness:
+    # the suite, the bus or the bench (its power control) failed under the test, not the DUT: an ERROR whatever the
+    # requirement's strength
+    if rep.when == "call" and isinstance(raised, HarnessError):
+        _harness_failed(item, rep, raised, d)
+    elif rep.when == "call" and not isinstance(raised, BENCH_FAILED):
         asserted = call.excinfo is not None and isinstance(call.excinfo.value, AssertionError)
         if rep.failed and strength == "OBSERVE":
             rep.outcome = "passed"
@@ -84,21 +86,17 @@ def _judged(item: pytest.Item, rep: pytest.TestReport, call: pytest.CallInfo, id
             d: Dut | None) -> None:
     """A test that failed an assert or a limit: its message says what the DUT did, the strongest broken
     requirement first and every other failed limit after it (never the traceback's fixture repr; that
-    stays below on the console). An assert saying "harness: ..." is the suite's problem: an ERROR."""
+    stays below on the console)."""
     own = ""
     if rep.failed and call.excinfo is not None:
         own = str(call.excinfo.value).strip()
         if "\nassert " in own:  # pytest's explanation of the assert follows the test's own message: reprs
             own = own.split("\nassert ", 1)[0].strip()
         own = own or "assertion failed"
-        if not own.startswith("harness:") and not own.startswith("["):
+        if not own.startswith("["):
             tagged = [i for i in ids if requirement(i).strength == strength] or ids
             own = f"[{' '.join(tagged)} {strength}] {own}"
-    if own.startswith("harness:"):
-        limits = d.record.failure_message() if d is not None else ""
-        message = own + (f"\nfailed limits before it:\n{limits}" if limits else "")
-    else:
-        message = d.record.failure_message(own, strength) if d is not None else own
+    message = d.record.failure_message(own, strength) if d is not None else own
     item.stash[_MESSAGE] = message
     trace = rep.longrepr
     rep.outcome = "failed"
@@ -112,6 +110,18 @@ def _judged(item: pytest.Item, rep: pytest.TestReport, call: pytest.CallInfo, id
         rep.longrepr = f"{message}\nthen: {trace[2]}"
     else:
         rep.longrepr = message if trace is None or not rep.failed else f"{message}\n\n{trace}"
+
+
+def _harness_failed(item: pytest.Item, rep: pytest.TestReport, raised: HarnessError, d: Dut | None) -> None:
+    """A test the suite itself could not carry out (:class:`~ckesc.bench.errors.HarnessError`): an ERROR, its message
+    the harness's, with the limits the DUT had failed before it listed (they are no verdict now)."""
+    limits = d.record.failure_message() if d is not None else ""
+    message = str(raised).strip() + (f"\nfailed limits before it:\n{limits}" if limits else "")
+    item.stash[_MESSAGE] = message
+    crash = getattr(rep.longrepr, "reprcrash", None)
+    if crash is not None and hasattr(crash, "message"):
+        crash.message = message
+        rep.sections.append(("ckesc verdict", message))
 
 
 def _stop(item: pytest.Item, why: str) -> None:
@@ -183,7 +193,6 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | 
         outcome, message = _outcome(rep, raised, strength), "" if rep.passed else _longrepr_text(rep, raised)
         if rep.when == "call" and _MESSAGE in item.stash:
             message = item.stash[_MESSAGE]
-            outcome = Verdict.ERROR if message.startswith("harness:") else Verdict.FAIL
         if rep.when == "teardown" and res.outcome not in (Verdict.FAIL,) and not bus_rules.failed_at_teardown(item):
             outcome = Verdict.ERROR
         if rep.when != "teardown" or res.outcome != Verdict.FAIL:
@@ -201,9 +210,9 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | 
         st.info.setdefault("interval_tolerance_ms", d.interval_tolerance_ms)
 
 
-#: what, raised under a test, says the bus or the bench (its power control) failed under it, not the DUT: an ERROR
-#: whatever the requirement's strength (:mod:`ckesc.bench.errors`, :mod:`ckesc.bench.lanes`)
-BENCH_FAILED = (BusFault, BenchGone, BenchError)
+#: what, raised under a test, says the suite itself, the bus or the bench (its power control) failed under it, not
+#: the DUT: an ERROR whatever the requirement's strength (:mod:`ckesc.bench.errors`, :mod:`ckesc.bench.lanes`)
+BENCH_FAILED = (BusFault, BenchGone, HarnessError)
 #: ... and with the harness that could not do what the test needed (:class:`~ckesc.bench.dut.DutError`): no verdict
 #: on the DUT
 NOT_THE_DUT = (DutError, *BENCH_FAILED)
@@ -233,7 +242,8 @@ def _longrepr_text(rep: pytest.TestReport, raised: BaseException | None = None) 
     else:
         crash = getattr(getattr(lr, "reprcrash", None), "message", None)
         text = crash if crash else str(lr)
-    kinds = (Inconclusive, NotClaimed) + ((type(raised),) if isinstance(raised, pytest.skip.Exception) else ())
+    kinds = (Inconclusive, NotClaimed) + ((type(raised),) if isinstance(raised, (pytest.skip.Exception, HarnessError))
+                                          else ())
     for verdict in kinds:  # raised below the test (a helper, a fixture): pytest names the class
         text = text.removeprefix(f"{verdict.__module__}.{verdict.__qualname__}: ")
     return text

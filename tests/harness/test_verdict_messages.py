@@ -1,7 +1,8 @@
 """Every limit judged, every message about the DUT (issue #12, item 3): a test evaluates all of its
 measurements before it fails, its message leads with the strongest broken requirement and lists the
-others, says what the DUT did (never a fixture repr), and a "harness:" assertion is an ERROR of the
-suite, never the DUT's FAIL. Tried in real ``ckesc run`` / pytest processes against the emulator."""
+others, says what the DUT did (never a fixture repr), and a :class:`~ckesc.bench.errors.HarnessError` is an ERROR
+of the suite, never the DUT's FAIL, whatever the requirement's strength (issue #35: told by the exception's type; an
+assert whose message begins "harness:" is an assert on the DUT like any other). Tried in real ``ckesc run`` / pytest processes against the emulator."""
 
 from __future__ import annotations
 
@@ -40,6 +41,7 @@ _SUITE = '''
 import pytest
 from dataclasses import dataclass
 
+from ckesc.bench.errors import HarnessError
 from ckesc.bench.outcomes import Inconclusive
 
 SECTION = "4.4.2"
@@ -53,7 +55,23 @@ class Traffic:
 
 @pytest.mark.requirement("4.4.2-4")
 def test_harness_problem(dut):
-    assert False, "harness: the throttle stream sent nothing"
+    raise HarnessError("the throttle stream sent nothing")
+
+
+@pytest.mark.requirement("4.4.2-4")
+def test_harness_problem_after_a_failed_limit(dut):
+    dut.record.measure("answer delay", 80.2, limit=64, unit="ms", requirement="4.4.2-4")
+    raise HarnessError("the load player could not open its bus")
+
+
+@pytest.mark.requirement("R10-answer")
+def test_harness_problem_of_an_observation(dut):
+    raise HarnessError("the request did not go out from node 0")
+
+
+@pytest.mark.requirement("4.4.2-4")
+def test_a_word_decides_nothing(dut):
+    assert False, "harness: the DUT's answer came late"
 
 
 @pytest.mark.requirement("R2", "4.4.2-4")
@@ -84,7 +102,14 @@ def test_messages_say_what_the_dut_did_and_a_harness_problem_is_an_error(tmp_pat
                           cwd=tmp_path, capture_output=True, text=True, timeout=300)
     res = _results(tmp_path / "reports")
     harness = res["conformance/test_messages.py::test_harness_problem"]
-    assert harness["outcome"] == "ERROR" and harness["message"] == "harness: the throttle stream sent nothing"
+    assert harness["outcome"] == "ERROR" and harness["message"] == "the throttle stream sent nothing"
+    after = res["conformance/test_messages.py::test_harness_problem_after_a_failed_limit"]
+    assert after["outcome"] == "ERROR", after
+    assert after["message"].startswith("the load player could not open its bus\nfailed limits before it:\n[4.4.2-4 SHALL]")
+    observe = res["conformance/test_messages.py::test_harness_problem_of_an_observation"]
+    assert observe["outcome"] == "ERROR" and observe["message"] == "the request did not go out from node 0", observe
+    word = res["conformance/test_messages.py::test_a_word_decides_nothing"]
+    assert word["outcome"] == "FAIL" and word["message"] == "[4.4.2-4 SHALL] harness: the DUT's answer came late", word
     limits = res["conformance/test_messages.py::test_all_limits"]
     assert limits["outcome"] == "FAIL"
     assert limits["message"].startswith("[4.4.2-4 SHALL] answer delay = 80.2ms (limit <= 64ms")
@@ -99,7 +124,7 @@ def test_messages_say_what_the_dut_did_and_a_harness_problem_is_an_error(tmp_pat
     summary = done.stdout.split("CKESC conformance summary")[-1]  # the console's closing summary
     assert "[FAIL READING] F4: transfer id 1, the request's is 0 - in 1 test" in summary
     assert "Traffic(" not in summary
-    assert "[ERROR] harness: the throttle stream sent nothing - in 1 test" in summary
+    assert "[ERROR] the throttle stream sent nothing - in 1 test" in summary
     assert summary.index("[FAIL SHALL]") < summary.index("[FAIL READING]") < summary.index("[ERROR]")
 
 
