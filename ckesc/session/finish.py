@@ -1,5 +1,6 @@
 """The session's end: whether the run was the whole suite run to its end (or why not, and which tests it did not
-run), its exit status, and its reports written (``ckesc/reporting``) and summarised on the console."""
+run), its exit status (decided here, once: :func:`~ckesc.reporting.exits.of_run`; ``ckesc run`` returns it), and its
+reports written (``ckesc/reporting``) and summarised on the console."""
 
 from __future__ import annotations
 
@@ -10,11 +11,11 @@ import pytest
 
 from ..protocol.requirements import Verdict
 from ..reporting import report
-from ..reporting.causes import broken_outside_a_fail
+from ..reporting.exits import ExitStatus, of_run
 from ..reporting.results import profile_warnings
 from . import trace_hooks
 from .collection import conformance_dir, item_requirements, section_of
-from .state import EXIT_ABORTED, RunState, report_dir, state
+from .state import RunState, report_dir, state
 
 
 def _module_name(nodeid_or_item) -> str:
@@ -80,19 +81,18 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     st.info["complete"] = reason is None
     st.info["incomplete"] = reason or ""
     st.info["not_run"] = len(not_run)
-    if reason is not None and reason.startswith("aborted"):
-        session.exitstatus = EXIT_ABORTED
-    elif session.exitstatus == pytest.ExitCode.OK and any(map(broken_outside_a_fail, st.results.values())):
-        session.exitstatus = pytest.ExitCode.TESTS_FAILED  # a bus rule broken while a SKIPPED test ran
+    st.exit_status = of_run(st.results.values(), stopped=reason, strict=session.config.getoption("ckesc_strict"))
+    if st.exit_status in (ExitStatus.ABORTED, ExitStatus.FAILED):  # (a bus rule broken while a SKIPPED test ran)
+        session.exitstatus = st.exit_status  # pytest's own statuses otherwise: its INTERRUPTED is 2
     out = report_dir(session.config)
     if out is not None:
         report.write_reports(out, list(st.results.values()), st.info, not_run=not_run,
                              html=not session.config.getoption("ckesc_no_html"))
         st.info["report_dir"] = str(out)
-    if session.exitstatus == EXIT_ABORTED:  # pytest prints no terminal summary for this status: ours, then
+    if session.exitstatus == ExitStatus.ABORTED:  # pytest prints no terminal summary for this status: ours, then
         tr = session.config.pluginmanager.get_plugin("terminalreporter")
         if tr is not None:
-            pytest_terminal_summary(tr, EXIT_ABORTED, session.config)
+            pytest_terminal_summary(tr, ExitStatus.ABORTED, session.config)
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:
