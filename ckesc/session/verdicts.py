@@ -16,7 +16,7 @@ import pytest
 from ..bench.dut import Dut, DutError
 from ..bench.errors import HarnessError
 from ..bench.lanes import BenchGone, BusFault
-from ..bench.outcomes import Inconclusive, NotClaimed
+from ..bench.outcomes import Broken, Inconclusive, NotClaimed, failure_text
 from ..evidence.timing import evidence
 from ..protocol.requirements import Verdict, requirement, strongest
 from ..reporting.results import Result
@@ -31,6 +31,7 @@ SILENT_TESTS_TO_ABORT = 3
 
 _DECISIVE = pytest.StashKey[pytest.TestReport]()  # the phase report that decided a test's verdict
 _MESSAGE = pytest.StashKey[str]()  # the test's failure message: what the DUT did (or the harness problem)
+_BROKEN = pytest.StashKey[list[Broken]]()  # what the test broke, typed: the message is its rendering
 _SILENT = pytest.StashKey[int]()  # tests in a row that ERRORed without a frame from the DUT
 
 
@@ -87,17 +88,16 @@ def _judged(item: pytest.Item, rep: pytest.TestReport, call: pytest.CallInfo, id
     """A test that failed an assert or a limit: its message says what the DUT did, the strongest broken
     requirement first and every other failed limit after it (never the traceback's fixture repr; that
     stays below on the console)."""
-    own = ""
+    own = None
     if rep.failed and call.excinfo is not None:
-        own = str(call.excinfo.value).strip()
-        if "\nassert " in own:  # pytest's explanation of the assert follows the test's own message: reprs
-            own = own.split("\nassert ", 1)[0].strip()
-        own = own or "assertion failed"
-        if not own.startswith("["):
-            tagged = [i for i in ids if requirement(i).strength == strength] or ids
-            own = f"[{' '.join(tagged)} {strength}] {own}"
-    message = d.record.failure_message(own, strength) if d is not None else own
-    item.stash[_MESSAGE] = message
+        text = str(call.excinfo.value).strip()
+        if "\nassert " in text:  # pytest's explanation of the assert follows the test's own message: reprs
+            text = text.split("\nassert ", 1)[0].strip()
+        own = Broken.of_assertion(text or "assertion failed",
+                                  [i for i in ids if requirement(i).strength == strength] or ids, strength)
+    broken = d.record.broken(own) if d is not None else [own] if own else []
+    message = item.stash[_MESSAGE] = failure_text(broken)
+    item.stash[_BROKEN] = broken
     trace = rep.longrepr
     rep.outcome = "failed"
     crash = getattr(trace, "reprcrash", None) if rep.failed else None
@@ -193,6 +193,7 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | 
         outcome, message = _outcome(rep, raised, strength), "" if rep.passed else _longrepr_text(rep, raised)
         if rep.when == "call" and _MESSAGE in item.stash:
             message = item.stash[_MESSAGE]
+            res.broken = [b.as_json() for b in item.stash.get(_BROKEN, [])]
         if rep.when == "teardown" and res.outcome not in (Verdict.FAIL,) and not bus_rules.failed_at_teardown(item):
             outcome = Verdict.ERROR
         if rep.when != "teardown" or res.outcome != Verdict.FAIL:
@@ -204,6 +205,7 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | 
         res.properties = {}
         for n, m in enumerate(d.record.measurements):
             res.properties.update(m.as_properties(n))
+        res.measured = [m.as_json() for m in d.record.measurements]
         res.observations = [(w, str(v)) for w, v in d.record.observations]
     if d is not None and rep.when == "teardown":
         res.evidence = evidence(d.trace, host=d.host_node, node=d.node_id, comm_loss="R8" in ids)

@@ -11,7 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ckesc.bench.outcomes import Record
+from ckesc.bench.outcomes import Broken, Record
 
 CKESC = [sys.executable, "-m", "ckesc"]
 
@@ -31,9 +31,14 @@ def test_a_failed_limit_does_not_stop_the_test_and_the_shall_leads():
     head, *rest = text.splitlines()
     assert head.startswith("[4.4.2-4 SHALL] answer delay = 80ms (limit <= 64ms")
     assert rest[0] == "also broken (1):" and rest[1].startswith("- [R2 READING] answer end after the request = 80ms")
-    # the test's own failed assert is one more broken requirement, placed by its strength
-    mixed = rec.failure_message("[F4 READING] transfer id 1, the request's is 0", "READING")
+    # the test's own failed assert is one more broken requirement, placed by its strength, typed as it failed
+    own = Broken.of_assertion("[F4 READING] transfer id 1, the request's is 0", ["4.4.2-4"], "SHALL")
+    assert own == Broken(("F4",), "READING", "transfer id 1, the request's is 0")
+    mixed = rec.failure_message(own)
     assert mixed.splitlines()[0].startswith("[4.4.2-4 SHALL]") and "- [F4 READING] transfer id 1" in mixed
+    assert [b.requirements for b in rec.broken(own)] == [("4.4.2-4",), ("R2",), ("F4",)]
+    untagged = Broken.of_assertion("[1, 2] are not [2, 1]", ["4.4.2-4"], "SHALL")  # brackets, no tag: the test's own
+    assert str(untagged) == "[4.4.2-4 SHALL] [1, 2] are not [2, 1]"
     assert Record().failure_message() == ""
 
 
