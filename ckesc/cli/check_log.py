@@ -14,7 +14,6 @@ from ..protocol.catalogue import BAUD_RATES
 from ..reporting.exits import ExitStatus
 
 
-
 def _bitrate_arg(text: str) -> int:
     try:
         value = int(text.lower().replace("k", "000").replace("m", "000000"))

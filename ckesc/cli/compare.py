@@ -11,7 +11,6 @@ from ..reporting import compare, soak_compare
 from ..reporting.exits import ExitStatus
 
 
-
 def _percent(text: str) -> float:
     try:
         value = float(text)

@@ -11,7 +11,6 @@ from .common import UsageError
 from .run import add_bench_options
 
 
-
 def parse_budget(text: str) -> float:
     """``90``, ``90s``, ``10m``, ``1h``, ``1h30m`` -> seconds."""
     m = re.fullmatch(r"\s*(?:(\d+(?:\.\d+)?)h)?\s*(?:(\d+(?:\.\d+)?)m)?\s*(?:(\d+(?:\.\d+)?)s?)?\s*", text)

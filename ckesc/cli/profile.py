@@ -17,7 +17,6 @@ from ..reporting.exits import ExitStatus
 from .common import UsageError
 from .run import add_bench_options
 
-
 READS_ONLY = ("The DUT is asked with reads only: GET_ESC_ID, ESC Information (240), Maintenance Information (241), "
               "Get Major Configuration (242), Set/Get Freq option 0 (214, the read), Get Rec (223) and Expand Set "
               "Part's record read (222 0xFFFB part 1); "

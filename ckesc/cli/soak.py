@@ -17,7 +17,6 @@ from .explore import parse_budget
 from .run import add_bench_options
 
 
-
 def parse_channels(text: str) -> tuple[int, ...]:
     """``1-4``, ``1,3``, ``1-4,7`` -> the channels."""
     out: list[int] = []
