@@ -5,7 +5,8 @@ Each subcommand is one module of this package (``run``, ``decode``, ``check_log`
 ``(args) -> exit code``): it parses the arguments, calls the library and maps its errors to exit codes.
 :data:`COMMANDS` lists them and :func:`main` builds the parser from that list. Adding a command is one
 module and one entry in :data:`COMMANDS`; nothing else here needs to change. ``common`` holds what the
-commands share (exit codes, the parser class, :class:`UsageError`, argument types).
+commands share (the parser class, :class:`UsageError`, argument types); the exit codes are one table,
+:class:`ckesc.reporting.exits.ExitStatus`.
 
 Exit codes: 0 success; 1 the input had frames that do not decode (``decode``), the emulator
 answered a control request with an error (``control``) or could not write its flash file at the end
