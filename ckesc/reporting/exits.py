@@ -64,10 +64,11 @@ def failing(results: Iterable[Result], *, strict: bool = False) -> list[Result]:
 
 def of_run(results: Iterable[Result], *, stopped: str | None, strict: bool = False) -> ExitStatus:
     """A conformance run's status: ABORTED or INTERRUPTED when it stopped so (``stopped``: "aborted: ...",
-    "interrupted ..."), FAILED when a result fails it (:func:`failing`) or no test ran, else OK."""
+    "interrupted ..."), FAILED when a result fails it (:func:`failing`), else OK (``ckesc run`` fails a run in which no
+    test ran; ``pytest --collect-only`` runs none)."""
     results = list(results)
     if (stopped or "").startswith("aborted"):
         return ExitStatus.ABORTED
     if (stopped or "").startswith("interrupted"):
         return ExitStatus.INTERRUPTED
-    return ExitStatus.FAILED if not results or failing(results, strict=strict) else ExitStatus.OK
+    return ExitStatus.FAILED if failing(results, strict=strict) else ExitStatus.OK

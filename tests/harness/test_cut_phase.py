@@ -70,3 +70,11 @@ def test_the_test_an_interrupt_cuts_is_not_run_to_its_end_never_a_pass(tmp_path:
     assert counts.get("passed", 0) == list(verdicts.values()).count("PASS") > 0, (closing, verdicts)
     summary = (tmp_path / "reports" / "latest" / "summary.txt").read_text(encoding="utf-8")
     assert summary.startswith("INTERRUPTED"), summary[:300]
+
+
+def test_a_session_that_runs_no_test_is_no_failure(tmp_path: Path):
+    """The session's end decides the run's status (ckesc.reporting.exits.of_run) from the results it has: a collection
+    (``--collect-only``, as the docs' build collects the suite's ids) has none, and fails nothing."""
+    done = subprocess.run([*CKESC[:1], "-m", "pytest", "--pyargs", "conformance", "-p", "no:cacheprovider", "--collect-only",
+                           "-q"], cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0 and "tests collected" in done.stdout, done.stdout[-2000:] + done.stderr[-2000:]
