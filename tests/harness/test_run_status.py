@@ -1,5 +1,7 @@
-"""A test the run did not finish is never a PASS (issue #35): ``ckesc run`` interrupted while a test runs keeps its
-report and exits 130, and the test the interrupt cut is "not run to its end", never counted as PASS.
+"""The run's status, decided once at the session's end from its typed results (issue #35, item 3).
+
+A test the run did not finish is never a PASS: ``ckesc run`` interrupted while a test runs keeps its report and exits
+130, and the test the interrupt cut is "not run to its end", never counted as PASS.
 
 Tried as a user meets it: a real ``ckesc run`` process (the simulated lane), a real SIGINT to its process group. To
 land the signal inside a test's call phase every time (a user's Ctrl-C after 5 s did, by chance), a small pytest
@@ -78,3 +80,16 @@ def test_a_session_that_runs_no_test_is_no_failure(tmp_path: Path):
     done = subprocess.run([*CKESC[:1], "-m", "pytest", "--pyargs", "conformance", "-p", "no:cacheprovider", "--collect-only",
                            "-q"], cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=300)
     assert done.returncode == 0 and "tests collected" in done.stdout, done.stdout[-2000:] + done.stderr[-2000:]
+
+
+def test_strict_fails_the_run_on_an_inconclusive_result(tmp_path: Path):
+    """``--strict`` (the plugin's ``--ckesc-strict``) is read where the status is decided: an INCONCLUSIVE result (an
+    ESC that sends no MSG_EXP9, which R9-exp leaves open) fails the run with it, and only with it."""
+    codes = []
+    for strict in ([], ["--strict"]):
+        done = subprocess.run([*CKESC, "run", "-q", *strict, "--reports", str(tmp_path / "reports"), "--emulator-option",
+                               "exp_frames=exp1_only", "4.4.11"], cwd=tmp_path, env=_env(tmp_path), capture_output=True,
+                              text=True, timeout=300)
+        assert done.stdout.strip().splitlines()[-1].startswith("1 inconclusive"), done.stdout[-2000:] + done.stderr
+        codes.append(done.returncode)
+    assert codes == [0, 1]
