@@ -14,7 +14,7 @@ Runs pytest in this process over the installed ``conformance`` package with the 
 options, shows one progress line per test, writes ``reports/<timestamp>/`` (JUnit, JSON, summary)
 with ``reports/latest`` pointing at it, and exits 0 only when no test FAILed or ERRORed and no bus rule
 was broken while a SKIPPED test ran (INCONCLUSIVE and SKIPPED are reported, and ``--strict`` makes
-INCONCLUSIVE fail the run too).
+INCONCLUSIVE fail the run too): the status the session's end decided (:func:`ckesc.reporting.exits.of_run`).
 
 With ``--rig``, the same on every bench of a rig file at once (:func:`run_batch`): pytest-xdist, one worker
 per bench (:mod:`ckesc.rigs.batch`), each bench's report in ``reports/<timestamp>/<bench>/`` and the
@@ -32,11 +32,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .protocol.requirements import Verdict, section_key
+from .protocol.requirements import section_key
+from .reporting.exits import ExitStatus
 from .session import options
-
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ABORTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
-EXIT_PYTEST_USAGE = 4  # pytest.ExitCode.USAGE_ERROR
 
 
 def _suite_root() -> str:
@@ -140,60 +138,52 @@ class _AfterDashes:
         way_out = shlex.join(["ckesc", "run", *self.args.selection, *extra, "--", *rest])
         print(f"ckesc run: error: {extra[0]} after `--` would be a path for pytest to collect: the selection goes before "
               f"`--` ({way_out})", file=sys.stderr)
-        return EXIT_PYTEST_USAGE
+        return ExitStatus.PYTEST_USAGE
 
 
 def run_command(args: argparse.Namespace) -> int:
     import pytest
 
-    from .reporting.causes import broken_outside_a_fail
-
     if args.rig:
         return run_batch(args)
     if args.benches:
         print("ckesc run: error: --benches chooses benches of a rig: it needs --rig FILE", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
 
     collector = _Collector()
     try:
         argv, targets = pytest_argv(args), targets_of(args)
     except SelectionError as exc:
         print(f"ckesc run: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     code = pytest.main(argv, plugins=[collector, _AfterDashes(targets, args)])
-    stopped = collector.stopped or ""
-    if stopped.startswith("aborted"):  # the DUT did not answer, or the bench went away
-        return EXIT_ABORTED
-    if stopped.startswith("interrupted") or code == pytest.ExitCode.INTERRUPTED:
-        return EXIT_INTERRUPTED
+    status = collector.status  # the session's end decided it from the run's results
+    if status in (ExitStatus.ABORTED, ExitStatus.INTERRUPTED):  # the DUT did not answer, the bench went away; Ctrl-C
+        return status
     if code in (pytest.ExitCode.USAGE_ERROR, pytest.ExitCode.INTERNAL_ERROR):
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     if code == pytest.ExitCode.NO_TESTS_COLLECTED:  # -k / -m / ::name that match nothing: never the whole suite
         print("ckesc run: error: the selection matches no conformance test", file=sys.stderr)
-        return EXIT_USAGE
-    results = collector.results
-    if not results:
+        return ExitStatus.USAGE
+    if status is None and code == pytest.ExitCode.INTERRUPTED:  # before any test (collecting)
+        return ExitStatus.INTERRUPTED
+    if status is None or not collector.ran:
         print("ckesc run: no conformance test ran", file=sys.stderr)
-        return EXIT_FAILED
-    failed = [r for r in results if r.outcome in (Verdict.FAIL, Verdict.ERROR) or broken_outside_a_fail(r)]
-    inconclusive = [r for r in results if r.outcome == Verdict.INCONCLUSIVE]
-    if failed or (args.strict and inconclusive):
-        return EXIT_FAILED
-    return EXIT_OK
+        return ExitStatus.FAILED
+    return status
 
 
 class _Collector:
-    """Keeps the plugin's results once the session ends."""
+    """Keeps what the session's end decided: the run's exit status, and whether any conformance test ran."""
 
-    results: list = []
-    stopped: str | None = None
+    status: ExitStatus | None = None
+    ran: bool = False
 
-    def pytest_sessionfinish(self, session):
+    def pytest_unconfigure(self, config):  # (after every pytest_sessionfinish)
         from .session.state import state
 
-        st = state(session.config)
-        self.results = list(st.results.values())
-        self.stopped = st.stopped
+        st = state(config)
+        self.status, self.ran = st.exit_status, bool(st.results)
 
 
 # ----------------------------------------------------------------------------------------- batches
@@ -246,7 +236,7 @@ def run_batch(args: argparse.Namespace) -> int:
     except ImportError:
         print("ckesc run: error: --rig runs its benches through pytest-xdist, which is not installed: "
               "pip install 'ckesc-conformance[rig]' (or pip install -e '.[rig]' in a checkout)", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     from .reporting import report as reports
     from .rigs import batch, batch_report
     from .session import preflight
@@ -257,7 +247,7 @@ def run_batch(args: argparse.Namespace) -> int:
         preflight.reports_writable(args.ckesc_reports)
     except (BatchError, SelectionError, preflight.PreflightError) as exc:
         print(f"ckesc run: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     started = time.time()
     batch_dir = reports.run_dir(Path(args.ckesc_reports), started)
     plans = [{"name": b.name, "options": b.options(), "report_dir": str((batch_dir / b.name).resolve())} for b in benches]
@@ -270,7 +260,7 @@ def run_batch(args: argparse.Namespace) -> int:
             (batch_dir / name / "setup-error.txt").write_text(said["setup_error"] + "\n", encoding="utf-8")
         rec = batch_report.bench_record(name, batch_dir / name, batch_dir, description=bench.description,
                                         command=bench.command_line(), setup_error=said.get("setup_error"),
-                                        crash=said.get("crash"), strict=args.strict)
+                                        crash=said.get("crash"), strict=args.ckesc_strict)
         if said.get("setup_error"):
             rec.setdefault("files", {})["setup-error.txt"] = f"{name}/setup-error.txt"
         rec["seconds"] = round(said.get("seconds") or (time.time() - started), 3)
@@ -299,7 +289,7 @@ def run_batch(args: argparse.Namespace) -> int:
     if code in (pytest.ExitCode.USAGE_ERROR, pytest.ExitCode.INTERNAL_ERROR) and not records:
         print("ckesc run: error: the batch could not start (pytest's message above)", file=sys.stderr)
         shutil.rmtree(batch_dir, ignore_errors=True)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     for b in benches:
         if b.name not in records:  # its worker never reported back
             records[b.name] = record(b.name, {"crash": "its worker ended without reporting back"})

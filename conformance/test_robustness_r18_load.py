@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import pytest
 
+from ckesc.bench.errors import HarnessError
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.bench.traffic_player import TrafficPlayer
 from ckesc.evidence.live import LaneRules
@@ -115,7 +116,8 @@ def loaded(dut, share: float, priority: str, what: str):
             load.reached = busy / elapsed if elapsed > 0 else 0.0
     else:
         play = getattr(dut.lane, "play", None)
-        assert play is not None, f"harness: the {dut.lane.name} lane has no handle a load player can send on"
+        if play is None:
+            raise HarnessError(f"the {dut.lane.name} lane has no handle a load player can send on")
         player = TrafficPlayer(play, [source], bitrate=bitrate).start()  # on the host's one handle: read back
         try:
             yield load
@@ -290,7 +292,8 @@ def test_above_half_load_is_recorded(dut):
             dut.wait(answer_window_s(dut))
             t1 = dut.now()
         dut.wait(CATCH_UP_S + max(interval_s(s, r) for r in cat.REPORT_FRAMES))  # the first gaps after it too
-    assert not load.judged, "harness: a share R18 judges is not above half"
+    if load.judged:
+        raise HarnessError("a share R18 judges is not above half")
     for which in cat.REPORT_FRAMES:
         starts = [frame_start(dut, f) for f in dut.frames(which, since=t0, until=sent.time, source=dut.node_id)]
         gaps = [b - a for a, b in zip(starts, starts[1:])]

@@ -9,6 +9,7 @@ moved to an unexpected id is still found.
 import pytest
 
 from ckesc.bench.epochs import AFTER, INSIDE
+from ckesc.bench.errors import HarnessError
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
@@ -228,7 +229,8 @@ def test_requests_from_host_0_are_answered_to_0(dut, original):
     node, channel = original
     _open_window(dut)
     ex = dut.request("set_id", {"node_id": node, "throttle_channel": channel})
-    assert ex.sent.wire.arbitration_id & 0x7F == HOST_NODE_ID, "harness: the request did not go out from node 0"
+    if ex.sent.wire.arbitration_id & 0x7F != HOST_NODE_ID:
+        raise HarnessError("the request did not go out from node 0")
     assert ex.response is not None, "no answer to a Set ID from host node 0"
     assert not ex.mismatch, f"answer to host node 0: {ex.mismatch}"
     assert ex.response.destination == HOST_NODE_ID, f"answer went to node {ex.response.destination}"

@@ -403,7 +403,7 @@ def test_run_splits_at_the_first_dashes_its_own_before_pytests_after_untouched()
 
     args = _run_args("-q", "4.4.22", "--strict", "4.4.3", "--", "-k", "4.4", "--maxfail", "3", "-x", "--strict", "--",
                      "--junitxml=out/j.xml")
-    assert args.strict and args.quiet
+    assert args.ckesc_strict and args.quiet
     assert args.selection == ["4.4.22", "4.4.3"]
     assert args.pytest_args == ["-k", "4.4", "--maxfail", "3", "-x", "--strict", "--", "--junitxml=out/j.xml"]
     argv = pytest_argv(_run_args("4.4.22", "--", "--no-header"))

@@ -1,6 +1,7 @@
-"""The bench's errors, shared by the bench's parts and the session's preflight: a set-up mistake found before
-any test (:class:`PreflightError`, exit status 2) and the bench failing under a test (:class:`BenchError`: that
-test's verdict is ERROR, never the DUT's FAIL)."""
+"""The bench's errors, shared by the bench's parts, the session's preflight and the conformance tests: a set-up
+mistake found before any test (:class:`PreflightError`, exit status 2), and the suite itself failing under a test
+(:class:`HarnessError`, :class:`BenchError`: that test's verdict is ERROR, never the DUT's FAIL). The verdict is
+told by the exception's type, never by a word in its message."""
 
 from __future__ import annotations
 
@@ -9,7 +10,14 @@ class PreflightError(Exception):
     """A set-up mistake: the message is one line naming what is wrong and, where there is one, the way out."""
 
 
-class BenchError(RuntimeError):
+class HarnessError(RuntimeError):
+    """The suite, not the DUT, could not do what a test needed (its own stream sent nothing, a request did not go
+    out as built, a load it set up is not the one it meant): the test ERRORs with this message, whatever the
+    requirement's strength. A conformance test raises it (``raise HarnessError("...")``) where the problem is its
+    own; an ``assert`` is a verdict on the DUT."""
+
+
+class BenchError(HarnessError):
     """The bench, not the DUT, failed under a test (a power command that failed or never returned): the test
     ERRORs with this message, whatever the requirement's strength."""
 

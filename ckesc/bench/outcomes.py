@@ -8,12 +8,15 @@ was seen and never fail.
 A failed limit does not stop the test: :class:`Record` keeps every failed limit and the plugin fails
 the test at its end (:meth:`Record.failure_message`), the strongest broken requirement first, so an
 answer after 80 ms is reported as breaking the SHALL 64 ms bound as well as its READING slot.
+
+What broke travels typed (:class:`Broken`: its requirements, strength and what the DUT did; :meth:`Measurement.as_json`:
+its numbers), into the results as fields; the message is their rendering, never read back.
 """
 
 from __future__ import annotations
 
 import operator
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import pytest
@@ -45,6 +48,33 @@ class NotClaimed(pytest.skip.Exception):  # type: ignore[misc, name-defined]
                          allow_module_level=False)
 
 
+@dataclass(frozen=True)
+class Broken:
+    """One broken requirement of a test: the requirement ids it breaks (none named: the test's own of that strength),
+    its strength, and what the DUT did (a measurement against its limit, or a failed assert's message)."""
+
+    requirements: tuple[str, ...]
+    strength: str
+    text: str
+
+    def __str__(self) -> str:
+        return f"[{' '.join((*self.requirements, self.strength))}] {self.text}"
+
+    def as_json(self) -> dict[str, Any]:
+        return {"requirements": list(self.requirements), "strength": self.strength, "text": self.text}
+
+    @classmethod
+    def of_assertion(cls, message: str, requirements: list[str], strength: str) -> Broken:
+        """A test's failed assert: its message, led by the requirement it breaks where the test names one of those it
+        cites (``assert ok, "[R1 READING] ..."``: the test's own words, read once as it failed), else the test's
+        requirements of ``strength``, its strongest."""
+        head, sep, rest = message.removeprefix("[").partition("]") if message.startswith("[") else ("", "", "")
+        *ids, word = head.split() or [""]
+        if sep and word in STRENGTHS:
+            return cls(tuple(ids), word, rest.strip())
+        return cls(tuple(requirements), strength, message)
+
+
 @dataclass
 class Measurement:
     name: str
@@ -66,6 +96,10 @@ class Measurement:
         if self.op in (">=", ">"):
             return self.value - self.limit
         return -abs(self.value - self.limit)
+
+    def as_json(self) -> dict[str, Any]:
+        """Its fields and margin as numbers (results.json's ``measured``; ``as_properties`` renders them for JUnit)."""
+        return {**asdict(self), "margin": self.margin}
 
     def as_properties(self, index: int) -> dict[str, str]:
         p = f"measurement.{index}."
@@ -95,8 +129,8 @@ class Record:
     measurements: list[Measurement] = field(default_factory=list)
     observations: list[tuple[str, Any]] = field(default_factory=list)
     inconclusive: list[str] = field(default_factory=list)
-    #: the failed limits, (strength, "[requirement strength] measurement"), in the order measured
-    failed: list[tuple[str, str]] = field(default_factory=list)
+    #: the failed limits, in the order measured
+    failed: list[Broken] = field(default_factory=list)
 
     def observe(self, what: str, value: Any) -> None:
         self.observations.append((what, value))
@@ -122,31 +156,28 @@ class Record:
         if not ok:
             m.verdict = Verdict.OBSERVED if strength == "OBSERVE" else Verdict.FAIL
             if strength != "OBSERVE":
-                tag = f"[{requirement} {strength}] " if requirement else f"[{strength}] "
-                self.failed.append((strength, f"{tag}{m}"))
+                self.failed.append(Broken((requirement,) if requirement else (), strength, str(m)))
                 return m
             self.observe(name, str(m))
         return m
 
-    def failure_message(self, assertion: str = "", strength: str = "SHALL") -> str:
-        """The test's failure message: every failed limit and ``assertion`` (the test's own failed
-        assert, of ``strength``), the strongest broken requirement first, the others listed after it;
-        "" when nothing failed."""
-        broken = list(self.failed)
-        if assertion:
-            broken.append((_tag_strength(assertion) or strength, assertion))
-        if not broken:
-            return ""
-        broken.sort(key=lambda sb: STRENGTH_ORDER.index(sb[0]) if sb[0] in STRENGTH_ORDER else len(STRENGTH_ORDER))
-        head, *others = [text for _, text in broken]
-        if not others:
-            return head
-        return head + f"\nalso broken ({len(others)}):\n" + "\n".join(f"- {o}" for o in others)
+    def broken(self, assertion: Broken | None = None) -> list[Broken]:
+        """Every failed limit and ``assertion`` (the test's own failed assert), the strongest first (in the order
+        measured among equals)."""
+        broken = [*self.failed, *((assertion,) if assertion else ())]
+        return sorted(broken, key=lambda b: STRENGTH_ORDER.index(b.strength) if b.strength in STRENGTH_ORDER
+                      else len(STRENGTH_ORDER))
+
+    def failure_message(self, assertion: Broken | None = None) -> str:
+        """The test's failure message (:func:`failure_text` of :meth:`broken`); "" when nothing failed."""
+        return failure_text(self.broken(assertion))
 
 
-def _tag_strength(message: str) -> str | None:
-    """The strength a message's leading ``[ids STRENGTH]`` tag names, if it has one."""
-    first = message.lstrip().split("]", 1)[0]
-    if message.lstrip().startswith("[") and first.rsplit(" ", 1)[-1] in STRENGTH_ORDER:
-        return first.rsplit(" ", 1)[-1]
-    return None
+def failure_text(broken: list[Broken]) -> str:
+    """A failure message: the strongest broken requirement, the others listed after it ("" for none)."""
+    if not broken:
+        return ""
+    head, *others = map(str, broken)
+    if not others:
+        return head
+    return head + f"\nalso broken ({len(others)}):\n" + "\n".join(f"- {o}" for o in others)

@@ -5,7 +5,8 @@ Each subcommand is one module of this package (``run``, ``decode``, ``check_log`
 ``(args) -> exit code``): it parses the arguments, calls the library and maps its errors to exit codes.
 :data:`COMMANDS` lists them and :func:`main` builds the parser from that list. Adding a command is one
 module and one entry in :data:`COMMANDS`; nothing else here needs to change. ``common`` holds what the
-commands share (exit codes, the parser class, :class:`UsageError`, argument types).
+commands share (the parser class, :class:`UsageError`, argument types); the exit codes are one table,
+:class:`ckesc.reporting.exits.ExitStatus`.
 
 Exit codes: 0 success; 1 the input had frames that do not decode (``decode``), the emulator
 answered a control request with an error (``control``) or could not write its flash file at the end
@@ -24,8 +25,9 @@ import sys
 from typing import Callable, Sequence
 
 from .. import __version__
+from ..reporting.exits import ExitStatus
 from .check_log import add_check_log_command
-from .common import EXIT_BROKEN_PIPE, EXIT_INTERRUPTED, EXIT_USAGE, Handler, Parser, UsageError
+from .common import Handler, Parser, UsageError
 from .compare import add_compare_command
 from .control import add_control_command
 from .decode import add_decode_command
@@ -71,21 +73,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, usage errors: a return code, as for every other outcome
-        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+        return exc.code if isinstance(exc.code, int) else ExitStatus.USAGE
     handler: Handler | None = getattr(args, "handler", None)
     if handler is None:
         parser.print_help(sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     try:
         return handler(args)
     except UsageError as exc:
         print(f"ckesc {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     except KeyboardInterrupt:
-        return EXIT_INTERRUPTED
+        return ExitStatus.INTERRUPTED
     except BrokenPipeError:
         _silence_stdout()
-        return EXIT_BROKEN_PIPE
+        return ExitStatus.BROKEN_PIPE
 
 
 def _silence_stdout() -> None:

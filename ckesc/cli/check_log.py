@@ -11,9 +11,7 @@ from ..evidence import checklog
 from ..evidence.checklog import DEFAULT_TOLERANCE_S, check_capture, summary_html, summary_text
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import BAUD_RATES
-from .common import EXIT_OK, EXIT_USAGE
-
-EXIT_VIOLATIONS = 1  # a rule broken
+from ..reporting.exits import ExitStatus
 
 
 def _bitrate_arg(text: str) -> int:
@@ -30,7 +28,7 @@ def _run_check_log(args: argparse.Namespace) -> int:
     path = args.file
     if not Path(path).is_file():
         print(f"ckesc check-log: error: no such file: {path}", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     jitter = 0.0
     if args.profile:
         from ..bench.profile import DutProfile, ProfileError
@@ -39,13 +37,13 @@ def _run_check_log(args: argparse.Namespace) -> int:
             jitter = DutProfile.load(args.profile).jitter_s
         except ProfileError as exc:
             print(f"ckesc check-log: error: --profile {args.profile}: {exc}", file=sys.stderr)
-            return EXIT_USAGE
+            return ExitStatus.USAGE
     summary = check_capture(path, bitrate=args.bitrate, tolerance=args.tolerance / 1000, complete=args.complete,
                             power_on=args.power_on, jitter=jitter)
     if summary["frames"] == 0:
         why = summary["damaged"]["first"][0]["reason"] if summary["damaged"]["count"] else "it holds no frame"
         print(f"ckesc check-log: error: nothing readable in {path}: {why}", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     try:
         if args.json:
             Path(args.json).write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
@@ -53,16 +51,16 @@ def _run_check_log(args: argparse.Namespace) -> int:
             Path(args.html).write_text(summary_html(summary), encoding="utf-8")
     except OSError as exc:
         print(f"ckesc check-log: error: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     print(summary_text(summary))
     if summary["truncated"]:
         cut = summary["truncated"]
         if not args.allow_truncated:
             print(f"ckesc check-log: error: {path} is truncated: {cut['detail']} (--allow-truncated judges what is there)",
                   file=sys.stderr)
-            return EXIT_USAGE
+            return ExitStatus.USAGE
         print(f"ckesc check-log: warning: {path} is truncated: {cut['detail']}", file=sys.stderr)
-    return EXIT_VIOLATIONS if summary["violations"]["count"] else EXIT_OK
+    return ExitStatus.FAILED if summary["violations"]["count"] else ExitStatus.OK
 
 
 def add_check_log_command(sub: argparse._SubParsersAction) -> None:

@@ -1,4 +1,5 @@
-"""What every ``ckesc`` command shares: exit statuses, the parser class, the usage error, argument types."""
+"""What every ``ckesc`` command shares: the parser class, the usage error, argument types (the exit statuses are
+:class:`ckesc.reporting.exits.ExitStatus`)."""
 
 from __future__ import annotations
 
@@ -7,13 +8,7 @@ import sys
 from typing import Callable
 
 from ..protocol.assignments import parse_int
-
-EXIT_OK = 0
-EXIT_FRAMES_FAILED = 1
-EXIT_USAGE = 2
-EXIT_UNREACHABLE = 3
-EXIT_INTERRUPTED = 130
-EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a writer killed by `| head`
+from ..reporting.exits import ExitStatus
 
 
 class Parser(argparse.ArgumentParser):
@@ -37,7 +32,7 @@ class Parser(argparse.ArgumentParser):
         return namespace, []
 
     def error(self, message: str):  # type: ignore[override]
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(ExitStatus.USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 class UsageError(Exception):

@@ -8,9 +8,7 @@ import sys
 from pathlib import Path
 
 from ..reporting import compare, soak_compare
-from .common import EXIT_OK, EXIT_USAGE
-
-EXIT_REGRESSED = 1
+from ..reporting.exits import ExitStatus
 
 
 def _percent(text: str) -> float:
@@ -31,7 +29,7 @@ def _run_compare(args: argparse.Namespace) -> int:
             kinds = ", ".join(f"{path} a {'soak' if s else 'conformance'} run" for path, s in zip(args.runs, soaks))
             print(f"ckesc compare: error: cannot compare a soak run with a conformance run ({kinds}): give runs of "
                   "one kind", file=sys.stderr)
-            return EXIT_USAGE
+            return ExitStatus.USAGE
         if all(soaks):
             doc = soak_compare.compare([soak_compare.parse_soak(d, label=label, path=str(path))
                                         for path, (label, d) in zip(args.runs, docs)])
@@ -42,7 +40,7 @@ def _run_compare(args: argparse.Namespace) -> int:
             render = compare
     except compare.RunError as exc:
         print(f"ckesc compare: error: cannot read run {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     try:
         if args.json:
             Path(args.json).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
@@ -50,9 +48,9 @@ def _run_compare(args: argparse.Namespace) -> int:
             Path(args.html).write_text(render.page(doc), encoding="utf-8")
     except OSError as exc:
         print(f"ckesc compare: error: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     print(render.text(doc))
-    return EXIT_REGRESSED if doc["regressed"] else EXIT_OK
+    return ExitStatus.FAILED if doc["regressed"] else ExitStatus.OK
 
 
 def add_compare_command(sub: argparse._SubParsersAction) -> None:
@@ -76,5 +74,5 @@ def add_compare_command(sub: argparse._SubParsersAction) -> None:
 def _check_count(args: argparse.Namespace) -> int:
     if len(args.runs) < 2:
         print("ckesc compare: error: give two runs or more (see ckesc compare --help)", file=sys.stderr)
-        return EXIT_USAGE
+        return ExitStatus.USAGE
     return _run_compare(args)

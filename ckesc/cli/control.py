@@ -9,7 +9,8 @@ import sys
 from typing import Any
 
 from ..protocol.assignments import parse_int
-from .common import EXIT_FRAMES_FAILED, EXIT_OK, EXIT_UNREACHABLE, Parser, UsageError, int_arg
+from ..reporting.exits import ExitStatus
+from .common import Parser, UsageError, int_arg
 
 
 def _control_port(args: argparse.Namespace) -> int:
@@ -53,9 +54,9 @@ def _run_control(args: argparse.Namespace) -> int:
         answer = control_request(port, req, timeout=args.timeout)
     except ControlError as exc:
         print(f"ckesc control: error: {exc}", file=sys.stderr)
-        return EXIT_UNREACHABLE if exc.unreachable else EXIT_FRAMES_FAILED
+        return ExitStatus.ABORTED if exc.unreachable else ExitStatus.FAILED
     print(json.dumps(answer, indent=1 if args.action in ("status", "faults") else None))
-    return EXIT_OK
+    return ExitStatus.OK
 
 
 def add_control_command(sub: argparse._SubParsersAction) -> None:

@@ -10,7 +10,8 @@ from typing import IO, Callable
 
 from ..evidence.candump import decode_lines
 from ..protocol.frame import Decoder
-from .common import EXIT_FRAMES_FAILED, EXIT_OK, UsageError
+from ..reporting.exits import ExitStatus
+from .common import UsageError
 
 
 def _open_input(path: str | None) -> tuple[IO[str], Callable[[], None]]:
@@ -66,7 +67,7 @@ def _run_decode(args: argparse.Namespace) -> int:
             write(dumps(record) + "\n")
     finally:
         release()
-    return EXIT_FRAMES_FAILED if failed else EXIT_OK
+    return ExitStatus.FAILED if failed else ExitStatus.OK
 
 
 def add_decode_command(sub: argparse._SubParsersAction) -> None:

@@ -11,7 +11,8 @@ import can
 from ..emulator import variants
 from ..emulator.socketcand import HANDLES
 from ..protocol.assignments import parse_int
-from .common import EXIT_FRAMES_FAILED, EXIT_OK, UsageError, int_arg
+from ..reporting.exits import ExitStatus
+from .common import UsageError, int_arg
 
 
 def _node_ids(text: str) -> list[int]:
@@ -92,7 +93,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
 
     if args.list_variants:
         print(variants.table())
-        return EXIT_OK
+        return ExitStatus.OK
     if args.socketcand is None and args.interface is None:
         raise UsageError("give --socketcand PORT (a hub for python-can's socketcand client) or --interface/--channel (a python-can bus)")
     if args.interface is not None and args.channel is None:
@@ -142,7 +143,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
         emulator.run(duration=args.duration, power_on=not args.unpowered)
     except OSError as exc:  # the flash file could not be written at power-off
         print(f"ckesc emulate: error: {exc}", file=sys.stderr)
-        return EXIT_FRAMES_FAILED
+        return ExitStatus.FAILED
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
@@ -151,7 +152,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
     print(f"ckesc emulate: stopped after {time.monotonic() - started:.1f} s: {emulator.counters['tx']} frames sent, "
           f"{emulator.counters['rx']} heard; lateness p50 {late['p50_us']} us, p99 {late['p99_us']} us, "
           f"max {late['max_us']} us{flash}", file=sys.stderr)
-    return EXIT_OK
+    return ExitStatus.OK
 
 
 def _model_options(args: argparse.Namespace) -> dict[str, Any]:

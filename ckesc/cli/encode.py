@@ -10,7 +10,8 @@ from ..protocol.assignments import AssignmentError, chosen_layout, encode_warnin
 from ..protocol.errors import EncodeError
 from ..protocol.frame import FALLBACK_PRIORITY, encode
 from ..protocol.ids import Kind, Priority
-from .common import EXIT_OK, UsageError, int_arg
+from ..reporting.exits import ExitStatus
+from .common import UsageError, int_arg
 
 
 def _priority_arg(text: str) -> int:
@@ -60,7 +61,7 @@ def _run_encode(args: argparse.Namespace) -> int:
     for warning in encode_warnings(spec, layout, values, args.source, args.destination):
         print(f"ckesc encode: warning: {warning}", file=sys.stderr)
     print(wire)
-    return EXIT_OK
+    return ExitStatus.OK
 
 
 def add_encode_command(sub: argparse._SubParsersAction) -> None:

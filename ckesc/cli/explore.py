@@ -6,11 +6,9 @@ import argparse
 import re
 import sys
 
+from ..reporting.exits import ExitStatus
 from .common import UsageError
 from .run import add_bench_options
-
-EXIT_FOUND = 1
-EXIT_BENCH = 3  # the bench failed the explorer (unreachable DUT, a state it could not restore): no verdict
 
 
 def parse_budget(text: str) -> float:
@@ -64,7 +62,7 @@ def add_explore_command(sub: argparse._SubParsersAction) -> None:
             return command.main(args, given, out=sys.stdout)
         except command.BenchProblem as exc:
             print(f"ckesc explore: {exc}", file=sys.stderr)
-            return EXIT_BENCH
+            return ExitStatus.ABORTED
         except ValueError as exc:
             raise UsageError(str(exc)) from None
 

@@ -8,7 +8,7 @@ from typing import Any
 
 from ..protocol import catalogue as cat
 from ..protocol.frame import FALLBACK_PRIORITY
-from .common import EXIT_OK
+from ..reporting.exits import ExitStatus
 
 
 def _frame_rows() -> list[dict[str, Any]]:
@@ -33,7 +33,7 @@ def _run_frames(args: argparse.Namespace) -> int:
     if args.json:
         for row in rows:
             print(json.dumps(row))
-        return EXIT_OK
+        return ExitStatus.OK
     table = [("ID", "NAME", "KIND", "PRIORITY", "SECTION", "TITLE")]
     for r in rows:
         prio = "-" if r["priority"] is None else f"{r['priority_name']} ({r['priority']})"
@@ -42,7 +42,7 @@ def _run_frames(args: argparse.Namespace) -> int:
     for row in table:
         print("  ".join(cell.ljust(w) for cell, w in zip(row, widths)) + "  " + row[-1])
     print(f"\n'-': the table lists no priority (F5: OBSERVE); encode uses {FALLBACK_PRIORITY.name} ({int(FALLBACK_PRIORITY)}).")
-    return EXIT_OK
+    return ExitStatus.OK
 
 
 def add_frames_command(sub: argparse._SubParsersAction) -> None:

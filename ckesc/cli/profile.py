@@ -13,11 +13,9 @@ import sys
 from pathlib import Path
 
 from ..bench.profile import DutProfile, ProfileError, find_profile, profile_dirs
+from ..reporting.exits import ExitStatus
 from .common import UsageError
 from .run import add_bench_options
-
-EXIT_CONTRADICTED = 1  # check --strict: a claim the DUT contradicts
-EXIT_BENCH = 3  # the bench could not be used (as ckesc explore's): nothing was asked
 
 READS_ONLY = ("The DUT is asked with reads only: GET_ESC_ID, ESC Information (240), Maintenance Information (241), "
               "Get Major Configuration (242), Set/Get Freq option 0 (214, the read), Get Rec (223) and Expand Set "
@@ -82,7 +80,7 @@ def _show(args: argparse.Namespace) -> int:
     except ProfileError as exc:
         raise UsageError(str(exc)) from None
     sys.stdout.write(find_profile(args.name).read_text(encoding="utf-8"))
-    return 0
+    return ExitStatus.OK
 
 
 def _list(args: argparse.Namespace) -> int:
@@ -101,7 +99,7 @@ def _list(args: argparse.Namespace) -> int:
             hidden = " (hidden by the one above)" if name in seen else ""
             seen.add(name)
             print(f"  {name:<20} {title}{hidden}")
-    return 0
+    return ExitStatus.OK
 
 
 # ------------------------------------------------------------------------------------------- init, check
@@ -142,18 +140,18 @@ def _init(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.output} exists (give --force to overwrite it)")
     session, observed = _ask(args)
     if session is None:
-        return EXIT_BENCH
+        return ExitStatus.ABORTED
     text = statement.profile_toml(observed, opened_with=session.profile, bus=args.dut == "bus",
                                   bench=_bench_line(args, session, observed), timing_error=session.lane.timing_error)
     if not args.output:
         sys.stdout.write(text)
-        return 0
+        return ExitStatus.OK
     Path(args.output).write_text(text, encoding="utf-8")
     DutProfile.load(args.output)  # what init writes, the suite takes (a ProfileError here is init's bug)
     absent = [n for n, s in observed.functions.items() if s.answered is False]
     print(f"wrote {args.output}: node {observed.node_id}; optional functions absent: {', '.join(absent) or 'none'}; "
           "check the keys marked 'state' and 'measure'", file=sys.stderr)
-    return 0
+    return ExitStatus.OK
 
 
 def _check(args: argparse.Namespace) -> int:
@@ -161,7 +159,7 @@ def _check(args: argparse.Namespace) -> int:
 
     session, observed = _ask(args)
     if session is None:
-        return EXIT_BENCH
+        return ExitStatus.ABORTED
     profile = session.profile
     print(f"profile {profile.name!r} ({profile.path}) against {_bench_line(args, session, observed)}")
     for name, seen in observed.functions.items():
@@ -173,4 +171,4 @@ def _check(args: argparse.Namespace) -> int:
         print(f"WARNING: {w}")
     print(f"{len(warnings)} claim(s) of the profile contradicted by the DUT" if warnings
           else "no claim of the profile is contradicted by what the DUT showed")
-    return EXIT_CONTRADICTED if warnings and args.strict else 0
+    return ExitStatus.FAILED if warnings and args.strict else ExitStatus.OK

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ..reporting.exits import ExitStatus
 from ..reporting.html_report import build
 
 
@@ -20,11 +21,11 @@ def _report_command(args) -> int:
     out = Path(args.report_dir)
     if not (out / "results.json").is_file():
         print(f"ckesc report: no results.json in {out} (give a run's directory, e.g. reports/latest)", file=sys.stderr)
-        return 2
+        return ExitStatus.USAGE
     try:
         path = build(out)
     except (ValueError, KeyError, TypeError, AttributeError) as exc:  # JSONDecodeError is a ValueError
         print(f"ckesc report: {out / 'results.json'} is not a results record this version reads: {exc!r}", file=sys.stderr)
-        return 2
+        return ExitStatus.USAGE
     print(path)
-    return 0
+    return ExitStatus.OK

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from .. import selftest as selftest_lib
 from ..emulator.faults import FAULTS
+from ..reporting.exits import ExitStatus
 from ..selftest import SCOPES, VARIANT_SETS, FaultRun, VariantRun, selftest, table
 
 
@@ -43,7 +44,7 @@ def selftest_command(args: argparse.Namespace) -> int:
     unknown = set(faults or ()) - set(FAULTS)
     if unknown:
         print(f"ckesc selftest: unknown fault(s) {', '.join(sorted(unknown))}", file=sys.stderr)
-        return 2
+        return ExitStatus.USAGE
 
     def progress(run: FaultRun, i: int, n: int) -> None:
         status = "ok" if run.ok else "PROBLEM"
@@ -57,7 +58,7 @@ def selftest_command(args: argparse.Namespace) -> int:
         matrix = selftest_lib.variant_matrix(args.variants, _seeds(args.seeds)) if args.variants else []
     except ValueError:
         print(f"ckesc selftest: --seeds takes 1,5,9 or 1-8, got {args.seeds!r}", file=sys.stderr)
-        return 2
+        return ExitStatus.USAGE
 
     def variant_progress(run: VariantRun, i: int, n: int) -> None:
         print(f"[{i:>3}/{n}] {run.label[:60]:<60} {len(run.inconclusive):>3} inconclusive  "
@@ -79,4 +80,4 @@ def selftest_command(args: argparse.Namespace) -> int:
         print(f"PROBLEM {v.problem}", file=sys.stderr)
     total = len(runs) + len(variant_runs)
     print(f"{total - len(bad) - len(bad_variants)} of {total} runs as expected: {line}")
-    return 1 if bad or bad_variants else 0
+    return ExitStatus.FAILED if bad or bad_variants else ExitStatus.OK

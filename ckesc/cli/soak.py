@@ -10,13 +10,11 @@ import argparse
 import re
 import sys
 
+from ..reporting.exits import ExitStatus
 from ..soak import trace
-from .common import EXIT_INTERRUPTED, UsageError
+from .common import UsageError
 from .explore import parse_budget
 from .run import add_bench_options
-
-EXIT_FOUND = 1
-EXIT_BENCH = 3
 
 
 def parse_channels(text: str) -> tuple[int, ...]:
@@ -126,12 +124,12 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
             raise UsageError(str(exc)) from None
         except (DutError, BenchGone, OSError) as exc:
             print(f"ckesc soak: cannot use the bench: {exc}", file=sys.stderr)
-            return EXIT_BENCH
+            return ExitStatus.ABORTED
         if outcome.status == runner.INTERRUPTED:
-            return EXIT_INTERRUPTED
+            return ExitStatus.INTERRUPTED
         if outcome.status == runner.ABORTED:
-            return EXIT_BENCH
-        return EXIT_FOUND if outcome.findings else 0
+            return ExitStatus.ABORTED
+        return ExitStatus.FAILED if outcome.findings else ExitStatus.OK
 
     p.set_defaults(handler=handler)
 

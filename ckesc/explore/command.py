@@ -12,6 +12,7 @@ from ..bench.dut import DutError
 from ..bench.errors import PreflightError
 from ..bench.lanes import BenchGone
 from ..bench.station import BenchOptions
+from ..reporting.exits import ExitStatus
 from .engine import Stats, explore
 from .report import load_replay, run_dir, summary_text, write_reports
 from .runner import OPTION_NAMES, RestoreError, Session
@@ -71,7 +72,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         if finding is not None:
             print(f"the finding of {os.path.basename(args.replay)} ({finding.get('key')}): "
                   f"{'reproduced' if same else 'NOT reproduced'}", file=out)
-        return 1 if outcome.findings else 0
+        return ExitStatus.FAILED if outcome.findings else ExitStatus.OK
     options = bench_options(args)
     session = open_session(options, load=bool(getattr(args, "load", False)))
     database = None if args.database == "none" else (args.database or os.path.join(args.reports, "explore-db"))
@@ -101,7 +102,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
             "load": session.bench.load}
     write_reports(where, found, stats, info)
     print(summary_text(found, stats, where), file=out)
-    return 1 if found else 0
+    return ExitStatus.FAILED if found else ExitStatus.OK
 
 
 def _duration(seconds: float) -> str:
@@ -137,4 +138,4 @@ def selftest_command(args: argparse.Namespace, out: TextIO) -> int:
     if args.out:
         Path(args.out).write_text(text + "\n")
         Path(args.out).with_suffix(".json").write_text(json.dumps([r.to_json() for r in rows], indent=1) + "\n")
-    return 0 if all(r.found for r in rows) else 1
+    return ExitStatus.OK if all(r.found for r in rows) else ExitStatus.FAILED

@@ -12,25 +12,21 @@ A bus rule broken while a test ran whose own verdict is not a FAIL (a test SKIPP
 or ERRORed) is the rule's failure, not that test's: it is grouped here like any other, the test named
 as where it was seen (:func:`rule_failures`), and it fails the run.
 
-Built from ``results.json``'s records (or the plugin's results), so ``ckesc report DIR`` rebuilds it.
+Built from ``results.json``'s records (or the plugin's results), so ``ckesc report DIR`` rebuilds it: from their
+fields (``broken``, ``bus_causes``), never from their messages' words. A record from before ``bus_causes`` were
+recorded is grouped by its message's first line, as a test's own failure.
 """
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..evidence.live import causes as violation_causes
 from ..evidence.live import generalise, without_context
-from ..evidence.rules import Violation
 from ..protocol.requirements import STRENGTHS as STRENGTH_ORDER
 from ..protocol.requirements import Verdict
 from .results import Result
 
-#: a violation quoted in a bus-rule failure message (read back from records without ``bus_causes``)
-_QUOTED = re.compile(r"^\[(?P<rules>.+?) (?P<strength>SHALL|READING)\] t=(?P<t>\S+) (?:node (?P<node>\d+)|bus): (?P<what>.*)$")
-_TAG = re.compile(r"^\[(?P<rules>[^\]]+?) (?P<strength>SHALL|READING|OBSERVE)\]\s*")
 #: the longest heading: a longer first line is cut, and says so ("...")
 _HEADING = 300
 _OUTCOMES = (Verdict.FAIL, Verdict.ERROR)
@@ -82,36 +78,21 @@ def rule_failures(results: list) -> list[dict[str, Any]]:
 
 def _own_cause(r: Result) -> tuple[str, str, str, list[str]] | None:
     """(key, what, strength, rules) of a test's own failure (not the bus rules'), or None. The key groups (its
-    context and the values that vary made ``#``); ``what``, the heading, is the message's first line as the test
-    wrote it, only its ``[rules strength]`` tag (shown beside it) left out: ``127.0.0.1:40594`` and ``failed (3)``
-    stay as they are."""
-    message = (r.message or "").strip()
-    if not message or message.startswith("[bus rules"):
-        return None
-    line = message.splitlines()[0].strip().removeprefix("AssertionError: ")
-    tag = _TAG.match(line)
-    strength = tag["strength"] if tag else ("" if r.outcome == Verdict.ERROR else r.strength)
-    rules = tag["rules"].split() if tag else []
-    text = line[tag.end():] if tag else line
+    context and the values that vary made ``#``); ``what``, the heading, is what the DUT did as the test wrote it
+    (the strongest of what it broke, :attr:`~.results.Result.broken`; its requirements and strength shown beside
+    it), or for an ERROR, or a FAIL that recorded nothing broken (an exception in the test), its message's first line:
+    ``127.0.0.1:40594`` and ``failed (3)`` stay as they are."""
+    if r.broken:
+        head = r.broken[0]
+        text, strength, rules = head["text"].strip().split("\n", 1)[0], head["strength"], list(head["requirements"])
+    elif (r.outcome == Verdict.FAIL and r.bus_causes) or not (r.message or "").strip():
+        return None  # the bus rules' failure: grouped by its causes
+    else:
+        text = r.message.strip().split("\n", 1)[0].strip().removeprefix("AssertionError: ")
+        strength, rules = ("" if r.outcome == Verdict.ERROR else r.strength), []
     key = f"{r.outcome}|{' '.join(rules)}|{strength}|{generalise(without_context(text)).strip()}"
     what = text if len(text) <= _HEADING else text[:_HEADING - 3] + "..."
     return key, what, strength, rules
-
-
-def _bus_causes(r: Result) -> list[dict[str, Any]]:
-    """The test's bus-rule problems: as recorded, or read back from its message (older records)."""
-    if r.bus_causes:
-        return r.bus_causes
-    lines = (r.message or "").splitlines()
-    if not lines or not lines[0].startswith("[bus rules"):
-        return []
-    found = []
-    for n, line in enumerate(lines):
-        if m := _QUOTED.match(line):
-            frames = tuple(f.strip() for f in lines[n + 1:n + 3] if f.startswith("    "))
-            found.append(Violation(tuple(m["rules"].split()), m["strength"], float(m["t"]),
-                                   int(m["node"]) if m["node"] else None, "", m["what"], frames))
-    return violation_causes(found)
 
 
 def groups(results: list) -> list[Group]:
@@ -130,7 +111,7 @@ def groups(results: list) -> list[Group]:
                                             r.nodeid, traces))
             g.tests.append(r.nodeid)
             g.occurrences += 1
-        for c in _bus_causes(r) if r.outcome == Verdict.FAIL else r.bus_causes:
+        for c in r.bus_causes:
             key = "bus|" + c["key"]
             g = found.setdefault(key, Group(key, Verdict.FAIL, c["strength"], list(c["rules"]), c["what"], c["first"],
                                             r.nodeid, traces))

@@ -25,7 +25,6 @@ dict; :func:`text` and :func:`page` render it. Only :func:`read_run` touches the
 from __future__ import annotations
 
 import json
-import re
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -151,17 +150,28 @@ def requirement_results(run: Run) -> dict[str, str]:
     return {rid: requirement_result(outcomes) for rid, outcomes in by_req.items()}
 
 
-_NUMBER = re.compile(r"\s*([-+0-9.eE]+(?:inf)?)\s*(.*)")
-
-
-def _quantity(text: str | None) -> tuple[float, str] | None:
-    m = _NUMBER.fullmatch(text or "")
-    if not m:
-        return None
+def _old_quantity(text: str | None) -> tuple[float, str] | None:
+    """(number, unit) of a quantity as a record from before ``measured`` rendered it (``80.2 ms``, ``3``:
+    :meth:`~ckesc.bench.outcomes.Measurement.as_properties`), None when it is none."""
+    number, _, unit = (text or "").strip().partition(" ")
     try:
-        return float(m.group(1)), m.group(2).strip()
+        return float(number), unit.strip()
     except ValueError:
         return None
+
+
+def _measured(r: Result) -> list[dict[str, Any]]:
+    """A result's measurements as numbers: as recorded (``measured``), or for a record from before they were, from
+    their rendering (``measurements``), each with its value, margin and unit and its limit as text."""
+    if r.measured:
+        return [{**m, "limit": f"{m['op']} {m['limit']:.6g} {m['unit']}".strip() if m.get("limit") is not None else ""}
+                for m in r.measured]
+    out = []
+    for m in r.measurements:
+        value, margin = _old_quantity(m.get("value")), _old_quantity(m.get("margin"))
+        out.append({**m, "value": value and value[0], "margin": margin and margin[0],
+                    "unit": margin[1] if margin else value[1] if value else ""})
+    return out
 
 
 def timing_margins(run: Run) -> dict[str, dict[str, Any]]:
@@ -170,15 +180,14 @@ def timing_margins(run: Run) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for nodeid, r in run.results.items():
         seen: Counter = Counter()
-        for m in r.measurements:
-            margin, value = _quantity(m.get("margin")), _quantity(m.get("value"))
-            if margin is None or value is None or margin[1] not in TIMING_UNITS:
+        for m in _measured(r):
+            if m["margin"] is None or m["value"] is None or m["unit"] not in TIMING_UNITS:
                 continue
             name = m.get("name", "?")
             seen[name] += 1
             key = f"{nodeid} :: {name}" + (f" #{seen[name]}" if seen[name] > 1 else "")
-            scale = TIMING_UNITS[margin[1]]
-            out[key] = {"test": nodeid, "name": name, "margin_ms": margin[0] * scale, "value_ms": value[0] * scale,
+            scale = TIMING_UNITS[m["unit"]]
+            out[key] = {"test": nodeid, "name": name, "margin_ms": m["margin"] * scale, "value_ms": m["value"] * scale,
                         "limit": m.get("limit", ""), "verdict": m.get("verdict", ""), "requirement": m.get("requirement")}
     return out
 

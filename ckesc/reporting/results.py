@@ -4,7 +4,6 @@ test, the run's :class:`RunInfo`, and :class:`RunRecord`, the whole file, which 
 from __future__ import annotations
 
 import json
-import re
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
@@ -26,28 +25,18 @@ def requirement_result(outcomes: Iterable[str]) -> str:
     return next((v for v in WORST_FIRST if v in outcomes), NOT_CHECKED)
 
 
-#: a broken requirement's tag at the start of a failure message's line: ``[4.4.3-4 SHALL] ...``, ``- [R2 READING] ...``,
-#: ``[bus rules R9 R13] ...``
-_TAG = re.compile(r"^(?:- )?\[(?:bus rules (?P<rules>[^\]]+)|(?:(?P<ids>[^\]]+) )?(?P<strength>SHALL|READING|OBSERVE))\]",
-                  re.M)
-
-
 def broken_requirements(r: Result) -> list[str]:
-    """The requirements a test's evidence broke, as its record names them: for a FAIL, the ids its message tags
-    (the failed assert's and every failed limit's, ``also broken``) and the bus rules it broke; for any other
-    verdict, the bus rules broken while it ran. A failure whose tag names no id (``[SHALL] ...``) or a record
-    whose message has no tag at all cannot say which it broke: then every requirement the test cites of that
-    strength (all of them without a tag)."""
+    """The requirements a test's evidence broke, as its record names them: for a FAIL, those of what it broke
+    (``broken``: the failed assert's and every failed limit's) and the bus rules it broke; for any other verdict, the
+    bus rules broken while it ran. A broken requirement that names no id cites every requirement of the test of its
+    strength, and a FAIL that records nothing broken (an exception in the test) all of them."""
     broken = list(r.bus_rules)
     if r.outcome != Verdict.FAIL:
         return list(dict.fromkeys(broken))
-    tags = list(_TAG.finditer(r.message or ""))
-    for tag in tags:
-        ids = (tag["rules"] or tag["ids"] or "").split()
-        if not ids:
-            ids = [i for i in r.requirements if i in REQUIREMENTS and REQUIREMENTS[i].strength == tag["strength"]]
+    for b in r.broken:
+        ids = b["requirements"] or [i for i in r.requirements if i in REQUIREMENTS and REQUIREMENTS[i].strength == b["strength"]]
         broken += ids or r.requirements
-    if not tags:
+    if not r.broken and not r.bus_rules:
         broken += r.requirements
     return list(dict.fromkeys(broken))
 
@@ -91,6 +80,13 @@ class Result:
     #: title, rules, node, how often among the quoted ones, its first occurrence): report.html, summary.txt
     #: and the console group the run's failures by them
     bus_causes: list[dict[str, Any]] = field(default_factory=list)
+    #: what the test itself broke (not the bus rules), the strongest first: each its ``requirements`` (none named: the
+    #: test's own of that strength), ``strength`` and ``text`` (what the DUT did) (:class:`~ckesc.bench.outcomes.Broken`);
+    #: ``message`` is their rendering
+    broken: list[dict[str, Any]] = field(default_factory=list)
+    #: the test's measurements as numbers: name, value, unit, limit, op, margin, clock, error, verdict, requirement
+    #: (:meth:`~ckesc.bench.outcomes.Measurement.as_json`; ``properties`` has them rendered, for JUnit)
+    measured: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def measurements(self) -> list[dict[str, str]]:
@@ -105,14 +101,27 @@ class Result:
 
     @classmethod
     def from_json(cls, record: Mapping[str, Any]) -> Result:
-        """A record of results.json (an older one may lack the later fields: they take their defaults); a key this
-        version does not know is left out. KeyError when a required one (nodeid, name, section, requirements,
-        strength) is missing, ValueError for an unknown outcome."""
+        """A record of results.json (an older one may lack the later fields: they take their defaults, and an older
+        FAIL's ``broken`` is its recorded ``broken_requirements``, :func:`_broken_of_old`); a key this version does not
+        know is left out. KeyError when a required one (nodeid, name, section, requirements, strength) is missing,
+        ValueError for an unknown outcome."""
         known = {f.name for f in fields(cls)}
         r = cls(**{k: v for k, v in record.items() if k in known})
         r.outcome = Verdict(r.outcome)
         r.observations = [tuple(o) for o in r.observations]  # type: ignore[misc]
+        if "broken" not in record:
+            r.broken = _broken_of_old(r, record.get("broken_requirements"))
         return r
+
+
+def _broken_of_old(r: Result, recorded: list[str] | None) -> list[dict[str, Any]]:
+    """What a FAIL recorded before ``broken`` was a field broke: the requirements its record listed as broken (all it
+    cites when it listed none), but the bus rules', at the test's strength, its message's first line the text. A
+    FAIL of the bus rules alone (its message begins ``[bus rules``) broke nothing of its own."""
+    own = [i for i in recorded or r.requirements if i not in r.bus_rules]
+    if r.outcome != Verdict.FAIL or (r.message or "").startswith("[bus rules") or not own:
+        return []
+    return [{"requirements": own, "strength": r.strength, "text": (r.message or "").strip().split("\n", 1)[0]}]
 
 
 class RunInfo(TypedDict, total=False):

@@ -28,9 +28,9 @@ from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
 
-from ..protocol.requirements import SECTION_TITLES, VERDICTS, Verdict, section_key
+from ..protocol.requirements import SECTION_TITLES, VERDICTS, section_key
 from ..reporting import compare
-from ..reporting.causes import broken_outside_a_fail
+from ..reporting.exits import ExitStatus, failing, failing_verdicts, worst
 from ..reporting.htmlkit import CSS, badge, e
 from ..reporting.report import classname
 from ..reporting.results import RunRecord, requirement_result
@@ -53,26 +53,25 @@ def bench_status(doc: RunRecord | dict[str, Any] | None, *, setup_error: str | N
         return ("ABORTED" if results else "ABSENT"), why.removeprefix("aborted: ")
     if why.startswith("interrupted"):
         return "INTERRUPTED", why
-    bad = [r for r in results if r.outcome in (Verdict.FAIL, Verdict.ERROR) or (strict and r.outcome == Verdict.INCONCLUSIVE)]
-    if bad:
+    failed = failing(results, strict=strict)
+    if bad := [r for r in failed if r.outcome in failing_verdicts(strict=strict)]:
         return "FAIL", f"{len(bad)} of {len(results)} tests " + ("FAILed, ERRORed or were INCONCLUSIVE" if strict else
                                                                   "FAILed or ERRORed")
-    if rules := [r for r in results if broken_outside_a_fail(r)]:
-        return "FAIL", f"bus rules broken while {len(rules)} SKIPPED test(s) ran"
+    if failed:
+        return "FAIL", f"bus rules broken while {len(failed)} SKIPPED test(s) ran"
     if not results:
         return "BROKEN", crash or why or "no test ran"
     return "PASS", why if why.startswith("subset") else ""
 
 
-def exit_status(statuses: list[str], *, interrupted: bool = False) -> int:
+#: a bench's status as a run's exit status: the batch's is the worst of them (:func:`~ckesc.reporting.exits.worst`)
+STATUS_EXITS = {"PASS": ExitStatus.OK, "FAIL": ExitStatus.FAILED, "ABSENT": ExitStatus.ABORTED,
+                "ABORTED": ExitStatus.ABORTED, "BROKEN": ExitStatus.ABORTED, "INTERRUPTED": ExitStatus.INTERRUPTED}
+
+
+def exit_status(statuses: list[str], *, interrupted: bool = False) -> ExitStatus:
     """The batch's exit status: 130 interrupted, 1 a bench FAILed, 3 a bench ABSENT, ABORTED or BROKEN, 0 all passed."""
-    if interrupted or "INTERRUPTED" in statuses:
-        return 130
-    if "FAIL" in statuses:
-        return 1
-    if any(s in ("ABSENT", "ABORTED", "BROKEN") for s in statuses):
-        return 3
-    return 0
+    return worst([STATUS_EXITS[s] for s in statuses] + ([ExitStatus.INTERRUPTED] if interrupted else []))
 
 
 def read_results(bench_dir: Path) -> RunRecord | None:
@@ -166,7 +165,7 @@ def _bench_classname(bench: str, cls: str) -> str:
 def page(doc: dict[str, Any], batch_dir: Path) -> str:
     """``batch.html``: self-contained, in report.html's style."""
     records = doc["benches"]
-    overall = "PASS" if doc["exit_status"] == 0 else ("INTERRUPTED" if doc["exit_status"] == 130 else "FAIL")
+    overall = {ExitStatus.OK: "PASS", ExitStatus.INTERRUPTED: "INTERRUPTED"}.get(doc["exit_status"], "FAIL")
     counts = ", ".join(f"{n} {s}" for s in STATUSES for k, n in doc["statuses"].items() if k == s)
     parts = [f"<header><h1>CKESC batch</h1><p class=run>{badge(overall)} {len(records)} benches ({e(counts)}), rig "
              f"{e(doc['rig'])}, {doc['seconds']:.1f} s; exit status {doc['exit_status']}</p>"

@@ -1,5 +1,6 @@
 """The session's end: whether the run was the whole suite run to its end (or why not, and which tests it did not
-run), its exit status, and its reports written (``ckesc/reporting``) and summarised on the console."""
+run), its exit status (decided here, once: :func:`~ckesc.reporting.exits.of_run`; ``ckesc run`` returns it), and its
+reports written (``ckesc/reporting``) and summarised on the console."""
 
 from __future__ import annotations
 
@@ -8,12 +9,13 @@ from typing import Any
 
 import pytest
 
+from ..protocol.requirements import Verdict
 from ..reporting import report
-from ..reporting.causes import broken_outside_a_fail
+from ..reporting.exits import ExitStatus, of_run
 from ..reporting.results import profile_warnings
 from . import trace_hooks
 from .collection import conformance_dir, item_requirements, section_of
-from .state import EXIT_ABORTED, report_dir, state
+from .state import RunState, report_dir, state
 
 
 def _module_name(nodeid_or_item) -> str:
@@ -21,6 +23,17 @@ def _module_name(nodeid_or_item) -> str:
     if mod is not None:
         return mod.__name__.rsplit(".", 1)[-1]
     return Path(str(nodeid_or_item).split("::")[0]).stem
+
+
+#: the verdicts a test has only once it ran to its end (its teardown judges the bus rules that ran under it)
+NEEDS_THE_END = (Verdict.PASS, Verdict.OBSERVED)
+
+
+def cut_short(st: RunState) -> list[str]:
+    """The tests the run's end cut (an interrupt, an abort) before their teardown reported, with no finding yet: a
+    test whose phase did not finish is never a PASS (pytest counts it in no outcome either); it is "not run to its
+    end". A FAIL, ERROR, INCONCLUSIVE or SKIPPED decided before the cut stands."""
+    return [n for n, r in st.results.items() if n not in st.finished and r.outcome in NEEDS_THE_END]
 
 
 def _completeness(session: pytest.Session, exitstatus: int) -> tuple[str | None, list[dict[str, Any]]]:
@@ -32,10 +45,15 @@ def _completeness(session: pytest.Session, exitstatus: int) -> tuple[str | None,
         reason = f"stopped: {session.shouldstop}" if isinstance(session.shouldstop, str) else "interrupted"
     if reason is None and session.shouldfail:
         reason = f"stopped: {session.shouldfail} (-x / --maxfail)"
-    why_not = {"aborted": "not run: the run was aborted", "interrupted": "not run: the run was interrupted",
-               "stopped": "not run: the run stopped early"}.get((reason or "").split(":")[0].split(" ")[0], "not run")
+    why = {"aborted": "the run was aborted", "interrupted": "the run was interrupted",
+           "stopped": "the run stopped early"}.get((reason or "").split(":")[0].split(" ")[0])
+    cut = set(cut_short(st))
+    for nodeid in cut:
+        del st.results[nodeid]
     not_run = [{"nodeid": it.nodeid, "name": it.name, "section": section_of(it), "requirements": item_requirements(it),
-                "reason": why_not} for it in st.selected if it.nodeid not in st.results]
+                "reason": (f"not run to its end: {why} while it ran" if why else "not run to its end") if it.nodeid in cut
+                else (f"not run: {why}" if why else "not run")}
+               for it in st.selected if it.nodeid not in st.results]
     not_run += [{"nodeid": n, "name": n.split("::")[-1], "section": "", "requirements": [], "reason": "not run: deselected"}
                 for n in st.deselected]
     where = conformance_dir()
@@ -63,19 +81,18 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     st.info["complete"] = reason is None
     st.info["incomplete"] = reason or ""
     st.info["not_run"] = len(not_run)
-    if reason is not None and reason.startswith("aborted"):
-        session.exitstatus = EXIT_ABORTED
-    elif session.exitstatus == pytest.ExitCode.OK and any(map(broken_outside_a_fail, st.results.values())):
-        session.exitstatus = pytest.ExitCode.TESTS_FAILED  # a bus rule broken while a SKIPPED test ran
+    st.exit_status = of_run(st.results.values(), stopped=reason, strict=session.config.getoption("ckesc_strict"))
+    if st.exit_status in (ExitStatus.ABORTED, ExitStatus.FAILED):  # (a bus rule broken while a SKIPPED test ran)
+        session.exitstatus = st.exit_status  # pytest's own statuses otherwise: its INTERRUPTED is 2
     out = report_dir(session.config)
     if out is not None:
         report.write_reports(out, list(st.results.values()), st.info, not_run=not_run,
                              html=not session.config.getoption("ckesc_no_html"))
         st.info["report_dir"] = str(out)
-    if session.exitstatus == EXIT_ABORTED:  # pytest prints no terminal summary for this status: ours, then
+    if session.exitstatus == ExitStatus.ABORTED:  # pytest prints no terminal summary for this status: ours, then
         tr = session.config.pluginmanager.get_plugin("terminalreporter")
         if tr is not None:
-            pytest_terminal_summary(tr, EXIT_ABORTED, session.config)
+            pytest_terminal_summary(tr, ExitStatus.ABORTED, session.config)
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:

@@ -20,11 +20,12 @@ from ..bench.profile import DutProfile
 from ..emulator import variants
 from ..protocol import catalogue as cat
 from ..protocol import functions
+from ..reporting.exits import ExitStatus
 from .bus_rules import watch_lane
 from .cold_boots import restore_point
 from .collection import check_claims, lacking, preflight
 from .safety import zero_throttle_now
-from .state import EXIT_ABORTED, state
+from .state import state
 from .trace_hooks import trace_lane
 
 #: Frames kept across the run for the run-wide checks (4.1): a whole suite in real time is ~70,000; a
@@ -284,9 +285,9 @@ def _await_ready(config: pytest.Config, d: Dut, since: float) -> None:
 
 def _abort(config: pytest.Config, why: str) -> None:
     """Stop the run now: no further test can reach the DUT. The reports say ABORTED with ``why`` and
-    list every test not run; the exit status is :data:`EXIT_ABORTED`."""
+    list every test not run; the exit status is :attr:`~ckesc.reporting.exits.ExitStatus.ABORTED`."""
     state(config).stopped = f"aborted: {why}"
-    pytest.exit(f"ABORTED: {why}", returncode=EXIT_ABORTED)
+    pytest.exit(f"ABORTED: {why}", returncode=ExitStatus.ABORTED)
 
 
 def _install_signal_guard(config: pytest.Config) -> None:

@@ -47,7 +47,7 @@ OPTIONS: tuple[Option, ...] = (
            help="print the per-section summary at the end (ckesc run sets it)"),
     Option("ckesc_no_html", group=OUTPUT, action="store_true", default=False, run=None,
            help="with --ckesc-reports: no report.html (machine readers only, e.g. ckesc selftest's runs)"),
-    Option("strict", group=OUTPUT, action="store_true", default=False, pytest=None,
+    Option("ckesc_strict", group=OUTPUT, action="store_true", default=False, run=("--strict",),
            help="INCONCLUSIVE results fail the run too"),
     Option("ckesc_trace_format", group=OUTPUT, choices=TRACE_FORMATS, default="blf", run=("--trace-format",),
            help="each test's CAN traffic in <run>/traces/, written by python-can: blf (default; Vector BLF), asc (Vector "

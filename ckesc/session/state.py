@@ -17,11 +17,8 @@ from ..bench.lanes import Lane
 from ..bench.profile import DutProfile
 from ..bench.station import Station
 from ..reporting import report
+from ..reporting.exits import ExitStatus
 from ..reporting.results import Result
-
-#: exit status of a run aborted because the DUT did not answer or the bench went away (pytest's own
-#: statuses are 0-5; ``ckesc run`` passes this one on)
-EXIT_ABORTED = 3
 
 
 class Shield:
@@ -65,6 +62,12 @@ class RunState:
     #: why the run stopped early: "aborted: ..." (the DUT did not answer, the bench went away) or
     #: "interrupted" (Ctrl-C, SIGTERM); None while it runs or when it ran to its end
     stopped: str | None = None
+    #: the tests whose every phase reported (their teardown included): a result of a test not among them was cut
+    #: by the run's end (an interrupt, an abort) and is no verdict (:func:`~.finish.cut_short`)
+    finished: set[str] = field(default_factory=set)
+    #: the run's exit status, decided once at the session's end from its results (:func:`~ckesc.reporting.exits.of_run`,
+    #: ``ckesc run`` returns it); None before, or for a session that ran no conformance test
+    exit_status: ExitStatus | None = None
     #: held while a trace file is written out: the first Ctrl-C / SIGTERM waits for it to end
     shield: Shield = field(default_factory=Shield)
 

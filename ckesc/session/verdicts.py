@@ -6,16 +6,17 @@ falls silent.
 A phase's verdict is decided in one place, :func:`_outcome`, from the type of what ended it (as pytest decides
 passed, failed or skipped from the exception's type in one hook): :class:`~ckesc.bench.outcomes.Inconclusive` is
 INCONCLUSIVE (a measurement inside the bench's error is one too), any other skip SKIPPED, a harness or bus error
-(``DutError``, ``BusFault``, ``BenchGone``) ERROR; never a word in the message."""
+(:class:`~ckesc.bench.errors.HarnessError`, ``DutError``, ``BusFault``, ``BenchGone``) ERROR; never a word in the
+message."""
 
 from __future__ import annotations
 
 import pytest
 
 from ..bench.dut import Dut, DutError
-from ..bench.errors import BenchError
+from ..bench.errors import HarnessError
 from ..bench.lanes import BenchGone, BusFault
-from ..bench.outcomes import Inconclusive, NotClaimed
+from ..bench.outcomes import Broken, Inconclusive, NotClaimed, failure_text
 from ..evidence.timing import evidence
 from ..protocol.requirements import Verdict, requirement, strongest
 from ..reporting.results import Result
@@ -30,6 +31,7 @@ SILENT_TESTS_TO_ABORT = 3
 
 _DECISIVE = pytest.StashKey[pytest.TestReport]()  # the phase report that decided a test's verdict
 _MESSAGE = pytest.StashKey[str]()  # the test's failure message: what the DUT did (or the harness problem)
+_BROKEN = pytest.StashKey[list[Broken]]()  # what the test broke, typed: the message is its rendering
 _SILENT = pytest.StashKey[int]()  # tests in a row that ERRORed without a frame from the DUT
 
 
@@ -41,11 +43,12 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     ids = item_requirements(item)
     strength = strongest(ids)
     d = dut_of(item)
-    # the bus or the bench (its power control) failed under the test, not the DUT: an ERROR whatever the
-    # requirement's strength
-    harness = call.excinfo is not None and isinstance(call.excinfo.value, BENCH_FAILED)
     raised = call.excinfo.value if call.excinfo is not None else None  # what ended the phase: decides its verdict
-    if rep.when == "call" and not harness:
+    # the suite, the bus or the bench (its power control) failed under the test, not the DUT: an ERROR whatever the
+    # requirement's strength
+    if rep.when == "call" and isinstance(raised, HarnessError):
+        _harness_failed(item, rep, raised, d)
+    elif rep.when == "call" and not isinstance(raised, BENCH_FAILED):
         asserted = call.excinfo is not None and isinstance(call.excinfo.value, AssertionError)
         if rep.failed and strength == "OBSERVE":
             rep.outcome = "passed"
@@ -65,6 +68,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     if call.excinfo is not None and isinstance(call.excinfo.value, BenchGone):
         _stop(item, f"aborted: {call.excinfo.value}")
     if rep.when == "teardown":
+        state(item.config).finished.add(item.nodeid)
         _watch_silence(item, d)
         _final_report(item, rep)
     return rep
@@ -83,22 +87,17 @@ def _judged(item: pytest.Item, rep: pytest.TestReport, call: pytest.CallInfo, id
             d: Dut | None) -> None:
     """A test that failed an assert or a limit: its message says what the DUT did, the strongest broken
     requirement first and every other failed limit after it (never the traceback's fixture repr; that
-    stays below on the console). An assert saying "harness: ..." is the suite's problem: an ERROR."""
-    own = ""
+    stays below on the console)."""
+    own = None
     if rep.failed and call.excinfo is not None:
-        own = str(call.excinfo.value).strip()
-        if "\nassert " in own:  # pytest's explanation of the assert follows the test's own message: reprs
-            own = own.split("\nassert ", 1)[0].strip()
-        own = own or "assertion failed"
-        if not own.startswith("harness:") and not own.startswith("["):
-            tagged = [i for i in ids if requirement(i).strength == strength] or ids
-            own = f"[{' '.join(tagged)} {strength}] {own}"
-    if own.startswith("harness:"):
-        limits = d.record.failure_message() if d is not None else ""
-        message = own + (f"\nfailed limits before it:\n{limits}" if limits else "")
-    else:
-        message = d.record.failure_message(own, strength) if d is not None else own
-    item.stash[_MESSAGE] = message
+        text = str(call.excinfo.value).strip()
+        if "\nassert " in text:  # pytest's explanation of the assert follows the test's own message: reprs
+            text = text.split("\nassert ", 1)[0].strip()
+        own = Broken.of_assertion(text or "assertion failed",
+                                  [i for i in ids if requirement(i).strength == strength] or ids, strength)
+    broken = d.record.broken(own) if d is not None else [own] if own else []
+    message = item.stash[_MESSAGE] = failure_text(broken)
+    item.stash[_BROKEN] = broken
     trace = rep.longrepr
     rep.outcome = "failed"
     crash = getattr(trace, "reprcrash", None) if rep.failed else None
@@ -111,6 +110,18 @@ def _judged(item: pytest.Item, rep: pytest.TestReport, call: pytest.CallInfo, id
         rep.longrepr = f"{message}\nthen: {trace[2]}"
     else:
         rep.longrepr = message if trace is None or not rep.failed else f"{message}\n\n{trace}"
+
+
+def _harness_failed(item: pytest.Item, rep: pytest.TestReport, raised: HarnessError, d: Dut | None) -> None:
+    """A test the suite itself could not carry out (:class:`~ckesc.bench.errors.HarnessError`): an ERROR, its message
+    the harness's, with the limits the DUT had failed before it listed (they are no verdict now)."""
+    limits = d.record.failure_message() if d is not None else ""
+    message = str(raised).strip() + (f"\nfailed limits before it:\n{limits}" if limits else "")
+    item.stash[_MESSAGE] = message
+    crash = getattr(rep.longrepr, "reprcrash", None)
+    if crash is not None and hasattr(crash, "message"):
+        crash.message = message
+        rep.sections.append(("ckesc verdict", message))
 
 
 def _stop(item: pytest.Item, why: str) -> None:
@@ -182,7 +193,7 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | 
         outcome, message = _outcome(rep, raised, strength), "" if rep.passed else _longrepr_text(rep, raised)
         if rep.when == "call" and _MESSAGE in item.stash:
             message = item.stash[_MESSAGE]
-            outcome = Verdict.ERROR if message.startswith("harness:") else Verdict.FAIL
+            res.broken = [b.as_json() for b in item.stash.get(_BROKEN, [])]
         if rep.when == "teardown" and res.outcome not in (Verdict.FAIL,) and not bus_rules.failed_at_teardown(item):
             outcome = Verdict.ERROR
         if rep.when != "teardown" or res.outcome != Verdict.FAIL:
@@ -194,15 +205,16 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | 
         res.properties = {}
         for n, m in enumerate(d.record.measurements):
             res.properties.update(m.as_properties(n))
+        res.measured = [m.as_json() for m in d.record.measurements]
         res.observations = [(w, str(v)) for w, v in d.record.observations]
     if d is not None and rep.when == "teardown":
         res.evidence = evidence(d.trace, host=d.host_node, node=d.node_id, comm_loss="R8" in ids)
         st.info.setdefault("interval_tolerance_ms", d.interval_tolerance_ms)
 
 
-#: what, raised under a test, says the bus or the bench (its power control) failed under it, not the DUT: an ERROR
-#: whatever the requirement's strength (:mod:`ckesc.bench.errors`, :mod:`ckesc.bench.lanes`)
-BENCH_FAILED = (BusFault, BenchGone, BenchError)
+#: what, raised under a test, says the suite itself, the bus or the bench (its power control) failed under it, not
+#: the DUT: an ERROR whatever the requirement's strength (:mod:`ckesc.bench.errors`, :mod:`ckesc.bench.lanes`)
+BENCH_FAILED = (BusFault, BenchGone, HarnessError)
 #: ... and with the harness that could not do what the test needed (:class:`~ckesc.bench.dut.DutError`): no verdict
 #: on the DUT
 NOT_THE_DUT = (DutError, *BENCH_FAILED)
@@ -232,7 +244,8 @@ def _longrepr_text(rep: pytest.TestReport, raised: BaseException | None = None) 
     else:
         crash = getattr(getattr(lr, "reprcrash", None), "message", None)
         text = crash if crash else str(lr)
-    kinds = (Inconclusive, NotClaimed) + ((type(raised),) if isinstance(raised, pytest.skip.Exception) else ())
+    kinds = (Inconclusive, NotClaimed) + ((type(raised),) if isinstance(raised, (pytest.skip.Exception, HarnessError))
+                                          else ())
     for verdict in kinds:  # raised below the test (a helper, a fixture): pytest names the class
         text = text.removeprefix(f"{verdict.__module__}.{verdict.__qualname__}: ")
     return text

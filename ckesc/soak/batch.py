@@ -12,8 +12,8 @@ The console: one line per bench (elapsed, left, frames, findings; then its end),
 once a second to a status file (:class:`~.runner.StatusFile`); on a terminal the lines are rewritten in place once a
 second, elsewhere (a CI log) printed as a block once a minute, and a line per bench as it ends. The batch's report,
 ``<batch>/batch.json`` and ``<batch>/summary.txt``: per bench its exit status, how its soak ended, its findings and
-its statement. The batch's exit status is the worst bench's: 130 one was interrupted, 1 a finding, 3 a bench could
-not be used, 2 a bench's set-up mistake, 0 nothing found on any bench.
+its statement. The batch's exit status is the worst bench's (:func:`ckesc.reporting.exits.worst`): 130 one was
+interrupted, 1 a finding, 3 a bench could not be used, 2 a bench's set-up mistake, 0 nothing found on any bench.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, TextIO
 
+from ..reporting.exits import ExitStatus, worst
 from ..reporting.report import run_dir
 from ..rigs import rig as rigs
 from ..session import options
@@ -36,12 +37,8 @@ from . import report
 from .runner import LIVE_LOG_S, LIVE_TTY_S, live_text
 from .statement import duration_text
 
-#: the batch's exit status from its benches': the first of these any bench has (then 0)
-WORST_FIRST = (130, 1, 3, 2)
 #: how often the benches' status files are read (s of wall time)
 POLL_S = 0.2
-#: a bench's exit status that is none of ``ckesc soak``'s (it died): counted as a bench that could not be used
-EXIT_BENCH = 3
 
 
 class BatchError(ValueError):
@@ -84,18 +81,12 @@ class BenchRun:
 
 def end_text(code: int, figures: dict[str, Any]) -> str:
     state = figures.get("state", "")
-    what = {0: "nothing found", 1: "FINDINGS", 2: "set-up mistake", 3: "the bench could not be used",
-            130: "interrupted"}.get(code, f"ended with status {code}")
+    what = {ExitStatus.OK: "nothing found", ExitStatus.FAILED: "FINDINGS", ExitStatus.USAGE: "set-up mistake",
+            ExitStatus.ABORTED: "the bench could not be used",
+            ExitStatus.INTERRUPTED: "interrupted"}.get(code, f"ended with status {code}")
     done = (f" ({state.lower()}, {duration_text(figures['elapsed_s'])}, {figures['frames']} frames, "
             f"{figures['findings']} findings)" if state and state != "running" else "")
     return f"exit {code}, {what}{done}"
-
-
-def worst(codes: list[int]) -> int:
-    for code in WORST_FIRST:
-        if code in codes:
-            return code
-    return 0 if all(c == 0 for c in codes) else EXIT_BENCH
 
 
 def plan(rig_file: str, names: str | None, given: dict[str, Any]) -> tuple[rigs.Rig, list[rigs.Bench]]:
@@ -255,8 +246,8 @@ def _tail(path: Path, lines: int = 3) -> str:
 
 def batch_record(rig: str, runs: list[BenchRun], started_utc: str, seconds: float, interrupted: bool) -> dict[str, Any]:
     benches = [_bench_doc(r) for r in runs]
-    codes = [b["exit"] if b["exit"] is not None else EXIT_BENCH for b in benches]
-    code = 130 if interrupted else worst(codes)
+    codes = [b["exit"] if b["exit"] is not None else ExitStatus.ABORTED for b in benches]
+    code = ExitStatus.INTERRUPTED if interrupted else worst(codes)
     return {"kind": "soak-batch", "rig": rig, "started_utc": started_utc, "seconds": round(seconds, 3),
             "interrupted": interrupted, "exit_status": code, "benches": benches}
 

@@ -93,22 +93,28 @@ def test_report_html_leads_with_the_groups(run, tmp_path):
 
 
 def test_ckesc_report_rebuilds_the_groups_from_older_records(run, tmp_path):
+    """A record from before the causes (``bus_causes``) and what a test broke (``broken``) were recorded: its messages
+    are not read back for rules and strengths (issue #35); each failure is grouped by its message's first line, so
+    every failing test is still in a group, and the test's own failures keep their groups."""
     out, _ = run
     doc = _doc(out)
     for r in doc["results"]:
-        r.pop("bus_causes", None)  # a record from before the causes were recorded: read from the messages
+        r.pop("bus_causes", None), r.pop("broken", None)
     (tmp_path / "results.json").write_text(json.dumps(doc))
-    old = groups(doc["results"])
-    assert [g.what for g in old[:3]] == [g.what for g in groups(_doc(out)["results"])[:3]]  # the messages quote 3
+    old, new = groups(doc["results"]), groups(_doc(out)["results"])
+    failing = {r["nodeid"] for r in doc["results"] if r["outcome"] in ("FAIL", "ERROR")}
+    assert {t for g in old for t in g.tests} == failing == {t for g in new for t in g.tests if t in failing}
+    own = [g for g in new if not g.key.startswith("bus|")]
+    assert own and all(any(set(g.tests) <= set(o.tests) for o in old) for g in own)
     done = subprocess.run([sys.executable, "-m", "ckesc", "report", str(tmp_path)], capture_output=True, text=True,
                           timeout=300)
     assert done.returncode == 0
     assert 'id="cause-1"' in (tmp_path / "report.html").read_text()
 
 
-def _record(nodeid: str, outcome: str, message: str) -> dict:
+def _record(nodeid: str, outcome: str, message: str, broken: list | None = None) -> dict:
     return {"nodeid": nodeid, "name": nodeid.split("::")[-1], "section": "4.4.3", "requirements": ["4.4.3-1"],
-            "strength": "SHALL", "outcome": outcome, "message": message}
+            "strength": "SHALL", "outcome": outcome, "message": message, "broken": broken or []}
 
 
 def test_a_causes_heading_is_its_first_tests_own_text(tmp_path):
@@ -121,7 +127,9 @@ def test_a_causes_heading_is_its_first_tests_own_text(tmp_path):
     results = [_record(f"{mod}::test_a", "ERROR", refused), _record(f"{mod}::test_b", "ERROR", power),
                _record(f"{mod}::test_c", "ERROR", refused.replace("40594", "40611")),
                _record(f"{mod}::test_d", "ERROR", power.replace("3", "4")),
-               _record(f"{mod}::test_e", "FAIL", "[4.4.3-1 SHALL] node 1.0.0.2 answered 3.000 ms late (limit <= 2 ms)")]
+               _record(f"{mod}::test_e", "FAIL", "[4.4.3-1 SHALL] node 1.0.0.2 answered 3.000 ms late (limit <= 2 ms)",
+                       [{"requirements": ["4.4.3-1"], "strength": "SHALL",
+                         "text": "node 1.0.0.2 answered 3.000 ms late (limit <= 2 ms)"}])]
     gs = groups(results)
     assert [(g.what, g.tests) for g in gs] == [
         ("node 1.0.0.2 answered 3.000 ms late (limit <= 2 ms)", [f"{mod}::test_e"]),

@@ -94,8 +94,7 @@ def test_a_run_with_a_fault_after_a_clean_one_regressed(runs, tmp_path):
     for m in shrank.values():
         for run, key in ((runs["clean"], "before_ms"), (runs["late"], "after_ms")):
             r = next(r for r in _doc(run)["results"] if r["nodeid"] == m["test"])
-            recorded = [float(v.split()[0]) for k, v in r["properties"].items()
-                        if k.endswith(".margin") and r["properties"][k.replace(".margin", ".name")] == m["name"]]
+            recorded = [x["margin"] for x in r["measured"] if x["name"] == m["name"] and x["unit"] == "ms"]
             assert m[key] in recorded, (m, key, recorded)
         assert m["after_ms"] < m["before_ms"]
     # every limit is judged: the late answer's end crossed its limit (margin below zero)
@@ -145,16 +144,35 @@ def test_tests_added_and_removed_and_not_run(runs):
 def test_a_margin_shrinking_past_the_threshold_and_the_timing_error(runs):
     old = _doc(runs["clean"])
     new = copy.deepcopy(old)
-    r, key = next((r, k) for r in new["results"] for k, v in r["properties"].items()
-                  if k.endswith(".margin") and v.endswith(" ms") and float(v.split()[0]) > 1)
-    before = float(r["properties"][key].split()[0])
-    r["properties"][key] = f"{before * 0.95:.6g} ms"  # 5 % less, still a PASS
+    r, measured = next((r, m) for r in new["results"] for m in r["measured"]
+                       if m["unit"] == "ms" and m["margin"] is not None and m["margin"] > 1)
+    before = measured["margin"]
+    measured["margin"] = before * 0.95  # 5 % less, still a PASS
     a, b = compare.parse_run(old, label="a"), compare.parse_run(new, label="b")
     assert not compare.diff(a, b)["margins_shrank"], "within the default 10 %"
     (m,) = compare.diff(a, b, threshold=0.04)["margins_shrank"]
-    assert (m["before_ms"], m["after_ms"], m["test"]) == (before, float(f"{before * 0.95:.6g}"), r["nodeid"])
+    assert (m["before_ms"], m["after_ms"], m["test"]) == (before, before * 0.95, r["nodeid"])
     new["info"]["timing_error_s"] = before * 0.1 / 1000  # the drop is inside what this run's clock can tell
     assert not compare.diff(a, compare.parse_run(new, label="b"), threshold=0.04)["margins_shrank"]
+
+
+def test_older_records_are_read_from_what_they_recorded(runs):
+    """A results.json from before the results carried what they broke and measured as fields (``broken``,
+    ``measured``: issue #35) is still compared: its recorded ``broken_requirements`` and its measurements' rendering
+    (``measurements``, 6 significant digits) are read, and a run compared with its older self changes nothing."""
+    new = _doc(runs["late"])
+    old = copy.deepcopy(new)
+    for r in old["results"]:
+        r.pop("broken"), r.pop("measured")
+    a, b = compare.parse_run(old, label="a"), compare.parse_run(new, label="b")
+    assert [compare.broken_requirements(r) for r in a.results.values()] == \
+        [compare.broken_requirements(r) for r in b.results.values()]
+    margins_old, margins_new = compare.timing_margins(a), compare.timing_margins(b)
+    assert margins_old and margins_old.keys() == margins_new.keys()
+    assert all(abs(margins_old[k]["margin_ms"] - margins_new[k]["margin_ms"]) <= 1e-5 * max(1.0, abs(margins_new[k]["margin_ms"]))
+               and margins_old[k]["limit"] == margins_new[k]["limit"] for k in margins_new)
+    pair = compare.diff(a, b)
+    assert not pair["regressed"] and not pair["margins_shrank"] and not pair["tests"]["changed"]
 
 
 # ------------------------------------------------------------------------------------------ three runs and the page

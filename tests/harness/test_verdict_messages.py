@@ -1,7 +1,8 @@
 """Every limit judged, every message about the DUT (issue #12, item 3): a test evaluates all of its
 measurements before it fails, its message leads with the strongest broken requirement and lists the
-others, says what the DUT did (never a fixture repr), and a "harness:" assertion is an ERROR of the
-suite, never the DUT's FAIL. Tried in real ``ckesc run`` / pytest processes against the emulator."""
+others, says what the DUT did (never a fixture repr), and a :class:`~ckesc.bench.errors.HarnessError` is an ERROR
+of the suite, never the DUT's FAIL, whatever the requirement's strength (issue #35: told by the exception's type; an
+assert whose message begins "harness:" is an assert on the DUT like any other). Tried in real ``ckesc run`` / pytest processes against the emulator."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ckesc.bench.outcomes import Record
+from ckesc.bench.outcomes import Broken, Record
 
 CKESC = [sys.executable, "-m", "ckesc"]
 
@@ -30,9 +31,14 @@ def test_a_failed_limit_does_not_stop_the_test_and_the_shall_leads():
     head, *rest = text.splitlines()
     assert head.startswith("[4.4.2-4 SHALL] answer delay = 80ms (limit <= 64ms")
     assert rest[0] == "also broken (1):" and rest[1].startswith("- [R2 READING] answer end after the request = 80ms")
-    # the test's own failed assert is one more broken requirement, placed by its strength
-    mixed = rec.failure_message("[F4 READING] transfer id 1, the request's is 0", "READING")
+    # the test's own failed assert is one more broken requirement, placed by its strength, typed as it failed
+    own = Broken.of_assertion("[F4 READING] transfer id 1, the request's is 0", ["4.4.2-4"], "SHALL")
+    assert own == Broken(("F4",), "READING", "transfer id 1, the request's is 0")
+    mixed = rec.failure_message(own)
     assert mixed.splitlines()[0].startswith("[4.4.2-4 SHALL]") and "- [F4 READING] transfer id 1" in mixed
+    assert [b.requirements for b in rec.broken(own)] == [("4.4.2-4",), ("R2",), ("F4",)]
+    untagged = Broken.of_assertion("[1, 2] are not [2, 1]", ["4.4.2-4"], "SHALL")  # brackets, no tag: the test's own
+    assert str(untagged) == "[4.4.2-4 SHALL] [1, 2] are not [2, 1]"
     assert Record().failure_message() == ""
 
 
@@ -40,6 +46,7 @@ _SUITE = '''
 import pytest
 from dataclasses import dataclass
 
+from ckesc.bench.errors import HarnessError
 from ckesc.bench.outcomes import Inconclusive
 
 SECTION = "4.4.2"
@@ -53,7 +60,17 @@ class Traffic:
 
 @pytest.mark.requirement("4.4.2-4")
 def test_harness_problem(dut):
-    assert False, "harness: the throttle stream sent nothing"
+    raise HarnessError("the throttle stream sent nothing")
+
+
+@pytest.mark.requirement("R10-answer")
+def test_harness_problem_of_an_observation(dut):
+    raise HarnessError("the request did not go out from node 0")
+
+
+@pytest.mark.requirement("4.4.2-4")
+def test_a_word_decides_nothing(dut):
+    assert False, "harness: the DUT's answer came late"
 
 
 @pytest.mark.requirement("R2", "4.4.2-4")
@@ -63,9 +80,11 @@ def test_all_limits(dut):
 
 
 @pytest.mark.requirement("4.4.2-4")
-def test_failed_then_inconclusive(dut):
+@pytest.mark.parametrize("then", [Inconclusive("power cycle not proven"),
+                                  HarnessError("the load player could not open its bus")], ids=["inconclusive", "harness"])
+def test_failed_then(dut, then):
     dut.record.measure("answer delay", 80.2, limit=64, unit="ms", requirement="4.4.2-4")
-    raise Inconclusive("power cycle not proven")
+    raise then
 
 
 @pytest.mark.requirement("F4")
@@ -84,13 +103,20 @@ def test_messages_say_what_the_dut_did_and_a_harness_problem_is_an_error(tmp_pat
                           cwd=tmp_path, capture_output=True, text=True, timeout=300)
     res = _results(tmp_path / "reports")
     harness = res["conformance/test_messages.py::test_harness_problem"]
-    assert harness["outcome"] == "ERROR" and harness["message"] == "harness: the throttle stream sent nothing"
+    assert harness["outcome"] == "ERROR" and harness["message"] == "the throttle stream sent nothing"
+    after = res["conformance/test_messages.py::test_failed_then[harness]"]
+    assert after["outcome"] == "ERROR", after
+    assert after["message"].startswith("the load player could not open its bus\nfailed limits before it:\n[4.4.2-4 SHALL]")
+    observe = res["conformance/test_messages.py::test_harness_problem_of_an_observation"]
+    assert observe["outcome"] == "ERROR" and observe["message"] == "the request did not go out from node 0", observe
+    word = res["conformance/test_messages.py::test_a_word_decides_nothing"]
+    assert word["outcome"] == "FAIL" and word["message"] == "[4.4.2-4 SHALL] harness: the DUT's answer came late", word
     limits = res["conformance/test_messages.py::test_all_limits"]
     assert limits["outcome"] == "FAIL"
     assert limits["message"].startswith("[4.4.2-4 SHALL] answer delay = 80.2ms (limit <= 64ms")
     assert "- [R2 READING] answer end after the request = 80.2ms (limit <= 4ms" in limits["message"]
     assert [limits["properties"][f"measurement.{n}.verdict"] for n in (0, 1)] == ["FAIL", "FAIL"]
-    late = res["conformance/test_messages.py::test_failed_then_inconclusive"]
+    late = res["conformance/test_messages.py::test_failed_then[inconclusive]"]
     assert late["outcome"] == "FAIL" and late["message"].startswith("[4.4.2-4 SHALL] answer delay = 80.2ms"), late
     reading = res["conformance/test_messages.py::test_reading_assert"]
     assert reading["outcome"] == "FAIL"
@@ -99,7 +125,7 @@ def test_messages_say_what_the_dut_did_and_a_harness_problem_is_an_error(tmp_pat
     summary = done.stdout.split("CKESC conformance summary")[-1]  # the console's closing summary
     assert "[FAIL READING] F4: transfer id 1, the request's is 0 - in 1 test" in summary
     assert "Traffic(" not in summary
-    assert "[ERROR] harness: the throttle stream sent nothing - in 1 test" in summary
+    assert "[ERROR] the throttle stream sent nothing - in 1 test" in summary
     assert summary.index("[FAIL SHALL]") < summary.index("[FAIL READING]") < summary.index("[ERROR]")
 
 

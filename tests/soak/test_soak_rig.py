@@ -15,6 +15,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "harness"))
 from procs import CKESC, env  # noqa: E402
 
+from ckesc.reporting.exits import ExitStatus  # noqa: E402
 from ckesc.soak import batch  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -77,7 +78,7 @@ def test_bench_options_with_a_rig_are_a_setup_mistake(tmp_path):
 def test_the_worst_status_ranks_interrupted_then_findings_then_benches_not_usable():
     assert batch.worst([0, 0]) == 0
     assert batch.worst([0, 1, 3]) == 1 and batch.worst([3, 2, 0]) == 3 and batch.worst([1, 130]) == 130
-    assert batch.worst([0, -9]) == batch.EXIT_BENCH  # a bench's process killed: not a pass
+    assert batch.worst([0, -9]) == ExitStatus.ABORTED  # a bench's process killed: not a pass
 
 
 class _Tty(io.StringIO):
