@@ -253,10 +253,14 @@ class _SendTap:
             try:
                 self._bus.send(msg, timeout)
             except BUS_ERRORS as exc:
-                if not stream:  # a stream's task hands it to the lane itself (on_error); a player counts it
-                    self._lane._io_failed(exc)
-                raise
-            self._lane._sent(t, msg, stream=stream)
+                failed = exc
+            else:
+                self._lane._sent(t, msg, stream=stream)
+                return
+        # (the lock let go first: reopening the bus stops the streams, whose threads may wait for it)
+        if not stream:  # a stream's task hands it to the lane itself (on_error); a player counts it
+            self._lane._io_failed(failed)
+        raise failed
 
     def send_periodic(self, msgs, period: float, duration: float | None = None, store_task: bool = True,
                       autostart: bool = True, modifier_callback=None):
