@@ -26,7 +26,7 @@ from procs import CKESC, Emulator, realtime_profile
 from procs import env as _env
 from test_clean_room_esc import PROFILE as CLEAN_ROOM_PROFILE
 from test_clean_room_esc import CleanRoom
-from test_robustness_realtime import CLEAN_ROOM_R17
+from test_robustness_realtime import CLEAN_ROOM_R17, _check_clean_room
 
 pytestmark = [pytest.mark.realtime, pytest.mark.slow]
 
@@ -63,16 +63,22 @@ def _ckesc(tmp: Path, *args: str, timeout: float) -> subprocess.CompletedProcess
     return subprocess.run([*CKESC, *args], cwd=tmp, env=_env(tmp), capture_output=True, text=True, timeout=timeout)
 
 
-def _modes(tmp: Path, bench: list[str], *, expected_fails: set[str] = frozenset()) -> list[str]:
-    """Every mode on ``bench``; what went wrong, in words (empty: nothing)."""
+def _no_fail(doc: dict) -> None:
+    bad = [f"{r['nodeid'].split('::')[-1]} {r['outcome']}: {(r.get('message') or '')[:300]}" for r in doc["results"]
+           if r["outcome"] in ("FAIL", "ERROR")]
+    assert not bad, "\n".join(bad)
+
+
+def _modes(tmp: Path, bench: list[str], check_run=_no_fail) -> list[str]:
+    """Every mode on ``bench``; what went wrong, in words (empty: nothing). ``check_run``: what the whole suite's
+    results must be (an AssertionError says what is wrong)."""
     wrong = []
     run = _ckesc(tmp, "run", "-q", *bench, "--trace-format", "none", "--reports", str(tmp / "run"), timeout=3600)
     doc = json.loads(next((tmp / "run").glob("2*/results.json")).read_text())
-    bad = {r["nodeid"].split("::")[-1]: f"{r['outcome']}: {(r.get('message') or '')[:200]}" for r in doc["results"]
-           if r["outcome"] in ("FAIL", "ERROR")}
-    if set(bad) != set(expected_fails):
-        wrong.append(f"ckesc run (exit {run.returncode}): " + "; ".join(f"{k} {v}" for k, v in bad.items()
-                                                                       if k not in expected_fails))
+    try:
+        check_run(doc)
+    except AssertionError as exc:
+        wrong.append(f"ckesc run (exit {run.returncode}): {exc}")
     soak = _ckesc(tmp, "soak", "-q", *bench, "--duration", SOAK, "--reports", str(tmp / "soak"), timeout=600)
     soaked = json.loads(next((tmp / "soak").rglob("results.json")).read_text())
     if soak.returncode != 0 or soaked["findings"]:
@@ -109,5 +115,7 @@ def test_every_mode_finds_nothing_but_its_known_r17_defects_on_the_clean_room_es
     with CleanRoom(tmp_path, hub=_hub(handles, echo, stamp)) as cr:
         bench = [*cr.bench, "--foreign-traffic", "ardupilot"]
         bench[bench.index("--profile") + 1] = str(_profile(tmp_path, CLEAN_ROOM_PROFILE, stamp))
-        wrong = _modes(tmp_path, bench, expected_fails=CLEAN_ROOM_R17)
+        # its known R17 defects, and report timing alone where the loaded machine stalled its Python process (said in
+        # a warning, as the robustness section's real-time test says it)
+        wrong = _modes(tmp_path, bench, check_run=lambda doc: _check_clean_room(doc, CLEAN_ROOM_R17))
     assert not wrong, "\n".join(wrong)
