@@ -3,15 +3,12 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..protocol import catalogue as cat
 from ..protocol import judgements as jd
 from ..protocol.frame import Frame
-from .watch import Watch
-
-if TYPE_CHECKING:
-    from .monitor import Monitor
+from .watch import Monitoring, Watch
 
 #: MSG1's comm-loss flag (R8) as a plain int
 _COMM_FAULT = int(cat.Status.COMM_FAULT)
@@ -23,7 +20,7 @@ class CommFlagWatch(Watch):
     what = "comm flag glitches"
     one = "comm flag glitch"
 
-    def __init__(self, monitor: Monitor) -> None:
+    def __init__(self, monitor: Monitoring) -> None:
         super().__init__(monitor)
         self.last_command: float | None = None
         self.msg1_since_stream = 0

@@ -4,15 +4,12 @@ not decode, or a frame type normal reporting never sends and the player never as
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..protocol import judgements as jd
 from ..protocol.errors import DecodeError
 from ..protocol.frame import Frame
-from .watch import Watch
-
-if TYPE_CHECKING:
-    from .monitor import Monitor
+from .watch import Monitoring, Watch
 
 #: a frame that does not decode: the requirement its reason breaks
 DECODE_RULES = {"not-extended-data-frame": "F1", "not-single-frame": "F2", "reserved-node-id": "F7",
@@ -25,7 +22,7 @@ class SettingsWatch(Watch):
     what = "settings changes"
     one = "settings change"
 
-    def __init__(self, monitor: Monitor) -> None:
+    def __init__(self, monitor: Monitoring) -> None:
         super().__init__(monitor)
         self.first: dict[str, Any] | None = None
         self.now: dict[str, Any] | None = None
@@ -51,7 +48,7 @@ class UnexpectedWatch(Watch):
     what = "unexpected frames"
     one = "unexpected frame"
 
-    def __init__(self, monitor: Monitor) -> None:
+    def __init__(self, monitor: Monitoring) -> None:
         super().__init__(monitor)
         self.kinds: dict[str, int] = {}
 

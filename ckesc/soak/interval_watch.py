@@ -6,13 +6,10 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..protocol import judgements as jd
-from .watch import REPORTS, Watch
-
-if TYPE_CHECKING:
-    from .monitor import Monitor
+from .watch import REPORTS, Monitoring, Watch
 
 #: the R9 minute
 MINUTE_S = 60.0
@@ -139,7 +136,7 @@ class IntervalWatch(Watch):
     what = "report-minutes out of R9"
     one = "report-minute out of R9"
 
-    def __init__(self, monitor: Monitor) -> None:
+    def __init__(self, monitor: Monitoring) -> None:
         super().__init__(monitor)
         self.t0 = monitor.t0
         self.minute = 0

@@ -6,15 +6,12 @@ others are counted with it (``signs_of_resets_found``)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..evidence.resets import POWER_UPS, RUN_TIME, ResetSigns
 from ..protocol.frame import Frame
 from ..protocol.judgements import Reset
-from .watch import Watch
-
-if TYPE_CHECKING:
-    from .monitor import Monitor
+from .watch import Monitoring, Watch
 
 
 class ResetWatch(Watch):
@@ -23,7 +20,7 @@ class ResetWatch(Watch):
     what = "resets"
     one = "reset"
 
-    def __init__(self, monitor: Monitor) -> None:
+    def __init__(self, monitor: Monitoring) -> None:
         super().__init__(monitor)
         #: the reset bookkeeping the bus rules keep too: the last report of each type, the last 241 readings
         self.signs = ResetSigns(error=self.cfg.error, jitter=self.cfg.jitter)

@@ -5,12 +5,9 @@ events), what it found (:class:`Finding`, with the frames around it), what it kn
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Protocol
 
 from ..protocol import catalogue as cat
-
-if TYPE_CHECKING:
-    from .monitor import Monitor
 
 #: frames kept before a finding (the ring) and read after it
 RING_FRAMES = 40
@@ -72,6 +69,18 @@ class WatchConfig:
     stream_frames: int = 1
 
 
+class Monitoring(Protocol):
+    """What a watch holds of the monitor that feeds it (:class:`.monitor.Monitor`, which imports the watches: they
+    import this, not it): its configuration, its start, where a finding goes, and the other watches it names."""
+
+    cfg: WatchConfig
+    t0: float
+    intervals: Any
+    unexpected: Any
+
+    def found(self, watch: Watch, t: float, message: str, rules: tuple[str, ...]) -> None: ...
+
+
 class Watch:
     """A watched property: its name, the requirement(s) it judges, how many times it was judged (``trials``) and how
     many events broke it (``events``). ``statement_unit``: ``hour`` (events per hour of run) or what a trial is."""
@@ -82,7 +91,7 @@ class Watch:
     what = ""  # the events, for the statement: "resets"
     one = ""  # one event: "reset"
 
-    def __init__(self, monitor: Monitor) -> None:
+    def __init__(self, monitor: Monitoring) -> None:
         self.monitor = monitor
         self.cfg = monitor.cfg
         self.trials = 0

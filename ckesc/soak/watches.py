@@ -9,17 +9,14 @@ and one that may be either is not judged).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..evidence.pairing import ANOTHER_NODE, QueryPairing
 from ..protocol import catalogue as cat
 from ..protocol import judgements as jd
 from ..protocol.frame import Frame, frame_bits
 from ..protocol.histogram import Histogram
-from .watch import Watch
-
-if TYPE_CHECKING:
-    from .monitor import Monitor
+from .watch import Monitoring, Watch
 
 #: GET_ESC_ID delay histogram: bins of a quarter slot over twice the 64 ms bound, then one overflow bin
 DELAY_BIN_S = cat.ANSWER_SLOT_S / 4
@@ -34,7 +31,7 @@ class AnswerWatch(Watch):
     what = "answers late, early or missing"
     one = "answer late, early or missing"
 
-    def __init__(self, monitor: Monitor) -> None:
+    def __init__(self, monitor: Monitoring) -> None:
         super().__init__(monitor)
         self.delays = Histogram(DELAY_BIN_S, DELAY_BINS)
         self.query: float | None = None
