@@ -187,7 +187,10 @@ def test_a_dut_that_loses_power_mid_run_aborts_the_rest(tmp_path):
     doc, junit, summary, _ = _read_run(reports)
     assert doc["info"]["incomplete"].startswith("aborted: the DUT stopped answering"), doc["info"]["incomplete"]
     errors = [r for r in doc["results"] if r["outcome"] == "ERROR"]
-    assert 1 <= len(errors) <= 3, [r["nodeid"] for r in errors]
+    # the abort comes after three ERRORs in a row that heard no frame of the DUT; a silent test that ends otherwise in
+    # between (INCONCLUSIVE: no answer to check) starts the row again, so a few more, never hundreds
+    assert 1 <= len(errors) <= 5, [r["nodeid"] for r in errors]
+    assert [r["outcome"] for r in doc["results"][-3:]] == ["ERROR"] * 3, [r["outcome"] for r in doc["results"]]
     assert doc["not_run"], "the rest of the run was not listed as not run"
     assert "ABORTED" in summary
 
