@@ -15,7 +15,6 @@ tests here).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
 from contextlib import contextmanager
 
 from ckesc.bench.outcomes import Inconclusive
@@ -245,12 +244,12 @@ def restart_limit_s(dut, settings: dict, which: str, old: dict | None = None) ->
                        jitter=dut.profile.jitter_s) + bus_access_s(dut)
 
 
-def mean_gaps(dut, gaps: int | None, intervals: Iterable[float]) -> int:
-    """How many gaps a report's mean interval is judged on (:func:`~ckesc.protocol.judgements.r9_gaps_needed`, with
-    the bench's error and the DUT's declared jitter, which count at the mean's two ends): where R9 is the test's
-    purpose (``gaps`` given), at least ``gaps`` and as many as keep the mean's bound near 1 ms; otherwise (None) the
-    fewest over which the shortest of ``intervals`` is judged at all (two on an exact bench)."""
-    n = r9_gaps_needed(min(intervals), error=dut.lane.timing_error, jitter=dut.profile.jitter_s, purpose=gaps is not None)
+def mean_gaps(dut, gaps: int | None, interval: float) -> int:
+    """How many gaps a report's mean ``interval`` is judged on (:func:`~ckesc.protocol.judgements.r9_gaps_needed`,
+    with the bench's error and the DUT's declared jitter, which count at the mean's two ends): where R9 is the test's
+    purpose (``gaps`` given), at least ``gaps`` and as many as keep the jitter's part of the bound within 1 ms;
+    otherwise (None) the fewest over which it is judged at all (two on an exact bench, ten at most)."""
+    n = r9_gaps_needed(interval, error=dut.lane.timing_error, jitter=dut.profile.jitter_s, purpose=gaps is not None)
     return max(n, gaps or 0)
 
 
@@ -300,17 +299,17 @@ def check_restart(dut, event: float, settings: dict, what: str, names=REPORTS, g
     the host's command by the host clock at send, ``Sent.clock`` / ``Sent.error``).
     When none of ``names`` comes back at all, whether reporting resumes is another clause's verdict: INCONCLUSIVE
     naming ``silent_is``'s test (a description), or FAIL when ``silent_is`` is None."""
-    n = mean_gaps(dut, gaps, (interval_s(settings, w) for w in names))
+    n = {w: mean_gaps(dut, gaps, interval_s(settings, w)) for w in names}  # (per report: its interval's own)
     limit = {w: restart_limit_s(dut, settings, w, old) for w in names}
     first = _first_reports(dut, event, names, {w: event + limit[w] + react_s(dut) for w in names})
     if not first:
         longest = max(max(limit.values()), max(interval_s(settings, w) for w in names))
-        dut.wait(max(0.0, event + (R9A_UNJUDGED + n) * longest + react_s(dut) - dut.now()))  # late, or not at all?
+        dut.wait(max(0.0, event + (R9A_UNJUDGED + max(n.values())) * longest + react_s(dut) - dut.now()))  # late, or none?
         if silent_is is not None and not any(report_starts(dut, which, event) for which in names):
             raise Inconclusive(f"no {'/'.join(w.upper() for w in names)} at all within {ms(dut.now() - event)} ms of "
                                f"{what} ({silent_is}): how they come back cannot be judged")
     else:  # the next n + 1 of each (R9A_UNJUDGED - 1 not judged), half an interval and the DUT's jitter to spare
-        end = max(t + (R9A_UNJUDGED - 1 + n + 0.5) * interval_s(settings, w) for w, t in first.items())
+        end = max(t + (R9A_UNJUDGED - 1 + n[w] + 0.5) * interval_s(settings, w) for w, t in first.items())
         dut.wait(max(0.0, end + dut.profile.jitter_s + react_s(dut) - dut.now()))
     err = dut.lane.timing_error * 1000
     broken = []  # what the measurements cannot say (they fail the test themselves), SHALL first
@@ -330,10 +329,10 @@ def check_restart(dut, event: float, settings: dict, what: str, names=REPORTS, g
         if len(stamps) > 1:
             dut.record.observe(f"{w} gaps up to the second after {what} (R9a-gaps)",
                                f"{ms(stamps[0] - event)} ms, {ms(stamps[1] - stamps[0])} ms")
-        judged = r9_judged(stamps)[:n + 1]
+        judged = r9_judged(stamps)[:n[which] + 1]
         if len(judged) < 2:
             broken.insert(0, f"[R9 SHALL] only {len(stamps)} {w} in {ms(dut.now() - event)} ms after {what}, the first "
-                             f"{ms(stamps[0] - event)} ms after it: every {ms(target)} ms there would be {R9A_UNJUDGED + n}")
+                             f"{ms(stamps[0] - event)} ms after it: every {ms(target)} ms there would be {R9A_UNJUDGED + n[which]}")
             continue
         k = len(judged) - 1
         mean = (judged[-1] - judged[0]) / k

@@ -115,15 +115,17 @@ def r9_mean_tells(gaps: int, interval: float, *, error: float = 0.0, jitter: flo
 
 def r9_gaps_needed(interval: float, *, error: float = 0.0, jitter: float = 0.0, purpose: bool = True) -> int:
     """How many gaps a test reads to judge a report's mean interval. Where R9 is its ``purpose``: :data:`R9_GAPS`, or
-    more where the bench's ``error`` and the DUT's declared ``jitter`` need them to keep the mean's bound near the
-    scheduling tolerance (their part, twice their sum over the gaps, no more than it), so that an ESC reporting
-    every 25 ms instead of 20 FAILs on any bench whatever jitter its vendor declares. Otherwise the fewest (two at
-    least) over which the mean is judged at all (:func:`r9_mean_tells`)."""
-    ends = 2 * (error + jitter)
+    more where the DUT's declared ``jitter`` needs them to keep its part of the mean's bound (twice it over the gaps)
+    within the scheduling tolerance, so that an ESC reporting every 25 ms instead of 20 FAILs whatever jitter its
+    vendor declares. Otherwise the fewest (two at least, :data:`R9_GAPS` at most) over which the mean is judged at
+    all (:func:`r9_mean_tells`) with the bench's ``error`` too. The bench's error never lengthens a test: it stays the
+    INCONCLUSIVE band it is, and on a bench too coarse for the interval the mean is not judged (OBSERVE)."""
+    if purpose:
+        return max(R9_GAPS, math.ceil(2 * jitter / SCHEDULING_TOLERANCE_S - _NOISE_S))
     spare = interval / 4 - SCHEDULING_TOLERANCE_S
-    if purpose or spare <= 0:
-        return max(R9_GAPS, math.ceil(ends / SCHEDULING_TOLERANCE_S - _NOISE_S))
-    return max(2, math.ceil(ends / spare - _NOISE_S))
+    if spare <= 0:
+        return R9_GAPS
+    return min(R9_GAPS, max(2, math.ceil(2 * (error + jitter) / spare - _NOISE_S)))
 
 
 # ------------------------------------------------------------------------------------------ R9, R9a

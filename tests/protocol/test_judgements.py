@@ -64,23 +64,26 @@ def test_r9_mean_over_too_few_gaps_for_its_bound_is_not_judged():
 
 
 def test_r9_a_test_whose_purpose_it_is_reads_enough_gaps_that_25_ms_instead_of_20_fails_whatever_the_jitter():
-    """A test whose purpose is R9 reads R9_GAPS gaps, or more where the bench's error and the DUT's declared jitter
-    need them: over that many an ESC reporting every 25 ms instead of 20 FAILs, a correct one with its ends at the
-    edges of its jitter passes. Where R9 is not the purpose, the fewest gaps over which it is judged at all."""
+    """A test whose purpose is R9 reads R9_GAPS gaps, or more where the DUT's declared jitter needs them (its part of
+    the bound within the scheduling tolerance): over that many an ESC reporting every 25 ms instead of 20 FAILs, a
+    correct one with its ends at the edges of its jitter passes. The bench's error never lengthens a test (a VM lane
+    states 300 ms: it would read 600 gaps); where R9 is not the purpose, the fewest gaps over which the mean is
+    judged at all, ten at most (more and the mean is not judged: OBSERVE)."""
     for error, jitter in ((0.0, 0.0), (2 * MS, 0.0), (2 * MS, 25 * MS), (10 * MS, 15 * MS)):
         n = J.r9_gaps_needed(0.020, error=error, jitter=jitter)
-        assert n >= J.R9_GAPS
-        assert J.r9_mean_tolerance_s(n, error, jitter) <= 2 * J.SCHEDULING_TOLERANCE_S + EPS
+        assert n >= J.R9_GAPS and 2 * jitter / n <= J.SCHEDULING_TOLERANCE_S + EPS
         slow = J.r9_mean(_grid(0.025, n + 1), 0.020, error=error, jitter=jitter)
         assert slow is not None and slow.judged and not slow.ok, (error, jitter, n, slow)
         edge = error + jitter / 2  # each end's stamp off by the bench's error and half the jitter, inward
         ends = [edge] + [k * 0.020 for k in range(1, n)] + [n * 0.020 - edge]
         right = J.r9_mean(ends, 0.020, error=error, jitter=jitter)
         assert right is not None and right.ok, (error, jitter, n, right)
-    assert J.r9_gaps_needed(0.020, error=2 * MS, jitter=25 * MS) == 54
-    few = J.r9_gaps_needed(0.020, error=2 * MS, jitter=25 * MS, purpose=False)
-    assert J.r9_mean_tells(few, 0.020, error=2 * MS, jitter=25 * MS) and not J.r9_mean_tells(few - 1, 0.020, error=2 * MS,
-                                                                                                 jitter=25 * MS)
+    assert J.r9_gaps_needed(0.020, error=2 * MS, jitter=25 * MS) == 50
+    assert J.r9_gaps_needed(0.020, error=0.300) == J.R9_GAPS  # the bench's error: INCONCLUSIVE or OBSERVE, not longer
+    few = J.r9_gaps_needed(0.020, error=2 * MS, jitter=3 * MS, purpose=False)
+    assert few == 3 and J.r9_mean_tells(few, 0.020, error=2 * MS, jitter=3 * MS)
+    assert not J.r9_mean_tells(few - 1, 0.020, error=2 * MS, jitter=3 * MS)
+    assert J.r9_gaps_needed(0.020, error=0.300, purpose=False) == J.R9_GAPS  # at most ten: not judged there
     assert J.r9_gaps_needed(0.5, purpose=False) == 2
 
 
