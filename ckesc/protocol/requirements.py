@@ -32,6 +32,11 @@ class Verdict(StrEnum):
 
 VERDICTS = tuple(Verdict)
 
+#: each verdict in a table's narrow column (summary.txt, the console, ``ckesc compare``), and the legend that says them
+VERDICT_SHORT = MappingProxyType({Verdict.PASS: "PASS", Verdict.FAIL: "FAIL", Verdict.INCONCLUSIVE: "INC",
+                                  Verdict.OBSERVED: "OBS", Verdict.SKIPPED: "SKIP", Verdict.ERROR: "ERR"})
+VERDICT_LEGEND = ", ".join(f"{short} {v}" for v, short in VERDICT_SHORT.items() if short != v.value)
+
 
 def section_key(section: str) -> tuple:
     """Sort key of a section number in the document's order ("4.4.2" before "4.4.10")."""

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from ..protocol.catalogue import firmware_date
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_key
+from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICT_LEGEND, VERDICT_SHORT, VERDICTS, Verdict, section_key
 from .htmlkit import CSS, badge, e, new_figure, svg
 from .results import NotRun, Result, RunInfo, RunRecord, broken_requirements, incomplete_banner, requirement_result
 
@@ -329,8 +329,7 @@ def compare(runs: list[Run], *, threshold: float = DEFAULT_THRESHOLD) -> dict[st
 
 
 # ------------------------------------------------------------------------------------------ text
-_SHORT = {Verdict.PASS: "PASS", Verdict.FAIL: "FAIL", Verdict.ERROR: "ERROR", Verdict.INCONCLUSIVE: "INCONC",
-          Verdict.OBSERVED: "OBS", Verdict.SKIPPED: "SKIP", NOT_CHECKED: "-", NOT_RUN: "-"}
+_SHORT = {**VERDICT_SHORT, NOT_CHECKED: "-", NOT_RUN: "-"}
 _LISTED = 40  # rows per list on the console; --json and --html have them all
 
 
@@ -395,6 +394,7 @@ def text(doc: dict[str, Any]) -> str:
             lines.append(f"  {'requirement':<14}{'':<9}" + "".join(f"{x:<8}" for x in letters))
             lines += [f"  {row['requirement']:<14}{row['strength']:<9}" + "".join(f"{_SHORT.get(v, v):<8}" for v in row["results"])
                       for row in differing]
+            lines.append(f"  verdicts: {VERDICT_LEGEND}, - not run")
         moving = [t for t in doc["trends"] if t["shrank_at"]]
         if moving:
             lines += ["", f"timing margins that shrank from one run to the next ({len(moving)}):"]

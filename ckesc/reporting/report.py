@@ -25,7 +25,16 @@ from junit_xml import TestCase, TestSuite, to_xml_report_string
 
 from .. import __version__
 from ..protocol import catalogue as cat
-from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_heading, section_key
+from ..protocol.requirements import (
+    REQUIREMENTS,
+    SECTION_TITLES,
+    VERDICT_LEGEND,
+    VERDICT_SHORT,
+    VERDICTS,
+    Verdict,
+    section_heading,
+    section_key,
+)
 from . import causes, html_report
 from .results import RunRecord, claim_text, incomplete_banner, profile_warnings
 
@@ -165,19 +174,27 @@ def coverage(results: list) -> dict[str, Any]:
     }
 
 
+def _counts(per_verdict: Mapping) -> str:
+    """A row's cells, one per verdict, each as wide as its column's head (:data:`VERDICT_SHORT`) and at least 5."""
+    return " ".join(f"{per_verdict[v]:>{max(5, len(VERDICT_SHORT[v]))}}" for v in VERDICTS)
+
+
 def summary_text(results: list, info: dict[str, Any]) -> str:
     rows = defaultdict(Counter)
     for r in results:
         rows[r.section][r.outcome] += 1
-    head = f"{'section':<10} {'title':<26} " + " ".join(f"{v[:6]:>6}" for v in VERDICTS)
-    lines = [head, "-" * len(head)]
+    # the counts first and the title last, whole: no word of either is cut (the verdicts abbreviated, with a legend)
+    head = f"{'section':<10} " + _counts(VERDICT_SHORT) + "  title"
+    rule = "-" * max(len(head), len(head) - len("title") + max((len(SECTION_TITLES.get(s, "")) for s in rows), default=0))
+    lines = [head, rule]
     total = Counter()
     for section in sorted(rows, key=section_key):
         c = rows[section]
         total.update(c)
-        lines.append(f"{section:<10} {SECTION_TITLES.get(section, '')[:26]:<26} " + " ".join(f"{c[v]:>6}" for v in VERDICTS))
-    lines.append("-" * len(head))
-    lines.append(f"{'all':<10} {'':<26} " + " ".join(f"{total[v]:>6}" for v in VERDICTS))
+        lines.append(f"{section:<10} {_counts(c)}  {SECTION_TITLES.get(section, '')}".rstrip())
+    lines.append(rule)
+    lines.append(f"{'all':<10} {_counts(total)}")
+    lines.append(f"verdicts: {VERDICT_LEGEND}")
     cov = coverage(results)
     lines.append(f"requirements: {len(cov['covered'])} of {cov['total']} checked; "
                  f"SHALL/READING not checked in this run: {len(cov['uncovered'])}"
