@@ -118,7 +118,11 @@ def pytest_argv(args: argparse.Namespace) -> list[str]:
             "-o", "console_output_style=count",
             # ckesc itself is the plugin and is imported before pytest starts: nothing of it needs rewriting
             "-W", "ignore:Module already imported so cannot be rewritten:pytest.PytestAssertRewriteWarning",
-            "-q" if args.quiet else "-v"]
+            "-q" if args.quiet else "-v",
+            # what a person reads first ends the console: the counts and the failures by cause (the plugin's summary);
+            # each test's traceback and pytest's short summary only with --verbose (the reports hold them all), and
+            # pytest's header, whose rootdir is the installed package's, not the user's
+            "--no-header", *(("--tb=short", "-rfE") if getattr(args, "verbose", False) else ("--tb=no", "-rN"))]
     return argv + list(args.pytest_args)  # last: pytest's own word wins
 
 

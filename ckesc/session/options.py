@@ -54,6 +54,9 @@ OPTIONS: tuple[Option, ...] = (
                 "ASCII), log (candump -L, `ckesc decode` reads it), none"),
     Option("quiet", group=OUTPUT, action="store_true", default=False, pytest=None, run=("-q", "--quiet"),
            help="no per-test progress lines"),
+    Option("verbose", group=OUTPUT, action="store_true", default=False, pytest=None, run=("-v", "--verbose"),
+           help="each failing test's detail on the console too (pytest's traceback and its short summary); without it "
+                "the console ends with the counts and the failures by cause, each test's detail in the reports"),
     Option("ckesc_progress", group=OUTPUT, choices=("on", "off"), default="on", run=("--progress",),
            help="a line per section with the protocol time planned, elapsed and an estimate of what is left (on a "
                 "terminal also after pytest's counter); off: none"),
