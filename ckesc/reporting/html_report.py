@@ -31,6 +31,7 @@ from .results import (
     Result,
     RunInfo,
     RunRecord,
+    broken_requirements,
     claim_text,
     incomplete_banner,
     profile_warnings,
@@ -240,7 +241,10 @@ def _plots(results: list[Result], info: dict[str, Any]) -> str:
             + f", one marker per service. Green band: the node's answer slot, (node id % 32) x "
             f"{cat.ANSWER_SLOT_S * 1000:g} ms to {cat.ANSWER_SLOT_S * 1000:g} ms later (R2); dashed: the "
             f"{cat.ANSWER_DELAY_MAX_S * 1000:g} ms bound (4.4.2-4, 4.4.3-4). Red: {late} answer(s) outside a limit"
-            + (f" (beyond the stated error of +-{err:g} ms)" if err else "") + "; each node's latest is labelled."))
+            + (f" (beyond the stated error of +-{err:g} ms)" if err else "") + "; each node's latest is labelled."
+            + (_why_red(results, ("R2", "4.4.2-4", "4.4.3-4"), "answer",
+                        "the suite judges each answer allowing for the time frames queued on the bus ahead of it could "
+                        "take (long at a low bit rate), which this plot does not draw") if late else "")))
     else:
         parts.append("<p>No answered request was recorded.</p>")
     if intervals:
@@ -252,7 +256,11 @@ def _plots(results: list[Result], info: dict[str, Any]) -> str:
             f"stated (ms, linear; box: quartiles, whiskers: min and max). Grey band: the tolerance, +-{tol:g} ms; red: "
             f"{outside} interval(s) outside it (the bus rules also allow for bus queueing). The intervals the bus rules "
             f"judged, start to start: none before the DUT stated a target, none across a power cycle, a suspension or "
-            f"a Set Freq change, nor up to the second report after a restart (R9a)."))
+            f"a Set Freq change, nor up to the second report after a restart (R9a)."
+            + (_why_red(results, ("R9",), "interval",
+                        "the bus rules hold each gap to its target within this tolerance widened by the time frames "
+                        "queued on the bus ahead of either report could take, and by the DUT's declared jitter; R9 "
+                        "itself judges a report's mean interval") if outside else "")))
     else:
         parts.append("<p>No report interval was recorded.</p>")
     if timelines:
@@ -261,6 +269,16 @@ def _plots(results: list[Result], info: dict[str, Any]) -> str:
                              f"(comm fault) clear or set. Dashed: {cat.COMM_LOSS_TIMEOUT_S * 1000:g} ms after the last command."))
     parts.append("</section>")
     return "".join(parts)
+
+
+def _why_red(results: list[Result], rules: tuple[str, ...], what: str, excused: str) -> str:
+    """The caption's sentence that says what its red marks mean for the verdicts: which tests FAILed on ``rules``,
+    or, where none did, why a red mark is no failure (``excused``)."""
+    failed = [r for r in results if r.outcome == Verdict.FAIL and set(rules) & set(broken_requirements(r))]
+    if failed:
+        return (f" {len(failed)} test(s) FAILed on {' / '.join(rules)} (their rows below say which {what}s); any other "
+                f"red mark broke no rule: {excused}.")
+    return f" No test FAILed on {' / '.join(rules)}: a red mark here broke no rule, as {excused}."
 
 
 def _answer_plot(answers: dict[int, dict[str, list[float]]], err: float) -> tuple[str, int]:
