@@ -32,6 +32,17 @@ def batch_of(tmp: Path) -> tuple[Path, dict]:
     return where, json.loads((where / "batch.json").read_text())
 
 
+def _documented(name: str) -> tuple[str, str]:
+    """Where docs/soak.md says a bench's report and its console go, as globs under the reports directory."""
+    import re
+
+    page = (ROOT / "docs" / "soak.md").read_text(encoding="utf-8")
+    report = re.search(r"`reports/(<UTC>-soak-batch/<bench>/[^`]*)`", page).group(1)
+    console = re.search(r"`(<bench>/console\.txt)`", page).group(1)
+    glob = lambda p: p.replace("<UTC>", "*").replace("<bench>", name)  # noqa: E731
+    return glob(report), "*-soak-batch/" + glob(console)
+
+
 def test_the_example_rigs_simulated_benches_soaked_at_once(tmp_path):
     done = soak(tmp_path, "--rig", str(EXAMPLE), "--benches", "sim-a,sim-b", "--duration", "30s", "--rate", "50")
     assert done.returncode == 0, done.stdout + done.stderr
@@ -44,6 +55,9 @@ def test_the_example_rigs_simulated_benches_soaked_at_once(tmp_path):
         # the bench's own soak ran with the batch's soak options and its own bench options
         own = json.loads((where / b["report_dir"] / "results.json").read_text())
         assert own["duration_s"] == 30 and own["plan"]["rate_hz"] == 50
+        report, console = _documented(b["name"])  # the paths the docs write are the paths on disk
+        assert [p.parent for p in (tmp_path / "reports").glob(report + "results.json")] == [where / b["report_dir"]]
+        assert list((tmp_path / "reports").glob(console)), console
         status = json.loads((where / b["name"] / "status.json").read_text())
         assert status["state"] == "COMPLETED" and status["frames"] == own["frames"]["total"]
     sim_b = json.loads((where / doc["benches"][1]["report_dir"] / "results.json").read_text())
