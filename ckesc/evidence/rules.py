@@ -99,9 +99,9 @@ from .tracker import (
     SIDE_ESC,
     SIDE_FOREIGN,
     SIDE_HOST,
+    EscStream,
     FrameId,
     Node,
-    Stream,
     Tracker,
     field_value,
 )
@@ -265,7 +265,7 @@ class BusRules(Tracker):
         if info.stream_key is not None and tid is not None:
             st = self._streams.get(info.stream_key)
             if st is None:
-                st = self._streams[info.stream_key] = Stream(node, info.type_id, info.label, info.periodic)
+                st = self._streams[info.stream_key] = EscStream(node, info.type_id, info.label, info.periodic)
             out = self._stream(out, st, info, node, data, ts, start, busy_from, tid)
         return out or _NONE
 
@@ -286,7 +286,7 @@ class BusRules(Tracker):
                                "answer requests (request bit 0)", (quote(info.can_id, data, ts, note=info.label),))
 
     # ------------------------------------------------------------------------------------- F3 and R9
-    def _stream(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float, tid: int):
+    def _stream(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float, tid: int):
         if st.periodic:
             out = self._report_restart(out, st, info, node, data, ts, start, tid)
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
@@ -321,11 +321,11 @@ class BusRules(Tracker):
         st.chain, st.reset, st.moved, st.power = node.chain, node.reset, node.moved, self.power_switches
         return out
 
-    def _pair(self, st: Stream, info: FrameId, data, ts: float) -> tuple[str, str]:
+    def _pair(self, st: EscStream, info: FrameId, data, ts: float) -> tuple[str, str]:
         return (quote(st.can_id, st.data, st.ts, note=f"{st.name} tid {st.tid}"),  # type: ignore[arg-type]
                 quote(info.can_id, data, ts, note=f"{st.name} tid {tail_transfer_id(data[-1])}"))
 
-    def _transfer_ids(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, gap: float, step: F3Step,
+    def _transfer_ids(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, gap: float, step: F3Step,
                       period: float | None):
         if step.advance and not self.complete:
             if period is None or not st.periodic:
@@ -340,7 +340,7 @@ class BusRules(Tracker):
                                f"{st.name}: transfer id {step.current} after {step.previous} ({ms(gap)} earlier), "
                                f"expected {step.expected}", self._pair(st, info, data, ts))
 
-    def _cadence(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float):
+    def _cadence(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float):
         """R9 between two reports of one stretch (no restart, no reset between them). Without a period the
         node stated, only a report closer than the shortest legal interval is judged. The DUT's jitter
         allowance widens the interval; the bench's error (``tolerance``) is on top of it."""
@@ -374,7 +374,7 @@ class BusRules(Tracker):
                                f"{st.name} {ms(start - st.start)} after the previous one (bus queueing allows up to "
                                f"{ms(hi)}), {expected}", self._pair(st, info, data, ts))
 
-    def _first_report(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float):
+    def _first_report(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float):
         """R9a: the first report of a type after a resume / CAN Test off comes within one interval plus a slack of
         max(3 ms, a quarter interval) of it; after a Set Freq write, within the longer of its old and new interval
         plus that slack; and never sooner than an earlier event's first report that had not come yet could. Judged
@@ -417,7 +417,7 @@ class BusRules(Tracker):
                       f"a reset, unless the power was switched (a capture does not show it): {sign.text}", frames)
         return out
 
-    def _report_restart(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, tid: int):
+    def _report_restart(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, start: float, tid: int):
         """R19: a report gap with a transfer id restart (every report of a periodic stream kept in its node's
         :class:`~.resets.ResetSigns`), judged between two reports of one stream with no host event between them that
         restarts reporting or may re-address the node (MSG Control, CAN Test, a Set Freq write or answer, Set ID: the

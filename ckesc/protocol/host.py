@@ -4,7 +4,7 @@
     wire, pending = host.request("set_freq", {"option": 0, ...}, destination=5, now=t, timeout=0.1)
     ...put wire on the bus...
     for event in host.receive(msg, now):          # every frame heard
-        ...Response(pending, frame) / Heard(frame) / Garbled(msg, error)...
+        ...Response(pending, frame) / Overheard(frame) / Garbled(msg, error)...
     for event in host.expire(now): ...             # TimedOut(pending) once a deadline passes
 
 A response matches a request when it carries the same service id and transfer id, comes from the
@@ -15,7 +15,7 @@ clear message instead of timing out.
 
 The host need not be alone on the bus (a flight controller, F6): a request another node sent is remembered
 (:attr:`HostProtocol.others`, the latest :data:`OTHERS_KEPT`), and a response that answers it (its service id and
-transfer id, from the node it asked, addressed to that node: F4) is that node's, :class:`Heard`, never paired
+transfer id, from the node it asked, addressed to that node: F4) is that node's, :class:`Overheard`, never paired
 with one of this host's requests as a misaddressed answer.
 """
 
@@ -57,7 +57,7 @@ class Response:
 
 
 @dataclass
-class Heard:
+class Overheard:
     frame: Frame
 
 
@@ -107,7 +107,7 @@ class HostProtocol:
         return wire, pending
 
     # -------------------------------------------------------------- incoming
-    def receive(self, msg: Any) -> list[Response | Heard | Garbled]:
+    def receive(self, msg: Any) -> list[Response | Overheard | Garbled]:
         try:
             frame = self.decoder.decode(msg)
         except DecodeError as exc:
@@ -116,12 +116,12 @@ class HostProtocol:
             self.others.append((frame.type_id, frame.transfer_id, frame.source, frame.destination))
         elif (frame.kind is Kind.RESPONSE and frame.destination != self.node_id
               and (frame.type_id, frame.transfer_id, frame.destination, frame.source) in self.others):
-            return [Heard(frame)]  # another node's answer to its own request
+            return [Overheard(frame)]  # another node's answer to its own request
         if frame.kind is Kind.RESPONSE or (frame.kind is Kind.REQUEST and frame.source != self.node_id):
             match = self._match(frame)
             if match is not None:
                 return [match]
-        return [Heard(frame)]
+        return [Overheard(frame)]
 
     def _match(self, frame: Frame) -> Response | None:
         best: tuple[int, Pending, list[str]] | None = None
