@@ -60,6 +60,7 @@ import dronecan
 from dronecan import dsdl, transport
 
 from ..protocol.frame import WireFrame
+from ..protocol.transfer import TRANSFER_ID_MODULO
 
 #: the traffic profiles ``--foreign-traffic`` takes (none: a quiet bus, the default)
 PROFILES = ("ardupilot",)
@@ -119,7 +120,7 @@ class ForeignStream:
 
     def frames(self) -> list[WireFrame]:
         """The next transfer's frames, stamped with its due time (a multi-frame transfer's frames back to back)."""
-        tid = self.n % 32
+        tid = self.n % TRANSFER_ID_MODULO
         frames = self._frames.get(tid) if self.fixed else None
         if frames is None:
             frames = encode(self.make(self.n), source=self.node, priority=self.priority, transfer_id=tid)
