@@ -10,8 +10,8 @@
 A response matches a request when it carries the same service id and transfer id, comes from the
 node the request went to and is addressed to this host (F4, :func:`.judgements.f4_mismatches`). A
 response that matches in all but one of those is still reported as :class:`Response` with
-``mismatch`` naming what differs (:func:`.judgements.f4_pairs`), so a suite can fail it with a
-clear message instead of timing out.
+``mismatch`` naming what differs, so a suite can fail it with a clear message instead of timing out.
+Which request a response answers is :func:`.judgements.f4_answers`'s to say (the rule written once).
 
 The host need not be alone on the bus (a flight controller, F6): a request another node sent is remembered
 (:attr:`HostProtocol.others`, the latest :data:`OTHERS_KEPT`), and a response that answers it (its service id and
@@ -28,7 +28,7 @@ from typing import Any, Mapping
 from .errors import DecodeError
 from .frame import Decoder, Frame, WireFrame, encode
 from .ids import Kind
-from .judgements import asked_node, f4_mismatches, f4_pairs
+from .judgements import asked_node, f4_answers, f4_mismatches
 from .transfer import TransferIdCounter
 
 #: How many of other nodes' requests the host remembers (their answers come within ~64 ms)
@@ -124,18 +124,13 @@ class HostProtocol:
         return [Overheard(frame)]
 
     def _match(self, frame: Frame) -> Response | None:
-        best: tuple[int, Pending, list[str]] | None = None
-        for p in self.pending:
-            if p.service != frame.type_id:
-                continue
-            mismatch = f4_mismatches(frame, service=p.service, transfer_id=p.transfer_id, requester=self.node_id,
-                                     asked=asked_node(p.name, p.destination))
-            if best is None or len(mismatch) < best[0]:
-                best = (len(mismatch), p, mismatch)
-        if best is None or not f4_pairs(best[2]):
+        asked = [(p.service, p.transfer_id, self.node_id, asked_node(p.name, p.destination)) for p in self.pending]
+        i = f4_answers(frame, asked)
+        if i is None:
             return None
-        _, p, mismatch = best
-        self.pending.remove(p)
+        p = self.pending.pop(i)
+        service, transfer_id, requester, node = asked[i]
+        mismatch = f4_mismatches(frame, service=service, transfer_id=transfer_id, requester=requester, asked=node)
         if frame.kind is Kind.RESPONSE and len(p.fields) and frame.layout is not None and frame.layout.name == "response":
             # a response whose layout depends on the request (241): decode it again with the request
             spec = frame.spec
