@@ -31,7 +31,11 @@ class Violation:
     """A rule the bus broke (or, with strength OBSERVE, something recorded that is never a failure).
 
     ``rules``: requirement ids; ``check``: a short stable name of the check; ``message``: what was
-    expected and what was seen; ``frames``: the offending frame(s) in candump -L style."""
+    expected and what was seen; ``frames``: the offending frame(s) in candump -L style. The cause, as fields (a
+    finding's cause is never read back from ``message``): ``subject``, what broke the rule, the same for every
+    occurrence of one problem (``msg1``, ``set_freq response``); ``expected``, what the rule wanted, in words, the
+    same for every occurrence too; ``measured_s`` and ``expected_s``, the time measured and the time wanted, where
+    the rule is one of time."""
 
     rules: tuple[str, ...]
     strength: str
@@ -40,6 +44,10 @@ class Violation:
     check: str
     message: str
     frames: tuple[str, ...] = ()
+    subject: str = ""
+    expected: str = ""
+    measured_s: float | None = None
+    expected_s: float | None = None
 
     @property
     def fails(self) -> bool:
@@ -52,7 +60,8 @@ class Violation:
 
     def to_json(self) -> dict[str, Any]:
         return {"rules": list(self.rules), "strength": self.strength, "timestamp": self.timestamp, "node": self.node,
-                "check": self.check, "message": self.message, "frames": list(self.frames)}
+                "check": self.check, "message": self.message, "frames": list(self.frames), "subject": self.subject,
+                "expected": self.expected, "measured_s": self.measured_s, "expected_s": self.expected_s}
 
 
 
@@ -129,8 +138,9 @@ class Findings:
         self._by_rule: dict[str, int] = {}
 
     def _violation(self, out: list | None, rules: tuple[str, ...], ts: float, node: int | None, check: str, message: str,
-                   frames: tuple[str, ...]) -> list:
-        v = Violation(rules, strongest(rules), ts, node, check, message, frames)
+                   frames: tuple[str, ...], *, subject: str, expected: str, measured_s: float | None = None,
+                   expected_s: float | None = None) -> list:
+        v = Violation(rules, strongest(rules), ts, node, check, message, frames, subject, expected, measured_s, expected_s)
         tally = self._tallies.get((node, check))
         if tally is None:
             tally = self._tallies[(node, check)] = Tally()
