@@ -191,7 +191,7 @@ class _Collector:
 
 
 # ----------------------------------------------------------------------------------------- batches
-class BatchError(ValueError):
+class RunBatchError(ValueError):
     """A batch that cannot start: the rig file, a bench's set-up, the options (one line, exit 2)."""
 
 
@@ -204,28 +204,28 @@ def _static_preflight(bench) -> None:
 
     opts = {**options.BENCH_OPTIONS, **bench.options()}
     if opts.get("power") == "manual":
-        raise BatchError(f"bench {bench.name}: power 'manual' prompts an operator at the console, which a batch cannot; "
+        raise RunBatchError(f"bench {bench.name}: power 'manual' prompts an operator at the console, which a batch cannot; "
                          f"run that bench alone: {bench.command_line()}")
     try:
         checks.check(BenchOptions.of(opts.get))
     except PreflightError as exc:
-        raise BatchError(f"bench {bench.name}: {exc}") from None
+        raise RunBatchError(f"bench {bench.name}: {exc}") from None
 
 
 def batch_plan(args: argparse.Namespace) -> tuple[Any, list]:
-    """The rig and its chosen benches, each checked (:class:`BatchError`)."""
+    """The rig and its chosen benches, each checked (:class:`RunBatchError`)."""
     from .rigs import rig as rigs
 
     given = [o for o in map(options.BY_DEST.get, options.BENCH_OPTIONS)
              if getattr(args, o.dest, None) not in (o.default_on(run=True), None, [], "")]
     if given:
-        raise BatchError(f"{given[0].run_flags[0]} is set per bench in the rig file ({given[0].rig}; with --rig, the rig "
+        raise RunBatchError(f"{given[0].run_flags[0]} is set per bench in the rig file ({given[0].rig}; with --rig, the rig "
                          "says it)")
     try:
         rig = rigs.load(args.rig)
         benches = rig.select([b.strip() for b in (args.benches or "").split(",") if b.strip()])
     except rigs.RigError as exc:
-        raise BatchError(str(exc)) from None
+        raise RunBatchError(str(exc)) from None
     for bench in benches:
         _static_preflight(bench)
     return rig, benches
@@ -249,7 +249,7 @@ def run_batch(args: argparse.Namespace) -> int:
         rig, benches = batch_plan(args)
         targets = targets_of(args)
         preflight.reports_writable(args.ckesc_reports)
-    except (BatchError, SelectionError, preflight.PreflightError) as exc:
+    except (RunBatchError, SelectionError, preflight.PreflightError) as exc:
         print(f"ckesc run: error: {exc}", file=sys.stderr)
         return ExitStatus.USAGE
     started = time.time()

@@ -13,7 +13,7 @@ Framing is judged on every frame the DUT sends, in two scopes (the ``scope`` par
   plugin's ``dut_segments``) plus a fresh provoked capture. The run-wide record holds decoded frames
   only (see :func:`run_heard`).
 
-The wire helpers it shares with section 4.3's module (:class:`Heard`, :func:`provoke`,
+The wire helpers it shares with section 4.3's module (:class:`HeardFrame`, :func:`provoke`,
 :func:`provoked_traffic`, :func:`in_scope`) are in ``conformance/wire.py``.
 """
 
@@ -37,7 +37,7 @@ from .answers import BROADCAST_WINDOW_S
 from .codes import code
 from .telemetry import read_request
 from .throttle import command_for
-from .wire import QUERIES, SCOPES, Heard, check_each, describe, in_scope, run_heard
+from .wire import QUERIES, SCOPES, HeardFrame, check_each, describe, in_scope, run_heard
 
 SECTION = "4.1"
 traffic = wire.traffic  # fixture: the provoked traffic, once per module
@@ -51,7 +51,7 @@ ARDUPILOT_NODE = 10
 
 
 # ------------------------------------------------------------------------------------------ the rules, per frame
-def id_layout_problems(h: Heard) -> list[str]:
+def id_layout_problems(h: HeardFrame) -> list[str]:
     """F1 (4.1.2): 29-bit extended data frames; a service frame from the ESC answers a request (request
     bit 0); no anonymous message frames (4.1.2: only message and service frames are used)."""
     if not h.extended:
@@ -66,7 +66,7 @@ def id_layout_problems(h: Heard) -> list[str]:
     return []
 
 
-def tail_problems(h: Heard) -> list[str]:
+def tail_problems(h: HeardFrame) -> list[str]:
     """F2 / 4.1.3: every frame is a single-frame transfer: start=1, end=1, toggle=0."""
     if not h.extended or not h.has_tail:
         return []
@@ -83,7 +83,7 @@ def tail_problems(h: Heard) -> list[str]:
     return out
 
 
-def source_problems(h: Heard) -> list[str]:
+def source_problems(h: HeardFrame) -> list[str]:
     """4.1.2-N2 / F7: an ESC's node id is 1..0x7D; 0 is 'unknown', 0x7E and 0x7F are reserved."""
     if not h.extended:
         return []
@@ -93,11 +93,11 @@ def source_problems(h: Heard) -> list[str]:
     return []
 
 
-def counter_streams(frames: list[Heard]) -> dict[tuple[int, int], list[Heard]]:
+def counter_streams(frames: list[HeardFrame]) -> dict[tuple[int, int], list[HeardFrame]]:
     """The frames that carry a transfer-id counter, by (source node, message type), in order. Service
     responses carry the request's transfer id (F4) and MSG_EXP12 names its record with it (R15): not
     counters; RawCommand_10b (the host's) has no tail byte."""
-    streams: dict[tuple[int, int], list[Heard]] = {}
+    streams: dict[tuple[int, int], list[HeardFrame]] = {}
     for h in frames:
         if not h.extended or h.remote or h.transfer_id is None:
             continue
@@ -107,12 +107,12 @@ def counter_streams(frames: list[Heard]) -> dict[tuple[int, int], list[Heard]]:
     return streams
 
 
-def counting_problems(stream: list[Heard], adjacent: Callable[[Heard, Heard], bool] | None = None
-                      ) -> tuple[list[tuple[Heard, str]], int, int]:
+def counting_problems(stream: list[HeardFrame], adjacent: Callable[[HeardFrame, HeardFrame], bool] | None = None
+                      ) -> tuple[list[tuple[HeardFrame, str]], int, int]:
     """F3 / 4.1.3-tid: +1 per transfer, modulo 32, between consecutive frames of one stream;
     ``adjacent`` says which pairs provably had no frame of the stream between them (None: all of
     them, one unbroken capture). Returns (problems, pairs checked, wrap-arounds seen)."""
-    problems: list[tuple[Heard, str]] = []
+    problems: list[tuple[HeardFrame, str]] = []
     pairs = wraps = 0
     for prev, h in zip(stream, stream[1:]):
         if adjacent is not None and not adjacent(prev, h):
@@ -125,7 +125,7 @@ def counting_problems(stream: list[Heard], adjacent: Callable[[Heard, Heard], bo
     return problems, pairs, wraps
 
 
-def run_counting_problems(frames: list[Heard], error_s: float) -> list[tuple[Heard, str]]:
+def run_counting_problems(frames: list[HeardFrame], error_s: float) -> list[tuple[HeardFrame, str]]:
     """F3 on the run-wide record, where frames are missing between tests (see :func:`run_heard`). Only
     MSG1/MSG2/MSG3 pairs from one test's capture are judged (frames heard between tests are in no
     record), and only pairs less than 1.5 shortest legal report intervals apart: a report comes at
@@ -135,12 +135,12 @@ def run_counting_problems(frames: list[Heard], error_s: float) -> list[tuple[Hea
     is skipped: two ESCs sharing a node id (what Set ID does to a bench, 4.4.18-2), or a DUT whose
     intervals break R9 (section 4.4.22's verdict), where no pair is provably adjacent."""
     shortest = SHORTEST_S - error_s
-    segments: list[list[Heard]] = [[]]
+    segments: list[list[HeardFrame]] = [[]]
     for h in frames:
         if segments[-1] and (h.timestamp < segments[-1][-1].timestamp or h.segment != segments[-1][-1].segment):
             segments.append([])
         segments[-1].append(h)
-    problems: list[tuple[Heard, str]] = []
+    problems: list[tuple[HeardFrame, str]] = []
     for segment in segments:
         for stream in counter_streams(segment).values():
             spec = stream[0].spec
@@ -267,7 +267,7 @@ def test_silent_at_the_default_node_id(dut):
         for g in dut.garbled:
             kind, _, source, _, spec = classify(g.msg.arbitration_id)
             if (g.msg.timestamp or 0.0) >= start and kind is Kind.MESSAGE and source == DEFAULT_ESC_NODE_ID:
-                on_its_own[(g.msg.arbitration_id, g.msg.timestamp)] = spec.name if spec else str(Heard.of_garbled(g))
+                on_its_own[(g.msg.arbitration_id, g.msg.timestamp)] = spec.name if spec else str(HeardFrame.of_garbled(g))
         # a GET_ESC_ID reply that answers a query another node sent meanwhile (a flight controller's, F6) is not
         # sent on its own: it answers, as at any node id (R1, R2: within 64 ms of the query)
         queries = [f.timestamp or 0.0 for f in dut.frames("get_esc_id", since=start - cat.ANSWER_DELAY_MAX_S)

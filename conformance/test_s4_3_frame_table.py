@@ -15,7 +15,7 @@ from ckesc.protocol import catalogue as cat
 from ckesc.protocol.ids import MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind, Priority, priority_name
 
 from . import wire
-from .wire import SCOPES, Heard, check_each, describe, in_scope
+from .wire import SCOPES, HeardFrame, check_each, describe, in_scope
 
 SECTION = "4.3"
 traffic = wire.traffic  # fixture: the provoked traffic, once per module
@@ -28,21 +28,21 @@ def _range_text(r: range) -> str:
     return f"[{r.start}, {r.stop})"
 
 
-def message_range_problems(h: Heard) -> list[str]:
+def message_range_problems(h: HeardFrame) -> list[str]:
     cid = h.cid
     if h.extended and cid.kind is Kind.MESSAGE and cid.type_id not in MESSAGE_VENDOR_RANGE:
         return [f"message type id {cid.type_id} outside the vendor range {_range_text(MESSAGE_VENDOR_RANGE)}"]
     return []
 
 
-def service_range_problems(h: Heard) -> list[str]:
+def service_range_problems(h: HeardFrame) -> list[str]:
     cid = h.cid
     if h.extended and cid.kind is not Kind.MESSAGE and cid.type_id not in SERVICE_VENDOR_RANGE:
         return [f"service id {cid.type_id} outside the vendor range {_range_text(SERVICE_VENDOR_RANGE)}"]
     return []
 
 
-def priority_problems(h: Heard) -> list[str]:
+def priority_problems(h: HeardFrame) -> list[str]:
     """F5: the table's priority for every frame type that lists one."""
     spec = h.spec
     if not h.extended or spec is None or spec.priority is None:
@@ -53,7 +53,7 @@ def priority_problems(h: Heard) -> list[str]:
     return []
 
 
-def _not_in_table(frames: list[Heard]) -> list[str]:
+def _not_in_table(frames: list[HeardFrame]) -> list[str]:
     return sorted({f"{h.cid.kind.label} {h.cid.type_id}" for h in frames if h.extended and h.spec is None})
 
 

@@ -1,7 +1,7 @@
 """The DUT's frames as they came off the wire, decoded or not, for the sections that judge every
 frame it sends (4.1 framing, 4.3 the frame table); not a section: no tests here.
 
-- :class:`Heard`: one frame as heard; :func:`describe` a list of problems with them;
+- :class:`HeardFrame`: one frame as heard; :func:`describe` a list of problems with them;
 - :func:`provoke` / :func:`provoked_traffic`: make the DUT send every kind of frame it has, and keep
   all it sent meanwhile (:class:`Traffic`), with a host that needs no decodable answer to start
   (:func:`bare_dut`);
@@ -47,7 +47,7 @@ QUERIES: tuple[tuple[str, str, dict[str, int]], ...] = (
 
 # ------------------------------------------------------------------------------------------ frames as heard
 @dataclass(frozen=True)
-class Heard:
+class HeardFrame:
     """One frame as it came off the wire, decoded or not: framing is judged on the raw id and data."""
 
     can_id: int
@@ -61,11 +61,11 @@ class Heard:
     segment: int = 0  # run-wide record: which test's capture it is from (frames between tests are in none)
 
     @classmethod
-    def of_frame(cls, f: Frame) -> Heard:
+    def of_frame(cls, f: Frame) -> HeardFrame:
         return cls(f.can_id, bytes(f.data), f.timestamp or 0.0, frame=f)
 
     @classmethod
-    def of_garbled(cls, g: Any) -> Heard:
+    def of_garbled(cls, g: Any) -> HeardFrame:
         m = g.msg
         return cls(m.arbitration_id, bytes(m.data), m.timestamp or 0.0, bool(getattr(m, "is_extended_id", True)),
                    bool(getattr(m, "is_remote_frame", False)), bool(getattr(m, "is_rx", True)), error=str(g.error))
@@ -97,9 +97,9 @@ class Heard:
         return f"{what} [{raw}]" + (f" ({self.error})" if self.error else "")
 
 
-def describe(problems: list[tuple[Heard, str]], limit: int = 5) -> str:
+def describe(problems: list[tuple[HeardFrame, str]], limit: int = 5) -> str:
     """The first few problems, one per frame type, and how many in all."""
-    seen: dict[tuple[str, int], tuple[Heard, str]] = {}
+    seen: dict[tuple[str, int], tuple[HeardFrame, str]] = {}
     for h, why in problems:
         seen.setdefault((why, h.cid.type_id), (h, why))
     lines = [f"{why}: {h}" for h, why in list(seen.values())[:limit]]
@@ -107,7 +107,7 @@ def describe(problems: list[tuple[Heard, str]], limit: int = 5) -> str:
 
 
 # ------------------------------------------------------------------------------------------ provoking traffic
-class Recorder(Dut):
+class RecordingDut(Dut):
     """A Dut that remembers every frame it puts on the bus, to tell its own echoes from the DUT's frames."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -118,25 +118,25 @@ class Recorder(Dut):
         self.sent_wires.add((wire.arbitration_id, bytes(wire.data)))
         return super().send_wire(wire)
 
-    def heard(self, *, every_node: bool = False) -> list[Heard]:
+    def heard(self, *, every_node: bool = False) -> list[HeardFrame]:
         """Everything heard that the host side did not send (the DUT's frames), decoded or not, in order.
         Error frames are the adapter's news of bus errors, nobody's frame: left out. ``every_node``: other nodes'
         frames too (:meth:`another_nodes`)."""
-        raw = [Heard.of_garbled(g) for g in self.garbled if not getattr(g.msg, "is_error_frame", False)]
+        raw = [HeardFrame.of_garbled(g) for g in self.garbled if not getattr(g.msg, "is_error_frame", False)]
         # one frame on the wire is one (id, end of frame time): a frame the harness also decoded after
         # repairing it (a wrong tail byte) is judged as it came, once
         seen = {(h.can_id, h.timestamp) for h in raw}
-        out = [h for h in map(Heard.of_frame, self.trace) if (h.can_id, h.timestamp) not in seen] + raw
+        out = [h for h in map(HeardFrame.of_frame, self.trace) if (h.can_id, h.timestamp) not in seen] + raw
         return sorted((h for h in out if not self.ours(h) and (every_node or not self.another_nodes(h))),
                       key=lambda h: h.timestamp)
 
-    def another_nodes(self, h: Heard) -> bool:
+    def another_nodes(self, h: HeardFrame) -> bool:
         """A frame whose source field (F1) names another node an ESC may be: another ESC of the bench, a flight
         controller or a battery sharing the bus (``--foreign-traffic``), never the DUT's to be judged. A frame
         from node 0 or a reserved id (0x7E, 0x7F) that the host did not send is still the DUT's (F7)."""
         return h.extended and h.cid.source in ESC_NODE_IDS and h.cid.source != self.node_id
 
-    def ours(self, h: Heard) -> bool:
+    def ours(self, h: HeardFrame) -> bool:
         """The host side's frame: one this host sent, or the echo of another host object's on the same
         bus (a request, or a host's message from the host's node id), never an ESC's."""
         if (h.can_id, h.data) in self.sent_wires:
@@ -158,19 +158,19 @@ class Asked:
     transfer_id: int
     sent_at: float
     until: float
-    answers: list[Heard] = field(default_factory=list)
+    answers: list[HeardFrame] = field(default_factory=list)
 
 
 @dataclass
 class Traffic:
     node: int
     host: int
-    heard: list[Heard]  # the DUT's frames in the order they came, one unbroken stretch
+    heard: list[HeardFrame]  # the DUT's frames in the order they came, one unbroken stretch
     asked: dict[str, Asked]  # the read-only requests, by label
-    broadcasts: dict[str, list[Heard]]  # the DUT's messages after each broadcast command, by label
+    broadcasts: dict[str, list[HeardFrame]]  # the DUT's messages after each broadcast command, by label
 
 
-def find_node(d: Recorder) -> int:
+def find_node(d: RecordingDut) -> int:
     """The DUT's node id when GET_ESC_ID discovery failed (its answers did not decode): the source
     of the reports (MSG1..MSG3, decoded or not) heard, which only an ESC sends (a flight controller or a battery
     on the bus sends none)."""
@@ -184,30 +184,30 @@ def find_node(d: Recorder) -> int:
     return max(set(sources), key=sources.count)
 
 
-def bare_dut(run, lane) -> Recorder:
+def bare_dut(run, lane) -> RecordingDut:
     """A host on the lane that needs no decodable answer to start. The plugin's ``dut`` fixture reads
     the settings through decoded answers: with a DUT whose framing is broken it cannot even start,
     yet that is exactly the DUT this module must fail, not error on."""
     node = run.node_id
     if node:
-        return Recorder(lane, run.profile, node_id=node)
+        return RecordingDut(lane, run.profile, node_id=node)
     try:
-        d = Recorder(lane, run.profile)  # GET_ESC_ID discovery (R1)
+        d = RecordingDut(lane, run.profile)  # GET_ESC_ID discovery (R1)
     except DutError:
-        d = Recorder(lane, run.profile, node_id=0)  # a placeholder until the raw search below
+        d = RecordingDut(lane, run.profile, node_id=0)  # a placeholder until the raw search below
         d.node_id = find_node(d)
         d.nodes = [d.node_id]
     run.node_id = run.node_id or d.node_id
     return d
 
 
-def _window(d: Recorder, seconds: float) -> tuple[float, float]:
+def _window(d: RecordingDut, seconds: float) -> tuple[float, float]:
     start = d.now()
     d.wait(seconds)
     return start, d.now()
 
 
-def provoke(d: Recorder) -> Traffic:
+def provoke(d: RecordingDut) -> Traffic:
     """Make the DUT send every kind of frame it has, and keep all it sent meanwhile. The frames of a
     function the profile declares absent (MSG_EXP mode, CAN Test, Get Rec) are not provoked: the
     framing and frame-table checks judge the rest (R9b), never skipped whole."""
@@ -247,7 +247,7 @@ def provoke(d: Recorder) -> Traffic:
         sid = cat.spec(a.name).type_id
         a.answers = [h for h in heard if h.cid.kind is not Kind.MESSAGE and h.cid.type_id == sid and a.sent_at <= h.timestamp <= a.until]
 
-    def during(label: str) -> list[Heard]:
+    def during(label: str) -> list[HeardFrame]:
         start, end = windows[label]
         return [h for h in heard if start <= h.timestamp <= end]
 
@@ -275,7 +275,7 @@ def traffic(ckesc_run, ckesc_lane) -> Iterator[Traffic]:
 
 
 # ------------------------------------------------------------------------------------------ scopes
-def run_heard(run) -> list[Heard]:
+def run_heard(run) -> list[HeardFrame]:
     """Every frame the DUT sent in the run so far, as the plugin collected them.
 
     Harness gap: ``dut_segments`` keeps decoded frames only (a frame that did not decode - the very
@@ -283,15 +283,15 @@ def run_heard(run) -> list[Heard]:
     a test's settings are restored, and the frames of ``multi_dut``'s private bench come with that
     bench's own clock. The run-wide checks therefore add a fresh provoked capture, and the transfer
     id check looks only at pairs of frames that provably had nothing between them."""
-    return [replace(Heard.of_frame(f), segment=i) for i, seg in enumerate(run.segments) for f in seg]
+    return [replace(HeardFrame.of_frame(f), segment=i) for i, seg in enumerate(run.segments) for f in seg]
 
 
 SCOPES = (pytest.param("provoked", id="provoked"), pytest.param("run", id="run", marks=pytest.mark.last))
 
 
-def in_scope(scope: str, traffic: Traffic, run) -> list[Heard]:
+def in_scope(scope: str, traffic: Traffic, run) -> list[HeardFrame]:
     return traffic.heard if scope == "provoked" else run_heard(run) + traffic.heard
 
 
-def check_each(frames: list[Heard], rule: Callable[[Heard], list[str]]) -> list[tuple[Heard, str]]:
+def check_each(frames: list[HeardFrame], rule: Callable[[HeardFrame], list[str]]) -> list[tuple[HeardFrame, str]]:
     return [(h, why) for h in frames for why in rule(h)]

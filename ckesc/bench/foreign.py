@@ -60,6 +60,7 @@ import dronecan
 from dronecan import dsdl, transport
 
 from ..protocol.frame import WireFrame
+from ..protocol.transfer import TRANSFER_ID_MODULO
 
 #: the traffic profiles ``--foreign-traffic`` takes (none: a quiet bus, the default)
 PROFILES = ("ardupilot",)
@@ -98,7 +99,7 @@ def encode(payload: Any, *, source: int, priority: int, transfer_id: int) -> lis
 
 
 @dataclass
-class Stream:
+class ForeignStream:
     """One message a node broadcasts every ``period`` seconds from ``start``: ``make(n)`` is the n-th transfer's
     payload (a ``dronecan`` value); ``fixed``: the payload never changes, so its frames are made once per transfer
     id. Its transfer id counts +1 modulo 32 per transfer, as every DroneCAN publisher's does."""
@@ -119,7 +120,7 @@ class Stream:
 
     def frames(self) -> list[WireFrame]:
         """The next transfer's frames, stamped with its due time (a multi-frame transfer's frames back to back)."""
-        tid = self.n % 32
+        tid = self.n % TRANSFER_ID_MODULO
         frames = self._frames.get(tid) if self.fixed else None
         if frames is None:
             frames = encode(self.make(self.n), source=self.node, priority=self.priority, transfer_id=tid)
@@ -136,7 +137,7 @@ class ForeignTraffic:
     per stream name."""
 
     name: str
-    streams: list[Stream]
+    streams: list[ForeignStream]
     bitrate: int | None = None
 
     def next_due(self) -> float:
@@ -203,15 +204,15 @@ def ardupilot(*, esc_rate_hz: float = COPTER_LOOP_HZ, cells: int = 12) -> Foreig
 
     # phases: the streams do not all start at one instant (different nodes, different loops)
     streams = [
-        Stream("ardupilot.indication.SafetyState", fc, LOW, 0.5, lambda n: ap.indication.SafetyState(status=safety_on),
+        ForeignStream("ardupilot.indication.SafetyState", fc, LOW, 0.5, lambda n: ap.indication.SafetyState(status=safety_on),
                start=_us(3000)),
-        Stream("uavcan.protocol.NodeStatus", fc, LOWEST, 1.0, lambda n: node_status(n, 1.0), start=_us(11000), fixed=False),
-        Stream("com.hobbywing.esc.GetEscID", fc, MEDIUM, 1.0, lambda n: dronecan.com.hobbywing.esc.GetEscID(payload=[0]),
+        ForeignStream("uavcan.protocol.NodeStatus", fc, LOWEST, 1.0, lambda n: node_status(n, 1.0), start=_us(11000), fixed=False),
+        ForeignStream("com.hobbywing.esc.GetEscID", fc, MEDIUM, 1.0, lambda n: dronecan.com.hobbywing.esc.GetEscID(payload=[0]),
                start=_us(17000)),
-        Stream("uavcan.equipment.esc.RawCommand", fc, HIGH - 1, 1.0 / esc_rate_hz,
+        ForeignStream("uavcan.equipment.esc.RawCommand", fc, HIGH - 1, 1.0 / esc_rate_hz,
                lambda n: uavcan.equipment.esc.RawCommand(cmd=[0, 0, 0, 0]), start=_us(500)),
-        Stream("ardupilot.equipment.power.BatteryCells", batt, LOW, 1.0, battery_cells, start=_us(29000)),
-        Stream("uavcan.protocol.NodeStatus", batt, LOWEST, 1.0, lambda n: node_status(n, 1.0), start=_us(37000), fixed=False),
+        ForeignStream("ardupilot.equipment.power.BatteryCells", batt, LOW, 1.0, battery_cells, start=_us(29000)),
+        ForeignStream("uavcan.protocol.NodeStatus", batt, LOWEST, 1.0, lambda n: node_status(n, 1.0), start=_us(37000), fixed=False),
     ]
     return ForeignTraffic("ardupilot", streams)
 

@@ -16,7 +16,7 @@ from ..protocol.frame import Frame, WireFrame, classify, frame_bits
 from ..protocol.host import Garbled, HostProtocol, Pending, Response
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind
 from ..protocol.judgements import timing_tolerance
-from ..protocol.transfer import TRANSFER_ID_MODULO
+from ..protocol.transfer import TAIL_BYTES, TRANSFER_ID_MODULO, tail_transfer_id
 from .epochs import WINDOW_REQUESTS
 from .lanes import Lane, OwnFrame
 from .outcomes import Inconclusive, NotClaimed, Record
@@ -165,7 +165,7 @@ class Link:
                 # read it as the single frame it must be, so one framing fault does not blind
                 # every other test (the violation stays in ``garbled``)
                 fixed = can.Message(arbitration_id=msg.arbitration_id, is_extended_id=True, timestamp=msg.timestamp,
-                                    data=bytes(msg.data[:-1]) + bytes([0xC0 | (msg.data[-1] & 0x1F)]))
+                                    data=bytes(msg.data[:-1]) + TAIL_BYTES[tail_transfer_id(msg.data[-1])])
                 return self._take_decoded(fixed)
             frame = event.frame
             self.trace.append(frame)

@@ -8,7 +8,7 @@ from typing import Any
 
 from ..protocol.frame import Frame, WireFrame
 from ..protocol.ids import Priority, message_id, service_id
-from ..protocol.transfer import tail_byte
+from ..protocol.transfer import tail_byte, tail_transfer_id
 from .config import RECORD_SENSORS
 
 
@@ -103,7 +103,7 @@ class Answers:
         due = now + self.config.service_delay
         status = bytes(7) + bytes((tail_byte(self.state.tids.next("dronecan341")),))
         self._push(due, WireFrame(message_id(Priority.LOW, 341, self.node_id), status, due))
-        answer = bytes(7) + bytes((tail_byte(data[-1] & 0x1F if data else 0),))
+        answer = bytes(7) + bytes((tail_byte(tail_transfer_id(data[-1]) if data else 0),))
         self._push(due, WireFrame(service_id(Priority.LOW, 1, False, can_id & 0x7F, self.node_id), answer, due))
         return True
 

@@ -10,7 +10,7 @@ from ..protocol.catalogue import ANSWER_SLOT_S, answer_slot_s
 from ..protocol.codecs import codec_for
 from ..protocol.frame import Frame, WireFrame, encode, frame_bits, new_wire
 from ..protocol.ids import Kind, Priority, message_id, service_id
-from ..protocol.transfer import TAIL_BYTES, tail_byte
+from ..protocol.transfer import TAIL_BYTES, next_transfer_id, tail_byte
 
 #: unlisted_priority (F5-unlisted): the priority of 240/241/242 answers; "request" keeps the request's
 _UNLISTED_PRIORITY = {"medium": Priority.MEDIUM, "low": Priority.LOW, "lowest": Priority.LOWEST}
@@ -92,7 +92,7 @@ class Output:
             priority = Priority.LOWEST if priority != Priority.LOWEST else Priority.MEDIUM
         tid = req.transfer_id or 0
         if "response_transfer_id_wrong" in self.faults:
-            tid = (tid + 1) % 32
+            tid = next_transfer_id(tid)
         destination = 127 if "response_to_broadcast" in self.faults else req.source
         request_bit = 0x8000 if "response_as_request" in self.faults else 0
         self._emit(now + self.config.service_delay, spec.name, fields, kind=Kind.RESPONSE, destination=destination,

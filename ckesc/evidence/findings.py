@@ -4,10 +4,10 @@ with strength OBSERVE something recorded that is never a failure), the first few
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
+from ..protocol.histogram import Histogram
 from ..protocol.requirements import strongest
 
 KEEP = 20  # findings and events kept per (node, check); the rest are counted
@@ -31,7 +31,11 @@ class Violation:
     """A rule the bus broke (or, with strength OBSERVE, something recorded that is never a failure).
 
     ``rules``: requirement ids; ``check``: a short stable name of the check; ``message``: what was
-    expected and what was seen; ``frames``: the offending frame(s) in candump -L style."""
+    expected and what was seen; ``frames``: the offending frame(s) in candump -L style. The cause, as fields (a
+    finding's cause is never read back from ``message``): ``subject``, what broke the rule, the same for every
+    occurrence of one problem (``msg1``, ``set_freq response``); ``expected``, what the rule wanted, in words, the
+    same for every occurrence too; ``measured_s`` and ``expected_s``, the time measured and the time wanted, where
+    the rule is one of time."""
 
     rules: tuple[str, ...]
     strength: str
@@ -40,6 +44,10 @@ class Violation:
     check: str
     message: str
     frames: tuple[str, ...] = ()
+    subject: str = ""
+    expected: str = ""
+    measured_s: float | None = None
+    expected_s: float | None = None
 
     @property
     def fails(self) -> bool:
@@ -52,7 +60,8 @@ class Violation:
 
     def to_json(self) -> dict[str, Any]:
         return {"rules": list(self.rules), "strength": self.strength, "timestamp": self.timestamp, "node": self.node,
-                "check": self.check, "message": self.message, "frames": list(self.frames)}
+                "check": self.check, "message": self.message, "frames": list(self.frames), "subject": self.subject,
+                "expected": self.expected, "measured_s": self.measured_s, "expected_s": self.expected_s}
 
 
 
@@ -71,52 +80,25 @@ class Tally:
             self.first.append(v)
 
 
-class Intervals:
-    """Running statistics of one stream's intervals, in bounded memory: count, mean, stdev, min,
-    max and a fixed-bin histogram (0.5 ms bins up to 600 ms, then an overflow bin)."""
+class Intervals(Histogram):
+    """Running statistics of one stream's intervals, in bounded memory: count, mean, stdev, min, max and a fixed-bin
+    histogram (0.5 ms bins up to 600 ms, then an overflow bin). The project's one :class:`Histogram`, read by its bins'
+    middles (the figures check-log and the reports show), a gap of exactly 20 ms in the 20.0 bin, not 19.5."""
 
-    __slots__ = ("n", "total", "squares", "lo", "hi", "hist")
+    __slots__ = ()
 
     def __init__(self) -> None:
-        self.n = 0
-        self.total = self.squares = 0.0
-        self.lo = math.inf
-        self.hi = -math.inf
-        self.hist = [0] * (HIST_BINS + 1)
-
-    def add(self, gap: float) -> None:
-        self.n += 1
-        self.total += gap
-        self.squares += gap * gap
-        if gap < self.lo:
-            self.lo = gap
-        if gap > self.hi:
-            self.hi = gap
-        i = int(gap / _HIST_BIN_S + 1e-6)  # a gap of exactly 20 ms goes in the 20.0 bin, not 19.5
-        self.hist[i if 0 <= i < HIST_BINS else (HIST_BINS if i > 0 else 0)] += 1
-
-    def quantile(self, q: float) -> float | None:
-        """From the histogram: the middle of the bin holding the q-quantile (0.5 ms resolution), within [min, max]."""
-        if not self.n:
-            return None
-        target, seen = q * self.n, 0
-        for i, c in enumerate(self.hist):
-            seen += c
-            if seen >= target and c:
-                return self.hi if i == HIST_BINS else min(max((i + 0.5) * _HIST_BIN_S, self.lo), self.hi)
-        return self.hi
+        super().__init__(_HIST_BIN_S, HIST_BINS, middle=True, nudge=1e-6)
 
     def to_json(self) -> dict[str, Any]:
         if not self.n:
             return {"count": 0}
-        mean = self.total / self.n
-        var = max(self.squares / self.n - mean * mean, 0.0)
         ms = lambda s: None if s is None else round(s * 1000, 4)  # noqa: E731
-        return {"count": self.n, "mean_ms": ms(mean), "stdev_ms": ms(math.sqrt(var)), "min_ms": ms(self.lo),
+        return {"count": self.n, "mean_ms": ms(self.total / self.n), "stdev_ms": ms(self.stdev), "min_ms": ms(self.lo),
                 "p50_ms": ms(self.quantile(0.5)), "p99_ms": ms(self.quantile(0.99)), "max_ms": ms(self.hi),
                 "histogram_bin_ms": _HIST_BIN_S * 1000,
                 "histogram": {str(round(i * _HIST_BIN_S * 1000, 1)) if i < HIST_BINS else "overflow": c
-                              for i, c in enumerate(self.hist) if c}}
+                              for i, c in enumerate(self.counts) if c}}
 
 
 class Findings:
@@ -129,8 +111,9 @@ class Findings:
         self._by_rule: dict[str, int] = {}
 
     def _violation(self, out: list | None, rules: tuple[str, ...], ts: float, node: int | None, check: str, message: str,
-                   frames: tuple[str, ...]) -> list:
-        v = Violation(rules, strongest(rules), ts, node, check, message, frames)
+                   frames: tuple[str, ...], *, subject: str, expected: str, measured_s: float | None = None,
+                   expected_s: float | None = None) -> list:
+        v = Violation(rules, strongest(rules), ts, node, check, message, frames, subject, expected, measured_s, expected_s)
         tally = self._tallies.get((node, check))
         if tally is None:
             tally = self._tallies[(node, check)] = Tally()

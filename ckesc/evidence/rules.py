@@ -99,9 +99,9 @@ from .tracker import (
     SIDE_ESC,
     SIDE_FOREIGN,
     SIDE_HOST,
+    EscStream,
     FrameId,
     Node,
-    Stream,
     Tracker,
     field_value,
 )
@@ -227,21 +227,27 @@ class BusRules(Tracker):
         if remote:
             return self._violation(out, ("F1",), ts, node.id, "frame-layout",
                                    f"remote frame with {info.label}'s id: all data goes in data frames (4.1.2)",
-                                   (quote(info.can_id, data, ts, remote=True),))
+                                   (quote(info.can_id, data, ts, remote=True),), subject=f"{info.label} remote frame",
+                                   expected="all data in data frames")
         if info.bad_source:
             what = "the host's / unknown node id 0" if info.source == 0 else f"the reserved node id {info.source:#04x}"
             return self._violation(out, ("F7", "4.1.2-N2"), ts, node.id, "reserved-node",
                                    f"{info.label} from {what}: an ESC's node id is 1..0x7D",
-                                   (quote(info.can_id, data, ts, note=info.label),))
+                                   (quote(info.can_id, data, ts, note=info.label),), subject=f"{info.label} from {what}",
+                                   expected="an ESC's node id is 1..0x7D")
         if info.report and info.source == DEFAULT_ESC_NODE_ID:
             out = self._violation(out, ("F7",), ts, node.id, "default-node-reports",
                                   f"{info.label} from the factory default node id 0x7D: at 0x7D an ESC reports nothing on its own",
-                                  (quote(info.can_id, data, ts, note=info.label),))
+                                  (quote(info.can_id, data, ts, note=info.label),),
+                                  subject=f"{info.label} from the factory default node id 0x7D",
+                                  expected="at 0x7D an ESC reports nothing on its own")
         if info.prio_ok is False:
             out = self._violation(out, ("F5",), ts, node.id, "priority",
                                   f"{info.label} at priority {info.priority} ({priority_name(info.priority)}), the table's "
                                   f"is {int(info.spec.priority)} ({priority_name(info.spec.priority)})",
-                                  (quote(info.can_id, data, ts, note=info.label),))
+                                  (quote(info.can_id, data, ts, note=info.label),),
+                                  subject=f"{info.label} at priority {info.priority}",
+                                  expected=f"the table's priority, {int(info.spec.priority)}")
         elif info.prio_ok is None and info.spec is not None and (info.type_id, 1) not in node.noted:
             node.noted.add((info.type_id, 1))
             self._observe(("F5-unlisted",), ts, node.id, "priority-unlisted",
@@ -251,7 +257,8 @@ class BusRules(Tracker):
         if info.has_tail:
             if not data:
                 return self._violation(out, ("F2",), ts, node.id, "tail-byte", f"{info.label} with no data: no tail byte",
-                                       (quote(info.can_id, data, ts),))
+                                       (quote(info.can_id, data, ts),), subject=f"{info.label} with no data",
+                                       expected="a tail byte")
             tail = data[-1]
             tid = tail_transfer_id(tail)
             if tail & 0xE0 != SINGLE_FRAME:
@@ -265,7 +272,7 @@ class BusRules(Tracker):
         if info.stream_key is not None and tid is not None:
             st = self._streams.get(info.stream_key)
             if st is None:
-                st = self._streams[info.stream_key] = Stream(node, info.type_id, info.label, info.periodic)
+                st = self._streams[info.stream_key] = EscStream(node, info.type_id, info.label, info.periodic)
             out = self._stream(out, st, info, node, data, ts, start, busy_from, tid)
         return out or _NONE
 
@@ -275,7 +282,9 @@ class BusRules(Tracker):
         rules = ("F2",) + tuple(rid for _, bit, rid in _TAIL_RULES if not tail & bit) + (("4.1.3-toggle",) if t.toggle else ())
         return self._violation(out, rules, ts, node.id, "tail-byte",
                                f"{info.label}: tail byte 0x{tail:02X} has {', '.join(wrong)}; a single-frame transfer has "
-                               "start=1 end=1 toggle=0", (quote(info.can_id, data, ts, note=info.label),))
+                               "start=1 end=1 toggle=0", (quote(info.can_id, data, ts, note=info.label),),
+                               subject=f"{info.label}'s tail byte with {', '.join(wrong)}",
+                               expected="a single-frame transfer's tail: start=1 end=1 toggle=0")
 
     def _host_frame_from_esc(self, info: FrameId, data, ts: float, remote: bool):
         """A host-side frame from a node known as an ESC: a request means a response sent with the request bit set."""
@@ -283,10 +292,12 @@ class BusRules(Tracker):
             return _NONE
         return self._violation(None, ("F1", "F4"), ts, info.source, "frame-layout",
                                f"{info.label} from node {info.source}, an ESC, to node {info.dest}: an ESC's service frames "
-                               "answer requests (request bit 0)", (quote(info.can_id, data, ts, note=info.label),))
+                               "answer requests (request bit 0)", (quote(info.can_id, data, ts, note=info.label),),
+                               subject=f"{info.label} from an ESC with the request bit set",
+                               expected="an ESC's service frames answer requests (request bit 0)")
 
     # ------------------------------------------------------------------------------------- F3 and R9
-    def _stream(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float, tid: int):
+    def _stream(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float, tid: int):
         if st.periodic:
             out = self._report_restart(out, st, info, node, data, ts, start, tid)
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
@@ -321,11 +332,11 @@ class BusRules(Tracker):
         st.chain, st.reset, st.moved, st.power = node.chain, node.reset, node.moved, self.power_switches
         return out
 
-    def _pair(self, st: Stream, info: FrameId, data, ts: float) -> tuple[str, str]:
+    def _pair(self, st: EscStream, info: FrameId, data, ts: float) -> tuple[str, str]:
         return (quote(st.can_id, st.data, st.ts, note=f"{st.name} tid {st.tid}"),  # type: ignore[arg-type]
                 quote(info.can_id, data, ts, note=f"{st.name} tid {tail_transfer_id(data[-1])}"))
 
-    def _transfer_ids(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, gap: float, step: F3Step,
+    def _transfer_ids(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, gap: float, step: F3Step,
                       period: float | None):
         if step.advance and not self.complete:
             if period is None or not st.periodic:
@@ -338,9 +349,10 @@ class BusRules(Tracker):
                 return out
         return self._violation(out, ("F3", "4.1.3-tid"), ts, node.id, "transfer-id",
                                f"{st.name}: transfer id {step.current} after {step.previous} ({ms(gap)} earlier), "
-                               f"expected {step.expected}", self._pair(st, info, data, ts))
+                               f"expected {step.expected}", self._pair(st, info, data, ts),
+                               subject=f"{st.name}'s transfer id", expected="+1 per transfer (modulo 32)")
 
-    def _cadence(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float):
+    def _cadence(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float):
         """R9 between two reports of one stretch (no restart, no reset between them). Without a period the
         node stated, only a report closer than the shortest legal interval is judged. The DUT's jitter
         allowance widens the interval; the bench's error (``tolerance``) is on top of it."""
@@ -356,9 +368,11 @@ class BusRules(Tracker):
                 return out
             rules: tuple[str, ...] = ("R9",)
             expected = f"never closer than the shortest legal interval, {ms(SHORTEST_S)}"
+            note = ""
         elif gap.op == ">=":
             rules = ("R9",) + self._period_rules(node)
-            expected = f"expected {ms(period)} +- {ms(tol)} ({node.period_note})"
+            expected = f"expected {ms(period)} +- {ms(tol)}"
+            note = f" ({node.period_note})"
         else:
             k_lo, k_hi = math.ceil((lo - tol) / period), math.floor((hi + tol) / period)
             if k_hi >= max(k_lo, 2) and not self.complete:
@@ -369,12 +383,16 @@ class BusRules(Tracker):
             return self._violation(out, ("R9",) + self._period_rules(node), ts, node.id, "report-interval",
                                    f"{st.name} {ms(start - st.start)} after the previous one (bus queueing allows no less "
                                    f"than {ms(lo)}), expected {ms(period)} +- {ms(tol)} ({node.period_note})",
-                                   self._pair(st, info, data, ts))
+                                   self._pair(st, info, data, ts), subject=st.name,
+                                   expected=f"{ms(period)} +- {ms(tol)}",
+                                   measured_s=start - st.start, expected_s=period)
         return self._violation(out, rules, ts, node.id, "report-interval",
                                f"{st.name} {ms(start - st.start)} after the previous one (bus queueing allows up to "
-                               f"{ms(hi)}), {expected}", self._pair(st, info, data, ts))
+                               f"{ms(hi)}), {expected}{note}", self._pair(st, info, data, ts), subject=st.name,
+                               expected=expected.removeprefix("expected "), measured_s=start - st.start,
+                               expected_s=period)
 
-    def _first_report(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float):
+    def _first_report(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float):
         """R9a: the first report of a type after a resume / CAN Test off comes within one interval plus a slack of
         max(3 ms, a quarter interval) of it; after a Set Freq write, within the longer of its old and new interval
         plus that slack; and never sooner than an earlier event's first report that had not come yet could. Judged
@@ -400,7 +418,10 @@ class BusRules(Tracker):
                                f"the first {st.name} {ms(start - node.event_ts)} after {node.event_what} "  # type: ignore[operator]
                                f"(bus queueing allows no less than {ms(since)}), expected within {which} plus a slack, "
                                f"{ms(limit)} +- {ms(tol)} ({node.period_note})",
-                               (quote(info.can_id, data, ts, note=st.name),))
+                               (quote(info.can_id, data, ts, note=st.name),),
+                               subject=f"the first {st.name} after {node.event_what}",
+                               expected=f"within {which} plus a slack, {ms(limit)} +- {ms(tol)}",
+                               measured_s=start - node.event_ts, expected_s=limit)  # type: ignore[operator]
 
     # ------------------------------------------------------------------------------------- R19 (R17): resets
     def _reset(self, out, sign: Reset, ts: float, node: Node, frames: tuple[str, ...]):
@@ -412,12 +433,13 @@ class BusRules(Tracker):
         are not reported (a capture, ``power_known`` False) the bench may have switched the power meanwhile: recorded."""
         if self.power_known:
             return self._violation(out, (sign.rule, "R17"), ts, node.id, "reset",
-                                   f"a reset the host did not make: {sign.text}", frames)
+                                   f"a reset the host did not make: {sign.text}", frames,
+                                   subject=f"a reset the host did not make ({sign.what})", expected="no reset")
         self._observe((sign.rule, "R17"), ts, node.id, "reset-unjudged",
                       f"a reset, unless the power was switched (a capture does not show it): {sign.text}", frames)
         return out
 
-    def _report_restart(self, out, st: Stream, info: FrameId, node: Node, data, ts: float, start: float, tid: int):
+    def _report_restart(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, start: float, tid: int):
         """R19: a report gap with a transfer id restart (every report of a periodic stream kept in its node's
         :class:`~.resets.ResetSigns`), judged between two reports of one stream with no host event between them that
         restarts reporting or may re-address the node (MSG Control, CAN Test, a Set Freq write or answer, Set ID: the
@@ -486,14 +508,16 @@ class BusRules(Tracker):
             return self._violation(out, ("F4",), ts, node.id, "response-match",
                                    f"{info.label} to node {requester} with transfer id {tid}; node {requester}'s requests "
                                    f"to node {info.source} in the last {RESPONSE_WINDOW_S:g} s had transfer ids "
-                                   f"{sorted(set(asked))} (a response keeps its request's)", frames)
+                                   f"{sorted(set(asked))} (a response keeps its request's)", frames,
+                                   subject=f"{info.label}'s transfer id", expected="a response keeps its request's")
         others = sorted({k[0] for k, q in self._requests.items() if k[1:] == key[1:] and k[0] != requester
                          and any(0 <= ts - when <= RESPONSE_WINDOW_S for _, when in q)})
         text = (f"{info.label} to node {requester}, but node {requester} sent no {info.spec.title} request to node "  # type: ignore[union-attr]
                 f"{info.source} in the last {RESPONSE_WINDOW_S:g} s" + (f" (node(s) {others} did)" if others else ""))
         if self.complete:  # every frame since the bus started was heard: the request was not missed
             return self._violation(out, ("F4",), ts, node.id, "response-match", text + ": a response goes to the requester",
-                                   frames)
+                                   frames, subject=f"{info.label} to a node that sent no {info.spec.title} request",  # type: ignore[union-attr]
+                                   expected="a response goes to the requester")
         self._observe(("F4",), ts, node.id, "response-unmatched", text + " (the capture may have missed it)", frames)
         return out or _NONE
 

@@ -10,14 +10,14 @@ from typing import Any
 
 from ..protocol.ids import HOST_NODE_ID
 from .rules import BusRules
-from .tracker import Heard
+from .tracker import TimingEvidence
 
 
-def heard(frames: list, *, host: int, node: int | None, tolerance: float = 0.0) -> Heard:
+def heard(frames: list, *, host: int, node: int | None, tolerance: float = 0.0) -> TimingEvidence:
     """What the tracker pairs over ``frames`` (decoded, in order, with their bus timestamps: ``Dut.trace``):
     ``host``'s frames are the host's own (their echo); intervals and MSG1 of ``node`` only."""
     rules = BusRules(tolerance=tolerance, complete=True, power_known=True, host_nodes={HOST_NODE_ID, host})
-    rules.heard = Heard(node=node)
+    rules.heard = TimingEvidence(node=node)
     for f in frames:
         if f.timestamp is not None:
             rules.feed(f.can_id, f.data, f.timestamp, own=f.source == host)
@@ -25,6 +25,6 @@ def heard(frames: list, *, host: int, node: int | None, tolerance: float = 0.0) 
 
 
 def evidence(frames: list, *, host: int, node: int | None, comm_loss: bool = False) -> dict[str, Any]:
-    """A test's ``evidence`` in results.json (:class:`~.tracker.Heard`'s fields; with ``comm_loss``, R8's
+    """A test's ``evidence`` in results.json (:class:`~.tracker.TimingEvidence`'s fields; with ``comm_loss``, R8's
     timeline): what :func:`heard` pairs over its frames."""
     return heard(frames, host=host, node=node).to_json(comm_loss=comm_loss)

@@ -10,7 +10,7 @@
 * **report-interval targets**: per node the MSG1..MSG3 intervals it last stated in a Set/Get Freq answer, and
   the events after which a report's cadence restarts (MSG Control, CAN Test, Set ID, Set Freq writes, R9a
   restarts, silences long enough for a power cycle);
-* with :attr:`Tracker.heard` set, a record of what it paired (:class:`Heard`: answer delays, the report
+* with :attr:`Tracker.heard` set, a record of what it paired (:class:`TimingEvidence`: answer delays, the report
   intervals the rules judged against a stated target, the R8 timeline).
 
 The rules' docstring (:mod:`.rules`) says what each of these means for a verdict.
@@ -92,7 +92,7 @@ def field_value(data, f) -> int:
 
 
 @dataclass
-class Heard:
+class TimingEvidence:
     """What the tracker paired while :attr:`Tracker.heard` was set, as the report's plots draw it (seconds):
 
     * ``answers``: ``{node: {request: [delay]}}``: each answer matched with the request it answers (its first
@@ -173,7 +173,7 @@ class Node:
         return "+".join(r for r, on in (("esc", self.esc), ("host", self.host)) if on) or "foreign"
 
 
-class Stream:
+class EscStream:
     """One (node, message type) of an ESC: transfer ids (F3) and intervals (R9)."""
 
     __slots__ = ("node", "type_id", "name", "interval", "periodic", "ts", "start", "busy_from", "tid", "data", "can_id",
@@ -255,7 +255,7 @@ class Tracker(Findings):
         self.last_ts = -math.inf
         self._nodes: dict[int, Node] = {}
         self._ids: dict[int, FrameId] = {}
-        self._streams: dict[tuple[int, int], Stream] = {}
+        self._streams: dict[tuple[int, int], EscStream] = {}
         self._requests: dict[tuple, deque] = {}
         super().__init__()
         self._last_throttle: tuple[float, str, int] | None = None
@@ -279,7 +279,7 @@ class Tracker(Findings):
         #: 241 requests' options by (requester, node asked, transfer id): their answers' layout (R19's counters)
         self._maintenance: dict[tuple[int, int | None, int], int] = {}
         #: what the tracker paired, for the report's plots: None (the default) records nothing
-        self.heard: Heard | None = None
+        self.heard: TimingEvidence | None = None
 
     # ------------------------------------------------------------------------------------- setup
     def set_bitrate(self, bitrate: int) -> None:
@@ -484,7 +484,7 @@ class Tracker(Findings):
         if self.heard is not None and delay is not None:
             self.heard.answer(node.id, info.spec.name, delay)  # type: ignore[union-attr]
 
-    def _heard_interval(self, st: Stream, node: Node, gap: float) -> None:
+    def _heard_interval(self, st: EscStream, node: Node, gap: float) -> None:
         """Report interval ``gap`` of ``st``, judged against the interval ``node`` stated (R9), for the plots."""
         period = node.periods[st.interval]  # type: ignore[index]
         if period is not None and self.heard.mine(node.id):  # type: ignore[union-attr]

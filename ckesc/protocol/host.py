@@ -4,18 +4,18 @@
     wire, pending = host.request("set_freq", {"option": 0, ...}, destination=5, now=t, timeout=0.1)
     ...put wire on the bus...
     for event in host.receive(msg, now):          # every frame heard
-        ...Response(pending, frame) / Heard(frame) / Garbled(msg, error)...
+        ...Response(pending, frame) / Overheard(frame) / Garbled(msg, error)...
     for event in host.expire(now): ...             # TimedOut(pending) once a deadline passes
 
 A response matches a request when it carries the same service id and transfer id, comes from the
 node the request went to and is addressed to this host (F4, :func:`.judgements.f4_mismatches`). A
 response that matches in all but one of those is still reported as :class:`Response` with
-``mismatch`` naming what differs (:func:`.judgements.f4_pairs`), so a suite can fail it with a
-clear message instead of timing out.
+``mismatch`` naming what differs, so a suite can fail it with a clear message instead of timing out.
+Which request a response answers is :func:`.judgements.f4_answers`'s to say (the rule written once).
 
 The host need not be alone on the bus (a flight controller, F6): a request another node sent is remembered
 (:attr:`HostProtocol.others`, the latest :data:`OTHERS_KEPT`), and a response that answers it (its service id and
-transfer id, from the node it asked, addressed to that node: F4) is that node's, :class:`Heard`, never paired
+transfer id, from the node it asked, addressed to that node: F4) is that node's, :class:`Overheard`, never paired
 with one of this host's requests as a misaddressed answer.
 """
 
@@ -28,7 +28,7 @@ from typing import Any, Mapping
 from .errors import DecodeError
 from .frame import Decoder, Frame, WireFrame, encode
 from .ids import Kind
-from .judgements import asked_node, f4_mismatches, f4_pairs
+from .judgements import asked_node, f4_answers, f4_mismatches
 from .transfer import TransferIdCounter
 
 #: How many of other nodes' requests the host remembers (their answers come within ~64 ms)
@@ -57,7 +57,7 @@ class Response:
 
 
 @dataclass
-class Heard:
+class Overheard:
     frame: Frame
 
 
@@ -107,7 +107,7 @@ class HostProtocol:
         return wire, pending
 
     # -------------------------------------------------------------- incoming
-    def receive(self, msg: Any) -> list[Response | Heard | Garbled]:
+    def receive(self, msg: Any) -> list[Response | Overheard | Garbled]:
         try:
             frame = self.decoder.decode(msg)
         except DecodeError as exc:
@@ -116,26 +116,21 @@ class HostProtocol:
             self.others.append((frame.type_id, frame.transfer_id, frame.source, frame.destination))
         elif (frame.kind is Kind.RESPONSE and frame.destination != self.node_id
               and (frame.type_id, frame.transfer_id, frame.destination, frame.source) in self.others):
-            return [Heard(frame)]  # another node's answer to its own request
+            return [Overheard(frame)]  # another node's answer to its own request
         if frame.kind is Kind.RESPONSE or (frame.kind is Kind.REQUEST and frame.source != self.node_id):
             match = self._match(frame)
             if match is not None:
                 return [match]
-        return [Heard(frame)]
+        return [Overheard(frame)]
 
     def _match(self, frame: Frame) -> Response | None:
-        best: tuple[int, Pending, list[str]] | None = None
-        for p in self.pending:
-            if p.service != frame.type_id:
-                continue
-            mismatch = f4_mismatches(frame, service=p.service, transfer_id=p.transfer_id, requester=self.node_id,
-                                     asked=asked_node(p.name, p.destination))
-            if best is None or len(mismatch) < best[0]:
-                best = (len(mismatch), p, mismatch)
-        if best is None or not f4_pairs(best[2]):
+        asked = [(p.service, p.transfer_id, self.node_id, asked_node(p.name, p.destination)) for p in self.pending]
+        i = f4_answers(frame, asked)
+        if i is None:
             return None
-        _, p, mismatch = best
-        self.pending.remove(p)
+        p = self.pending.pop(i)
+        service, transfer_id, requester, node = asked[i]
+        mismatch = f4_mismatches(frame, service=service, transfer_id=transfer_id, requester=requester, asked=node)
         if frame.kind is Kind.RESPONSE and len(p.fields) and frame.layout is not None and frame.layout.name == "response":
             # a response whose layout depends on the request (241): decode it again with the request
             spec = frame.spec

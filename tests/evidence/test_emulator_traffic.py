@@ -3,9 +3,13 @@ breaks a bus rule is caught by that rule, citing a requirement the fault names."
 
 from __future__ import annotations
 
+import json
+from dataclasses import replace
+
 import pytest
 
 from ckesc.emulator.faults import FAULTS
+from ckesc.evidence.live import cause_key, cause_what
 
 from .traffic import scripted_run
 
@@ -61,6 +65,19 @@ def test_each_fault(fault):
             assert rules & set(FAULTS[fault].rules), f"{check} cites {sorted(rules)}, the fault breaks {FAULTS[fault].rules}"
     for v in run.violations:
         assert v.frames and v.message and v.strength in ("SHALL", "READING")
+        assert v.subject and v.expected, f"{v.check}: its cause as fields (subject, expected)"
+
+
+def test_a_cause_is_read_from_the_violations_fields_not_its_message():
+    """A violation's cause (its key and its one line) comes from its fields: the message may say anything."""
+    run = scripted_run(NODES, ("report_interval_wrong",))
+    [v, *_] = [v for v in run.violations if v.check == "report-interval" and v.subject == "msg1"]
+    assert v.measured_s is not None and v.expected_s == pytest.approx(0.02)
+    what = cause_what(v)
+    assert what.startswith(f"MSG1 of node {v.node} every ") and what.endswith(", not 20 ms"), what
+    reworded = replace(v, message="something else entirely, 12.5 ms (see above)")
+    assert cause_key(reworded) == cause_key(v) and cause_what(reworded) == what
+    assert json.loads(json.dumps(v.to_json()))["expected_s"] == v.expected_s, "check-log --json carries the fields"
 
 
 def test_an_esc_answering_dronecan_is_observed():

@@ -34,7 +34,7 @@ from ckesc.soak.monitor import Monitor
 from ckesc.soak.watch import WatchConfig
 from conformance.answers import esc_id_pairings
 from conformance.test_s4_1_framing import counter_streams, counting_problems
-from conformance.wire import Heard
+from conformance.wire import HeardFrame
 
 NODE = 5
 BOOT_S = 0.25
@@ -140,7 +140,7 @@ STUCK, EXPECTED = "transfer id 0 after 0", "expected 1"
 def _f3_conformance(heard) -> set[str]:
     """As ``test_transfer_ids_count_per_frame_type`` judges one unbroken capture: every counter's consecutive frames."""
     decoder = Decoder()
-    frames = [Heard.of_frame(decoder.decode(m)) for m in heard]
+    frames = [HeardFrame.of_frame(decoder.decode(m)) for m in heard]
     msg1 = counter_streams(frames)[(NODE, cat.spec("msg1").type_id)]
     problems, pairs, _ = counting_problems(msg1)
     assert pairs > 32

@@ -335,6 +335,26 @@ def test_comm_loss_events():
     assert [e["timestamp"] for e in events] == [pytest.approx(0.04), pytest.approx(0.08)]
 
 
+def test_intervals_are_the_one_histogram_read_by_its_bins_middles():
+    """The bus rules' intervals are the project's one Histogram (issue #35), read by a bin's middle within [min, max]
+    as check-log's figures always were; the soak's reading of the same values is the bin's upper edge. A gap of
+    20 ms computed with float noise counts in the 20.0 bin."""
+    from ckesc.protocol.histogram import Histogram
+
+    stats, upper = Intervals(), Histogram(0.0005, 1200)
+    assert isinstance(stats, Histogram)
+    for gap in (0.0201, 0.0202, 0.0203, 0.0204, 0.021 - 1e-12):
+        stats.add(gap)
+        upper.add(gap)
+    assert stats.quantile(0.5) == pytest.approx(0.02025) and upper.quantile(0.5) == pytest.approx(0.0205)
+    assert stats.to_json()["histogram"] == {"20.0": 4, "21.0": 1} and stats.to_json()["p50_ms"] == 20.25
+    low, high = Intervals(), Intervals()
+    low.add(0.0204), low.add(0.0204), high.add(0.0201), high.add(0.0201)
+    assert low.quantile(0.5) == pytest.approx(0.0204), "never above the maximum"
+    high.add(0.0209)
+    assert high.quantile(0.0) == pytest.approx(0.02025) and Intervals().quantile(0.5) is None
+
+
 def test_memory_is_bounded():
     """Statistics are fixed-size; a capture of ever new CAN ids does not grow the id cache without bound."""
     from ckesc.evidence import findings, tracker
@@ -342,7 +362,7 @@ def test_memory_is_bounded():
     stats = Intervals()
     for i in range(10_000):
         stats.add(i * 0.001)
-    assert len(stats.hist) == findings.HIST_BINS + 1 and stats.to_json()["histogram"]["overflow"] == 9400
+    assert len(stats.counts) == findings.HIST_BINS + 1 and stats.to_json()["histogram"]["overflow"] == 9400
     engine = BusRules()
     for i in range(tracker.ID_CACHE + 1000):
         engine.feed(0x10000000 | i << 8 | 5, b"\xc0", i * 1e-4)

@@ -8,7 +8,7 @@ import pytest
 
 from ckesc.evidence import BusRules
 from ckesc.evidence.timing import evidence
-from ckesc.evidence.tracker import Heard
+from ckesc.evidence.tracker import TimingEvidence
 from ckesc.protocol.frame import decode, encode
 
 from .test_rules import BITRATE, INTERVALS, READ, feed, msg1
@@ -29,7 +29,7 @@ def _trace():
 
 def test_the_plot_draws_what_the_rules_judged():
     rules = BusRules(bitrate=BITRATE, complete=True)
-    rules.heard = Heard(node=1)
+    rules.heard = TimingEvidence(node=1)
     found = [v for wire, t in _trace() for v in feed(rules, wire, t)]
     # the rules: one MSG1 30 ms after the previous one, expected 20 ms
     assert [v.check for v in found] == ["report-interval"] and "30.000 ms after" in found[0].message
@@ -49,7 +49,7 @@ def test_a_tests_evidence_is_the_trackers_over_its_decoded_frames():
         trace.append(f)
     ev = evidence(trace, host=0, node=1)
     rules = BusRules(bitrate=BITRATE, complete=True)
-    rules.heard = Heard(node=1)
+    rules.heard = TimingEvidence(node=1)
     for wire, t in _trace():
         feed(rules, wire, t)
     assert ev == rules.heard.to_json()

@@ -169,7 +169,7 @@ def test_the_host_leaves_another_nodes_answer_alone():
     as this host: the ESC's answer to node 10 is node 10's (F4: addressed to it, answering its request), never paired
     with this host's request as a misaddressed answer; the answer to this host still is."""
     from ckesc.protocol.frame import encode
-    from ckesc.protocol.host import Heard, HostProtocol, Response
+    from ckesc.protocol.host import HostProtocol, Overheard, Response
 
     host = HostProtocol(0)
     fields = dict(cat.FREQ_READ)
@@ -178,8 +178,8 @@ def test_the_host_leaves_another_nodes_answer_alone():
     answer = {"option": 0, "msg1_interval": 10, "msg2_interval": 50, "msg3_interval": 250}
     to_them = encode("set_freq", answer, kind=Kind.RESPONSE, source=1, destination=10, transfer_id=3)
     to_us = encode("set_freq", answer, kind=Kind.RESPONSE, source=1, destination=0, transfer_id=3)
-    assert isinstance(host.receive(theirs)[0], Heard)
-    assert isinstance(host.receive(to_them)[0], Heard) and host.pending == [pending]
+    assert isinstance(host.receive(theirs)[0], Overheard)
+    assert isinstance(host.receive(to_them)[0], Overheard) and host.pending == [pending]
     got = host.receive(to_us)[0]
     assert isinstance(got, Response) and got.pending is pending and got.mismatch == []
 

@@ -234,6 +234,29 @@ def test_f4_reads_a_raw_id_too():
     assert J.f4_mismatches(raw, service=f.type_id, transfer_id=3, requester=0, asked=5) == []
 
 
+def test_f4_the_host_pairs_a_response_as_f4_answers_says():
+    """The host's pairing (``HostProtocol._match``) is F4's one rule: an exact answer wins over an open request it
+    is one field off from, one field off still pairs (named), two fields off pairs with none."""
+    from ckesc.protocol.host import HostProtocol, Overheard, Response
+
+    fields = {"option": 0, "msg1_interval": 10, "msg2_interval": 50, "msg3_interval": 250}
+    for kw, expect in ((dict(transfer_id=1), 1), (dict(transfer_id=0, source=6), 0), (dict(transfer_id=2), 0),
+                       (dict(transfer_id=2, source=6), None)):
+        host = HostProtocol(node_id=0)
+        pending = [host.request("set_freq", fields, destination=5, now=0.0, timeout=1.0)[1] for _ in range(2)]
+        assert [p.transfer_id for p in pending] == [0, 1]
+        answer = _answer(**kw)
+        asked = [(p.service, p.transfer_id, 0, J.asked_node(p.name, p.destination)) for p in pending]
+        assert J.f4_answers(answer, asked) == expect, kw
+        got = host.receive(encode("set_freq", fields, kind="response", source=kw.get("source", 5), destination=0,
+                                  transfer_id=kw["transfer_id"]))[0]
+        if expect is None:
+            assert isinstance(got, Overheard) and host.pending == pending, kw
+        else:
+            assert isinstance(got, Response) and got.pending is pending[expect], kw
+            assert bool(got.mismatch) == (kw != dict(transfer_id=1)), kw
+
+
 def test_judgement_is_a_frozen_record_with_its_text():
     j = J.r9a_first(0.030, 0.025, what="the first MSG1")
     with pytest.raises(AttributeError):
