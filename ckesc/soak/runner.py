@@ -284,6 +284,9 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             "watches": {w.name: {"rules": list(w.rules), "events": w.events, "trials": w.trials,
                                  "statistics": w.statistics()} for w in monitor.watches},
             "r9_per_minute_ms": monitor.intervals.series,
+            # what the bus reader the watches take their events from kept (its own violations are the suite's per-frame
+            # reading, not the soak's findings: the soak judges the properties above)
+            "bus_reader": monitor.rules.summary(),
             "trace": trace.to_json() if trace is not None else None,
             "findings": [f.to_json() for f in monitor.findings], "findings_not_kept": monitor.dropped,
             "statement": [s.to_json() for s in statements],
