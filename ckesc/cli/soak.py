@@ -148,5 +148,5 @@ def _batch(args: argparse.Namespace, given: dict) -> int:
         soak.append("--stop-on-finding")
     try:
         return batch.run_batch(args.rig, args.benches, soak, args.reports, given=given, quiet=args.quiet)
-    except batch.BatchError as exc:
+    except batch.SoakBatchError as exc:
         raise UsageError(str(exc)) from None

@@ -136,6 +136,10 @@ class BusRules(Tracker):
             signs = self._resets[node.id] = ResetSigns(error=self.tolerance, jitter=self.jitter)
         return signs
 
+    def reset_signs(self, node_id: int) -> ResetSigns | None:
+        """Node ``node_id``'s reset bookkeeping (its resets counted, its 241 counters' last readings), None: none yet."""
+        return self._resets.get(node_id)
+
     # ------------------------------------------------------------------------------------- the hot path
     def feed(self, can_id: int, data, ts: float, extended: bool = True, remote: bool = False, error: bool = False,
              own: bool = False) -> list[Violation] | tuple:
@@ -212,7 +216,7 @@ class BusRules(Tracker):
             looks_esc = layout is not None and layout.sender == "esc"
             if looks_esc and info.source not in self._host_nodes and not node.host:
                 node.esc = True
-                self._query_reply(info, node, ts)
+                self._query_reply(info, node, data, ts)
         if node.esc and not node.host:
             return self._esc_frame(info, node, data, ts, start, busy_from, remote)
         if not looks_esc:
@@ -267,6 +271,9 @@ class BusRules(Tracker):
             return self._response(out, info, node, data, ts, tid)
         if info.type_id == MSG1.type_id and len(data) > COMM_BYTE:
             self._comm_flag(node, bool(data[COMM_BYTE] & COMM_MASK), ts)
+            if self.events is not None:
+                self.events.msg1(ts, node.id, bool(data[COMM_BYTE] & COMM_MASK),
+                                 None if self._last_throttle is None else self._last_throttle[0])
             if self.heard is not None and self.heard.mine(node.id):
                 self.heard.msg1.append([ts, bool(data[COMM_BYTE] & COMM_MASK)])
         if info.stream_key is not None and tid is not None:
@@ -430,7 +437,10 @@ class BusRules(Tracker):
         ESC"): the bus cannot tell what set it off (a malformed frame, a long stream, nothing), and a reset in the middle
         of a test that asked for none breaks both, so it cites both, as the soak's reset watch does; the selftest then
         takes it as a test failing for the fault's rule whichever of the two a reset fault names. Where power cycles
-        are not reported (a capture, ``power_known`` False) the bench may have switched the power meanwhile: recorded."""
+        are not reported (a capture, ``power_known`` False) the bench may have switched the power meanwhile: recorded.
+        Told to the consumer (:meth:`.events.ReaderEvents.reset`) either way."""
+        if self.events is not None:
+            self.events.reset(ts, node.id, sign, self._signs(node))
         if self.power_known:
             return self._violation(out, (sign.rule, "R17"), ts, node.id, "reset",
                                    f"a reset the host did not make: {sign.text}", frames,
@@ -450,10 +460,13 @@ class BusRules(Tracker):
         period = node.periods[st.interval] if st.interval is not None else None
         if period is None and st.min_gap < math.inf:
             period = st.min_gap
-        sign = self._signs(node).report(info.type_id, start, tid, period, what=st.name, judge=judge)
-        if sign is None:
-            return out
-        return self._reset(out, sign, ts, node, self._pair(st, info, data, ts))
+        signs = self._signs(node)
+        sign = signs.report(info.type_id, start, tid, period, what=st.name, judge=judge)
+        if sign is not None:
+            out = self._reset(out, sign, ts, node, self._pair(st, info, data, ts))
+        if self.events is not None:
+            self.events.report(ts, node.id, st.name, signs.restarted)
+        return out
 
     def _counters(self, out, info: FrameId, node: Node, data, ts: float, asked: float):
         """R19: a 241 answer (option 2: the power-up count; option 1: the run time) against the node's last one of that
@@ -466,6 +479,8 @@ class BusRules(Tracker):
         if f is None or len(data) <= f.offset + f.size or node.shared:
             return out
         value = field_value(data, f)
+        if self.events is not None:
+            self.events.counter(ts, node.id, f.name, value)
         # each reading kept with its request's time, the tracker's power switches, the node's Set ID count and chain
         signs = self._signs(node)
         before = signs.last(f.name)

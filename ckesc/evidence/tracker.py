@@ -27,6 +27,7 @@ from ..protocol import catalogue as cat
 from ..protocol.frame import classify, frame_bits
 from ..protocol.ids import ESC_NODE_IDS, HOST_NODE_ID, MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind
 from ..protocol.transfer import tail_transfer_id
+from .events import ReaderEvents
 from .findings import KEEP, Findings, Intervals, quote
 from .pairing import QueryPairing
 
@@ -240,7 +241,7 @@ class Tracker(Findings):
     """The traffic's state, fed by :class:`.rules.BusRules` (which judges it); see the module docstring."""
 
     def __init__(self, *, tolerance: float = 0.0, bitrate: int = cat.DEFAULT_BITRATE, complete: bool = False,
-                 host_nodes=(HOST_NODE_ID,), jitter: float = 0.0, power_known: bool = False) -> None:
+                 host_nodes=(HOST_NODE_ID,), jitter: float = 0.0, power_known: bool = False, own_error: float = 0.0) -> None:
         self.tolerance = max(float(tolerance), 1e-9)
         self.jitter = max(float(jitter), 0.0)
         self.complete = complete
@@ -263,7 +264,13 @@ class Tracker(Findings):
         self._answered: dict[int, int] = {}
         #: which GET_ESC_ID query each reply answers, from any node: another host on the bus (a flight controller, F6)
         #: queries too, and the ESC may answer both (the one owner of that decision)
-        self.queries = QueryPairing(error=self.tolerance, host=min(self._host_nodes, default=HOST_NODE_ID))
+        #: ``own_error``: the error of the stamps on the host's own frames (a query's), where larger than ``tolerance``
+        self.queries = QueryPairing(error=max(self.tolerance, own_error), host=min(self._host_nodes, default=HOST_NODE_ID))
+        #: the throttle commands heard (any host's), the longest gap between two, and the gaps longer than the comm-loss
+        #: time (R8: the ESC may then flag it)
+        self.commands = 0
+        self.longest_command_gap = 0.0
+        self.command_gaps = 0
         self._set_id_ts = -math.inf  # the last Set ID: a node id not heard since may have been left by its ESC
         self._bus_end = -math.inf
         self._busy_from = -math.inf
@@ -280,6 +287,8 @@ class Tracker(Findings):
         self._maintenance: dict[tuple[int, int | None, int], int] = {}
         #: what the tracker paired, for the report's plots: None (the default) records nothing
         self.heard: TimingEvidence | None = None
+        #: a consumer of the reader's events (:class:`.events.ReaderEvents`): None (the default) tells none
+        self.events: ReaderEvents | None = None
 
     # ------------------------------------------------------------------------------------- setup
     def set_bitrate(self, bitrate: int) -> None:
@@ -335,6 +344,15 @@ class Tracker(Findings):
         node.reset += 1
         node.event_reset, node.event_ts, node.event_what, node.event_old = node.reset, ts, what, old
 
+    def stated(self, node_id: int, periods: dict[str, float], what: str) -> None:
+        """Node ``node_id`` stated its MSG1..MSG3 intervals (seconds, by report name: ``msg1``) in a read answer the
+        reader was not fed (the soak's settings, read before its run): taken as if it had heard it (``what`` says where
+        from, for messages)."""
+        node = self._node(node_id)
+        node.periods = [periods.get(k.removesuffix("_interval")) for k in INTERVAL_FIELDS]
+        node.floor, node.from_read, node.before_silence = True, True, False
+        node.period_note = what
+
     def power_switched(self, ts: float) -> None:
         """The host switched the DUT's power (off or on) at ``ts``: a pending R9a event is void (the first
         report after a power-up is the boot's, not the command's); the next stretch has R9a-gaps grace."""
@@ -375,10 +393,20 @@ class Tracker(Findings):
             if type_id in THROTTLE:
                 if self.heard is not None:
                     self.heard.commands.append(ts)
+                last = self._last_throttle
+                if last is not None:
+                    gap = ts - last[0]
+                    if gap > self.longest_command_gap:
+                        self.longest_command_gap = gap
+                    if gap > cat.COMM_LOSS_TIMEOUT_S:
+                        self.command_gaps += 1
+                self.commands += 1
                 self._last_throttle = (ts, info.label, type_id)
                 return
             if type_id == GET_ESC_ID.type_id:  # a query: every ESC answers it once
                 self.queries.query(ts, info.source)
+                if self.events is not None:
+                    self.events.query(ts, info.source)
             switch = REPORTING_SWITCHES.get(type_id)
             if switch is not None and len(data) > switch[0].offset + switch[0].size and field_value(data, switch[0]) in switch[1]:
                 value = field_value(data, switch[0])
@@ -469,13 +497,15 @@ class Tracker(Findings):
         self._paired.add(pair)
         self.heard.answer(info.source, info.spec.name, ts - when)  # type: ignore[union-attr]
 
-    def _query_reply(self, info: FrameId, node: Node, ts: float) -> None:
+    def _query_reply(self, info: FrameId, node: Node, data, ts: float) -> None:
         """An ESC's GET_ESC_ID reply: the query it answers (:class:`.pairing.QueryPairing`). None while queries it
         could have answered by time were open: this node id answered them all already, so a second ESC shares it
         (4.4.18-2); none with no query open (one the capture missed, or nobody's) says nothing of the id. Its delay
         when it answers one query only."""
         open_ = bool(self.queries.open(ts))
         p = self.queries.reply(ts, node.id)
+        if self.events is not None:
+            self.events.reply(ts, node.id, p, info.can_id, bytes(data))
         if p.none:
             if open_:
                 self._shared(node, ts)

@@ -41,7 +41,7 @@ from .statement import duration_text
 POLL_S = 0.2
 
 
-class BatchError(ValueError):
+class SoakBatchError(ValueError):
     """A batch that cannot start: the rig file, a bench's power, bench options given with --rig (exit 2)."""
 
 
@@ -90,20 +90,20 @@ def end_text(code: int, figures: dict[str, Any]) -> str:
 
 
 def plan(rig_file: str, names: str | None, given: dict[str, Any]) -> tuple[rigs.Rig, list[rigs.Bench]]:
-    """The rig and its chosen benches (:class:`BatchError`: the rig file's mistake, a bench option given on the
+    """The rig and its chosen benches (:class:`SoakBatchError`: the rig file's mistake, a bench option given on the
     command line, a bench whose power asks an operator)."""
     for dest, value in given.items():
         o = options.BY_DEST[dest]
         if value not in (o.default_on(run=True), None, [], "", False):
-            raise BatchError(f"{o.run_flags[0]} is set per bench in the rig file ({o.rig}; with --rig, the rig says it)")
+            raise SoakBatchError(f"{o.run_flags[0]} is set per bench in the rig file ({o.rig}; with --rig, the rig says it)")
     try:
         rig = rigs.load(rig_file)
         benches = rig.select([b.strip() for b in (names or "").split(",") if b.strip()])
     except rigs.RigError as exc:
-        raise BatchError(str(exc)) from None
+        raise SoakBatchError(str(exc)) from None
     for b in benches:
         if b.power == "manual":
-            raise BatchError(f"bench {b.name}: power 'manual' prompts an operator at the console, which a batch cannot; "
+            raise SoakBatchError(f"bench {b.name}: power 'manual' prompts an operator at the console, which a batch cannot; "
                              f"soak that bench alone: {shlex.join(['ckesc', 'soak', *b.argv()])}")
     return rig, benches
 
@@ -144,7 +144,7 @@ class Console:
 def run_batch(rig_file: str, names: str | None, soak_argv: list[str], reports: str, *, given: dict[str, Any],
               quiet: bool = False, out: TextIO = sys.stdout, wall: Callable[[], float] = time.monotonic) -> int:
     """Soak every chosen bench of ``rig_file`` at once; ``soak_argv``: the soak's own options for each bench (not its
-    bench options nor ``--reports``). The batch's exit status (a :class:`BatchError` before anything started)."""
+    bench options nor ``--reports``). The batch's exit status (a :class:`SoakBatchError` before anything started)."""
     rig, benches = plan(rig_file, names, given)
     batch_dir = run_dir(Path(reports), time.time(), "soak-batch")
     runs = [BenchRun(b.name, b.description, [*b.argv(), *soak_argv], batch_dir / b.name) for b in benches]

@@ -1,17 +1,13 @@
 """The soak's comm-flag watch (R8, R19): MSG1's comm-loss flag set only when the host's stream stops
-(:func:`~ckesc.protocol.judgements.r8_flag_due`)."""
+(:func:`~ckesc.protocol.judgements.r8_flag_due`), each MSG1's flag and the last throttle command as the bus reader
+tells them (:meth:`~ckesc.evidence.events.ReaderEvents.msg1`); the stream's gaps are the reader's statistics."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from ..protocol import catalogue as cat
 from ..protocol import judgements as jd
-from ..protocol.frame import Frame
 from .watch import Monitoring, Watch
-
-#: MSG1's comm-loss flag (R8) as a plain int
-_COMM_FAULT = int(cat.Status.COMM_FAULT)
 
 
 class CommFlagWatch(Watch):
@@ -22,11 +18,8 @@ class CommFlagWatch(Watch):
 
     def __init__(self, monitor: Monitoring) -> None:
         super().__init__(monitor)
-        self.last_command: float | None = None
         self.msg1_since_stream = 0
         self.flagged = False  # inside an episode already found
-        self.stream_gaps = 0  # the host's stream stopped for longer than the comm-loss time
-        self.longest_command_gap = 0.0
         self.flag_set = 0
         interval = self.cfg.intervals.get("msg1")
         #: R8's window opens here after the last command (its judgement's: r8_window_s)
@@ -34,19 +27,8 @@ class CommFlagWatch(Watch):
         self._interval = interval
         self._error = self.cfg.error + self.cfg.own_error
 
-    def command(self, t: float) -> None:
-        if self.last_command is not None:
-            gap = t - self.last_command
-            if gap > self.longest_command_gap:
-                self.longest_command_gap = gap
-            if gap > cat.COMM_LOSS_TIMEOUT_S:
-                self.stream_gaps += 1
-        else:
-            self.msg1_since_stream = 0
-        self.last_command = t
-
-    def msg1(self, frame: Frame, t: float) -> None:
-        if self.last_command is None:
+    def msg1(self, t: float, flag: bool, last_command: float | None) -> None:
+        if last_command is None:
             return
         self.msg1_since_stream += 1
         if self.msg1_since_stream < 2:  # the MSG1 due as the stream began may still show the flag of before it
@@ -54,9 +36,8 @@ class CommFlagWatch(Watch):
         interval = self._interval
         if interval is None:
             return
-        flag = bool(frame.fields.get("status", 0) & _COMM_FAULT)  # (a plain int: IntFlag's & is slow, once per MSG1)
         self.flag_set += flag
-        since = t - self.last_command
+        since = t - last_command
         error = self._error
         if not flag and since < self._early - error:  # well before R8's window, clear: as r8_flag_due wants (hot path)
             self.trials += 1
@@ -71,11 +52,11 @@ class CommFlagWatch(Watch):
             return
         if not self.flagged:
             self.flagged = True
-            since = (t - self.last_command) * 1000
-            self.find(t, f"MSG1 {'shows' if flag else 'lacks'} the comm-loss flag {since:.1f} ms after the last command "
+            self.find(t, f"MSG1 {'shows' if flag else 'lacks'} the comm-loss flag {since * 1000:.1f} ms after the last command "
                       f"({'the stream runs' if not due else 'the stream stopped'})")
 
     def statistics(self) -> dict[str, Any]:
+        rules = self.monitor.rules
         return {"msg1_judged": self.trials, "msg1_with_flag": self.flag_set,
-                "host_stream_gaps_over_200ms": self.stream_gaps,
-                "longest_command_gap_ms": round(self.longest_command_gap * 1000, 3)}
+                "host_stream_gaps_over_200ms": rules.command_gaps,
+                "longest_command_gap_ms": round(rules.longest_command_gap * 1000, 3)}

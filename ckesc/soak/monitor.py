@@ -1,25 +1,30 @@
-"""The soak's monitor, sans-IO: every frame of the run in (with its lane timestamp), the watches fed, findings out.
+"""The soak's monitor, sans-IO: every frame of the run in (with its lane timestamp), read once by the bus reader (one
+:class:`~ckesc.evidence.rules.BusRules`, as the suite's live rules and check-log read the bus: the host's own frames,
+the played foreign traffic, the DUT's), whose events the watches take (:class:`Sinks`); findings out.
 
-One watch owns each property (R19), each calling its rule's judgement in :mod:`ckesc.protocol.judgements`:
+The reader keeps the state of the stateful rules (which query a reply answers, a reset's signs, each report's
+restarts, the last throttle command) and tells it as events (:class:`~ckesc.evidence.events.ReaderEvents`); each watch
+owns one property (R19) and keeps only what the soak alone needs of them, judging with the reader's word or its rule's
+judgement in :mod:`ckesc.protocol.judgements`:
 
-* :class:`~.reset_watch.ResetWatch` - no reset: 241's power-up count does not move, its run time neither goes back
-  nor jumps, no report gap with a transfer id restart (the bus rules' bookkeeping, :mod:`ckesc.evidence.resets`);
+* :class:`~.reset_watch.ResetWatch` - no reset: the reader's reset signs (241's power-up count and run time, a
+  report gap with a transfer id restart; :class:`~ckesc.evidence.resets.ResetSigns`), one finding per reset;
 * :class:`~.interval_watch.IntervalWatch` - R9 over every minute, per report (MSG1..3): the mean of that minute's
-  gaps, less those R9a leaves unjudged after a restart (:func:`~ckesc.protocol.judgements.r9_mean`); the trend is
-  one mean per minute and report;
+  gaps, less those R9a leaves unjudged after a restart the reader told (:func:`~ckesc.protocol.judgements.r9_mean`);
+  the trend is one mean per minute and report;
 * :class:`~.comm_watch.CommFlagWatch` - the comm flag (MSG1's status, R8) set only when the stream stops
-  (:func:`~ckesc.protocol.judgements.r8_flag_due`);
+  (:func:`~ckesc.protocol.judgements.r8_flag_due`, from the last command the reader heard);
 * :class:`~.watches.AnswerWatch` - GET_ESC_ID's answers in the node's slot (R2) and within 64 ms (4.4.3-4), their
-  delays as a fixed-bin histogram (another node's query, a flight controller's on the bus, is answered too: its
-  answer is neither the host's nor one to no query);
+  delays as a fixed-bin histogram; which query a reply answers is the reader's (another node's query, a flight
+  controller's on the bus, is answered too: its answer is neither the host's nor one to no query);
 * :class:`~.frame_watches.SettingsWatch` - 242's answers unchanged (:func:`~ckesc.protocol.judgements.r13_read_back`);
 * :class:`~.frame_watches.UnexpectedWatch` - frames the ESC should not send: one that does not decode, or a frame
   type normal reporting never sends and the player never asked for.
 
-Memory does not grow with the run's length: counters, fixed-bin histograms, the last value of each counter, a ring
-of recent frames (:data:`~.watch.RING_FRAMES`), at most :data:`~.watch.MAX_FINDINGS` findings kept whole (the rest
-counted), and the R9 trend, one value per minute and report (1440 a day: the one thing that grows, as the trend
-plot needs it).
+Memory does not grow with the run's length: the reader's is bounded (counters, fixed-bin histograms, bounded caches),
+and so are the watches' (counters, fixed-bin histograms, the last value of each counter), a ring of recent frames
+(:data:`~.watch.RING_FRAMES`), at most :data:`~.watch.MAX_FINDINGS` findings kept whole (the rest counted), and the
+R9 trend, one value per minute and report (1440 a day: the one thing that grows, as the trend plot needs it).
 """
 
 from __future__ import annotations
@@ -27,16 +32,27 @@ from __future__ import annotations
 from collections import deque
 from typing import Any
 
-from ..protocol import catalogue as cat
+from ..evidence.events import ReaderEvents
+from ..evidence.rules import BusRules
 from ..protocol.errors import DecodeError
 from ..protocol.frame import Decoder, Frame, classify
 from ..protocol.histogram import Histogram
-from ..protocol.ids import Kind
+from ..protocol.ids import HOST_NODE_ID, Kind
 from .comm_watch import CommFlagWatch
 from .frame_watches import SettingsWatch, UnexpectedWatch
 from .interval_watch import IntervalWatch
 from .reset_watch import ResetWatch
-from .watch import AFTER_FRAMES, MAX_FINDINGS, MAX_FINDINGS_PER_WATCH, MAX_IDS, REPORTS, RING_FRAMES, Finding, Watch, WatchConfig
+from .watch import (
+    AFTER_FRAMES,
+    MAX_FINDINGS,
+    MAX_FINDINGS_PER_WATCH,
+    MAX_IDS,
+    REPORTS,
+    RING_FRAMES,
+    SoakFinding,
+    Watch,
+    WatchConfig,
+)
 from .watches import AnswerWatch
 
 #: the host's send times kept per frame (id and bytes) until its echo comes back (the stream's repeat every 32 transfers)
@@ -56,10 +72,10 @@ class Monitor:
         self.t0 = t0
         self.decoder = Decoder(nibble_order=cfg.nibble_order)
         self.ring: deque[tuple[float, int, bytes]] = deque(maxlen=RING_FRAMES)
-        self.findings: list[Finding] = []
+        self.findings: list[SoakFinding] = []
         self.dropped = 0  # findings counted but not kept
         self._kept: dict[str, int] = {}  # findings kept per watch
-        self._open: list[tuple[Finding, int]] = []  # findings still collecting frames after them
+        self._open: list[tuple[SoakFinding, int]] = []  # findings still collecting frames after them
         self.frames = 0
         self.dut_frames = 0
         self.own_frames = 0
@@ -78,6 +94,12 @@ class Monitor:
         self.unexpected = UnexpectedWatch(self)
         self.watches: tuple[Watch, ...] = (self.resets, self.intervals, self.comm, self.answers, self.settings,
                                            self.unexpected)
+        #: the bus reader, fed every frame: the bench's stated error (its own frames' too), the DUT's declared jitter,
+        #: power switched by nobody during the run (a reset is one), the intervals the DUT stated at the start
+        self.rules = BusRules(tolerance=cfg.error, own_error=cfg.own_error, bitrate=cfg.bitrate, jitter=cfg.jitter,
+                              host_nodes=(HOST_NODE_ID, cfg.host_node), power_known=True)
+        self.rules.stated(cfg.node_id, dict(cfg.intervals), "its Set/Get Freq settings read at the soak's start")
+        self.rules.events = Sinks(self)
 
     # ------------------------------------------------------------------ findings
     def found(self, watch: Watch, t: float, message: str, rules: tuple[str, ...]) -> None:
@@ -86,7 +108,7 @@ class Monitor:
             self.dropped += 1
             return
         self._kept[watch.name] = kept + 1
-        f = Finding(t - self.t0, watch.name, rules, message, [self._line(*r) for r in self.ring])
+        f = SoakFinding(t - self.t0, watch.name, rules, message, [self._line(*r) for r in self.ring])
         self.findings.append(f)
         self._open.append((f, AFTER_FRAMES))
 
@@ -121,7 +143,9 @@ class Monitor:
 
     def feed(self, msg: Any) -> None:
         """One frame heard (a ``can.Message`` or anything with its attributes): ``timestamp``, ``arbitration_id``,
-        ``data``, ``is_extended_id`` (and the error / remote flags)."""
+        ``data``, ``is_extended_id`` (and the error / remote flags). The reader reads it (its events go to the
+        watches); the monitor keeps the frames around findings, the bench's stamp lag and what the reader does not
+        judge (a frame that does not decode, 242's settings, frames normal reporting never sends)."""
         t = msg.timestamp
         can_id = msg.arbitration_id
         data = bytes(msg.data)
@@ -138,54 +162,43 @@ class Monitor:
                     still.append((f, left - 1))
             self._open = still
         self.ring.append((t, can_id, data))
+        extended = getattr(msg, "is_extended_id", True)
         info = self._ids.get(can_id)
         if info is None:
             if len(self._ids) > MAX_IDS:  # a DUT sending ever new ids must not grow the memory
                 self._ids.clear()
-            info = self._ids[can_id] = classify(can_id) if getattr(msg, "is_extended_id", True) else (None,) * 5
-        kind, type_id, source, _, spec = info
+            info = self._ids[can_id] = classify(can_id) if extended else (None,) * 5
+        kind, _, source, _, spec = info
         cfg = self.cfg
-        if source == cfg.host_node and spec is not None:
+        own = source == cfg.host_node and spec is not None
+        if own:
             self.own_frames += 1
             if self._sent and (q := self._sent.get((can_id, data))):
                 lag = max(t - q.popleft(), 0.0)
                 self.bench_lag.add(lag)
                 self.answers.lagged(t, lag)
-            name = spec.name
-            if name in cat.THROTTLE_FRAMES:
-                self.comm.command(t)
-            elif name == "get_esc_id":
-                self.answers.asked(t)
-            elif kind is Kind.REQUEST:
+            if kind is Kind.REQUEST:
                 self._decode(msg, data)  # the decoder remembers a 241 request: its answer's layout depends on it
-            return
-        if source != cfg.node_id:
+        elif source != cfg.node_id:
             self.other_frames += 1
             self.answers.bus_taken(len(data))
-            if spec is not None and spec.name == "get_esc_id" and kind is Kind.MESSAGE:
-                frame = self._decode(msg, data, judge=False)
-                if frame is not None and frame.layout is not None and frame.layout.name == "query":
-                    self.answers.foreign_asked(t)
+        else:
+            self.dut_frames += 1
+            self.unexpected.trials += 1  # every frame of the DUT is judged by it
+        self.rules.feed(can_id, data, t, extended, getattr(msg, "is_remote_frame", False),
+                        getattr(msg, "is_error_frame", False), own)
+        if own or source != cfg.node_id:
             return
-        self.dut_frames += 1
-        self.unexpected.trials += 1  # every frame of the DUT is judged by it
         frame = self._decode(msg, data)
         if frame is None:
             return
         name = frame.name
         if kind is Kind.MESSAGE:
-            if name in REPORTS:
-                self.intervals.report(name, t, self.resets.report(name, t, frame.transfer_id))
-                if name == "msg1":
-                    self.comm.msg1(frame, t)
-                return
-            if name == "get_esc_id" and frame.layout is not None and frame.layout.name == "reply":
-                self.answers.reply(frame, t)
-                return
+            if name in REPORTS or (name == "get_esc_id" and frame.layout is not None and frame.layout.name == "reply"):
+                return  # the reader's (its events)
         elif kind is Kind.RESPONSE and frame.destination == cfg.host_node:
             if name == "maintenance_information":
-                self.resets.maintenance(frame, t)
-                return
+                return  # the reader's (its counters' events)
             if name == "get_major_configuration":
                 self.settings.read(frame, t)
                 return
@@ -216,3 +229,37 @@ class Monitor:
         """The run ended at lane time ``now``: the watches judge what is still open."""
         for w in self.watches:
             w.close(now)
+
+
+class Sinks(ReaderEvents):
+    """The reader's events about the DUT, each handed to the watch that owns its property."""
+
+    def __init__(self, monitor: Monitor) -> None:
+        self.node, self.host = monitor.cfg.node_id, monitor.cfg.host_node
+        self.resets, self.intervals, self.comm, self.answers = monitor.resets, monitor.intervals, monitor.comm, monitor.answers
+
+    def query(self, ts: float, source: int) -> None:
+        if source == self.host:
+            self.answers.asked(ts)
+        else:
+            self.answers.foreign_asked(ts)
+
+    def reply(self, ts, node, pairing, can_id, data) -> None:
+        if node == self.node:
+            self.answers.reply(ts, pairing, can_id, data)
+
+    def report(self, ts: float, node: int, name: str, restarted: bool) -> None:
+        if node == self.node and name in REPORTS:
+            self.intervals.report(name, ts, restarted)
+
+    def reset(self, ts, node, sign, signs) -> None:
+        if node == self.node:
+            self.resets.sign(ts, sign, signs)
+
+    def counter(self, ts: float, node: int, name: str, value: int) -> None:
+        if node == self.node:
+            self.resets.read(name)
+
+    def msg1(self, ts: float, node: int, flag: bool, last_command: float | None) -> None:
+        if node == self.node:
+            self.comm.msg1(ts, flag, last_command)

@@ -65,7 +65,7 @@ class SoakOptions:
 
 
 @dataclass
-class Outcome:
+class SoakOutcome:
     status: str
     findings: int
     where: Path | None
@@ -132,7 +132,7 @@ def _raise_interrupt(signum: int, frame: Any) -> None:
 
 
 def run(bench: BenchOptions, soak: SoakOptions, *, out: TextIO = sys.stdout, given: dict[str, Any] | None = None,
-        wall: Callable[[], float] = time.monotonic) -> Outcome:
+        wall: Callable[[], float] = time.monotonic) -> SoakOutcome:
     """One soak of ``bench`` (a set-up mistake raises :class:`~ckesc.bench.errors.PreflightError` before anything
     is opened; a DUT that cannot be found raises :class:`~ckesc.bench.dut.DutError`)."""
     station = build(bench)
@@ -155,7 +155,7 @@ def _in_main_thread() -> bool:
 
 
 def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: dict[str, Any],
-         wall: Callable[[], float]) -> Outcome:
+         wall: Callable[[], float]) -> SoakOutcome:
     started_utc = report.utc_now()
     wall0 = wall()
     lane = station.open_lane()  # (on a real bus the echo found first, then any foreign traffic)
@@ -284,6 +284,9 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             "watches": {w.name: {"rules": list(w.rules), "events": w.events, "trials": w.trials,
                                  "statistics": w.statistics()} for w in monitor.watches},
             "r9_per_minute_ms": monitor.intervals.series,
+            # what the bus reader the watches take their events from kept (its own violations are the suite's per-frame
+            # reading, not the soak's findings: the soak judges the properties above)
+            "bus_reader": monitor.rules.summary(),
             "trace": trace.to_json() if trace is not None else None,
             "findings": [f.to_json() for f in monitor.findings], "findings_not_kept": monitor.dropped,
             "statement": [s.to_json() for s in statements],
@@ -295,7 +298,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             out.flush()
     finally:
         ignore()
-    return Outcome(status, monitor.count, where, statements)
+    return SoakOutcome(status, monitor.count, where, statements)
 
 
 def live_text(f: dict[str, Any]) -> str:

@@ -1,6 +1,6 @@
 """A soak's frames on disk within a budget (``--trace-budget``): a rolling candump log of every frame heard, in
 :data:`ROLL_FILES` files (``trace-000001.log``, ...) of which the oldest is deleted as a new one starts, and each
-finding's frames (:class:`~.watch.Finding`: the ring before it and the frames after it) in a file of its own
+finding's frames (:class:`~.watch.SoakFinding`: the ring before it and the frames after it) in a file of its own
 (``finding-001.log``), never deleted. Room for :data:`~.watch.MAX_FINDINGS` finding files is set aside from the
 budget first; the rest is the rolling log's, so the files together never exceed the budget.
 
@@ -15,7 +15,7 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-from .watch import AFTER_FRAMES, MAX_FINDINGS, RING_FRAMES, Finding
+from .watch import AFTER_FRAMES, MAX_FINDINGS, RING_FRAMES, SoakFinding
 
 #: the rolling log's files: the budget's rolling part split among them, the oldest deleted as the next one starts
 ROLL_FILES = 4
@@ -117,7 +117,7 @@ class Trace:
             self._fh.write("".join(self._lines))
             self._lines.clear()
 
-    def finding(self, finding: Finding) -> str:
+    def finding(self, finding: SoakFinding) -> str:
         """``finding``'s frames (before and after it) in a file of its own; returns its name (also set on the
         finding: results.json names it)."""
         name = f"finding-{len(self.finding_files) + 1:03d}.log"

@@ -1,5 +1,5 @@
 """The soak's watches' common ground, sans-IO: what a watch is (:class:`Watch`: a property judged, its trials and
-events), what it found (:class:`Finding`, with the frames around it), what it knows of the bench and the DUT
+events), what it found (:class:`SoakFinding`, with the frames around it), what it knows of the bench and the DUT
 (:class:`WatchConfig`), and the bounds that keep a day's run in flat memory."""
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ REPORTS = cat.REPORT_FRAMES
 
 
 @dataclass
-class Finding:
+class SoakFinding:
     """One thing a watch found: when (s into the run), which watch, the requirements, what, and the frames around it
     (candump lines with times into the run)."""
 
@@ -77,6 +77,8 @@ class Monitoring(Protocol):
     t0: float
     intervals: Any
     unexpected: Any
+    decoder: Any
+    rules: Any  #: the bus reader (:class:`~ckesc.evidence.rules.BusRules`): its statistics
 
     def found(self, watch: Watch, t: float, message: str, rules: tuple[str, ...]) -> None: ...
 

@@ -2,19 +2,21 @@
 :mod:`.comm_watch`, :mod:`.frame_watches`; their base :mod:`.watch`; the monitor that feeds them all :mod:`.monitor`).
 
 :class:`AnswerWatch` - GET_ESC_ID's answers in the node's slot (R2) and within 64 ms (4.4.3-4), their delays as a
-fixed-bin histogram; which query a reply answers is :class:`~ckesc.evidence.pairing.QueryPairing`'s (another node's
-query, a flight controller's on the bus, may be answered too: its answer is neither the host's nor one to no query,
-and one that may be either is not judged).
+fixed-bin histogram; which query a reply answers is the bus reader's (its :class:`~ckesc.evidence.pairing.QueryPairing`,
+told with each reply: :meth:`~ckesc.evidence.events.ReaderEvents.reply`; another node's query, a flight controller's on
+the bus, may be answered too: its answer is neither the host's nor one to no query, and one that may be either is not
+judged).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from ..evidence.pairing import ANOTHER_NODE, QueryPairing
+from ..evidence.pairing import ReplyPairing
 from ..protocol import catalogue as cat
 from ..protocol import judgements as jd
-from ..protocol.frame import Frame, frame_bits
+from ..protocol.errors import DecodeError
+from ..protocol.frame import WireFrame, frame_bits
 from ..protocol.histogram import Histogram
 from .watch import Monitoring, Watch
 
@@ -42,9 +44,6 @@ class AnswerWatch(Watch):
         #: the host's own stream may delay an answer (never blame the DUT for the bench's traffic): one tick's stream
         #: frames ahead of it on the bus widen the late side of R2's slot and of the 64 ms bound
         self.queueing = self.cfg.stream_frames * frame_bits(8) / self.cfg.bitrate
-        #: which query each reply answers: the host's, another node's (a flight controller's on the bus, R17, which the
-        #: ESC may answer too), both may (not judged), or none (the one owner of that decision)
-        self.pairing = QueryPairing(error=self.error, host=self.cfg.host_node)
         self.foreign_queries = 0
         self.foreign_answers = 0
         self.ambiguous = 0
@@ -52,14 +51,13 @@ class AnswerWatch(Watch):
         self.busy = 0.0
         #: the worst lag of the bench's stamps on the host's own frames since the query (:meth:`lagged`)
         self.lag = 0.0
-        self.pending: tuple[Frame, float, float] | None = None  # an answer not judged yet: (frame, time, delay)
+        self.pending: tuple[int, float, float] | None = None  # an answer not judged yet: (its bytes, time, delay)
         self.bench_late = 0  # answers late only by the bench's own lag: not judged (not a trial)
         self.worst_lag = 0.0
 
-    def foreign_asked(self, t: float, source: int = ANOTHER_NODE) -> None:
-        """Another node's GET_ESC_ID query, heard at ``t``."""
+    def foreign_asked(self, t: float) -> None:
+        """Another node's GET_ESC_ID query, heard at ``t`` (the reader pairs it)."""
         self.foreign_queries += 1
-        self.pairing.query(t, source)
 
     def bus_taken(self, data_bytes: int) -> None:
         """A frame of another node (or the ESC's answer to another node) on the bus while the host's query waits."""
@@ -86,14 +84,17 @@ class AnswerWatch(Watch):
             self.missing += 1
             bound = jd.answer_bound(t - self.query, error=self.error, rule="4.4.3-4")
             self.find(t, f"no answer to GET_ESC_ID within {(t - self.query) * 1000:.0f} ms: {bound}", ("4.4.3-4", "R19"))
-        self.pairing.query(t, self.cfg.host_node)
         self.query, self.answered, self.maybe, self.busy, self.lag = t, False, False, 0.0, 0.0
 
-    def reply(self, frame: Frame, t: float) -> None:
-        p = self.pairing.reply(t, frame.source)
+    def reply(self, t: float, p: ReplyPairing, can_id: int, data: bytes) -> None:
+        """The ESC's reply at ``t``, and what it answers (the reader's word)."""
         host = self.cfg.host_node
         if p.none:
-            self.monitor.unexpected.find(t, f"a GET_ESC_ID reply that answers no query ({frame.fields})", ("R1",))
+            try:
+                fields = self.monitor.decoder.decode(WireFrame(can_id, data, t)).fields
+            except DecodeError as exc:
+                fields = str(exc)
+            self.monitor.unexpected.find(t, f"a GET_ESC_ID reply that answers no query ({fields})", ("R1",))
             return
         current = any(q.source == host and q.t == self.query for q in p.could)
         if p.answers(host):
@@ -101,21 +102,21 @@ class AnswerWatch(Watch):
                 self.answered = True
                 end = t - self.query  # type: ignore[operator]
                 self.delays.add(end)
-                self.pending = (frame, t, end)  # judged once the frames stamped with it are read (tick): their lag counts
+                self.pending = (len(data), t, end)  # judged once the frames stamped with it are read (tick): their lag counts
             return  # (an answer to an earlier query of the host's, already found missing: nothing more)
         if p.ambiguous(host):  # the host's answer or another node's: neither judged nor missing
             self.ambiguous += 1
             self.maybe = self.maybe or current
         else:  # another node's answer: not the host's to judge
             self.foreign_answers += 1
-        self.bus_taken(len(frame.data))
+        self.bus_taken(len(data))
 
     def _judge(self) -> None:
         if self.pending is None:
             return
-        frame, t, end = self.pending
+        size, t, end = self.pending
         self.pending = None
-        start = end - frame_bits(len(frame.data)) / self.cfg.bitrate
+        start = end - frame_bits(size) / self.cfg.bitrate
         late = self.error + self.queueing + self.busy
         broken = self._broken(start, end, late)
         if broken and self.lag and not self._broken(start, end, late + self.lag):

@@ -243,12 +243,14 @@ def _bus_rules_pairing(heard) -> tuple[list[str], dict]:
 
 
 def _soak_pairing(heard) -> list[str]:
-    """The soak's AnswerWatch (the Monitor feeds it every frame, the host's own by its source)."""
+    """The soak's AnswerWatch (the Monitor feeds every frame to its bus reader, the host's own by its source, and the
+    watch takes the reader's pairing of each reply)."""
     monitor = Monitor(WatchConfig(node_id=NODE, host_node=0, intervals={}), t0=0.0)
     for m in heard:
         monitor.feed(m)
     assert not [f.line() for f in monitor.findings if f.watch == monitor.answers.name]
-    return [p.outcome(0) for p in monitor.answers.pairing.kept]
+    assert monitor.answers.foreign_answers + monitor.answers.ambiguous + monitor.answers.delays.n == len(monitor.rules.queries.kept)
+    return [p.outcome(0) for p in monitor.rules.queries.kept]
 
 
 def _check_log_pairing(heard, tmp_path, capsys) -> dict:
