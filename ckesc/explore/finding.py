@@ -1,4 +1,4 @@
-"""What the explorer's judge finds (:class:`Finding`), the bench's limits it judges with (:class:`Params`) and the
+"""What the explorer's judge finds (:class:`ExploreFinding`), the bench's limits it judges with (:class:`Params`) and the
 report streams it names (:func:`stream_of`)."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from ..protocol.requirements import requirement
 
 
 @dataclass
-class Finding:
+class ExploreFinding:
     kind: str  # answer | stream | interval | status | reset | bus_rule
     requirements: list[str]
     what: str

@@ -1,6 +1,6 @@
 """Comparing what the DUT sent with what the oracle model predicts, only where the document is specific (sans-IO).
 
-Observations compared (each a :class:`Finding` when they differ):
+Observations compared (each a :class:`ExploreFinding` when they differ):
 - **answers** (:mod:`.answers`): each request's answer, paired with it as F4 says, against the model's: answered at
   all, with the model's payload, in its node's slot (R2); no answer to a malformed or foreign frame (R17).
 - **streams**: per stretch between two events (a host frame other than throttle, a power switch) and per
@@ -48,10 +48,10 @@ from ..protocol.judgements import (
     report_stamp_error_s,
 )
 from .answers import KEPT, answers
-from .finding import STREAMS, Finding, Params, stream_of
+from .finding import STREAMS, ExploreFinding, Params, stream_of
 from .oracle import Malformed, Oracle, State
 
-__all__ = ["Finding", "Params", "cite_r17", "cite_r18", "judge"]
+__all__ = ["ExploreFinding", "Params", "cite_r17", "cite_r18", "judge"]
 
 #: MSG1 status bits compared (R7): direction, throttle source, comm fault (R8), running
 STATUS_MASK = int(cat.STATUS_STATE_BITS)
@@ -70,7 +70,7 @@ _ECHO_SLACK_S = 0.005
 _MIN_GAPS = 3
 
 
-def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[Finding]:
+def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[ExploreFinding]:
     """Every disagreement between the DUT's frames (decoded, from the ESC, bus timestamps) and the model's."""
     dut = sorted((f for f in dut if f.source != p.host_node and f.timestamp is not None), key=lambda f: f.timestamp)
     # other nodes' GET_ESC_ID queries (a flight controller's, F6): the ESC answers them too, they are none of its frames
@@ -84,14 +84,14 @@ def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) 
     return [f for f in out if f.strength != "OBSERVE" and r18_judged(oracle.max_load(t0 + f.at, t0 + f.at))]
 
 
-def _r17_restarts(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Finding]:
+def _r17_restarts(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[ExploreFinding]:
     """R17: a malformed frame never resets the ESC. Across one, in normal reporting and with no event of the model's
     around it that restarts reports (a power switch, a mode, a Set Freq write), no report of the DUT stops for longer
     than a restart may take and comes back with its transfer id started again (R19's sign of a reset,
     :func:`~ckesc.protocol.judgements.r19_report_restart`; the gap's end may be stamped late by a report stamp's
     error, :func:`~ckesc.protocol.judgements.report_stamp_error_s`). A report late but counting on is R9's (the stream
     and interval findings), a transfer id off without a gap F3's (the live bus rules)."""
-    out: list[Finding] = []
+    out: list[ExploreFinding] = []
     marks = {m.t for m in oracle.malformed}
     others = [st for st in oracle.states if st.t not in marks]
     said: set[str] = set()
@@ -123,14 +123,14 @@ def _r17_restarts(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> lis
             if reset is None:
                 continue
             said.add(stream)
-            out.append(Finding("reset", ["R17", reset.rule], f"{stream.upper()} restarted after a malformed frame: {m.what}",
+            out.append(ExploreFinding("reset", ["R17", reset.rule], f"{stream.upper()} restarted after a malformed frame: {m.what}",
                                reset.text, f"{stream.upper()} every {interval * 1000:g} ms, its transfer id counting "
                                "on (R17: a malformed frame never resets the ESC)", m.t - t0, m.step,
                                subject=f"{stream} restarted, {m.form}"))
     return out
 
 
-def cite_r17(findings: list[Finding], oracle: Oracle, t0: float) -> list[Finding]:
+def cite_r17(findings: list[ExploreFinding], oracle: Oracle, t0: float) -> list[ExploreFinding]:
     """Every finding after a malformed or foreign frame of the program also cites R17 (the model ignored the
     frame; a DUT that took it differs from then on), and says which came last before it."""
     if not oracle.malformed:
@@ -143,7 +143,7 @@ def cite_r17(findings: list[Finding], oracle: Oracle, t0: float) -> list[Finding
     return findings
 
 
-def cite_r18(findings: list[Finding], oracle: Oracle, t0: float) -> list[Finding]:
+def cite_r18(findings: list[ExploreFinding], oracle: Oracle, t0: float) -> list[ExploreFinding]:
     """Every finding while (or just after) a foreign load played also cites R18 (the ESC keeps R9, R2, the 64 ms bound
     and obeys its commands under it), and says the load."""
     for f in findings:
@@ -173,7 +173,7 @@ def _interval(state: State, stream: str) -> float:
     return max(state.intervals.values())  # MSG_EXP frames, CAN Test: at most the longest (R9-exp: OBSERVE)
 
 
-def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[Finding]:
+def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[ExploreFinding]:
     out = []
     by = {k: ([], []) for k in STREAMS}
     for i, frames in enumerate((dut, oracle.out)):
@@ -209,11 +209,11 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
             if on and m and hi - lo >= 2 * iv and not d:
                 if _between(by[stream][0], hi, end + 2 * iv):  # it came, late: the first report after a restart (R9a)
                     rids = ["R9a", *rids]
-                out.append(Finding("stream", rids, f"{_label(stream)} stopped ({state.mode} since {state.cause})",
+                out.append(ExploreFinding("stream", rids, f"{_label(stream)} stopped ({state.mode} since {state.cause})",
                                    f"no {_label(stream)} for {hi - lo:.3f} s", f"{len(m)} frames",
                                    lo - t0, state.step, subject=f"{stream} stopped, {state.mode}"))
             elif not on and d:
-                out.append(Finding("stream", rids, f"{_label(stream)} sent ({state.mode} since {state.cause})",
+                out.append(ExploreFinding("stream", rids, f"{_label(stream)} sent ({state.mode} since {state.cause})",
                                    f"{len(d)} frames, the first at t={d[0] - t0:.3f} s", "none", d[0] - t0, state.step,
                                    subject=f"{stream} sent, {state.mode}"))
             elif stream in cat.REPORT_FRAMES and len(m) >= 2:
@@ -222,7 +222,7 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
 
 
 def _interval_finding(state: State, stream: str, stamps: list[float], end: float, iv: float, t0: float, p: Params,
-                      frame_s: float, share: float = 0.0) -> list[Finding]:
+                      frame_s: float, share: float = 0.0) -> list[ExploreFinding]:
     """R9 on the DUT's reports of one stretch, the gap to its third report and on (R9a: the gaps before are
     OBSERVE), on the mean of their gaps (:func:`~ckesc.protocol.judgements.r9_mean`): its stamps are the frames'
     ends, each late by up to a frame's bus access besides the bench's error. Under a foreign load of ``share`` (R18,
@@ -240,7 +240,7 @@ def _interval_finding(state: State, stream: str, stamps: list[float], end: float
     mean = (seen[-1] - seen[0]) / gaps
     tol = j.limit + j.error
     loaded = f", under {share:.0%} load" if share else ""
-    return [Finding("interval", ["R9", "R18"] if share else ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, "
+    return [ExploreFinding("interval", ["R9", "R18"] if share else ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, "
                     f"not {iv * 1000:g} ms ({state.mode} since {state.cause}{loaded})", f"mean of {gaps} gaps {mean * 1000:.2f} ms",
                     f"{iv * 1000:g} ms (+-{tol * 1000:.2f})", seen[0] - t0, state.step, subject=f"{stream} interval")]
 
@@ -267,13 +267,13 @@ def _between(stamps: list[float], lo: float, hi: float) -> list[float]:
 
 
 # ------------------------------------------------------------------------------------------ MSG1 status
-def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Finding]:
+def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[ExploreFinding]:
     model = [f for f in oracle.out if f.name == "msg1" and f.kind is Kind.MESSAGE]
     stamps = [f.timestamp for f in model]
     host_times = [f.timestamp for f, _ in oracle.host if f.name not in _THROTTLE]
     commands = oracle.commands
     ups = [st.t for st in oracle.states if st.label in ("start", "power on")]
-    out: list[Finding] = []
+    out: list[ExploreFinding] = []
     seen: set[int] = set()
     for f in dut:
         if f.name != "msg1" or f.kind is not Kind.MESSAGE or "status" not in f.fields:
@@ -299,7 +299,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
             bits = _COMM
             if bits not in seen:
                 seen.add(bits)
-                out.append(Finding("status", ["R8", "R7"], f"MSG1 comm-loss bit {'clear' if comm else 'set'} "
+                out.append(ExploreFinding("status", ["R8", "R7"], f"MSG1 comm-loss bit {'clear' if comm else 'set'} "
                                    f"{(t - _last(commands, t)) * 1000:.0f} ms after the last command ({state.mode})",
                                    f"status {f.fields['status']:#06x}", f"bit 13 {'set' if comm else 'clear'} "
                                    f"(R8: set 200 ms to 200 ms + one MSG1 interval after the last command)", t - t0,
@@ -316,7 +316,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         for bit, setting in _STATUS_SETTING.items():  # a bit showing a setting: the setting's own keeping, and R13's
             if bits & bit:                            # after a power cycle in the program
                 rids += [KEPT[setting]] + (["R13"] if any(u > t0 for u in ups if u <= t) else [])
-        out.append(Finding("status", rids, f"MSG1 status bits {bits:#06x} differ ({state.mode} since {state.cause})",
+        out.append(ExploreFinding("status", rids, f"MSG1 status bits {bits:#06x} differ ({state.mode} since {state.cause})",
                            f"status {f.fields['status']:#06x}", f"status {want:#06x} (bits {STATUS_MASK:#06x} compared)",
                            t - t0, state.step, subject=f"status {bits:#06x}"))
     return out
