@@ -15,17 +15,19 @@ Observations compared (each a :class:`ExploreFinding` when they differ):
   one interval and a report stamp's error (:func:`~ckesc.protocol.judgements.report_stamp_error_s`; R8's window for
   bit 13: the flag may come up to one MSG1 interval after the model's).
 - **malformed and foreign frames** (R17): the model ignores them, so whatever the DUT does on one differs: an
-  answer to one (:mod:`.answers`), a reset across one (a report gap with a transfer id restart,
-  :func:`~ckesc.protocol.judgements.r19_report_restart`, the one reading of a reset every mode shares), and any
-  other finding after the first of them in the program, which :func:`cite_r17` makes cite R17 too (a setting, mode,
-  suspension, LED or comm-loss flag the DUT changed on one shows as its read-back, stream or MSG1 status finding; a
-  power-up count grown, as 241's answer).
+  answer to one (:mod:`.answers`), and any other finding after the first of them in the program, which
+  :func:`cite_r17` makes cite R17 too (a setting, mode, suspension, LED or comm-loss flag the DUT changed on one
+  shows as its read-back, stream or MSG1 status finding; a power-up count grown, as 241's answer). A reset across
+  one is the bus's own rule, not the model's: the reader finds it (``evidence/rules.py``, R19 with R17, over
+  :class:`~ckesc.evidence.resets.ResetSigns`), taking a malformed frame of the host's as nothing the ESC acted on
+  (:mod:`ckesc.evidence.taken`).
 - **a loaded bus** (R18): under a foreign load of up to half the bus (the runner's load steps), R9's mean interval is
   widened by the queueing the load can put ahead of a report (:func:`~ckesc.protocol.judgements.r18_mean`), and a
-  report's reach (MSG1 status, R8's clock, a reset's gap) by that queueing
+  report's reach (MSG1 status, R8's clock) by that queueing
   (:func:`~ckesc.protocol.judgements.r18_queueing_s`); R2's slot and the answers are not widened (R18 widens R9
   only). Under a load above half, and in the stretch after one, nothing is judged (R18: OBSERVE).
-The live bus rules (``evidence/live.py``) run beside this and are findings of their own (runner).
+The bus's own rules (``evidence/live.py``: F1..F7, R9 between two reports against the interval the node stated, R9a,
+resets, pairing) are the reader's: the runner hears every frame through them and adds what they find.
 """
 
 from __future__ import annotations
@@ -36,7 +38,6 @@ from ..protocol import catalogue as cat
 from ..protocol.frame import Frame, frame_bits
 from ..protocol.ids import Kind
 from ..protocol.judgements import (
-    f3_step,
     r8_flag_due,
     r9_judged,
     r9_mean,
@@ -44,7 +45,6 @@ from ..protocol.judgements import (
     r18_judged,
     r18_mean,
     r18_queueing_s,
-    r19_report_restart,
     report_stamp_error_s,
 )
 from .answers import KEPT, answers
@@ -80,54 +80,7 @@ def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) 
     out = answers(oracle, dut, t0, p, _ECHO_SLACK_S + 2 * p.error if p.error else 0.0, queries)
     out += _streams(oracle, dut, t0, t_end, p)
     out += _status(oracle, dut, t0, p)
-    out += _r17_restarts(oracle, dut, t0, p)
     return [f for f in out if f.strength != "OBSERVE" and r18_judged(oracle.max_load(t0 + f.at, t0 + f.at))]
-
-
-def _r17_restarts(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[ExploreFinding]:
-    """R17: a malformed frame never resets the ESC. Across one, in normal reporting and with no event of the model's
-    around it that restarts reports (a power switch, a mode, a Set Freq write), no report of the DUT stops for longer
-    than a restart may take and comes back with its transfer id started again (R19's sign of a reset,
-    :func:`~ckesc.protocol.judgements.r19_report_restart`; the gap's end may be stamped late by a report stamp's
-    error, :func:`~ckesc.protocol.judgements.report_stamp_error_s`). A report late but counting on is R9's (the stream
-    and interval findings), a transfer id off without a gap F3's (the live bus rules)."""
-    out: list[ExploreFinding] = []
-    marks = {m.t for m in oracle.malformed}
-    others = [st for st in oracle.states if st.t not in marks]
-    said: set[str] = set()
-    for m in oracle.malformed:
-        state = oracle.state_at(m.t)
-        if state.mode != "normal":
-            continue
-        longest = cat.restart_limit_s(max(state.intervals.values())) + p.boot_s + 2 * p.error
-        queueing = _queueing(oracle, m.t - longest, m.t + longest, state.bitrate)
-        if queueing is None:
-            continue  # R18: a load above half around it, its reports OBSERVE
-        # (a Set Freq read, or a write that changed nothing, restarts nothing; the program's start is no restart)
-        restarts = [st.t for st in others if st.label in _RESTARTS - {"start", "set_freq"} or st.label == "power off"
-                    or st.mode != state.mode or st.intervals != state.intervals]
-        error = report_stamp_error_s(error=p.error, bitrate=p.bitrate, queueing=queueing)
-        for stream in cat.REPORT_FRAMES:
-            mine = [f for f in dut if f.name == stream and f.kind is Kind.MESSAGE]
-            k = bisect.bisect_right([f.timestamp for f in mine], m.t)
-            if stream in said or not 0 < k < len(mine):
-                continue
-            before, after = mine[k - 1], mine[k]
-            if (before.transfer_id is None or after.transfer_id is None
-                    or _between(restarts, min(before.timestamp, m.t - longest), after.timestamp)):
-                continue
-            interval = state.intervals[stream]
-            reset = r19_report_restart(after.timestamp - before.timestamp, interval,
-                                       f3_step(before.transfer_id, after.transfer_id), error=error, jitter=p.jitter,
-                                       what=stream.upper())
-            if reset is None:
-                continue
-            said.add(stream)
-            out.append(ExploreFinding("reset", ["R17", reset.rule], f"{stream.upper()} restarted after a malformed frame: {m.what}",
-                               reset.text, f"{stream.upper()} every {interval * 1000:g} ms, its transfer id counting "
-                               "on (R17: a malformed frame never resets the ESC)", m.t - t0, m.step,
-                               subject=f"{stream} restarted, {m.form}"))
-    return out
 
 
 def cite_r17(findings: list[ExploreFinding], oracle: Oracle, t0: float) -> list[ExploreFinding]:
