@@ -8,9 +8,9 @@ Observations compared (each a :class:`ExploreFinding` when they differ):
   stretch has settled (R9a's restart allowance of the longer interval, answer delay and the bench's error; a
   power-up's boot time); which MSG_EXP frames come is OBSERVE (R9-exp), only that some do.
 - **intervals** (R9): from the gap to the third report after the event on (R9a: the gaps before are OBSERVE), the
-  mean gap of MSG1/2/3 against the model's interval, held to R9's tolerance (1 ms plus twice the bench's error, here
-  with a frame's bus access, and twice the DUT's declared jitter, over the gaps; a mean whose bound exceeds a quarter
-  of the interval is not judged).
+  mean gap of MSG1/2/3 against the model's interval, held to R9's tolerance as the suite holds it (1 ms plus twice
+  the bench's error and the DUT's declared jitter, over the gaps; a mean whose bound exceeds a quarter of the interval
+  is not judged).
 - **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only), 13 and 8 against the model's MSG1s within
   one interval and a report stamp's error (:func:`~ckesc.protocol.judgements.report_stamp_error_s`; R8's window for
   bit 13: the flag may come up to one MSG1 interval after the model's).
@@ -35,7 +35,7 @@ from __future__ import annotations
 import bisect
 
 from ..protocol import catalogue as cat
-from ..protocol.frame import Frame, frame_bits
+from ..protocol.frame import Frame
 from ..protocol.ids import Kind
 from ..protocol.judgements import (
     r8_flag_due,
@@ -134,7 +134,7 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
             s = stream_of(f)
             if s is not None and f.source != p.host_node:
                 by[s][i].append(f.timestamp)
-    frame_s = frame_bits(8) / p.bitrate
+    stamp = report_stamp_error_s(error=p.error, bitrate=p.bitrate)  # how far a report's stamp strays from its schedule
     restart: State | None = None  # the latest event after which a report restarts (R9a), and the state before it
     restart_before: State | None = None
     for state, before, end in _segments(oracle, t_end):
@@ -146,13 +146,13 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
         for stream in STREAMS:
             iv = _interval(state, stream)
             old = _interval(before, stream) if before is not None else iv
-            late = cat.ANSWER_DELAY_MAX_S + 2 * p.error  # the command may be answered first, stamps off by the error
+            late = cat.ANSWER_DELAY_MAX_S + stamp  # the command may be answered first, and the report's stamp stray
             lo = state.t + r9a_limit_s(iv, old, jitter=p.jitter) + late + (p.boot_s if state.label == "power on" else 0.0)
             if restart is not None:  # R9a's allowance counts from the restart, over the longer of its old and new interval
                 r_old = _interval(restart_before, stream) if restart_before is not None else iv
                 lo = max(lo, restart.t + r9a_limit_s(iv, r_old, jitter=p.jitter) + late
                          + (p.boot_s if restart.label == "power on" else 0.0))
-            hi = end - 2 * p.error - frame_s
+            hi = end - stamp
             if hi <= lo:
                 continue
             d = _between(by[stream][0], lo, hi)
@@ -170,23 +170,26 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
                                    f"{len(d)} frames, the first at t={d[0] - t0:.3f} s", "none", d[0] - t0, state.step,
                                    subject=f"{stream} sent, {state.mode}"))
             elif stream in cat.REPORT_FRAMES and len(m) >= 2:
-                out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, frame_s, share)
+                out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, share)
     return out
 
 
 def _interval_finding(state: State, stream: str, stamps: list[float], end: float, iv: float, t0: float, p: Params,
-                      frame_s: float, share: float = 0.0) -> list[ExploreFinding]:
-    """R9 on the DUT's reports of one stretch, the gap to its third report and on (R9a: the gaps before are
-    OBSERVE), on the mean of their gaps (:func:`~ckesc.protocol.judgements.r9_mean`): its stamps are the frames'
-    ends, each late by up to a frame's bus access besides the bench's error. Under a foreign load of ``share`` (R18,
-    up to half), widened by the queueing it can cause (:func:`~ckesc.protocol.judgements.r18_mean`)."""
-    seen = r9_judged(_between(stamps, state.t, end - 2 * p.error))
+                      share: float = 0.0) -> list[ExploreFinding]:
+    """R9 on the DUT's reports of one stretch against the model's interval (what the model alone knows: across a
+    Set ID, a refused write or a power cycle, where the node stated none since), the gap to its third report and on
+    (R9a: the gaps before are OBSERVE), on the mean of their gaps as the suite judges it
+    (:func:`~ckesc.protocol.judgements.r9_mean`, the bench's error and the DUT's declared jitter, nothing of the
+    judge's own). Under a foreign load of ``share`` (R18, up to half), widened by the queueing it can cause
+    (:func:`~ckesc.protocol.judgements.r18_mean`). Each single gap against the interval the node stated is the
+    reader's (the bus rules' R9)."""
+    seen = r9_judged(_between(stamps, state.t, end - report_stamp_error_s(error=p.error, bitrate=p.bitrate)))
     if len(seen) <= _MIN_GAPS:
         return []
     if share:
-        j = r18_mean(seen, iv, share=share, bitrate=state.bitrate, error=p.error + frame_s, jitter=p.jitter, what=stream)
+        j = r18_mean(seen, iv, share=share, bitrate=state.bitrate, error=p.error, jitter=p.jitter, what=stream)
     else:
-        j = r9_mean(seen, iv, error=p.error + frame_s, jitter=p.jitter)
+        j = r9_mean(seen, iv, error=p.error, jitter=p.jitter)
     if j is None or j.ok:
         return []
     gaps = len(seen) - 1
