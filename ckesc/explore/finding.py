@@ -52,7 +52,16 @@ class Params:
     bitrate: int = cat.DEFAULT_BITRATE
     host_node: int = 0
 
+    @property
+    def host_late(self) -> float:
+        """How much later than the DUT heard it a host frame may be stamped (:data:`ECHO_SLACK_S`), both stamps off by
+        the bench's error: the oracle hears it at that stamp, so what the DUT did on it may show that much early."""
+        return ECHO_SLACK_S + 2 * self.error
 
+
+#: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
+#: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
+ECHO_SLACK_S = 0.005
 _EXP = frozenset(cat.EXP_REPORT_FRAMES)
 #: the report streams judged: MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test
 STREAMS = (*cat.REPORT_FRAMES, "exp", "can_test")

@@ -48,7 +48,7 @@ from ..protocol.judgements import (
     report_stamp_error_s,
 )
 from .answers import KEPT, answers
-from .finding import STREAMS, ExploreFinding, Params, stream_of
+from .finding import ECHO_SLACK_S, STREAMS, ExploreFinding, Params, stream_of
 from .oracle import Malformed, Oracle, State
 
 __all__ = ["ExploreFinding", "Params", "cite_r17", "cite_r18", "judge"]
@@ -63,9 +63,6 @@ _FLOWING = {"normal": cat.REPORT_FRAMES, "exp": ("exp",), "can_test": ("can_test
 _THROTTLE = cat.THROTTLE_FRAMES
 #: events after which reporting restarts (R9a: power-up, resume, leaving MSG_EXP mode or CAN Test, a Set Freq write)
 _RESTARTS = frozenset({"start", "power on", "ready", "msg_control", "can_test", "set_freq"})
-#: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
-#: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
-_ECHO_SLACK_S = 0.005
 #: R9 on a stretch's mean interval only from this many gaps judged: fewer say little on a real bench
 _MIN_GAPS = 3
 
@@ -77,7 +74,7 @@ def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) 
     queries = [f for f in dut if f.name == "get_esc_id" and f.layout is not None and f.layout.name == "query"]
     if queries:
         dut = [f for f in dut if f.name != "get_esc_id" or f.layout is None or f.layout.name != "query"]
-    out = answers(oracle, dut, t0, p, _ECHO_SLACK_S + 2 * p.error if p.error else 0.0, queries)
+    out = answers(oracle, dut, t0, p, p.host_late if p.error else 0.0, queries)
     out += _streams(oracle, dut, t0, t_end, p)
     out += _status(oracle, dut, t0, p)
     return [f for f in out if f.strength != "OBSERVE" and r18_judged(oracle.max_load(t0 + f.at, t0 + f.at))]
@@ -89,7 +86,7 @@ def cite_r17(findings: list[ExploreFinding], oracle: Oracle, t0: float) -> list[
     if not oracle.malformed:
         return findings
     for f in findings:
-        before = [m for m in oracle.malformed if m.t - t0 <= f.at + _ECHO_SLACK_S]
+        before = [m for m in oracle.malformed if m.t - t0 <= f.at + ECHO_SLACK_S]
         if before and "R17" not in f.requirements:
             f.requirements.append("R17")
             f.model += f" (R17: the model ignored {_step_of(before[-1])})"
@@ -235,7 +232,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Expl
         if f.name != "msg1" or f.kind is not Kind.MESSAGE or "status" not in f.fields:
             continue
         t = f.timestamp
-        if _between(host_times, t - cat.ANSWER_DELAY_MAX_S - 2 * p.error, t + _ECHO_SLACK_S + 2 * p.error):
+        if _between(host_times, t - cat.ANSWER_DELAY_MAX_S - 2 * p.error, t + p.host_late):
             continue  # a setting just sent (its echo may be stamped late): when within its answer time it shows is not written
         state = oracle.state_at(t)
         queueing = _queueing(oracle, t - 2 * state.intervals["msg1"], t, state.bitrate)  # R18: a load may hold it back
@@ -291,12 +288,12 @@ def _comm_fault_expected(t: float, commands: list[float], ups: list[float], stat
     if state.source != 0 or state.mode == "off":
         return None
     up = ups[max(0, bisect.bisect_right(ups, t) - 1)] if ups else float("-inf")
-    last = _last(commands, t + _ECHO_SLACK_S + 2 * p.error)
+    last = _last(commands, t + p.host_late)
     if last < up:
         return None
     since = t - last
     error = report_stamp_error_s(error=p.error, bitrate=p.bitrate, queueing=queueing)  # MSG1's stamp is its end
-    if since < -(error + p.jitter) or abs(since) <= _ECHO_SLACK_S + 2 * p.error:
+    if since < -(error + p.jitter) or abs(since) <= p.host_late:
         return None  # a command as the MSG1 went out: which came first is within the bench's error
     return r8_flag_due(since, state.intervals["msg1"], jitter=p.jitter, error=error)
 
