@@ -30,6 +30,7 @@ from ..protocol.transfer import tail_transfer_id
 from .events import ReaderEvents
 from .findings import KEEP, Findings, Intervals, quote
 from .pairing import QueryPairing
+from .taken import taken
 
 # ------------------------------------------------------------------------------------------ facts, derived
 #: The reports whose interval Set/Get Freq sets (R9), by type id, with their interval field.
@@ -403,6 +404,8 @@ class Tracker(Findings):
                 self.commands += 1
                 self._last_throttle = (ts, info.label, type_id)
                 return
+            if not taken(info.can_id, data):
+                return  # R17: an ESC ignores it (a multi-frame part, a wrong length): it switches nothing
             if type_id == GET_ESC_ID.type_id:  # a query: every ESC answers it once
                 self.queries.query(ts, info.source)
                 if self.events is not None:
@@ -419,8 +422,8 @@ class Tracker(Findings):
                 else:
                     self._reset_all()  # reporting stops or switches on every ESC: cadence restarts
             return
-        if info.kind is not Kind.REQUEST or not data:
-            return
+        if info.kind is not Kind.REQUEST or not data or not taken(info.can_id, data):
+            return  # (R17: a malformed request is ignored, and asks nothing an answer could answer)
         tid = tail_transfer_id(data[-1])
         if type_id in PSEUDO_BROADCAST:
             key = (info.source, None, type_id)

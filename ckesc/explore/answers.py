@@ -33,7 +33,7 @@ from ..protocol.ids import Kind
 from ..protocol.judgements import asked_node, f4_answers, r2_slot_start, r13_read_back, r19_power_ups
 from ..protocol.requirements import requirement
 from .actions import asks_only
-from .finding import Finding, Params, stream_of
+from .finding import ExploreFinding, Params, stream_of
 from .oracle import Malformed, Oracle
 
 #: the requirement an answer's payload comes from, per request
@@ -126,7 +126,7 @@ def _asks(req: Frame) -> bool:
 
 # ------------------------------------------------------------------------------------------ answers
 def answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, slack: float,
-            queries: Sequence[Frame] = ()) -> list[Finding]:
+            queries: Sequence[Frame] = ()) -> list[ExploreFinding]:
     """The findings on what the DUT answered (the module's list). ``dut``: the ESC's frames in time order; ``slack``:
     how much earlier than its request an answer may be stamped (a real bench's late echo); ``queries``: other nodes'
     GET_ESC_ID queries heard meanwhile (a flight controller's)."""
@@ -206,7 +206,7 @@ def _refusals(oracle: Oracle) -> list[tuple[float, str]]:
 
 
 def _answered_as_modelled(oracle: Oracle, host: list[tuple[Frame, int | None]], got: list[Frame | None],
-                          want: list[Frame | None], t0: float, p: Params) -> list[Finding]:
+                          want: list[Frame | None], t0: float, p: Params) -> list[ExploreFinding]:
     """Each host frame the model answers, against the DUT's answer to it (``got``, paired as ``want`` is)."""
     out = []
     refused = _refusals(oracle)
@@ -221,7 +221,7 @@ def _answered_as_modelled(oracle: Oracle, host: list[tuple[Frame, int | None]], 
             reqs.append("4.1.1-2")
         earlier = list(dict.fromkeys(rule for t, rule in refused if t < req.timestamp))
         if mine is None:  # (after a write the model refused and the DUT took, a Set ID, it answers at another id)
-            out.append(Finding("answer", reqs + [r for r in earlier if r not in reqs], f"{req.name} {fields(req)} not answered", "no answer",
+            out.append(ExploreFinding("answer", reqs + [r for r in earlier if r not in reqs], f"{req.name} {fields(req)} not answered", "no answer",
                                f"{fields(model)}", req.timestamp - t0, step, subject=f"{req.name} not answered"))
             continue
         if req.kind is Kind.MESSAGE:
@@ -240,12 +240,12 @@ def _answered_as_modelled(oracle: Oracle, host: list[tuple[Frame, int | None]], 
                 if (reset := r19_power_ups(d.expected, d.read)) is None:
                     continue  # the same count modulo its 16 bits
                 cited += [] if powered else [reset.rule]  # grown with the power on since the program's start: a reset
-            out.append(Finding("answer", rids + cited, f"{req.name} {fields(req)} answered {k}={d.read}, the model {d.expected}",
+            out.append(ExploreFinding("answer", rids + cited, f"{req.name} {fields(req)} answered {k}={d.read}, the model {d.expected}",
                                fields(mine), fields(model), req.timestamp - t0, step, subject=f"{req.name}.{k}"))
     return out
 
 
-def _slot(req: Frame, got: Frame, want: Frame, step: int | None, t0: float, p: Params, bitrate: int) -> list[Finding]:
+def _slot(req: Frame, got: Frame, want: Frame, step: int | None, t0: float, p: Params, bitrate: int) -> list[ExploreFinding]:
     """R2: a broadcast's answer (MSG Control, GET_ESC_ID) starts no earlier than its node's slot, (node_id % 32) x
     2 ms after the request, for the node id the model says the DUT has now (after a Set ID, its new one). Judged
     with the bench's error given to the DUT, as the suite's slot tests do; only the early side: an answer late in
@@ -257,7 +257,7 @@ def _slot(req: Frame, got: Frame, want: Frame, step: int | None, t0: float, p: P
     if r2_slot_start(start, node, error=error).ok:
         return []
     reqs = ["R2", "4.4.2-4" if req.name == "msg_control" else "4.4.3-4"]
-    return [Finding("answer", reqs, f"{req.name} answered {start * 1000:.1f} ms after the request, before node {node}'s "
+    return [ExploreFinding("answer", reqs, f"{req.name} answered {start * 1000:.1f} ms after the request, before node {node}'s "
                     "slot", f"answer from node {got.source} starting {start * 1000:.2f} ms after the request",
                     f"node {node}: slot {slot * 1000:g}..{(slot + cat.ANSWER_SLOT_S) * 1000:g} ms (bench error "
                     f"+-{error * 1000:g} ms)", req.timestamp - t0, step, strength="READING",
@@ -271,7 +271,7 @@ def fields(f: Frame) -> str:
 
 # ------------------------------------------------------------------------------------------ malformed frames (R17)
 def _r17_answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, slack: float, paired: set[int],
-                 to_request: dict[int, Frame | None]) -> list[Finding]:
+                 to_request: dict[int, Frame | None]) -> list[ExploreFinding]:
     """R17: no answer to a malformed or foreign frame. To a request sent malformed, the response F4 pairs with it
     (``to_request``, by the id of its :class:`Malformed`); to another, a frame of the DUT of its type, not a report,
     within the answer time of it, that answers no host frame (``paired``: the valid command's answer, judged or free),
@@ -291,7 +291,7 @@ def _r17_answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, slack: 
             if id(f) in seen:
                 continue
             seen.add(id(f))
-            out.append(Finding("answer", ["R17"], f"{f.name} {f.kind.label} to a malformed frame: {m.what}",
+            out.append(ExploreFinding("answer", ["R17"], f"{f.name} {f.kind.label} to a malformed frame: {m.what}",
                                f"{f.kind.label} {fields(f)} (transfer id {f.transfer_id})",
                                "no answer (R17: a malformed or foreign frame gets none)", f.timestamp - t0, m.step,
                                subject=f"{m.name} answered, {m.form}"))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import time
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -13,8 +14,9 @@ from ..bench.errors import PreflightError
 from ..bench.lanes import BenchGone
 from ..bench.station import BenchOptions
 from ..reporting.exits import ExitStatus
+from ..reporting.report import run_dir
 from .engine import Stats, explore
-from .report import load_replay, run_dir, summary_text, write_reports
+from .report import load_replay, summary_text, write_reports
 from .runner import OPTION_NAMES, RestoreError, Session
 
 BENCH_OPTIONS = OPTION_NAMES
@@ -95,7 +97,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         raise BenchProblem(str(exc)) from None
     finally:
         _close(session, out)
-    where = run_dir(args.reports)
+    where = run_dir(Path(args.reports), time.time(), "explore")  # named as every command's run
     info = {"bench": options, "seed": args.seed, "budget_s": args.budget, "lane": session.lane.name,
             "clock": session.lane.clock, "profile": session.profile.name, "faults": options.get("emulator_faults") or "",
             "emulator_variants": options.get("emulator_variants"), "emulator_option": options.get("emulator_option"),

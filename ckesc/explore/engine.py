@@ -5,7 +5,7 @@ The budget is spent in rounds of :data:`ROUND` programs, each a Hypothesis run s
 the same seed gives the same programs, round after round. The database (``database``, a directory) keeps every
 finding's shrunk program, and the next exploration runs those first (ours: Hypothesis's own example database
 stores choice sequences, which a change of the action strategy reinterprets; a program is what a person reads). A problem already found (its
-:attr:`Finding.key`) is not found again: a later program that shows only known problems passes, so each round
+:attr:`ExploreFinding.key`) is not found again: a later program that shows only known problems passes, so each round
 looks for something new. The budget bounds the whole exploration, shrinking included: a problem shown late is
 shrunk for what is left of it (the program found so far is kept, shrunk or not, and :attr:`Found.cut` says so), and
 ``say`` is told when shrinking starts. The problems are returned in the order they were first seen.
@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from .actions import Action, program_from_json, program_json, programs
-from .runner import Outcome, RestoreError, Session
+from .runner import ExploreOutcome, RestoreError, Session
 
 ROUND = 25  # programs per Hypothesis run (a round); shrinking comes on top
 PAST = "past-findings.json"  # in the database directory: every finding's program, run first next time
@@ -31,7 +31,7 @@ class Found:
     """One problem: the shortest program found that shows it, and how long it took to find."""
 
     program: list[Action]
-    outcome: Outcome
+    outcome: ExploreOutcome
     key: str
     programs_before: int  # programs run before the first that showed it
     steps_before: int
@@ -56,7 +56,7 @@ class Stats:
     pairs: set[tuple[str, str]] = field(default_factory=set)
     features: set[str] = field(default_factory=set)
 
-    def add(self, outcome: Outcome) -> None:
+    def add(self, outcome: ExploreOutcome) -> None:
         self.programs += 1
         self.steps += len(outcome.program)
         self.lane += outcome.seconds
@@ -255,6 +255,6 @@ def _cost(program: list[Action]) -> float:
                for a in program)
 
 
-def replay(session: Session, program: list[Action]) -> Outcome:
+def replay(session: Session, program: list[Action]) -> ExploreOutcome:
     """Run one program once (``ckesc explore --replay``, the generated tests)."""
     return session.run(program)

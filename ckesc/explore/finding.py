@@ -1,4 +1,4 @@
-"""What the explorer's judge finds (:class:`Finding`), the bench's limits it judges with (:class:`Params`) and the
+"""What the explorer's judge finds (:class:`ExploreFinding`), the bench's limits it judges with (:class:`Params`) and the
 report streams it names (:func:`stream_of`)."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from ..protocol.requirements import requirement
 
 
 @dataclass
-class Finding:
-    kind: str  # answer | stream | interval | status | reset | bus_rule
+class ExploreFinding:
+    kind: str  # answer | stream | interval | status | bus_rule (the reader's: F1..F7, R9 per gap, R9a, resets)
     requirements: list[str]
     what: str
     dut: str
@@ -52,7 +52,16 @@ class Params:
     bitrate: int = cat.DEFAULT_BITRATE
     host_node: int = 0
 
+    @property
+    def host_late(self) -> float:
+        """How much later than the DUT heard it a host frame may be stamped (:data:`ECHO_SLACK_S`), both stamps off by
+        the bench's error: the oracle hears it at that stamp, so what the DUT did on it may show that much early."""
+        return ECHO_SLACK_S + 2 * self.error
 
+
+#: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
+#: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
+ECHO_SLACK_S = 0.005
 _EXP = frozenset(cat.EXP_REPORT_FRAMES)
 #: the report streams judged: MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test
 STREAMS = (*cat.REPORT_FRAMES, "exp", "can_test")

@@ -1,6 +1,6 @@
 """Comparing what the DUT sent with what the oracle model predicts, only where the document is specific (sans-IO).
 
-Observations compared (each a :class:`Finding` when they differ):
+Observations compared (each a :class:`ExploreFinding` when they differ):
 - **answers** (:mod:`.answers`): each request's answer, paired with it as F4 says, against the model's: answered at
   all, with the model's payload, in its node's slot (R2); no answer to a malformed or foreign frame (R17).
 - **streams**: per stretch between two events (a host frame other than throttle, a power switch) and per
@@ -8,24 +8,26 @@ Observations compared (each a :class:`Finding` when they differ):
   stretch has settled (R9a's restart allowance of the longer interval, answer delay and the bench's error; a
   power-up's boot time); which MSG_EXP frames come is OBSERVE (R9-exp), only that some do.
 - **intervals** (R9): from the gap to the third report after the event on (R9a: the gaps before are OBSERVE), the
-  mean gap of MSG1/2/3 against the model's interval, held to R9's tolerance (1 ms plus twice the bench's error, here
-  with a frame's bus access, and twice the DUT's declared jitter, over the gaps; a mean whose bound exceeds a quarter
-  of the interval is not judged).
+  mean gap of MSG1/2/3 against the model's interval, held to R9's tolerance as the suite holds it (1 ms plus twice
+  the bench's error and the DUT's declared jitter, over the gaps; a mean whose bound exceeds a quarter of the interval
+  is not judged).
 - **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only), 13 and 8 against the model's MSG1s within
   one interval and a report stamp's error (:func:`~ckesc.protocol.judgements.report_stamp_error_s`; R8's window for
   bit 13: the flag may come up to one MSG1 interval after the model's).
 - **malformed and foreign frames** (R17): the model ignores them, so whatever the DUT does on one differs: an
-  answer to one (:mod:`.answers`), a reset across one (a report gap with a transfer id restart,
-  :func:`~ckesc.protocol.judgements.r19_report_restart`, the one reading of a reset every mode shares), and any
-  other finding after the first of them in the program, which :func:`cite_r17` makes cite R17 too (a setting, mode,
-  suspension, LED or comm-loss flag the DUT changed on one shows as its read-back, stream or MSG1 status finding; a
-  power-up count grown, as 241's answer).
+  answer to one (:mod:`.answers`), and any other finding after the first of them in the program, which
+  :func:`cite_r17` makes cite R17 too (a setting, mode, suspension, LED or comm-loss flag the DUT changed on one
+  shows as its read-back, stream or MSG1 status finding; a power-up count grown, as 241's answer). A reset across
+  one is the bus's own rule, not the model's: the reader finds it (``evidence/rules.py``, R19 with R17, over
+  :class:`~ckesc.evidence.resets.ResetSigns`), taking a malformed frame of the host's as nothing the ESC acted on
+  (:mod:`ckesc.evidence.taken`).
 - **a loaded bus** (R18): under a foreign load of up to half the bus (the runner's load steps), R9's mean interval is
   widened by the queueing the load can put ahead of a report (:func:`~ckesc.protocol.judgements.r18_mean`), and a
-  report's reach (MSG1 status, R8's clock, a reset's gap) by that queueing
+  report's reach (MSG1 status, R8's clock) by that queueing
   (:func:`~ckesc.protocol.judgements.r18_queueing_s`); R2's slot and the answers are not widened (R18 widens R9
   only). Under a load above half, and in the stretch after one, nothing is judged (R18: OBSERVE).
-The live bus rules (``evidence/live.py``) run beside this and are findings of their own (runner).
+The bus's own rules (``evidence/live.py``: F1..F7, R9 between two reports against the interval the node stated, R9a,
+resets, pairing) are the reader's: the runner hears every frame through them and adds what they find.
 """
 
 from __future__ import annotations
@@ -33,10 +35,9 @@ from __future__ import annotations
 import bisect
 
 from ..protocol import catalogue as cat
-from ..protocol.frame import Frame, frame_bits
+from ..protocol.frame import Frame
 from ..protocol.ids import Kind
 from ..protocol.judgements import (
-    f3_step,
     r8_flag_due,
     r9_judged,
     r9_mean,
@@ -44,14 +45,13 @@ from ..protocol.judgements import (
     r18_judged,
     r18_mean,
     r18_queueing_s,
-    r19_report_restart,
     report_stamp_error_s,
 )
 from .answers import KEPT, answers
-from .finding import STREAMS, Finding, Params, stream_of
+from .finding import ECHO_SLACK_S, STREAMS, ExploreFinding, Params, stream_of
 from .oracle import Malformed, Oracle, State
 
-__all__ = ["Finding", "Params", "cite_r17", "cite_r18", "judge"]
+__all__ = ["ExploreFinding", "Params", "cite_r17", "cite_r18", "judge"]
 
 #: MSG1 status bits compared (R7): direction, throttle source, comm fault (R8), running
 STATUS_MASK = int(cat.STATUS_STATE_BITS)
@@ -63,87 +63,37 @@ _FLOWING = {"normal": cat.REPORT_FRAMES, "exp": ("exp",), "can_test": ("can_test
 _THROTTLE = cat.THROTTLE_FRAMES
 #: events after which reporting restarts (R9a: power-up, resume, leaving MSG_EXP mode or CAN Test, a Set Freq write)
 _RESTARTS = frozenset({"start", "power on", "ready", "msg_control", "can_test", "set_freq"})
-#: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
-#: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
-_ECHO_SLACK_S = 0.005
 #: R9 on a stretch's mean interval only from this many gaps judged: fewer say little on a real bench
 _MIN_GAPS = 3
 
 
-def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[Finding]:
+def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[ExploreFinding]:
     """Every disagreement between the DUT's frames (decoded, from the ESC, bus timestamps) and the model's."""
     dut = sorted((f for f in dut if f.source != p.host_node and f.timestamp is not None), key=lambda f: f.timestamp)
     # other nodes' GET_ESC_ID queries (a flight controller's, F6): the ESC answers them too, they are none of its frames
     queries = [f for f in dut if f.name == "get_esc_id" and f.layout is not None and f.layout.name == "query"]
     if queries:
         dut = [f for f in dut if f.name != "get_esc_id" or f.layout is None or f.layout.name != "query"]
-    out = answers(oracle, dut, t0, p, _ECHO_SLACK_S + 2 * p.error if p.error else 0.0, queries)
+    out = answers(oracle, dut, t0, p, p.host_late if p.error else 0.0, queries)
     out += _streams(oracle, dut, t0, t_end, p)
     out += _status(oracle, dut, t0, p)
-    out += _r17_restarts(oracle, dut, t0, p)
     return [f for f in out if f.strength != "OBSERVE" and r18_judged(oracle.max_load(t0 + f.at, t0 + f.at))]
 
 
-def _r17_restarts(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Finding]:
-    """R17: a malformed frame never resets the ESC. Across one, in normal reporting and with no event of the model's
-    around it that restarts reports (a power switch, a mode, a Set Freq write), no report of the DUT stops for longer
-    than a restart may take and comes back with its transfer id started again (R19's sign of a reset,
-    :func:`~ckesc.protocol.judgements.r19_report_restart`; the gap's end may be stamped late by a report stamp's
-    error, :func:`~ckesc.protocol.judgements.report_stamp_error_s`). A report late but counting on is R9's (the stream
-    and interval findings), a transfer id off without a gap F3's (the live bus rules)."""
-    out: list[Finding] = []
-    marks = {m.t for m in oracle.malformed}
-    others = [st for st in oracle.states if st.t not in marks]
-    said: set[str] = set()
-    for m in oracle.malformed:
-        state = oracle.state_at(m.t)
-        if state.mode != "normal":
-            continue
-        longest = cat.restart_limit_s(max(state.intervals.values())) + p.boot_s + 2 * p.error
-        queueing = _queueing(oracle, m.t - longest, m.t + longest, state.bitrate)
-        if queueing is None:
-            continue  # R18: a load above half around it, its reports OBSERVE
-        # (a Set Freq read, or a write that changed nothing, restarts nothing; the program's start is no restart)
-        restarts = [st.t for st in others if st.label in _RESTARTS - {"start", "set_freq"} or st.label == "power off"
-                    or st.mode != state.mode or st.intervals != state.intervals]
-        error = report_stamp_error_s(error=p.error, bitrate=p.bitrate, queueing=queueing)
-        for stream in cat.REPORT_FRAMES:
-            mine = [f for f in dut if f.name == stream and f.kind is Kind.MESSAGE]
-            k = bisect.bisect_right([f.timestamp for f in mine], m.t)
-            if stream in said or not 0 < k < len(mine):
-                continue
-            before, after = mine[k - 1], mine[k]
-            if (before.transfer_id is None or after.transfer_id is None
-                    or _between(restarts, min(before.timestamp, m.t - longest), after.timestamp)):
-                continue
-            interval = state.intervals[stream]
-            reset = r19_report_restart(after.timestamp - before.timestamp, interval,
-                                       f3_step(before.transfer_id, after.transfer_id), error=error, jitter=p.jitter,
-                                       what=stream.upper())
-            if reset is None:
-                continue
-            said.add(stream)
-            out.append(Finding("reset", ["R17", reset.rule], f"{stream.upper()} restarted after a malformed frame: {m.what}",
-                               reset.text, f"{stream.upper()} every {interval * 1000:g} ms, its transfer id counting "
-                               "on (R17: a malformed frame never resets the ESC)", m.t - t0, m.step,
-                               subject=f"{stream} restarted, {m.form}"))
-    return out
-
-
-def cite_r17(findings: list[Finding], oracle: Oracle, t0: float) -> list[Finding]:
+def cite_r17(findings: list[ExploreFinding], oracle: Oracle, t0: float) -> list[ExploreFinding]:
     """Every finding after a malformed or foreign frame of the program also cites R17 (the model ignored the
     frame; a DUT that took it differs from then on), and says which came last before it."""
     if not oracle.malformed:
         return findings
     for f in findings:
-        before = [m for m in oracle.malformed if m.t - t0 <= f.at + _ECHO_SLACK_S]
+        before = [m for m in oracle.malformed if m.t - t0 <= f.at + ECHO_SLACK_S]
         if before and "R17" not in f.requirements:
             f.requirements.append("R17")
             f.model += f" (R17: the model ignored {_step_of(before[-1])})"
     return findings
 
 
-def cite_r18(findings: list[Finding], oracle: Oracle, t0: float) -> list[Finding]:
+def cite_r18(findings: list[ExploreFinding], oracle: Oracle, t0: float) -> list[ExploreFinding]:
     """Every finding while (or just after) a foreign load played also cites R18 (the ESC keeps R9, R2, the 64 ms bound
     and obeys its commands under it), and says the load."""
     for f in findings:
@@ -173,7 +123,7 @@ def _interval(state: State, stream: str) -> float:
     return max(state.intervals.values())  # MSG_EXP frames, CAN Test: at most the longest (R9-exp: OBSERVE)
 
 
-def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[Finding]:
+def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[ExploreFinding]:
     out = []
     by = {k: ([], []) for k in STREAMS}
     for i, frames in enumerate((dut, oracle.out)):
@@ -181,7 +131,7 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
             s = stream_of(f)
             if s is not None and f.source != p.host_node:
                 by[s][i].append(f.timestamp)
-    frame_s = frame_bits(8) / p.bitrate
+    stamp = report_stamp_error_s(error=p.error, bitrate=p.bitrate)  # how far a report's stamp strays from its schedule
     restart: State | None = None  # the latest event after which a report restarts (R9a), and the state before it
     restart_before: State | None = None
     for state, before, end in _segments(oracle, t_end):
@@ -193,13 +143,13 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
         for stream in STREAMS:
             iv = _interval(state, stream)
             old = _interval(before, stream) if before is not None else iv
-            late = cat.ANSWER_DELAY_MAX_S + 2 * p.error  # the command may be answered first, stamps off by the error
+            late = cat.ANSWER_DELAY_MAX_S + stamp  # the command may be answered first, and the report's stamp stray
             lo = state.t + r9a_limit_s(iv, old, jitter=p.jitter) + late + (p.boot_s if state.label == "power on" else 0.0)
             if restart is not None:  # R9a's allowance counts from the restart, over the longer of its old and new interval
                 r_old = _interval(restart_before, stream) if restart_before is not None else iv
                 lo = max(lo, restart.t + r9a_limit_s(iv, r_old, jitter=p.jitter) + late
                          + (p.boot_s if restart.label == "power on" else 0.0))
-            hi = end - 2 * p.error - frame_s
+            hi = end - stamp
             if hi <= lo:
                 continue
             d = _between(by[stream][0], lo, hi)
@@ -209,38 +159,41 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
             if on and m and hi - lo >= 2 * iv and not d:
                 if _between(by[stream][0], hi, end + 2 * iv):  # it came, late: the first report after a restart (R9a)
                     rids = ["R9a", *rids]
-                out.append(Finding("stream", rids, f"{_label(stream)} stopped ({state.mode} since {state.cause})",
+                out.append(ExploreFinding("stream", rids, f"{_label(stream)} stopped ({state.mode} since {state.cause})",
                                    f"no {_label(stream)} for {hi - lo:.3f} s", f"{len(m)} frames",
                                    lo - t0, state.step, subject=f"{stream} stopped, {state.mode}"))
             elif not on and d:
-                out.append(Finding("stream", rids, f"{_label(stream)} sent ({state.mode} since {state.cause})",
+                out.append(ExploreFinding("stream", rids, f"{_label(stream)} sent ({state.mode} since {state.cause})",
                                    f"{len(d)} frames, the first at t={d[0] - t0:.3f} s", "none", d[0] - t0, state.step,
                                    subject=f"{stream} sent, {state.mode}"))
             elif stream in cat.REPORT_FRAMES and len(m) >= 2:
-                out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, frame_s, share)
+                out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, share)
     return out
 
 
 def _interval_finding(state: State, stream: str, stamps: list[float], end: float, iv: float, t0: float, p: Params,
-                      frame_s: float, share: float = 0.0) -> list[Finding]:
-    """R9 on the DUT's reports of one stretch, the gap to its third report and on (R9a: the gaps before are
-    OBSERVE), on the mean of their gaps (:func:`~ckesc.protocol.judgements.r9_mean`): its stamps are the frames'
-    ends, each late by up to a frame's bus access besides the bench's error. Under a foreign load of ``share`` (R18,
-    up to half), widened by the queueing it can cause (:func:`~ckesc.protocol.judgements.r18_mean`)."""
-    seen = r9_judged(_between(stamps, state.t, end - 2 * p.error))
+                      share: float = 0.0) -> list[ExploreFinding]:
+    """R9 on the DUT's reports of one stretch against the model's interval (what the model alone knows: across a
+    Set ID, a refused write or a power cycle, where the node stated none since), the gap to its third report and on
+    (R9a: the gaps before are OBSERVE), on the mean of their gaps as the suite judges it
+    (:func:`~ckesc.protocol.judgements.r9_mean`, the bench's error and the DUT's declared jitter, nothing of the
+    judge's own). Under a foreign load of ``share`` (R18, up to half), widened by the queueing it can cause
+    (:func:`~ckesc.protocol.judgements.r18_mean`). Each single gap against the interval the node stated is the
+    reader's (the bus rules' R9)."""
+    seen = r9_judged(_between(stamps, state.t, end - report_stamp_error_s(error=p.error, bitrate=p.bitrate)))
     if len(seen) <= _MIN_GAPS:
         return []
     if share:
-        j = r18_mean(seen, iv, share=share, bitrate=state.bitrate, error=p.error + frame_s, jitter=p.jitter, what=stream)
+        j = r18_mean(seen, iv, share=share, bitrate=state.bitrate, error=p.error, jitter=p.jitter, what=stream)
     else:
-        j = r9_mean(seen, iv, error=p.error + frame_s, jitter=p.jitter)
+        j = r9_mean(seen, iv, error=p.error, jitter=p.jitter)
     if j is None or j.ok:
         return []
     gaps = len(seen) - 1
     mean = (seen[-1] - seen[0]) / gaps
     tol = j.limit + j.error
     loaded = f", under {share:.0%} load" if share else ""
-    return [Finding("interval", ["R9", "R18"] if share else ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, "
+    return [ExploreFinding("interval", ["R9", "R18"] if share else ["R9"], f"{_label(stream)} every {mean * 1000:.1f} ms, "
                     f"not {iv * 1000:g} ms ({state.mode} since {state.cause}{loaded})", f"mean of {gaps} gaps {mean * 1000:.2f} ms",
                     f"{iv * 1000:g} ms (+-{tol * 1000:.2f})", seen[0] - t0, state.step, subject=f"{stream} interval")]
 
@@ -267,19 +220,19 @@ def _between(stamps: list[float], lo: float, hi: float) -> list[float]:
 
 
 # ------------------------------------------------------------------------------------------ MSG1 status
-def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Finding]:
+def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[ExploreFinding]:
     model = [f for f in oracle.out if f.name == "msg1" and f.kind is Kind.MESSAGE]
     stamps = [f.timestamp for f in model]
     host_times = [f.timestamp for f, _ in oracle.host if f.name not in _THROTTLE]
     commands = oracle.commands
     ups = [st.t for st in oracle.states if st.label in ("start", "power on")]
-    out: list[Finding] = []
+    out: list[ExploreFinding] = []
     seen: set[int] = set()
     for f in dut:
         if f.name != "msg1" or f.kind is not Kind.MESSAGE or "status" not in f.fields:
             continue
         t = f.timestamp
-        if _between(host_times, t - cat.ANSWER_DELAY_MAX_S - 2 * p.error, t + _ECHO_SLACK_S + 2 * p.error):
+        if _between(host_times, t - cat.ANSWER_DELAY_MAX_S - 2 * p.error, t + p.host_late):
             continue  # a setting just sent (its echo may be stamped late): when within its answer time it shows is not written
         state = oracle.state_at(t)
         queueing = _queueing(oracle, t - 2 * state.intervals["msg1"], t, state.bitrate)  # R18: a load may hold it back
@@ -299,7 +252,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
             bits = _COMM
             if bits not in seen:
                 seen.add(bits)
-                out.append(Finding("status", ["R8", "R7"], f"MSG1 comm-loss bit {'clear' if comm else 'set'} "
+                out.append(ExploreFinding("status", ["R8", "R7"], f"MSG1 comm-loss bit {'clear' if comm else 'set'} "
                                    f"{(t - _last(commands, t)) * 1000:.0f} ms after the last command ({state.mode})",
                                    f"status {f.fields['status']:#06x}", f"bit 13 {'set' if comm else 'clear'} "
                                    f"(R8: set 200 ms to 200 ms + one MSG1 interval after the last command)", t - t0,
@@ -316,7 +269,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Find
         for bit, setting in _STATUS_SETTING.items():  # a bit showing a setting: the setting's own keeping, and R13's
             if bits & bit:                            # after a power cycle in the program
                 rids += [KEPT[setting]] + (["R13"] if any(u > t0 for u in ups if u <= t) else [])
-        out.append(Finding("status", rids, f"MSG1 status bits {bits:#06x} differ ({state.mode} since {state.cause})",
+        out.append(ExploreFinding("status", rids, f"MSG1 status bits {bits:#06x} differ ({state.mode} since {state.cause})",
                            f"status {f.fields['status']:#06x}", f"status {want:#06x} (bits {STATUS_MASK:#06x} compared)",
                            t - t0, state.step, subject=f"status {bits:#06x}"))
     return out
@@ -335,12 +288,12 @@ def _comm_fault_expected(t: float, commands: list[float], ups: list[float], stat
     if state.source != 0 or state.mode == "off":
         return None
     up = ups[max(0, bisect.bisect_right(ups, t) - 1)] if ups else float("-inf")
-    last = _last(commands, t + _ECHO_SLACK_S + 2 * p.error)
+    last = _last(commands, t + p.host_late)
     if last < up:
         return None
     since = t - last
     error = report_stamp_error_s(error=p.error, bitrate=p.bitrate, queueing=queueing)  # MSG1's stamp is its end
-    if since < -(error + p.jitter) or abs(since) <= _ECHO_SLACK_S + 2 * p.error:
+    if since < -(error + p.jitter) or abs(since) <= p.host_late:
         return None  # a command as the MSG1 went out: which came first is within the bench's error
     return r8_flag_due(since, state.intervals["msg1"], jitter=p.jitter, error=error)
 

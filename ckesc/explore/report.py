@@ -4,7 +4,6 @@ and per finding a replay file (``ckesc explore --replay``), a standalone pytest 
 
 from __future__ import annotations
 
-import datetime as _dt
 import html
 import json
 import pprint
@@ -17,20 +16,9 @@ import can
 from ..protocol.requirements import requirement
 from .actions import Action, program_from_json, program_json
 from .engine import Found, Stats
-from .judge import Finding
+from .judge import ExploreFinding
 
 REPLAY_FORMAT = "ckesc-explore-replay/1"
-
-
-def run_dir(reports: str | Path) -> Path:
-    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
-    out = Path(reports) / f"{stamp}-explore"
-    n = 1
-    while out.exists():  # two explorations in one second
-        n += 1
-        out = Path(reports) / f"{stamp}-explore-{n}"
-    out.mkdir(parents=True)
-    return out
 
 
 # ------------------------------------------------------------------------------------------ replay files
@@ -189,7 +177,7 @@ def summary_text(found: list[Found], stats: Stats, out: Path | None) -> str:
     else:
         lines.append("nothing found")
     for i, fd in enumerate(found, 1):
-        f: Finding = fd.finding
+        f: ExploreFinding = fd.finding
         steps = f"{len(fd.program)} step{'s' if len(fd.program) != 1 else ''}"
         shrunk = (f"{steps}, shrinking cut short by the budget: a shorter program may show it too" if fd.cut
                   else f"{steps} after shrinking")

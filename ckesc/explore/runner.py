@@ -6,13 +6,13 @@ checks, lanes and profile), finds the DUT and notes its settings: the *baseline*
 the settings restored and verified, as the suite's ``dut`` fixture does), runs the program step by step, feeds
 every host frame and power switch to a fresh :class:`~ckesc.explore.oracle.Oracle` after each step (so that a
 request goes to the node id the model says the DUT has), reads the settings back at the end, and returns an
-:class:`Outcome`.
+:class:`ExploreOutcome`.
 
 A load step (R18) puts a :class:`~ckesc.protocol.load.LoadSource` on the simulated lane's bus (its frames contend
 by arbitration, as the conformance module's do) and tells the oracle the share, which the judge widens R9 by
 (:func:`~ckesc.protocol.judgements.r18_queueing_s`) and, above half, judges nothing under (R18: OBSERVE; the live
 bus rules' report timing excused meanwhile, as ``test_above_half_load_is_recorded`` does). A lane that cannot play
-a load (real time) draws no load step; one replayed there is skipped, and said so (:attr:`Outcome.skipped`). Load
+a load (real time) draws no load step; one replayed there is skipped, and said so (:attr:`ExploreOutcome.skipped`). Load
 steps are drawn only when asked for (``Session(..., load=True)``, ``ckesc explore --load``); a replayed one is
 played wherever the lane can.
 """
@@ -39,7 +39,7 @@ from ..protocol.ids import Kind
 from ..protocol.judgements import r18_judged
 from ..protocol.load import LoadSource
 from .actions import Action, Bench, stream_fields
-from .judge import Finding, Params, cite_r17, cite_r18, judge
+from .judge import ExploreFinding, Params, cite_r17, cite_r18, judge
 from .oracle import SETTING_KEYS, Oracle
 
 #: The bench options by name (:class:`~ckesc.bench.station.BenchOptions`' fields, ``ckesc run``'s bench options)
@@ -82,9 +82,9 @@ class Recorder(can.Listener):
 
 
 @dataclass
-class Outcome:
+class ExploreOutcome:
     program: list[Action]
-    findings: list[Finding]
+    findings: list[ExploreFinding]
     t0: float
     t_end: float
     messages: list[can.Message]  # the whole trace of the program (BLF)
@@ -288,7 +288,7 @@ class Session:
         return Oracle(baseline, powered_at, start=t0, host_node=self.dut.host_node)
 
     # ---------------------------------------------------------------- one program
-    def run(self, program: Sequence[Action]) -> Outcome:
+    def run(self, program: Sequence[Action]) -> ExploreOutcome:
         try:
             powered_at = self._reset()
         except RestoreError:  # once more (a real-time bench may lose a frame under load, issue #21); then it stands
@@ -368,11 +368,11 @@ class Session:
         found, _count = self.rules.take()
         for v in found:
             at = v.timestamp - t0
-            findings.append(Finding("bus_rule", list(v.rules) or ["4.1.1-1"], f"bus rule {v.check}: {v.message}",
+            findings.append(ExploreFinding("bus_rule", list(v.rules) or ["4.1.1-1"], f"bus rule {v.check}: {v.message}",
                                     str(v), "the rule holds", at, None, strength=v.strength,
                                     subject=f"{' '.join(v.rules)} {v.check}"))
         findings = [f for f in cite_r18(cite_r17(findings, oracle, t0), oracle, t0) if f.strength != "OBSERVE"]
-        return Outcome(list(program), findings, t0, t_end, list(rec.messages), frames, list(oracle.out), steps,
+        return ExploreOutcome(list(program), findings, t0, t_end, list(rec.messages), frames, list(oracle.out), steps,
                        {a.feature for a in program}, list(self._skipped))
 
     def _set_load(self, fields: Mapping[str, Any] | None, step: int | None = None) -> None:

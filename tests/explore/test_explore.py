@@ -18,6 +18,7 @@ import argparse
 import io
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -26,8 +27,9 @@ from ckesc.emulator.faults import FAULTS
 from ckesc.explore import command
 from ckesc.explore.actions import Action
 from ckesc.explore.engine import explore
-from ckesc.explore.report import load_replay, run_dir, write_reports
+from ckesc.explore.report import load_replay, write_reports
 from ckesc.explore.runner import Session
+from ckesc.reporting.report import run_dir
 
 SEED = 1
 
@@ -137,7 +139,7 @@ def test_a_finding_replays_and_its_generated_test_reproduces_it(tmp_path):
     options = {"emulator_faults": "second_suspend_latches"}
     found, stats = _explore(options, budget_s=600, max_programs=40, stop_at_first=True)
     assert found
-    out = run_dir(tmp_path / "reports")
+    out = run_dir(tmp_path / "reports", time.time(), "explore")
     results = write_reports(out, found, stats, {"bench": options, "seed": SEED, "lane": "simulated"})
     record = results["findings"][0]
     assert [s["step"] for s in record["steps"][:3]] == ["msg_control(option=0, command=0x55555555)"] * 2 + [

@@ -41,7 +41,7 @@ SHOWS = {
                              "self_test response to a malformed frame"),
     "reset_on_multi_frame_start": ([Action("wait", seconds=0.3),
                                     Action("malformed", "msg_control", SUSPEND, form=r17.START)],
-                                   "restarted after a malformed frame"),
+                                   "a reset the host did not make"),  # (the reader's R19, R17)
     "short_raw_command_padded": (_comm_refresh("raw_command_10b", r17.SHORT), "comm-loss bit clear"),
 }
 

@@ -145,8 +145,8 @@ def test_an_unknown_requirement_id_is_an_error_not_a_dropped_finding(monkeypatch
     with pytest.raises(KeyError, match="get_rec"):
         answers.check_tables()
     with pytest.raises(KeyError, match="R9x"):
-        judge.Finding("interval", ["R9x"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0)
-    assert judge.Finding("interval", ["R9"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0).strength == "SHALL"
+        judge.ExploreFinding("interval", ["R9x"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0)
+    assert judge.ExploreFinding("interval", ["R9"], "MSG1 every 30 ms", "30 ms", "20 ms", 1.0).strength == "SHALL"
 
 
 def test_a_reply_to_a_flight_controller_s_query_is_not_the_answer_to_the_host_s():

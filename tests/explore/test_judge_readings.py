@@ -5,10 +5,7 @@ from __future__ import annotations
 
 from ckesc.explore.judge import Params, _comm_fault_expected, _interval_finding
 from ckesc.explore.oracle import State
-from ckesc.protocol import catalogue as cat
-from ckesc.protocol.frame import frame_bits
 
-FRAME_S = frame_bits(8) / cat.DEFAULT_BITRATE
 INTERVALS = {"msg1": 0.020, "msg2": 0.100, "msg3": 0.500}
 
 
@@ -17,7 +14,7 @@ def _state(t: float = 0.0) -> State:
 
 
 def _r9(stamps: list[float], jitter: float = 0.0) -> list:
-    return _interval_finding(_state(), "msg1", stamps, stamps[-1] + 1.0, 0.020, 0.0, Params(jitter=jitter), FRAME_S)
+    return _interval_finding(_state(), "msg1", stamps, stamps[-1] + 1.0, 0.020, 0.0, Params(jitter=jitter))
 
 
 def test_a_declared_jitter_enters_the_mean_at_its_two_ends_over_the_gaps():
@@ -29,6 +26,18 @@ def test_a_declared_jitter_enters_the_mean_at_its_two_ends_over_the_gaps():
     assert _r9(stamps) and _r9(stamps, jitter=0.0005)
     assert not _r9(stamps, jitter=0.050)
     assert not _r9([0.1 + k * 0.020 for k in range(6)], jitter=0.050)
+
+
+def test_the_mean_is_held_to_the_suite_s_bound_not_one_of_the_judge_s_own():
+    """Issue #35 item 2: the judge adds no tolerance of its own. It gave the mean a frame's bus access on top of the
+    bench's error (twice a frame over the gaps, 0.1 ms over five); the suite's R9 (``conformance.telemetry``,
+    ``judgements.r9_mean`` with the lane's error) does not, and the suite's reading won: MSG1 every 21.05 ms over
+    five gaps in simulated time is R9 to both."""
+    from ckesc.protocol.judgements import r9_judged, r9_mean
+
+    stamps = [0.1 + k * 0.02105 for k in range(7)]
+    assert not r9_mean(r9_judged(stamps), 0.020, error=0.0).ok  # the suite's
+    assert [f.requirements for f in _r9(stamps)] == [["R9"]]
 
 
 def test_the_gap_to_the_third_report_is_judged():
@@ -49,70 +58,4 @@ def test_the_comm_loss_flag_is_never_due_before_200_ms_whatever_the_jitter():
     assert _comm_fault_expected(last + 0.235, [last], [0.0], state, p) is True
 
 
-def _across_a_malformed_frame(change) -> list:
-    """The judge's findings on a faultless emulated ESC's frames, given a malformed frame (a multi-frame start of a
-    MSG Control suspend) at 0.5 s, with ``change(frames, at)`` applied to the ESC's MSG1s after it."""
-    import can
-
-    from ckesc.emulator.model import EscConfig, EscModel, factory_nvm
-    from ckesc.explore.judge import judge
-    from ckesc.explore.oracle import SETTING_KEYS, Oracle
-    from ckesc.protocol import malformed as r17
-    from ckesc.protocol.frame import Decoder
-
-    cfg = EscConfig(node_id=1, boot_time=0.0, report_delay=0.0)
-    nvm = factory_nvm(cfg)
-    esc = EscModel(cfg, dict(nvm))
-    esc.power_on(0.0)
-    oracle = Oracle({"node_id": 1, **{k: nvm[k] for k in SETTING_KEYS}}, powered_at=0.0, start=0.0)
-    sent = []
-    bad = r17.build("msg_control", {"option": 0, "command": cat.MSG_CONTROL_SUSPEND}, r17.START, source=0, node_id=1,
-                    others=[], transfer_id=lambda _: 3)[0]
-    at, until = 0.5, 1.5
-    for t in (at, until):
-        while (d := esc.next_deadline()) is not None and d <= t:
-            sent.extend(esc.poll(d))
-        sent.extend(esc.poll(t))
-        if t == at:
-            msg = can.Message(arbitration_id=bad.frames[0].arbitration_id, data=bad.frames[0].data, is_extended_id=True,
-                              timestamp=at)
-            esc.receive(msg, at)
-            oracle.malformed_frame(msg, "msg_control", r17.START, bad.what)
-    oracle.finish(until)
-    decoder = Decoder()
-    frames = [decoder.decode(w._replace(timestamp=w.timestamp + FRAME_S)) for w in sent]
-    return judge(oracle, change(frames, at), 0.0, until, Params())
-
-
-def _msg1_after(frames: list, at: float, tid) -> list:
-    """``frames`` with each MSG1 after ``at`` given transfer id ``tid(old, k)`` (k counting them from 0), or dropped (None)."""
-    out, k = [], 0
-    for f in frames:
-        if f.name == "msg1" and f.timestamp > at:
-            new = tid(f.transfer_id, k)
-            k += 1
-            if new is None:
-                continue
-            f.transfer_id = new  # (the frames are this case's own)
-        out.append(f)
-    return out
-
-
-def test_a_reset_across_a_malformed_frame_is_a_report_gap_with_a_transfer_id_restart():
-    """R17/R19 (issue #35: one reading of a reset in every mode, ``judgements.r19_report_restart``): the explorer took
-    any transfer id jump after a malformed frame for a reset, and any report later than R9a's restart bound from the
-    frame, counting on or not. A reset is a gap longer than a restart may take across which the counter started again:
-    a jump with no gap is F3's, a late report counting on R9's on its gap (the live bus rules find both, and the
-    runner makes them cite R17 after a malformed frame)."""
-    assert _across_a_malformed_frame(lambda frames, at: frames) == []
-    resets = lambda found: [f.what for f in found if f.kind == "reset"]  # noqa: E731
-    # the ESC reset: no MSG1 for 300 ms, then its counter from 0
-    found = _across_a_malformed_frame(lambda fs, at: _msg1_after(fs, at, lambda old, k: None if k < 15 else k - 15))
-    assert resets(found) == ["MSG1 restarted after a malformed frame: " + found[0].what.split(": ", 1)[1]]
-    assert found[0].requirements == ["R17", "R19"]
-    # a jump with no gap: not a reset (the old judge: 'MSG1 transfer id 25 -> 30')
-    assert resets(_across_a_malformed_frame(lambda fs, at: _msg1_after(fs, at, lambda old, k: (old + 5) % 32))) == []
-    # late, counting on (or the frames between lost, F3's counter having gone on): not a reset (the old judge: 'no
-    # MSG1 for 28.0 ms after it')
-    for late in (lambda old, k: None if k < 15 else (old - 15) % 32, lambda old, k: None if k < 15 else old):
-        assert resets(_across_a_malformed_frame(lambda fs, at, late=late: _msg1_after(fs, at, late))) == []
+# (a reset across a malformed frame is the reader's, R19 with R17: tests/evidence/test_taken.py)
