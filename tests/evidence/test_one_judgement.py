@@ -42,11 +42,12 @@ ASK_AT = 0.4  # the host reads the intervals (Set/Get Freq read): the node state
 END_S = 1.6
 
 
-def request(name: str, fields: dict, t: float, *, source: int = 0, destination: int = NODE, transfer_id: int = 0,
+def request(name: str, fields: dict, t: float, *, source: int = 0, destination: int | None = NODE, transfer_id: int = 0,
             layout: str | None = None) -> can.Message:
-    """A host's frame at ``t`` (a service request to ``destination``, or a message with ``layout``), as heard: the
-    host's own (``is_rx`` False) when node 0 sends it, else another node's (a flight controller's)."""
-    kw = {"layout": layout} if layout else {"kind": "request", "destination": destination}
+    """A host's frame at ``t`` (a service request to ``destination``; a message with ``layout``, or without one and
+    ``destination`` None), as heard: the host's own (``is_rx`` False) when node 0 sends it, else another node's (a
+    flight controller's)."""
+    kw = {"layout": layout} if layout else {"kind": "request", "destination": destination} if destination else {}
     wire = encode(name, fields, source=source, transfer_id=transfer_id, **kw)
     return can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True, timestamp=t,
                        is_rx=source != 0)
