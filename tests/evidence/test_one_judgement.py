@@ -12,7 +12,12 @@ bus rules (``evidence/live.LaneRules``, :class:`~ckesc.evidence.rules.BusRules`)
 GET_ESC_ID pairing likewise (issue #35, :class:`~ckesc.evidence.pairing.QueryPairing`): with a flight controller's
 queries interleaved with the host's, each reply answers the same query to the suite's helper
 (``conformance.answers.esc_id_pairings``), the bus rules, check-log and the soak's AnswerWatch, with the host's own
-frames timed by their echo or without one, the ESC answering the flight controller or not (F6)."""
+frames timed by their echo or without one, the ESC answering the flight controller or not (F6).
+
+The other stateful rules have modules of their own, on the trace player and the consumers' runners here (:func:`play`,
+:func:`request`, :func:`bus_rules`, :func:`check_log`): report restarts (R9a, ``test_one_judgement_restarts``), resets
+(R19, ``test_one_judgement_resets``), the comm flag (R8, ``test_one_judgement_comm``) and a loaded bus (R18,
+``test_one_judgement_load``)."""
 
 from __future__ import annotations
 
@@ -54,9 +59,10 @@ def request(name: str, fields: dict, t: float, *, source: int = 0, destination: 
 
 
 def play(events, end: float, *, nvm: dict | None = None, **config) -> list[can.Message]:
-    """An emulated ESC at node NODE (``EscConfig`` ``config``: faults, ...) powered at 0, fed ``events`` in time
-    order (``nvm``: its flash before, e.g. ``power_ups``), each ``(t, what)``: a ``can.Message`` it hears (the host's or another node's), or ``"off"`` / ``"on"`` (its
-    power switched: a reset when nobody says so), up to ``end``. Returns everything on the bus, in order: the frames
+    """An emulated ESC at node NODE (``EscConfig`` ``config``: faults, ...; ``nvm``: its flash before, e.g.
+    ``power_ups``) powered at 0, fed ``events`` in time order, each ``(t, what)``: a ``can.Message`` it hears (the
+    host's or another node's), or ``"off"`` / ``"on"`` (its power switched: a reset when nobody says so), up to
+    ``end``. Returns everything on the bus, in order: the frames
     fed as given, the ESC's one at a time (the lowest id first) stamped at their end, as SocketCAN does."""
     esc = EscModel(EscConfig(**{"node_id": NODE, "boot_time": BOOT_S, **config}))
     esc.nvm.update(nvm or {})  # (its flash as a long life left it: a power-up count near its wrap, say)

@@ -41,7 +41,7 @@ RESET_AT, END_S = 0.80, 1.80
 INTERVAL = {"msg1": 0.020, "msg2": 0.100, "msg3": 0.500}
 
 
-def _trace(reset: bool, *, power_ups: int = 7, run_time: tuple[int, int] | None = None) -> list:
+def _trace(reset: bool, *, power_ups: int = 7, run_time: tuple[int, int] | None = None, faults: tuple[str, ...] = ()) -> list:
     """The host's 241 reads around ``RESET_AT`` (a reset there, or none) of an ESC whose power-up count reads
     ``power_ups`` before it; ``run_time``: the run time (s) the two option 1 answers say instead of the ESC's own."""
     events = []
@@ -50,7 +50,7 @@ def _trace(reset: bool, *, power_ups: int = 7, run_time: tuple[int, int] | None 
                    (t + 0.05, request("maintenance_information", {"option": 1}, t + 0.05, transfer_id=2 * k + 1))]
     if reset:
         events += [(RESET_AT, "off"), (RESET_AT + 0.02, "on")]
-    frames = play(sorted(events, key=lambda e: e[0]), END_S, nvm={"power_ups": power_ups - 1})
+    frames = play(sorted(events, key=lambda e: e[0]), END_S, nvm={"power_ups": power_ups - 1}, faults=faults)
     if run_time is not None:  # the option 1 answers (their request's transfer id odd) rewritten: a run time gone back
         field = RESET_FIELDS[1]
         answers = [m for m in frames if m.is_rx and (m.arbitration_id >> 16) & 0xFF == 241 and m.data[-1] & 1]
@@ -141,3 +141,15 @@ def test_a_run_time_gone_back_is_a_reset_to_the_bus_rules_check_log_and_the_soak
     frames = _trace(False, run_time=run_time)
     got = {"bus rules": _bus_rules(frames), "check-log": _check_log(frames, tmp_path, capsys), "soak": _soak(frames)[0]}
     assert got == dict.fromkeys(got, {"R19", "R17"} if back else set())
+
+
+def test_a_transfer_id_that_skips_without_a_gap_is_f3s_and_no_reset_to_any_consumer(tmp_path, capsys):
+    """An ESC whose message transfer ids never move (``transfer_id_stuck``): every report's id is off by one, with no
+    gap longer than a restart may take. Not a reset to any consumer (the losing reading: "any transfer id jump is a
+    reset", which the R17 tests held); F3 to the bus rules and check-log (:mod:`.test_one_judgement`)."""
+    frames = _trace(False, faults=("transfer_id_stuck",))
+    soak, resets = _soak(frames)
+    got = {"suite": _suite(frames), "bus rules": _bus_rules(frames), "check-log": _check_log(frames, tmp_path, capsys),
+           "soak": soak}
+    assert got == dict.fromkeys(got, set()) and resets == 0
+    assert {r for v in bus_rules(frames) for r in v.rules} >= {"F3"}
