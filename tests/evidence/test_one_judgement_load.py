@@ -29,7 +29,7 @@ from ckesc.explore.judge import Params, judge
 from ckesc.explore.oracle import Oracle
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.errors import DecodeError
-from ckesc.protocol.frame import Decoder, frame_bits
+from ckesc.protocol.frame import Decoder, classify, frame_bits
 from ckesc.protocol.judgements import r18_gap, r18_mean
 from ckesc.protocol.load import LoadSource
 from ckesc.soak.monitor import Monitor
@@ -37,16 +37,16 @@ from ckesc.soak.watch import WatchConfig
 
 from .test_one_judgement import NODE, bus_rules, check_log, request
 
-SHARE = 0.35
 RATE = cat.DEFAULT_BITRATE
 #: the host reads the intervals at READ, the load plays from LOAD_FROM to the end; judged from JUDGE_FROM
-START, READ, LOAD_FROM, JUDGE_FROM, END_S = 0.30, 0.40, 0.50, 0.60, 2.10
+START, READ, LOAD_FROM, JUDGE_FROM, LOAD_TO, END_S = 0.30, 0.40, 0.50, 0.60, 1.60, 2.30
 INTERVAL = {"msg1": 0.020, "msg2": 0.100, "msg3": 0.500}
 _CHANNELS = itertools.count()
 
 
-def _trace(faults: tuple[str, ...]) -> list:
-    """Everything on the simulated bus as the host hears it (its own read by its echo), the load playing."""
+def _trace(faults: tuple[str, ...], share: float) -> list:
+    """Everything on the simulated bus as the host hears it (its own read by its echo), the load of ``share``
+    playing from LOAD_FROM to LOAD_TO."""
     channel = f"one-judgement-load-{next(_CHANNELS)}"
     bus = can.Bus(interface="ckesc-sim", channel=channel, nodes=[NODE], faults=list(faults), receive_own_messages=True,
                   seed=1)
@@ -62,7 +62,9 @@ def _trace(faults: tuple[str, ...]) -> list:
         until(READ)
         bus.send(request("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}, READ))
         until(LOAD_FROM)
-        sim_bus.world(channel).add_source(LoadSource(SHARE, RATE, priority="high", seed=5, exclude_nodes=[NODE]))
+        sim_bus.world(channel).add_source(LoadSource(share, RATE, priority="high", seed=5, exclude_nodes=[NODE]))
+        until(LOAD_TO)
+        sim_bus.world(channel).remove_source("load")
         until(END_S)
         return heard
     finally:
@@ -82,30 +84,31 @@ def _decoded(frames) -> list:
 
 def _starts(frames, name: str) -> list[float]:
     return [f.timestamp - frame_bits(len(f.data)) / RATE for f in _decoded(frames)
-            if f.name == name and f.source == NODE and f.timestamp > JUDGE_FROM]
+            if f.name == name and f.source == NODE and JUDGE_FROM < f.timestamp <= LOAD_TO]
 
 
-def _suite(frames) -> set[str]:
+def _suite(frames, share: float) -> set[str]:
     """As ``test_reports_keep_their_intervals_under_load`` judges: each report's mean and single gaps under the share,
     and none missing."""
     out = set()
     for which, interval in INTERVAL.items():
         starts = _starts(frames, which)
-        mean = r18_mean(starts, interval, share=SHARE, bitrate=RATE, what=which)
-        expected = int((END_S - JUDGE_FROM) / interval)
-        gaps = [r18_gap(b - a, interval, share=SHARE, bitrate=RATE, what=which) for a, b in zip(starts, starts[1:])]
+        mean = r18_mean(starts, interval, share=share, bitrate=RATE, what=which)
+        expected = int((LOAD_TO - JUDGE_FROM) / interval)
+        gaps = [r18_gap(b - a, interval, share=share, bitrate=RATE, what=which) for a, b in zip(starts, starts[1:])]
         if mean is None or len(starts) < expected - 1 or not (mean.ok or not mean.judged) or not all(g.ok for g in gaps):
             out.add(f"R18: {which}")
     return out
 
 
-def _explorer(frames) -> set[str]:
+def _explorer(frames, share: float) -> set[str]:
     baseline = {"node_id": NODE, "throttle_channel": NODE, **cat.DEFAULT_REPORT_INTERVALS}
     oracle = Oracle(baseline, powered_at=0.0, start=START)
     for m in frames:
         if not m.is_rx:
             oracle.host_frame(m)
-    oracle.load(LOAD_FROM, SHARE)
+    oracle.load(LOAD_FROM, share)
+    oracle.load(LOAD_TO, 0.0)
     oracle.finish(END_S)
     found = judge(oracle, _decoded(m for m in frames if m.is_rx and m.timestamp >= START), START, END_S,
                   Params(boot_s=START))
@@ -113,10 +116,11 @@ def _explorer(frames) -> set[str]:
 
 
 def _soak(frames) -> set[str]:
-    """The soak's monitor over the trace from the load on (a soak reads no intervals: its configuration says them)."""
+    """The soak's monitor over the trace but the host's Set/Get Freq read and its answer (a soak reads no intervals:
+    its configuration says them)."""
     monitor = Monitor(WatchConfig(node_id=NODE, host_node=0, intervals=INTERVAL), t0=0.0)
     for m in frames:
-        if m.timestamp >= LOAD_FROM:
+        if (spec := classify(m.arbitration_id)[4]) is None or spec.name != "set_freq":
             monitor.feed(m)
     monitor.close(END_S)
     return {f"{rule}: {name}" for f in monitor.findings for rule in f.rules for name in INTERVAL if f" {name} " in f.message}
@@ -135,19 +139,21 @@ def _named(found: set[str]) -> dict[str, set[str]]:
     return out
 
 
+@pytest.mark.parametrize("share", [0.35, 0.5], ids=["35 %", "50 %"])
 @pytest.mark.parametrize("faults", [(), ("drops_reports_under_load",)], ids=["faultless", "drops reports"])
 def test_one_trace_the_same_finding_under_load_from_the_suite_the_explorer_the_bus_rules_check_log_and_the_soak(
-        faults, tmp_path, capsys):
+        faults, share, tmp_path, capsys):
     """MSG1 (its 20 ms gaps the most, each skipped report a gap of 40 ms or more) is named by every consumer, under R18
     where the consumer knows the load's share (the suite, the explorer) and R9 where it does not; nothing else is
     found, and nothing at all on the faultless ESC, the load only delaying its reports. (MSG2 and MSG3 are named where
     the consumer sees a gap of theirs: the bus rules compare no frames across a silence of the node longer than 40 ms,
     which may be the bench's power cycle or a disturbed bus (R20); the explorer judges a stream stopped only over
     two of its intervals in a settled stretch.)"""
-    frames = _trace(faults)
-    _, _, summary = check_log(frames, tmp_path, capsys, "--tolerance", "0")  # (the simulated lane's stamps are exact)
+    frames = _trace(faults, share)
+    # (the simulated lane's stamps are exact, and its power stayed on)
+    _, _, summary = check_log(frames, tmp_path, capsys, "--tolerance", "0", "--power-on")
     check = {f"{rule}: {v['message'].split()[0]}" for v in summary["violations"]["first"] for rule in v["rules"]}
-    got = {"suite": _named(_suite(frames)), "explorer": _named(_explorer(frames)), "bus rules": _named(_bus_rules(frames)),
+    got = {"suite": _named(_suite(frames, share)), "explorer": _named(_explorer(frames, share)), "bus rules": _named(_bus_rules(frames)),
            "check-log": _named(check), "soak": _named(_soak(frames))}
     if not faults:
         assert got == dict.fromkeys(got, {})
