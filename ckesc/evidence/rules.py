@@ -307,6 +307,9 @@ class BusRules(Tracker):
     def _stream(self, out, st: EscStream, info: FrameId, node: Node, data, ts: float, start: float, busy_from: float, tid: int):
         if st.periodic:
             out = self._report_restart(out, st, info, node, data, ts, start, tid)
+            if (node.paused and st.chain == node.chain - 1 and st.reset == node.reset and st.moved == node.moved
+                    and f3_holds(st.tid, tid)):  # no power cycle, counting on: a late report across the pause (R9)
+                st.chain = node.chain
         fresh = st.ts is None or st.chain != node.chain or st.reset != node.reset
         if st.ts is not None and st.chain == node.chain and not node.shared and ts > node.unsure_until:
             gap = start - st.start

@@ -131,7 +131,8 @@ class TimingEvidence:
 class Node:
     __slots__ = ("id", "esc", "host", "first_ts", "last_ts", "chain", "reset", "periods", "period_note", "floor",
                  "from_read", "before_silence", "shared", "comm_fault", "comm_events", "comm_dropped", "silences", "noted",
-                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until", "moved")
+                 "event_reset", "event_ts", "event_what", "event_old", "pending", "grace_chain", "unsure_until", "moved",
+                 "paused")
 
     def __init__(self, node_id: int, host: bool) -> None:
         self.id = node_id
@@ -140,6 +141,9 @@ class Node:
         self.first_ts: float | None = None
         self.last_ts = -math.inf
         self.chain = 0  # +1 at every silence long enough for a power cycle
+        #: the last silence came with every power switch reported and none since the node's frame before it: the
+        #: node's own pause (R9 judges its gap where a report counts on) or a reset (its counter starts again, R19)
+        self.paused = False
         self.reset = 0  # +1 whenever this node's report cadence may restart (suspend/resume, Set Freq, ...)
         #: +1 at every Set ID (it may re-address any ESC): the ESC sending from this id next may have sent from
         #: another id meanwhile, its transfer ids counting on there (F3 counts at the sender), so the first frame
@@ -368,6 +372,7 @@ class Tracker(Findings):
 
     # ------------------------------------------------------------------------------------- state the traffic sets
     def _silence(self, node: Node, ts: float) -> None:
+        node.paused = self.power_known and node.last_ts >= self.last_switch_ts
         if node.last_ts > -math.inf:
             node.silences += 1
             if any(p is not None for p in node.periods) and not node.before_silence:

@@ -12,7 +12,12 @@ bus rules (``evidence/live.LaneRules``, :class:`~ckesc.evidence.rules.BusRules`)
 GET_ESC_ID pairing likewise (issue #35, :class:`~ckesc.evidence.pairing.QueryPairing`): with a flight controller's
 queries interleaved with the host's, each reply answers the same query to the suite's helper
 (``conformance.answers.esc_id_pairings``), the bus rules, check-log and the soak's AnswerWatch, with the host's own
-frames timed by their echo or without one, the ESC answering the flight controller or not (F6)."""
+frames timed by their echo or without one, the ESC answering the flight controller or not (F6).
+
+The other stateful rules have modules of their own, on the trace player and the consumers' runners here (:func:`play`,
+:func:`request`, :func:`bus_rules`, :func:`check_log`): report restarts (R9a, ``test_one_judgement_restarts``), resets
+(R19, ``test_one_judgement_resets``), the comm flag (R8, ``test_one_judgement_comm``) and a loaded bus (R18,
+``test_one_judgement_load``)."""
 
 from __future__ import annotations
 
@@ -42,29 +47,54 @@ ASK_AT = 0.4  # the host reads the intervals (Set/Get Freq read): the node state
 END_S = 1.6
 
 
-def _trace(faults: tuple[str, ...]) -> tuple[can.Message, list[can.Message]]:
-    """The host's Set/Get Freq read at ASK_AT and everything the emulated ESC sends up to END_S, as heard."""
-    esc = EscModel(EscConfig(node_id=NODE, boot_time=BOOT_S, faults=faults))
+def request(name: str, fields: dict, t: float, *, source: int = 0, destination: int | None = NODE, transfer_id: int = 0,
+            layout: str | None = None) -> can.Message:
+    """A host's frame at ``t`` (a service request to ``destination``; a message with ``layout``, or without one and
+    ``destination`` None), as heard: the host's own (``is_rx`` False) when node 0 sends it, else another node's (a
+    flight controller's)."""
+    kw = {"layout": layout} if layout else {"kind": "request", "destination": destination} if destination else {}
+    wire = encode(name, fields, source=source, transfer_id=transfer_id, **kw)
+    return can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True, timestamp=t,
+                       is_rx=source != 0)
+
+
+def play(events, end: float, *, nvm: dict | None = None, **config) -> list[can.Message]:
+    """An emulated ESC at node NODE (``EscConfig`` ``config``: faults, ...; ``nvm``: its flash before, e.g.
+    ``power_ups``) powered at 0, fed ``events`` in time order, each ``(t, what)``: a ``can.Message`` it hears (the
+    host's or another node's), or ``"off"`` / ``"on"`` (its power switched: a reset when nobody says so), up to
+    ``end``. Returns everything on the bus, in order: the frames
+    fed as given, the ESC's one at a time (the lowest id first) stamped at their end, as SocketCAN does."""
+    esc = EscModel(EscConfig(**{"node_id": NODE, "boot_time": BOOT_S, **config}))
+    esc.nvm.update(nvm or {})  # (its flash as a long life left it: a power-up count near its wrap, say)
     esc.power_on(0.0)
-    wire = encode("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}, kind="request",
-                  source=0, destination=NODE, transfer_id=0)
-    ask = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True, timestamp=ASK_AT,
-                      is_rx=False)
-    out = []
+    out, fed = [], []
 
     def run(until: float) -> None:
         while (d := esc.next_deadline()) is not None and d <= until:
             out.extend(esc.poll(d))
         out.extend(esc.poll(until))
 
-    run(ASK_AT)
-    esc.receive(ask, ASK_AT)
-    run(END_S)
-    heard, bus_free = [], 0.0  # on the bus one at a time (the lowest id first), stamped at their end as SocketCAN does
+    for t, what in events:
+        run(t)
+        if what == "off":
+            esc.power_off(t)
+        elif what == "on":
+            esc.power_on(t)
+        else:
+            esc.receive(what, t)
+            fed.append(what)
+    run(end)
+    heard, bus_free = [], 0.0
     for w in sorted(out, key=lambda w: (w.timestamp, w.arbitration_id)):
         bus_free = max(w.timestamp, bus_free) + frame_bits(len(w.data)) / cat.DEFAULT_BITRATE
         heard.append(can.Message(arbitration_id=w.arbitration_id, data=w.data, is_extended_id=True, timestamp=bus_free))
-    return ask, heard
+    return sorted(heard + fed, key=lambda m: m.timestamp)
+
+
+def _trace(faults: tuple[str, ...]) -> tuple[can.Message, list[can.Message]]:
+    """The host's Set/Get Freq read at ASK_AT and everything the emulated ESC sends up to END_S, as heard."""
+    ask = request("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}, ASK_AT)
+    return ask, [m for m in play([(ASK_AT, ask)], END_S, faults=faults) if m is not ask]
 
 
 def _conformance(ask, heard) -> set[str]:
@@ -100,14 +130,34 @@ def _explorer(ask, heard) -> set[str]:
     return {r for f in found if f.subject == "msg1 interval" for r in f.requirements}
 
 
-def _check_log_run(ask, heard, tmp_path, capsys) -> tuple[int, str]:
-    """``ckesc check-log --complete`` over a candump log of the frames: its exit code and what it printed."""
-    log = tmp_path / "trace.log"
+def check_log(frames, tmp_path, capsys, *flags: str) -> tuple[int, str, dict]:
+    """``ckesc check-log --complete FLAGS`` over a candump log of ``frames``: its exit code, what it printed, its
+    JSON summary."""
+    log, out = tmp_path / "trace.log", tmp_path / "summary.json"
     log.write_text("".join(f"({m.timestamp:.6f}) can0 {m.arbitration_id:08X}#{bytes(m.data).hex().upper()}\n"
-                           for m in sorted([ask, *heard], key=lambda m: m.timestamp)))
-    code = cli_main(["check-log", "--complete", str(log)])
+                           for m in sorted(frames, key=lambda m: m.timestamp)))
+    code = cli_main(["check-log", "--complete", *flags, "--json", str(out), str(log)])
     text = capsys.readouterr().out
     assert code in (0, 1), text
+    return code, text, json.loads(out.read_text())
+
+
+def bus_rules(frames, **kw) -> list:
+    """The live bus rules over ``frames`` (a suite's lane: every frame heard, every power switch reported): the
+    violations they find (``kw``: e.g. the ``power_switched`` times to report, as the lane does)."""
+    switches = sorted(kw.pop("power_switched", ()))
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True, **kw)
+    out = []
+    for m in sorted(frames, key=lambda m: m.timestamp):
+        while switches and switches[0] <= m.timestamp:
+            rules.power_switched(switches.pop(0))
+        out.extend(rules.feed_message(m))
+    return out
+
+
+def _check_log_run(ask, heard, tmp_path, capsys) -> tuple[int, str]:
+    """``ckesc check-log --complete`` over a candump log of the frames: its exit code and what it printed."""
+    code, text, _ = check_log([ask, *heard], tmp_path, capsys)
     return code, text
 
 

@@ -136,10 +136,18 @@ def test_report_restarts_the_host_made_are_not_resets():
         assert "reset" not in after(event), event
 
 
-def test_a_late_report_counting_on_is_no_reset():
+def test_a_late_report_counting_on_is_no_reset_but_r9s():
+    """A silence with no power switch (every one reported) and the counter counting on: a late report, R9's (issue
+    #35: the losing reading took any silence for a possible power cycle and judged nothing across it); with a power
+    switch reported meanwhile, nothing is compared across it."""
     rules = engine()
     t = stated(rules, 1, 0.0)
-    assert stream(rules, 1, [t + 0.02 * i for i in range(10)] + [t + 0.5], start_tid=5) == []  # a silence, no restart
+    late = stream(rules, 1, [t + 0.02 * i for i in range(10)] + [t + 0.5], start_tid=5)
+    assert checks(late) == ["report-interval"] and "R9" in late[0].rules  # a silence, no restart
+    rules = engine()
+    t = stated(rules, 1, 0.0)
+    rules.power_switched(t + 0.3)
+    assert stream(rules, 1, [t + 0.02 * i for i in range(10)] + [t + 0.5], start_tid=5) == []
 
 
 # ------------------------------------------------------------------------------------------ the emulator's faults

@@ -1,0 +1,158 @@
+"""One trace, every consumer that judges the comm flag, one finding (issue #35): R8 over the frames of an emulated ESC
+under the host's RawCommand stream that stops for half a second and starts again, while a flight controller queries
+GET_ESC_ID every 50 ms and streams its standard DroneCAN ESC command (1030) every 10 ms throughout (R20: only RawCommand refreshes the comm watchdog, and comm loss is judged with
+such traffic going on). The faultless ESC is R8 to none; one that raises the flag 400 ms or 100 ms after the last
+command, never, or does not clear it on the next command (the emulator's ``comm_loss_*`` faults) is R8 to each:
+
+* the suite's check (``conformance/test_s4_4_4_msg1.py``, as written there: no flag under the stream; the first MSG1
+  with the flag against ``judgements.r8_onset`` from the last command, one MSG1 interval being the DUT's own; the
+  flag clear on an MSG1 within an interval of the next command);
+* the soak's comm-flag watch (:class:`~ckesc.soak.comm_watch.CommFlagWatch`: each MSG1 against
+  ``judgements.r8_flag_due``);
+* ``ckesc explore``'s judge (``judge._status``: each MSG1's bit 13 against ``r8_flag_due`` from the model's commands).
+
+Who does not judge it, and why: the live bus rules and ``ckesc check-log`` record the flag's changes with the time
+since the last command (``summary()["nodes"][...]["comm_loss"]``) and judge nothing of them: a capture does not say
+that the throttle source is CAN, nor which node's RawCommand channel is the ESC's. They must record the same
+episodes on every trace, the flight controller's queries no command."""
+
+from __future__ import annotations
+
+import can
+import pytest
+
+from ckesc.evidence.rules import BusRules
+from ckesc.explore.judge import Params, judge
+from ckesc.explore.oracle import Oracle
+from ckesc.protocol import catalogue as cat
+from ckesc.protocol.errors import DecodeError
+from ckesc.protocol.frame import Decoder, frame_bits
+from ckesc.protocol.judgements import r8_onset
+from ckesc.soak.monitor import Monitor
+from ckesc.soak.watch import WatchConfig
+from conformance.telemetry import REACT_S
+
+from .test_one_judgement import BOOT_S, NODE, play, request
+
+FC = 10
+HIGH_MINUS_1 = 3  # the flight controller's priority for 1030 (bench/foreign.py)
+#: the host's stream: every 10 ms over these two spans (the gap between them: comm loss); the trace's end
+STREAMS = ((0.30, 0.80), (1.30, 1.60))
+END_S = 1.80
+MSG1_S = 0.020
+COMM = int(cat.Status.COMM_FAULT)
+
+
+def _trace(faults: tuple[str, ...], echo: bool = True) -> list:
+    """The host's stream (its frames stamped at their end on the bus by their echo, or without one at the host's send,
+    one frame's time before) and the flight controller's queries, and everything the ESC sends."""
+    events = [(t / 1000, request("raw_command_14b", {"channels": [0] * 4}, t / 1000, destination=None,
+                                 transfer_id=(t // 10) % 32))
+              for lo, hi in STREAMS for t in range(round(lo * 1000), round(hi * 1000) + 1, 10)]
+    events += [(t / 1000 + 0.003, request("get_esc_id", {"option": 0}, t / 1000 + 0.003, source=FC, layout="query",
+                                          transfer_id=(t // 50) % 32)) for t in range(250, 1750, 50)]
+    events += [(t / 1000 + 0.005, _foreign_esc_command(t / 1000 + 0.005, (t // 10) % 32)) for t in range(250, 1750, 10)]
+    frames = play(sorted(events, key=lambda e: e[0]), END_S, faults=faults, throttle_channel=1)
+    for m in frames:
+        if not echo and not m.is_rx:
+            m.timestamp -= frame_bits(len(m.data)) / cat.DEFAULT_BITRATE
+    return sorted(frames, key=lambda m: m.timestamp)
+
+
+def _foreign_esc_command(t: float, tid: int) -> can.Message:
+    """The flight controller's standard DroneCAN ESC command (``uavcan.equipment.esc.RawCommand``, 1030), ZERO, as
+    ``bench/foreign.ardupilot`` plays it: not one of the ESC's frames (R17), no comm refresh (R20)."""
+    return can.Message(arbitration_id=(HIGH_MINUS_1 << 24) | (1030 << 8) | FC, data=bytes([0] * 7 + [0xC0 | tid]),
+                       is_extended_id=True, timestamp=t)
+
+
+def _decoded(frames) -> list:
+    """The CKESC frames among ``frames``, decoded (the flight controller's DroneCAN frames are none)."""
+    decoder, out = Decoder(), []
+    for m in frames:
+        try:
+            out.append(decoder.decode(m))
+        except DecodeError:
+            pass
+    return out
+
+
+def _flag(f) -> bool:
+    return bool(f.fields["status"] & COMM)
+
+
+def _suite(frames) -> set[str]:
+    """As ``test_comm_fault_flag`` judges: no flag under the stream, the first flag's onset, cleared again."""
+    msg1 = [f for f in _decoded(frames) if f.name == "msg1" and f.source == NODE]
+    commands = [m.timestamp for m in frames if not m.is_rx]
+    last = max(t for t in commands if t <= STREAMS[0][1] + 0.001)
+    again = min(t for t in commands if t > last)
+
+    def start(f) -> float:
+        return f.timestamp - frame_bits(len(f.data)) / cat.DEFAULT_BITRATE
+
+    under = [f for f in msg1 if STREAMS[0][0] + MSG1_S < f.timestamp <= last]
+    if any(map(_flag, under)):
+        return {"R8"}  # "bit13 (comm fault) set in MSG1 under a command stream"
+    interval = max([MSG1_S] + [start(b) - start(a) for a, b in zip(under, under[1:])])
+    first = next((f for f in msg1 if last < f.timestamp < again and _flag(f)), None)
+    if first is None:
+        return {"R8"}  # "no MSG1 with bit13 (comm fault) within ... of the last command"
+    before = [f for f in msg1 if last < f.timestamp < first.timestamp]
+    if before:
+        interval = max(interval, start(first) - start(before[-1]))
+    broken = {j.rule for j in r8_onset(start(first) - last, interval) if not j.ok}
+    cleared = next((f for f in msg1 if again < f.timestamp and not _flag(f)), None)
+    if cleared is None or start(cleared) - again > interval + REACT_S:
+        broken.add("R8")  # "bit13 still set ... after a new command (4.4.4-3: cleared)"
+    return broken
+
+
+def _soak(frames) -> set[str]:
+    monitor = Monitor(WatchConfig(node_id=NODE, host_node=0, intervals={"msg1": MSG1_S}), t0=0.0)
+    for m in frames:
+        monitor.feed(m)
+    monitor.close(END_S)
+    return {r for f in monitor.findings if f.watch == monitor.comm.name for r in f.rules}
+
+
+def _explorer(frames) -> set[str]:
+    baseline = {"node_id": NODE, "throttle_channel": 1, **cat.DEFAULT_REPORT_INTERVALS}
+    oracle = Oracle(baseline, powered_at=0.0, start=BOOT_S)
+    for m in frames:
+        if not m.is_rx:
+            oracle.host_frame(m)
+    oracle.finish(END_S)
+    found = judge(oracle, _decoded(m for m in frames if m.is_rx and m.timestamp >= BOOT_S), BOOT_S, END_S,
+                  Params(boot_s=BOOT_S))
+    return {r for f in found for r in f.requirements}
+
+
+def _recorded(frames) -> list[tuple[str, float]]:
+    """The bus rules' (and check-log's) record of the flag: each change and its time since the last command (ms)."""
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    for m in frames:
+        rules.feed_message(m)
+    assert not [v for v in rules.findings() if v.fails]
+    return [(e["event"], e.get("since_last_throttle_ms")) for e in rules.summary()["nodes"][str(NODE)]["comm_loss"]]
+
+
+@pytest.mark.parametrize("faults, expected", [((), set()), (("comm_loss_late",), {"R8"}), (("comm_loss_early",), {"R8"}),
+                                              (("comm_loss_never",), {"R8"}), (("comm_loss_sticky",), {"R8"})],
+                         ids=["faultless", "late", "early", "never", "sticky"])
+@pytest.mark.parametrize("echo", [True, False], ids=["echo", "no echo"])
+def test_one_trace_the_same_r8_finding_from_the_suite_the_soak_and_the_explorer(faults, expected, echo):
+    frames = _trace(faults, echo)
+    soak, explorer = _soak(frames), _explorer(frames)
+    got = {"suite": _suite(frames), "soak": soak & {"R8"}, "explorer": explorer & {"R8"}}
+    assert got == dict.fromkeys(got, expected)
+    assert soak <= {"R8", "R19"} and explorer <= {"R8", "R7"}  # nothing else found on the flight controller's traffic
+
+
+def test_the_bus_rules_record_the_comm_loss_episode_and_no_command_in_the_flight_controllers_queries():
+    """The faultless ESC's flag set once, 200 ms to one MSG1 interval after the last command however many queries
+    came meanwhile, and cleared once after the next command."""
+    (set_, since_set), (cleared, since_cleared) = _recorded(_trace(()))
+    assert (set_, cleared) == ("set", "cleared")
+    assert 200 <= since_set <= 200 + MSG1_S * 1000 + frame_bits(8) / cat.DEFAULT_BITRATE * 1000
+    assert since_cleared <= MSG1_S * 1000 + 1
