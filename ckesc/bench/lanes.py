@@ -150,6 +150,13 @@ class Lane(ABC):
 # ------------------------------------------------------------------------------------------ simulated
 
 
+#: the simulated lane's CAN (ckesc/emulator/sim_bus.py): no acknowledgement needed and no limit to the host's
+#: transmit queue, until the suite's bus rules and bursts are ready for the CAN model of issue #36 (with it, a frame
+#: the host sends while the ESC boots is held for it: every later frame moves, and R9's queueing allowance FAILs a
+#: report delayed by an answer that started as it fell due; the robustness section sends bursts of more than 10)
+SIM_CAN: dict[str, Any] = {"ack": False, "txqueuelen": None}
+
+
 class SimLane(Lane):
     name = "simulated"
     clock = "simulated"
@@ -161,7 +168,7 @@ class SimLane(Lane):
         self.bitrate = bitrate
         self.bus = self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, nodes=list(nodes), faults=faults,
                                       flash_path=flash_path, seed=seed, bitrate=bitrate, esc_config=esc_config,
-                                      receive_own_messages=True, ignore_config=True)
+                                      receive_own_messages=True, ignore_config=True, **SIM_CAN)
         self.power = EmulatorPower(self)
 
     @property
@@ -181,7 +188,7 @@ class SimLane(Lane):
     def reopen(self, bitrate: int) -> None:
         old = self.sim
         self.bus = self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, bitrate=bitrate,
-                                      receive_own_messages=True, ignore_config=True)
+                                      receive_own_messages=True, ignore_config=True, **SIM_CAN)
         old.shutdown()
         self.bitrate = bitrate
 
