@@ -39,7 +39,6 @@ from __future__ import annotations
 import errno
 import heapq
 import itertools
-import math
 import os
 from collections import deque
 from typing import Any, Callable, Iterable, Mapping, Sequence
@@ -53,6 +52,7 @@ from ..protocol.frame import WireFrame, frame_bits, new_wire
 from ..protocol.traffic import TrafficSource
 from .emulated_bench import EmulatedBench
 from .model import EscModel
+from .sim_can import CanNodes
 
 _WORLDS: dict[str, SimWorld] = {}
 
@@ -81,12 +81,9 @@ class _Pending:
 
 
 INF = float("inf")
-#: frames an ESC holds to send (its mailboxes and its firmware's queue behind them, sent lowest id first); what does
-#: not fit is dropped
-ESC_TX_MAILBOXES = 32
 
 
-class SimWorld:
+class SimWorld(CanNodes):
     """One simulated CAN bus with its bench of ESCs and the host buses attached to it.
 
     Frames wait in ``_waiting`` (a heap by ready time) until the clock reaches their ready time, then join their
@@ -199,19 +196,6 @@ class SimWorld:
             heapq.heappush(self._waiting, (ready, seq, _Pending(ready, seq, wire, origin, bitrate, flags)))
 
     # ------------------------------------------------------------------ the nodes' controllers
-    def controller(self, node: Any) -> CanController:
-        """``node``'s CAN controller (a :class:`SimEscBus`, an :class:`EscModel`, a traffic source)."""
-        ctl = self._ctl.get(node)
-        if ctl is None:
-            if isinstance(node, SimEscBus):
-                ctl = CanController(node.bitrate, **node.controller_options)
-            elif isinstance(node, EscModel):
-                ctl = CanController(node.state.bitrate, txqueuelen=ESC_TX_MAILBOXES, order="priority")
-            else:
-                ctl = CanController(node.bitrate or self._host_bitrate(), txqueuelen=None, order="priority")
-            self._ctl[node] = ctl
-        return ctl
-
     def _submit(self, p: _Pending) -> None:
         """A frame joins its sender's queue (an ESC's that does not fit is dropped; a bus's raises QueueFull)."""
         if not self.ack:  # the bus before issue #36: no queue of its own for a node, every frame contends at once
@@ -225,25 +209,6 @@ class SimWorld:
         ctl.submit(p, p.wire.arbitration_id)
         if ctl.state is not ErrorState.BUS_OFF and node not in self._parked and node not in self._contending:
             self._contending.append(node)
-
-    def _acknowledged(self, sender: Any, bitrate: int) -> bool:
-        """Whether another node at ``bitrate`` listens now (and so acknowledges what ``sender`` sends)."""
-        ctls = self._ctl
-        for bus in self.buses:
-            if bus is not sender and bus.bitrate == bitrate:
-                ctl = ctls.get(bus)
-                if ctl is None or ctl.state is not ErrorState.BUS_OFF:
-                    return True
-        now = self.now
-        for esc in self.bench.escs:
-            if esc is not sender and esc.powered and esc.state.bitrate == bitrate and now >= esc.state.ready_at:
-                ctl = ctls.get(esc)
-                if ctl is None or ctl.state is not ErrorState.BUS_OFF:
-                    return True
-        for source in self._sources:
-            if source is not sender and (source.bitrate or self._host_bitrate()) == bitrate:
-                return True
-        return False
 
     def _start_transmission(self) -> None:
         waiting = self._waiting
@@ -322,98 +287,6 @@ class SimWorld:
                 continue
             bus._deliver(wire, is_rx=bus is not origin, **flags)
 
-    def _failed(self, node: Any, ctl: CanController, end: float) -> None:
-        """A try that was not acknowledged (or met a short): the frame stays at the head; the node goes on trying,
-        is parked (the ACK exception: nothing changes until someone listens) or is bus-off."""
-        self.stats["retries"] += 1
-        ctl.attempt(self._outcome, end)
-        self._report(node, ctl)
-        if ctl.bus_off:
-            self._contending.remove(node)
-            self._set_alarm()
-        elif self._outcome is Attempt.NO_ACK and ctl.steady_without_ack():
-            self._contending.remove(node)
-            p = ctl.head()
-            period = attempt_bits(len(p.wire.data), Attempt.NO_ACK, True) / p.bitrate
-            self._parked[node] = (end, period, self._slot(end, period, self._next_listener(p.bitrate)))
-            self._set_alarm()
-
-    def _report(self, node: Any, ctl: CanController) -> None:
-        frames = ctl.take_error_frames()
-        if frames and isinstance(node, SimEscBus) and node.error_frames:
-            for f in frames:
-                node._deliver_error(f)
-
-    # ------------------------------------------------------------------ parking, recovery, shorts
-    @staticmethod
-    def _slot(since: float, period: float, t: float) -> float:
-        """A parked node's first retransmission that starts at ``t`` or after."""
-        if t == INF:
-            return INF
-        k = max(0, math.ceil(round((t - since) / period, 9)))
-        return round(since + k * period, 12)
-
-    def _next_listener(self, bitrate: int) -> float:
-        """When the next ESC at ``bitrate`` that is booting now starts to listen (INF: none is)."""
-        now = self.now
-        t = INF
-        for esc in self.bench.escs:
-            if esc.powered and esc.state.bitrate == bitrate and now < esc.state.ready_at < t:
-                t = esc.state.ready_at
-        return t
-
-    def _wake(self) -> None:
-        """Someone may listen now (a power-up, a bus opened, a source joined, a recovery): parked nodes try again
-        at their next retransmission slot."""
-        now = self.now
-        for node, (since, period, resume) in self._parked.items():
-            self._parked[node] = (since, period, min(resume, self._slot(since, period, now)))
-        self._set_alarm()
-
-    def _set_alarm(self) -> None:
-        t = self._short_until if self._short_until > self.now else INF
-        for _, _, resume in self._parked.values():
-            t = min(t, resume)
-        for ctl in self._ctl.values():
-            if ctl.bus_off_at is not None:
-                due = ctl.recovery_due()
-                if due is not None:
-                    t = min(t, due)
-        self._alarm = t
-
-    def _on_alarm(self, t: float) -> None:
-        woke = False
-        for node, ctl in list(self._ctl.items()):
-            if ctl.bus_off_at is not None and ctl.poll(t):
-                self._report(node, ctl)
-                if ctl and node not in self._contending:
-                    self._contending.append(node)
-                woke = True
-        for node, (_, _, resume) in list(self._parked.items()):
-            if resume <= t:
-                del self._parked[node]
-                if self._ctl[node]:
-                    self._contending.append(node)
-        if woke:
-            self._wake()
-        self._set_alarm()
-
-    def short(self, seconds: float) -> None:
-        """Short the bus (CANH to CANL) for ``seconds`` from now: every try meets a bit error, nothing is
-        delivered; the nodes that try to send go bus-off and recover as their controllers do."""
-        self._short_until = max(self._short_until, self.now + seconds)
-        self._wake()
-
-    def _forget(self, node: Any) -> None:
-        """``node`` left the bus (an ESC powered off, a bus shut down): its queue and its state go."""
-        ctl = self._ctl.pop(node, None)
-        if ctl is not None:
-            ctl.clear()
-        if node in self._contending:
-            self._contending.remove(node)
-        self._parked.pop(node, None)
-        self._set_alarm()
-
     # ------------------------------------------------------------------ other nodes
     def add_source(self, source: TrafficSource) -> None:
         """Put another node on this bus (:mod:`ckesc.protocol.traffic`): its frames are queued at their due
@@ -430,9 +303,6 @@ class SimWorld:
         """Take a source off the bus (its frames already queued still go out)."""
         name = source if isinstance(source, str) else source.name
         self._sources = [s for s in self._sources if s.name != name]
-
-    def _host_bitrate(self) -> int:
-        return self.buses[-1].bitrate if self.buses else DEFAULT_BITRATE
 
     # ------------------------------------------------------------------ host side
     def send(self, bus: SimEscBus, msg: can.Message) -> None:
