@@ -12,6 +12,20 @@ bit arrived as ``timestamp``, like SocketCAN. An ESC whose bit rate differs from
 hears nor is heard. Nothing here reads the wall clock or sleeps, so a run is deterministic for a
 given seed and a 120 s window costs milliseconds.
 
+The bus is CAN as hardware makes it (:mod:`ckesc.protocol.canbus`, issue #36): every node (each
+``can.Bus`` on the channel, each ESC, each traffic source) has a controller with a transmit queue
+and error counters, and only the heads of the queues contend. A frame is sent only when another
+node at its bit rate acknowledges it (a powered ESC past its boot time, another bus, a source);
+otherwise its sender keeps it at the head and retransmits it (the frames behind it wait): a host
+alone on the bus goes error-passive at TEC 128 and its frames meet the ESC at its power-up. A host
+bus's queue holds ``txqueuelen`` frames (10, SocketCAN's), in ``tx_order`` "fifo" (SocketCAN's) or
+"priority"; a further ``send()`` raises ``can.CanOperationError`` (ENOBUFS, as SocketCAN's).
+``bus.state`` is its controller's (ACTIVE, PASSIVE, ERROR for bus-off); ``error_frames=True`` hands
+it SocketCAN's error frames (``berr_reporting=True``: each bus error too); :meth:`SimWorld.short`
+shorts the bus for a time (every transmitter goes bus-off, and recovers by itself after 128 x 11
+bits unless ``auto_recovery=False``: then :meth:`SimEscBus.restart`). An ESC's controller holds
+:data:`ESC_TX_MAILBOXES` frames by priority and drops what does not fit.
+
 The flash file (``flash_path``) is written at power-off and when the bus shuts down or the world
 is discarded; within the process the ESCs keep their settings across power cycles anyway.
 
@@ -22,19 +36,23 @@ Set Baud. :func:`discard` removes it.
 
 from __future__ import annotations
 
+import errno
 import heapq
 import itertools
+import os
 from collections import deque
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import can
 from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
 
+from ..protocol.canbus import DEFAULT_TXQUEUELEN, Attempt, CanController, ErrorFrame, ErrorState, QueueFull, attempt_bits
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame, frame_bits, new_wire
 from ..protocol.traffic import TrafficSource
 from .emulated_bench import EmulatedBench
 from .model import EscModel
+from .sim_can import CanNodes
 
 _WORLDS: dict[str, SimWorld] = {}
 
@@ -65,29 +83,42 @@ class _Pending:
 INF = float("inf")
 
 
-class SimWorld:
+class SimWorld(CanNodes):
     """One simulated CAN bus with its bench of ESCs and the host buses attached to it.
 
-    Frames wait in ``_waiting`` (a heap by ready time) until the clock reaches their ready time,
-    then contend in ``_ready`` (a heap by id, i.e. arbitration order) for the bus."""
+    Frames wait in ``_waiting`` (a heap by ready time) until the clock reaches their ready time, then join their
+    sender's transmit queue (its :class:`~ckesc.protocol.canbus.CanController`); the heads of the queues contend
+    for the bus (arbitration: the lowest id wins). A node whose head nobody can acknowledge and whose tries change
+    nothing any more (error-passive: the ACK exception) is *parked*: its tries are not played one by one until a
+    node that can listen appears (an ESC's boot ends, a bus opens, a source joins), when it resumes at its next
+    retransmission slot. ``_alarm`` is the earliest of the resumptions, the bus-off recoveries and a short's end."""
 
-    def __init__(self, channel: str, bench: EmulatedBench, *, power_on: bool = True) -> None:
+    def __init__(self, channel: str, bench: EmulatedBench, *, power_on: bool = True, ack: bool = True) -> None:
         self.channel = channel
+        #: whether a frame needs another node's acknowledgement (False: every try is sent, as a bus that no
+        #: one needs to hear: the lanes before issue #36)
+        self.ack = ack
         self.bench = bench
         self.now = 0.0
         self.clock = SimClock(self)
         self.buses: list[SimEscBus] = []
         self._waiting: list[tuple[float, int, _Pending]] = []
-        self._ready: list[tuple[int, int, _Pending]] = []
         self._in_flight: tuple[float, _Pending] | None = None
+        self._ready: list[tuple[int, int, _Pending]] = []  # without acknowledgement: every node's frames, by id
+        self._outcome = Attempt.ACKED  # what the frame in flight meets
         self._seq = itertools.count()
         self._tasks: list[SimCyclicTask] = []
         self._sources: list[TrafficSource] = []
-        self.stats = {"frames": 0, "busy_s": 0.0}
+        self._ctl: dict[Any, CanController] = {}  # each node's controller (a bus, an ESC, a source)
+        self._contending: list[Any] = []  # the nodes with a head frame to try now
+        self._parked: dict[Any, tuple[float, float, float]] = {}  # node -> (since, retry period, resume at)
+        self._short_until = -INF
+        self._alarm = INF
+        self.stats = {"frames": 0, "busy_s": 0.0, "retries": 0, "dropped": 0}
         #: per traffic source (by name): frames it put on the bus and the bus time they took
         self.source_stats: dict[str, dict[str, float]] = {}
         if power_on:
-            bench.power_on(0.0)
+            self.power_on()
 
     # ------------------------------------------------------------------ event loop
     def next_event(self) -> float | None:
@@ -98,11 +129,13 @@ class SimWorld:
         if in_flight is not None:
             if in_flight[0] < t:
                 t = in_flight[0]
-        elif self._ready:
+        elif self._contending or self._ready:
             t = self.now
         elif self._waiting:
             if self._waiting[0][0] < t:
                 t = self._waiting[0][0]
+        if self._alarm < t:
+            t = self._alarm
         for task in self._tasks:
             if task.next_time < t:
                 t = task.next_time
@@ -124,6 +157,8 @@ class SimWorld:
         self.now = t
         if self._in_flight is not None and self._in_flight[0] <= t:
             self._finish_transmission()
+        if self._alarm <= t:
+            self._on_alarm(t)
         if self._tasks:
             for task in self._tasks:
                 if task.next_time <= t:
@@ -156,29 +191,79 @@ class SimWorld:
         now = self.now
         seq = next(self._seq)
         if ready <= now:
-            heapq.heappush(self._ready, (wire.arbitration_id, seq, _Pending(now, seq, wire, origin, bitrate, flags)))
+            self._submit(_Pending(now, seq, wire, origin, bitrate, flags))
         else:
             heapq.heappush(self._waiting, (ready, seq, _Pending(ready, seq, wire, origin, bitrate, flags)))
 
-    def _start_transmission(self) -> None:
-        waiting, ready = self._waiting, self._ready
-        while waiting and waiting[0][0] <= self.now:
-            p = heapq.heappop(waiting)[2]
-            heapq.heappush(ready, (p.wire.arbitration_id, p.seq, p))
-        if not ready:
+    # ------------------------------------------------------------------ the nodes' controllers
+    def _submit(self, p: _Pending) -> None:
+        """A frame joins its sender's queue (an ESC's that does not fit is dropped; a bus's raises QueueFull)."""
+        if not self.ack:  # the bus before issue #36: no queue of its own for a node, every frame contends at once
+            heapq.heappush(self._ready, (p.wire.arbitration_id, p.seq, p))
             return
-        # arbitration: the lowest id wins (a frame at another bit rate than its listeners' is
-        # garbage to them; a mixed-rate bus is broken anyway, so rates do not interact here)
-        winner = heapq.heappop(ready)[2]
-        duration = (67 + 8 * len(winner.wire.data)) / winner.bitrate  # frame_bits, inline: once per frame
+        node = p.origin
+        ctl = self._ctl.get(node) or self.controller(node)
+        if ctl.full and not isinstance(node, SimEscBus):
+            self.stats["dropped"] += 1
+            return
+        ctl.submit(p, p.wire.arbitration_id)
+        if ctl.state is not ErrorState.BUS_OFF and node not in self._parked and node not in self._contending:
+            self._contending.append(node)
+
+    def _start_transmission(self) -> None:
+        waiting = self._waiting
+        while waiting and waiting[0][0] <= self.now:
+            self._submit(heapq.heappop(waiting)[2])
+        if self._ready:
+            winner = heapq.heappop(self._ready)[2]
+            duration = (67 + 8 * len(winner.wire.data)) / winner.bitrate  # frame_bits, inline: once per frame
+            self._in_flight = (round(self.now + duration, 12), winner)
+            self.stats["busy_s"] += duration
+            return
+        contending = self._contending
+        if not contending:
+            return
+        ctls = self._ctl
+        # arbitration: the lowest head id wins (a frame at another bit rate than its listeners' is garbage to
+        # them; a mixed-rate bus is broken anyway, so rates do not interact here)
+        winner = None
+        for node in contending:
+            p = ctls[node].head()
+            if winner is None or (p.wire.arbitration_id, p.seq) < (winner.wire.arbitration_id, winner.seq):
+                winner = p
+        bitrate, n = winner.bitrate, len(winner.wire.data)
+        if self.now < self._short_until:
+            self._outcome = Attempt.SHORT
+        elif self._acknowledged(winner.origin, bitrate):
+            self._outcome = Attempt.ACKED
+            duration = (67 + 8 * n) / bitrate  # frame_bits, inline: once per frame
+            self._in_flight = (round(self.now + duration, 12), winner)
+            self.stats["busy_s"] += duration
+            return
+        else:
+            self._outcome = Attempt.NO_ACK
+        duration = attempt_bits(n, self._outcome, ctls[winner.origin].passive) / bitrate
         self._in_flight = (round(self.now + duration, 12), winner)
         self.stats["busy_s"] += duration
 
     def _finish_transmission(self) -> None:
         end, p = self._in_flight  # type: ignore[misc]
         self._in_flight = None
-        self.stats["frames"] += 1
         origin, bitrate, old = p.origin, p.bitrate, p.wire
+        if self.ack:
+            ctl = self._ctl.get(origin)
+            if ctl is None or ctl.head() is not p:  # its queue went away meanwhile (a power-off, a bus shut down)
+                return
+            if self._outcome is not Attempt.ACKED:
+                self._failed(origin, ctl, end)
+                return
+            was = ctl.state
+            ctl.attempt(Attempt.ACKED, end)
+            if not ctl:
+                self._contending.remove(origin)
+            if was is not ErrorState.ACTIVE:  # (only a controller past 95 can change its state by a success)
+                self._report(origin, ctl)
+        self.stats["frames"] += 1
         if isinstance(origin, _Shifted):
             st = self.source_stats[origin.name]
             st["frames"] += 1
@@ -212,17 +297,16 @@ class SimWorld:
             raise ValueError(f"a traffic source named {source.name!r} is already on {self.channel}")
         self._sources.append(_Shifted(source, self.now))
         self.source_stats.setdefault(source.name, {"frames": 0, "busy_s": 0.0})
+        self._wake()
 
     def remove_source(self, source: TrafficSource | str) -> None:
         """Take a source off the bus (its frames already queued still go out)."""
         name = source if isinstance(source, str) else source.name
         self._sources = [s for s in self._sources if s.name != name]
 
-    def _host_bitrate(self) -> int:
-        return self.buses[-1].bitrate if self.buses else DEFAULT_BITRATE
-
     # ------------------------------------------------------------------ host side
     def send(self, bus: SimEscBus, msg: can.Message) -> None:
+        """Queue ``msg`` on ``bus``'s controller; raises :class:`~ckesc.protocol.canbus.QueueFull`."""
         flags = None
         if msg.is_remote_frame or msg.is_error_frame:
             flags = {"is_remote_frame": msg.is_remote_frame, "is_error_frame": msg.is_error_frame}
@@ -230,12 +314,25 @@ class SimWorld:
         wire = new_wire((msg.arbitration_id, bytes(msg.data), 0.0, msg.is_extended_id))
         self._queue(wire, bus, bus.bitrate, ready=self.now, flags=flags)
 
+    def attach(self, bus: SimEscBus) -> None:
+        self.buses.append(bus)
+        self._wake()
+
+    def detach(self, bus: SimEscBus) -> None:
+        if bus in self.buses:
+            self.buses.remove(bus)
+        self._forget(bus)
+
     # ------------------------------------------------------------------ power
     def power_off(self) -> None:
         self.bench.power_off(self.now)
+        if self.ack:  # (without acknowledgement, the lanes' bus before issue #36: what an ESC queued still goes out)
+            for esc in self.bench.escs:
+                self._forget(esc)
 
     def power_on(self) -> None:
         self.bench.power_on(self.now)
+        self._wake()
 
     def power_cycle(self, off_time: float = 1.0) -> None:
         self.power_off()
@@ -295,7 +392,10 @@ class SimCyclicTask(ModifiableCyclicTaskABC, RestartableCyclicTaskABC):
         self.index = (self.index + 1) % len(self.messages)
         if self.modifier_callback is not None:
             self.modifier_callback(msg)
-        self.bus.world.send(self.bus, msg)
+        try:
+            self.bus.world.send(self.bus, msg)
+        except QueueFull:  # SocketCAN's BCM: the frame is lost, the task goes on
+            self.bus.world.stats["dropped"] += 1
         self.next_time = round(self.next_time + self.period, 9)
 
 
@@ -314,6 +414,12 @@ class SimEscBus(can.BusABC):
         seed: int = 0,
         esc_config: Mapping[str, Any] | None = None,
         receive_own_messages: bool = False,
+        txqueuelen: int | None = DEFAULT_TXQUEUELEN,
+        ack: bool = True,
+        tx_order: str = "fifo",
+        auto_recovery: bool = True,
+        error_frames: bool = False,
+        berr_reporting: bool = False,
         **kwargs: Any,
     ) -> None:
         channel = str(channel)
@@ -324,15 +430,21 @@ class SimEscBus(can.BusABC):
         world = _WORLDS.get(channel)
         if world is None:
             bench = EmulatedBench(nodes, faults=faults, flash=flash_path, seed=seed, config=esc_config)
-            world = _WORLDS[channel] = SimWorld(channel, bench)
+            world = _WORLDS[channel] = SimWorld(channel, bench, ack=_flag(ack))
         self.world = world
         self.bitrate = int(bitrate)
         self.receive_own_messages = receive_own_messages
+        #: this bus's controller (:mod:`ckesc.protocol.canbus`): its transmit queue, and its recovery from bus-off
+        self.controller_options = {"txqueuelen": None if txqueuelen in (None, "", "none") else int(txqueuelen),
+                                   "order": tx_order,
+                                   "auto_recovery": _flag(auto_recovery), "berr_reporting": _flag(berr_reporting)}
+        CanController(self.bitrate, **self.controller_options)  # (checks them before the bus joins the world)
+        self.error_frames = _flag(error_frames)  # SocketCAN's CAN_RAW_ERR_FILTER: hand this bus its error frames
         self._rx: deque[can.Message] = deque()
         self.channel_info = f"ckesc-sim {channel} @ {self.bitrate} bit/s ({len(world.bench.escs)} ESCs)"
         super().__init__(channel, can_filters=can_filters, **kwargs)
         self.channel = channel
-        world.buses.append(self)
+        world.attach(self)
 
     # ---------------------------------------------------------------- the lane's extras
     @property
@@ -362,6 +474,27 @@ class SimEscBus(can.BusABC):
     def set_fault(self, name: str, on: bool = True, node: int | None = None) -> None:
         self.world.bench.set_fault(name, on, node)
 
+    @property
+    def controller(self) -> CanController:
+        """This bus's CAN controller: its error counters (``tec``, ``rec``), state and transmit queue."""
+        return self.world.controller(self)
+
+    @property
+    def state(self) -> can.BusState:
+        """python-can's view of the controller: ACTIVE (error-active or -warning), PASSIVE, ERROR (bus-off)."""
+        return _BUS_STATE[self.world.controller(self).state]
+
+    def restart(self) -> None:
+        """Restart the controller (SocketCAN's ``ip link set canX type can restart``): error-active again,
+        its queue kept."""
+        ctl = self.world.controller(self)
+        was_off = ctl.bus_off
+        ctl.restart(self.world.now)
+        self.world._report(self, ctl)
+        if was_off and ctl and self not in self.world._contending:
+            self.world._contending.append(self)
+        self.world._wake()
+
     # ---------------------------------------------------------------- BusABC
     def _deliver(self, wire: WireFrame, is_rx: bool, **flags: bool) -> None:
         msg = can.Message(timestamp=wire.timestamp, arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id,
@@ -369,9 +502,19 @@ class SimEscBus(can.BusABC):
         if self._filters is None or self._matches_filters(msg):
             self._rx.append(msg)
 
+    def _deliver_error(self, frame: ErrorFrame) -> None:
+        self._rx.append(can.Message(timestamp=frame.timestamp, arbitration_id=frame.can_id, is_extended_id=False,
+                                    is_error_frame=True, dlc=len(frame.data), data=frame.data, channel=self.channel))
+
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Queue ``msg`` on this bus's controller; a full queue raises ``can.CanOperationError`` at once, as
+        SocketCAN's ENOBUFS does (its ``timeout`` waits for the socket, which a full queue leaves writable)."""
         self._check_open()
-        self.world.send(self, msg)
+        try:
+            self.world.send(self, msg)
+        except QueueFull as exc:
+            raise can.CanOperationError(f"Failed to transmit: {os.strerror(errno.ENOBUFS)} ({exc}; controller "
+                                        f"{self.world.controller(self).state.value})", errno.ENOBUFS) from exc
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """The next frame, advancing simulated time up to ``timeout`` seconds to wait for it."""
@@ -411,14 +554,24 @@ class SimEscBus(can.BusABC):
     def shutdown(self) -> None:
         if self._is_shutdown:
             return
-        if self in self.world.buses:
-            self.world.buses.remove(self)
+        self.world.detach(self)
         self.world.bench.persist()
         super().shutdown()
 
     @staticmethod
     def _detect_available_configs():
         return [{"interface": "ckesc-sim", "channel": "ckesc-sim"}]
+
+
+_BUS_STATE = {ErrorState.ACTIVE: can.BusState.ACTIVE, ErrorState.WARNING: can.BusState.ACTIVE,
+              ErrorState.PASSIVE: can.BusState.PASSIVE, ErrorState.BUS_OFF: can.BusState.ERROR}
+
+
+def _flag(value: Any) -> bool:
+    """A yes/no option, also as can.conf / CAN_CONFIG give it (a string)."""
+    if isinstance(value, str):
+        return value.strip().lower() not in ("", "0", "false", "no", "off")
+    return bool(value)
 
 
 def discard(channel: str) -> None:

@@ -1,0 +1,163 @@
+"""The simulated bus's CAN nodes (issue #36): each node's controller (:mod:`ckesc.protocol.canbus`), who acknowledges
+a frame, and what the world does when nobody does: a node whose tries change nothing any more is *parked* until a
+node that can listen appears, a bus-off controller recovers when its time comes, a short ends. Mixed into
+:class:`ckesc.emulator.sim_bus.SimWorld`, whose state (``_ctl``, ``_contending``, ``_parked``, ``_alarm``, ...) it
+keeps; no IO, no wall clock."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from ..protocol.canbus import Attempt, CanController, ErrorState, attempt_bits
+from ..protocol.catalogue import DEFAULT_BITRATE
+from .model import EscModel
+
+INF = float("inf")
+#: frames an ESC holds to send (its mailboxes and its firmware's queue behind them, sent lowest id first); what does
+#: not fit is dropped
+ESC_TX_MAILBOXES = 32
+
+
+class CanNodes:
+    """The CAN side of :class:`~ckesc.emulator.sim_bus.SimWorld` (see this module's docstring)."""
+
+    now: float
+    ack: bool
+    buses: list[Any]
+    bench: Any
+    stats: dict[str, float]
+    _ctl: dict[Any, CanController]
+    _contending: list[Any]
+    _parked: dict[Any, tuple[float, float, float]]
+    _sources: list[Any]
+    _short_until: float
+    _alarm: float
+    _outcome: Attempt
+
+    def _host_bitrate(self) -> int:
+        return self.buses[-1].bitrate if self.buses else DEFAULT_BITRATE
+
+    def controller(self, node: Any) -> CanController:
+        """``node``'s CAN controller (a host's bus, an :class:`EscModel`, a traffic source)."""
+        ctl = self._ctl.get(node)
+        if ctl is None:
+            options = getattr(node, "controller_options", None)  # a host's bus (sim_bus.SimEscBus)
+            if options is not None:
+                ctl = CanController(node.bitrate, **options)
+            elif isinstance(node, EscModel):
+                ctl = CanController(node.state.bitrate, txqueuelen=ESC_TX_MAILBOXES, order="priority")
+            else:
+                ctl = CanController(node.bitrate or self._host_bitrate(), txqueuelen=None, order="priority")
+            self._ctl[node] = ctl
+        return ctl
+
+    def _acknowledged(self, sender: Any, bitrate: int) -> bool:
+        """Whether another node at ``bitrate`` listens now (and so acknowledges what ``sender`` sends)."""
+        ctls = self._ctl
+        for bus in self.buses:
+            if bus is not sender and bus.bitrate == bitrate:
+                ctl = ctls.get(bus)
+                if ctl is None or ctl.state is not ErrorState.BUS_OFF:
+                    return True
+        now = self.now
+        for esc in self.bench.escs:
+            if esc is not sender and esc.powered and esc.state.bitrate == bitrate and now >= esc.state.ready_at:
+                ctl = ctls.get(esc)
+                if ctl is None or ctl.state is not ErrorState.BUS_OFF:
+                    return True
+        for source in self._sources:
+            if source is not sender and (source.bitrate or self._host_bitrate()) == bitrate:
+                return True
+        return False
+
+    def _failed(self, node: Any, ctl: CanController, end: float) -> None:
+        """A try that was not acknowledged (or met a short): the frame stays at the head; the node goes on trying,
+        is parked (the ACK exception: nothing changes until someone listens) or is bus-off."""
+        self.stats["retries"] += 1
+        ctl.attempt(self._outcome, end)
+        self._report(node, ctl)
+        if ctl.bus_off:
+            self._contending.remove(node)
+            self._set_alarm()
+        elif self._outcome is Attempt.NO_ACK and ctl.steady_without_ack():
+            self._contending.remove(node)
+            p = ctl.head()
+            period = attempt_bits(len(p.wire.data), Attempt.NO_ACK, True) / p.bitrate
+            self._parked[node] = (end, period, self._slot(end, period, self._next_listener(p.bitrate)))
+            self._set_alarm()
+
+    def _report(self, node: Any, ctl: CanController) -> None:
+        frames = ctl.take_error_frames()
+        if frames and getattr(node, "error_frames", False):  # a host's bus that asked for them
+            for f in frames:
+                node._deliver_error(f)
+
+    @staticmethod
+    def _slot(since: float, period: float, t: float) -> float:
+        """A parked node's first retransmission that starts at ``t`` or after."""
+        if t == INF:
+            return INF
+        k = max(0, math.ceil(round((t - since) / period, 9)))
+        return round(since + k * period, 12)
+
+    def _next_listener(self, bitrate: int) -> float:
+        """When the next ESC at ``bitrate`` that is booting now starts to listen (INF: none is)."""
+        now = self.now
+        t = INF
+        for esc in self.bench.escs:
+            if esc.powered and esc.state.bitrate == bitrate and now < esc.state.ready_at < t:
+                t = esc.state.ready_at
+        return t
+
+    def _wake(self) -> None:
+        """Someone may listen now (a power-up, a bus opened, a source joined, a recovery): parked nodes try again
+        at their next retransmission slot."""
+        now = self.now
+        for node, (since, period, resume) in self._parked.items():
+            self._parked[node] = (since, period, min(resume, self._slot(since, period, now)))
+        self._set_alarm()
+
+    def _set_alarm(self) -> None:
+        t = self._short_until if self._short_until > self.now else INF
+        for _, _, resume in self._parked.values():
+            t = min(t, resume)
+        for ctl in self._ctl.values():
+            if ctl.bus_off_at is not None:
+                due = ctl.recovery_due()
+                if due is not None:
+                    t = min(t, due)
+        self._alarm = t
+
+    def _on_alarm(self, t: float) -> None:
+        woke = False
+        for node, ctl in list(self._ctl.items()):
+            if ctl.bus_off_at is not None and ctl.poll(t):
+                self._report(node, ctl)
+                if ctl and node not in self._contending:
+                    self._contending.append(node)
+                woke = True
+        for node, (_, _, resume) in list(self._parked.items()):
+            if resume <= t:
+                del self._parked[node]
+                if self._ctl[node]:
+                    self._contending.append(node)
+        if woke:
+            self._wake()
+        self._set_alarm()
+
+    def short(self, seconds: float) -> None:
+        """Short the bus (CANH to CANL) for ``seconds`` from now: every try meets a bit error, nothing is
+        delivered; the nodes that try to send go bus-off and recover as their controllers do."""
+        self._short_until = max(self._short_until, self.now + seconds)
+        self._wake()
+
+    def _forget(self, node: Any) -> None:
+        """``node`` left the bus (an ESC powered off, a bus shut down): its queue and its state go."""
+        ctl = self._ctl.pop(node, None)
+        if ctl is not None:
+            ctl.clear()
+        if node in self._contending:
+            self._contending.remove(node)
+        self._parked.pop(node, None)
+        self._set_alarm()
