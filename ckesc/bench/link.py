@@ -401,7 +401,9 @@ class Link:
         """Send a throttle frame every ``period`` s with its transfer id counting (F3) until
         :meth:`stop_throttle` (called on every exit path by the plugin)."""
         self._check_throttle(name, fields)
-        return self._start_periodic(*self._counting(name, fields), period)
+        task = self._start_periodic(*self._counting(name, fields), period)
+        self._tasks.append(task)
+        return task
 
     @contextmanager
     def periodic(self, name: str, fields: Mapping[str, Any] | None = None, period: float = 0.05, *,
@@ -411,8 +413,8 @@ class Link:
         a broadcast, or with ``destination`` a request to that node (its answers are heard as any frame, paired with
         no request: the block's end reads for an answer's time, so that a late one cannot pair with the next request
         of its service). ``frames``: another node's frames (one CAN id), sent in turn as they are (their transfer ids
-        their own), ``name`` then only says what they are. Throttle frames are :meth:`throttle_stream`'s; a
-        stream is also stopped by :meth:`stop_throttle` (every exit path)."""
+        their own), ``name`` then only says what they are. Throttle frames are :meth:`throttle_stream`'s, which
+        :meth:`stop_throttle` stops; this stream runs on until the block ends, whatever leaves it."""
         if name in _THROTTLE_FRAMES:
             raise ValueError(f"{name} is a throttle frame: stream it with throttle_stream (its safety checks)")
         if frames is not None:
@@ -425,8 +427,6 @@ class Link:
             yield task
         finally:
             stop_task(task)
-            if task in self._tasks:
-                self._tasks.remove(task)
             if destination is not None and frames is None:
                 self.wait(0.1 + self.lane.timing_error)  # the last request's answer, within request()'s timeout
 
@@ -451,9 +451,7 @@ class Link:
 
     def _start_periodic(self, msgs: can.Message | list[can.Message], bump: Callable[[can.Message], None] | None,
                         period: float) -> Any:
-        task = self.lane.bus.send_periodic(msgs, period, modifier_callback=bump)
-        self._tasks.append(task)
-        return task
+        return self.lane.bus.send_periodic(msgs, period, modifier_callback=bump)
 
     def stop_throttle(self) -> None:
         for task in self._tasks:
