@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 
 import pytest
 
 from ckesc.bench.errors import HarnessError
-from ckesc.bench.outcomes import Inconclusive
+from ckesc.bench.outcomes import Inconclusive, NotClaimed
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.catalogue import Status
 from ckesc.protocol.frame import frame_bits
 from ckesc.protocol.judgements import r8_onset
+from ckesc.protocol.transfer import TRANSFER_ID_MODULO
 
 from .settings import changes, listed
 from .telemetry import REACT_S, describe_garbled, frame_start, garbled, interval_s, ms, need_decoded
@@ -178,6 +181,61 @@ def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
     fields = command_for(name, s["throttle_channel"])
     if fields is None:
         pytest.skip(f"{name} cannot address the DUT's throttle channel {s['throttle_channel']}")
+    _check_comm_loss(dut, s, name, fields)
+
+
+#: R20-watchdog's other traffic: each frame once in this period, all through the comm-loss test
+OTHER_TRAFFIC_PERIOD_S = 0.05
+#: what the host asks the DUT meanwhile: (request, its fields); a function the profile declares absent is left out
+OTHER_READS = (("get_major_configuration", {"option": 0}), ("maintenance_information", {"option": 2}),
+               ("set_freq", cat.FREQ_READ))
+#: the flight controller's DroneCAN frames played meanwhile (ckesc.bench.foreign's ArduPilot: its node, single frames)
+OTHER_FOREIGN = ("uavcan.protocol.NodeStatus", "uavcan.equipment.esc.RawCommand")
+
+
+@pytest.mark.requirement("R20-watchdog", "4.4.4-3", "R8")
+def test_comm_loss_flag_sets_while_other_traffic_goes_on(dut):
+    """As the comm-loss test, with a GET_ESC_ID query, reads (242, 241, Set/Get Freq) and a flight controller's
+    DroneCAN frames (NodeStatus, its zero ESC command 1030) each every 50 ms from before the command stream stops
+    until the flag has cleared: only RawCommand refreshes the comm watchdog (R20), so the flag rises within R8's
+    bound all the same, and the next command clears it."""
+    s = can_throttle(dut)
+    name = next(n for n in FORMAT_CHANNELS if command_for(n, s["throttle_channel"]) is not None)
+    with _other_traffic(dut) as what:
+        _check_comm_loss(dut, s, name, command_for(name, s["throttle_channel"]), during=what)
+
+
+@contextmanager
+def _other_traffic(dut) -> Iterator[str]:
+    """R20-watchdog's traffic, each stream every :data:`OTHER_TRAFFIC_PERIOD_S` in its own phase, while the block runs;
+    yields what it is (for the messages)."""
+    from ckesc.bench import foreign  # imports dronecan (about a second): only for this test
+
+    played = [s for s in foreign.ardupilot().streams if s.name in OTHER_FOREIGN and s.node == foreign.FLIGHT_CONTROLLER_NODE]
+    streams = [("get_esc_id", {"option": 0}, {"layout": "query"}),
+               *((n, f, {"destination": dut.node_id}) for n, f in OTHER_READS),
+               *((s.name, None, {"frames": [foreign.encode(s.make(t), source=s.node, priority=s.priority, transfer_id=t)[0]
+                                            for t in range(TRANSFER_ID_MODULO)]}) for s in played)]
+    phase = OTHER_TRAFFIC_PERIOD_S / len(streams)
+    names = []
+    with ExitStack() as stack:
+        for n, fields, how in streams:
+            try:
+                stack.enter_context(dut.periodic(n, fields, OTHER_TRAFFIC_PERIOD_S, **how))
+            except NotClaimed:
+                continue  # the profile declares the function absent: the others go on
+            names.append(n)
+            dut.wait(phase)
+        what = f"{', '.join(names)} each every {ms(OTHER_TRAFFIC_PERIOD_S):g} ms"
+        dut.record.observe("other traffic during the comm-loss test (R20)", what)
+        yield what
+
+
+def _check_comm_loss(dut, s: dict, name: str, fields: dict, during: str = "") -> None:
+    """The comm-loss test's body: a zero-throttle ``name`` stream, the flag clear under it; the last command placed on
+    the DUT's MSG1 grid, the flag's onset judged by R8; a new command clears it. ``during``: what other traffic goes
+    on meanwhile (R20-watchdog), for the messages."""
+    while_ = f" while {during} went on (R20: only RawCommand refreshes the comm watchdog)" if during else ""
     # the last command's time is the host's own frame's: its echo, or without one the host clock at send
     own_clock, own_err = dut.lane.own_clock, dut.lane.own_error * 1000
     t0 = dut.now()
@@ -214,7 +272,7 @@ def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
     interval = max([interval_s(s, "msg1")] + gaps)
     first = dut.wait_for("msg1", 2 * cat.COMM_LOSS_TIMEOUT_S + 3 * interval, where=_comm_fault)  # a late flag is measured
     assert first is not None, (f"no MSG1 with bit13 (comm fault) within {ms(dut.now() - last)} ms of the last command "
-                               f"(R8: set after {ms(cat.COMM_LOSS_TIMEOUT_S)} ms)")
+                               f"(R8: set after {ms(cat.COMM_LOSS_TIMEOUT_S)} ms){while_}")
     before = [f for f in _msg1_after(dut, last) if f.timestamp < first.timestamp]
     if before:
         interval = max(interval, frame_start(dut, first) - frame_start(dut, before[-1]))
@@ -234,7 +292,7 @@ def test_comm_loss_flag_sets_after_200ms_and_clears(dut, name):
     dut.read_until(_mid_interval_send(dut, [*before[-1:], first], interval))
     again = dut.broadcast(name, fields)
     cleared = dut.wait_for("msg1", 3 * interval, where=lambda f: not _comm_fault(f))
-    assert cleared is not None, f"bit13 still set {ms(dut.now() - again.time)} ms after a new command (4.4.4-3: cleared)"
+    assert cleared is not None, f"bit13 still set {ms(dut.now() - again.time)} ms after a new command (4.4.4-3: cleared){while_}"
     # the next MSG1 the DUT prepares after the command (REACT_S) shows the flag clear: within one interval
     dut.record.measure("comm fault flag: first MSG1 without bit13 after a new command", ms(frame_start(dut, cleared) - again.time),
                        limit=ms(interval + REACT_S), unit="ms", clock=again.clock, error=again.error * 1000,

@@ -450,7 +450,7 @@ class BusLane(Lane):
         what = f"{type(exc).__name__}: {exc}"
         state = self._bus_state()
         for task in self._tasks:
-            _stop_task(task)
+            stop_task(task)
         self._tasks.clear()
         errors = []
         for attempt in range(REOPEN_TRIES):
@@ -542,7 +542,7 @@ class BusLane(Lane):
 
     def stop_streams(self) -> None:
         for task in list(self._tasks):  # the tap's thread-based tasks (a native task is the bus's own)
-            _stop_task(task)
+            stop_task(task)
         self._tasks.clear()
         super().stop_streams()
 
@@ -592,7 +592,8 @@ def _stopped_means_stopped(task: Any) -> Any:
     return task
 
 
-def _stop_task(task: Any) -> None:
+def stop_task(task: Any) -> None:
+    """Stop a periodic task, whatever its stop() raises (on an exit path every stop is attempted)."""
     try:
         task.stop()
     except Exception:  # noqa: BLE001 - on an exit path every stop is attempted

@@ -4,8 +4,9 @@ their answers, discovery, and the throttle safety every send goes through."""
 from __future__ import annotations
 
 from collections import deque
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import can
 
@@ -18,7 +19,7 @@ from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind
 from ..protocol.judgements import timing_tolerance
 from ..protocol.transfer import TAIL_BYTES, TRANSFER_ID_MODULO, tail_transfer_id
 from .epochs import WINDOW_REQUESTS
-from .lanes import Lane, OwnFrame
+from .lanes import Lane, OwnFrame, stop_task
 from .outcomes import Inconclusive, NotClaimed, Record
 from .profile import DutProfile
 
@@ -400,25 +401,61 @@ class Link:
         """Send a throttle frame every ``period`` s with its transfer id counting (F3) until
         :meth:`stop_throttle` (called on every exit path by the plugin)."""
         self._check_throttle(name, fields)
-        wire = self.proto.message(name, fields)
-        msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True)
-        spec = cat.spec(name)
-        key = (Kind.MESSAGE, name)
-
-        def bump(m: can.Message) -> None:
-            if spec.has_tail:
-                m.data[-1] = 0xC0 | self.proto.tids.next(key)
-
-        task = self.lane.bus.send_periodic(msg, period, modifier_callback=bump)
+        task = self._start_periodic(*self._counting(name, fields), period)
         self._tasks.append(task)
         return task
 
+    @contextmanager
+    def periodic(self, name: str, fields: Mapping[str, Any] | None = None, period: float = 0.05, *,
+                 destination: int | None = None, layout: str | None = None,
+                 frames: Sequence[WireFrame] | None = None) -> Iterator[Any]:
+        """Send frame ``name`` every ``period`` s while the ``with`` block runs, its transfer id counting (F3):
+        a broadcast, or with ``destination`` a request to that node (its answers are heard as any frame, paired with
+        no request: the block's end reads for an answer's time, so that a late one cannot pair with the next request
+        of its service). ``frames``: another node's frames (one CAN id), sent in turn as they are (their transfer ids
+        their own), ``name`` then only says what they are. Throttle frames are :meth:`throttle_stream`'s, which
+        :meth:`stop_throttle` stops; this stream runs on until the block ends, whatever leaves it."""
+        if name in _THROTTLE_FRAMES:
+            raise ValueError(f"{name} is a throttle frame: stream it with throttle_stream (its safety checks)")
+        if frames is not None:
+            task = self._start_periodic([can.Message(arbitration_id=w.arbitration_id, data=w.data, is_extended_id=True)
+                                         for w in frames], None, period)
+        else:
+            self._check_claimed(name, fields)
+            task = self._start_periodic(*self._counting(name, fields, destination=destination, layout=layout), period)
+        try:
+            yield task
+        finally:
+            stop_task(task)
+            if destination is not None and frames is None:
+                self.wait(0.1 + self.lane.timing_error)  # the last request's answer, within request()'s timeout
+
+    def _counting(self, name: str, fields: Mapping[str, Any] | None, *, destination: int | None = None,
+                  layout: str | None = None) -> tuple[can.Message, Callable[[can.Message], None]]:
+        """Frame ``name`` (a request to ``destination`` where one is given) and the callback that gives each send of
+        it the next transfer id of its type (and destination) before it goes (F3)."""
+        if destination is None:
+            wire, key = self.proto.message(name, fields, layout=layout), (Kind.MESSAGE, name)
+        else:
+            wire = self.proto.request(name, fields, destination=destination, now=self.now(), timeout=0.0,
+                                      expect_response=False)[0]
+            key = (Kind.REQUEST, name)
+        msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True)
+        tids, tail = self.proto.tids, cat.spec(name).has_tail
+
+        def bump(m: can.Message) -> None:
+            if tail:
+                m.data[-1] = 0xC0 | tids.next(key, destination)
+
+        return msg, bump
+
+    def _start_periodic(self, msgs: can.Message | list[can.Message], bump: Callable[[can.Message], None] | None,
+                        period: float) -> Any:
+        return self.lane.bus.send_periodic(msgs, period, modifier_callback=bump)
+
     def stop_throttle(self) -> None:
         for task in self._tasks:
-            try:
-                task.stop()
-            except Exception:  # noqa: BLE001 - on an exit path every stop is attempted
-                pass
+            stop_task(task)
         self._tasks.clear()
 
     def zero_throttle(self) -> None:

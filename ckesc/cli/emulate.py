@@ -9,6 +9,7 @@ from typing import Any
 import can
 
 from ..emulator import variants
+from ..emulator.host_alone import HOST_ALONE, TX_QUEUE_LEN
 from ..emulator.socketcand import HANDLES
 from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
@@ -116,7 +117,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
     try:
         emulator = RealtimeEmulator(bench, bus=bus, own_bus=True, socketcand_port=args.socketcand, control_port=args.control,
                                     bitrate=args.bitrate, stamp=args.stamp, frame_stamp=args.frame_stamp,
-                                    echo_own=not args.no_echo_own, handles=args.handles,
+                                    echo_own=not args.no_echo_own, handles=args.handles, host_alone=args.host_alone,
                                     rt_priority=args.rt_priority)
     except OSError as exc:
         if bus is not None:
@@ -231,5 +232,10 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
                    "one name are handles of one adapter and do not hear each other's frames, as most USB adapters; a "
                    "client that opened another name, the DUT's own, hears them all) or one (a name is open on one client "
                    "at a time, a second is refused, as an adapter that allows one handle)")
+    p.add_argument("--host-alone", choices=HOST_ALONE, default="deliver",
+                   help="the host's frames while no ESC is powered (or still booting) to acknowledge them: deliver "
+                   "(default: they reach the bus all the same), or hold as SocketCAN does: the first and up to "
+                   f"{TX_QUEUE_LEN} more (its transmit queue) are held and reach the ESC, stamped then, when its "
+                   "controller comes up; the rest are lost (status: host_held, host_lost)")
     p.add_argument("--unpowered", action="store_true", help="start with the power off (switch it on with ckesc control)")
     p.set_defaults(handler=_run_emulate)

@@ -8,6 +8,7 @@ import math
 from ..protocol.catalogue import COMM_LOSS_TIMEOUT_S, INTERVAL_UNIT_S, THROTTLE_10B_MAX, THROTTLE_MAX
 from ..protocol.codecs import TAIL_BITS_10B, unpack_throttle12
 from ..protocol.frame import Frame
+from ..protocol.ids import Kind
 from .config import RECORD_SENSORS
 from .faults import WARM_CLOCK_RATE, onset
 
@@ -184,11 +185,25 @@ class Motor:
         self._update(now)
         self.state.can_throttle = value  # R6: above 2000 is OBSERVE (over_max_throttle)
         self.state.last_command = now
-        sticky = "comm_loss_sticky" in self.faults or (self.state.resumed and "comm_loss_sticky_after_resume" in self.faults)
-        if self.state.comm_fault and not sticky:
+        if self.state.comm_fault and not self._comm_flag_sticks():
             self.state.comm_fault = False
         self._refresh_throttle(now)
 
+    def _comm_flag_sticks(self) -> bool:
+        """Whether a command leaves the comm-loss flag set (faults comm_loss_sticky, comm_loss_sticky_after_resume)."""
+        return "comm_loss_sticky" in self.faults or (self.state.resumed and "comm_loss_sticky_after_resume" in self.faults)
+
+    def _keep_alive(self, f: Frame, now: float) -> bool:
+        """Fault 'comm_watchdog_kept_alive': a request addressed to this ESC or a GET_ESC_ID query refreshes the comm
+        watchdog as a command does (R20: only RawCommand may), the throttle unchanged. True when it did."""
+        if not (f.kind is Kind.REQUEST and f.destination == self.node_id
+                or f.name == "get_esc_id" and f.layout is not None and f.layout.name == "query"):
+            return False
+        self._update(now)
+        self.state.last_command = now
+        if self.state.comm_fault and not self._comm_flag_sticks():
+            self.state.comm_fault = False
+        return True
 
     def _stream_resets(self, now: float) -> bool:
         """Fault 'reset_after_streaming': a command addressed to this ESC continues the stream (no gap longer than

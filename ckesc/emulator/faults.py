@@ -90,6 +90,10 @@ _FAULTS = (
     Fault("comm_loss_early", ("R8",), "the comm-loss flag is set 100 ms after the last command"),
     Fault("comm_loss_never", ("R8",), "the comm-loss flag is never set"),
     Fault("comm_loss_sticky", ("R8",), "the comm-loss flag is not cleared by the next command"),
+    Fault("comm_watchdog_kept_alive", ("R20-watchdog", "R8"),
+          "the comm watchdog is refreshed by any frame addressed to the ESC (a read, a setting request) and by a "
+          "GET_ESC_ID query, not by RawCommand alone (a keep-alive beside the commands, as in the public cases): while "
+          "queries and reads go on the comm-loss flag never rises, and one clears it as a command would"),
     # throttle (4.4.15 - 4.4.17)
     Fault("throttle_channel_ignored", ("4.4.18-6",), "the ESC always follows channel 1, not its own throttle channel"),
     Fault("twelve_bit_nibbles_swapped", ("R4",), "RawCommand_12b is read with the nibbles of p1/p4 swapped"),

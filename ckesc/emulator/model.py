@@ -232,13 +232,14 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
             if self._counts_foreign:
                 self._heard_foreign(msg, now)
             return False
+        kept = "comm_watchdog_kept_alive" in self.faults and self._keep_alive(frame, now)
         handler = _HANDLERS.get((frame.kind, frame.name))
         if handler is None or (frame.source and self.config.foreign_host == "ignore"):
             self.counters["rx_ignored"] += 1
-            return False
+            return kept
         if handler is not EscModel._on_throttle:
             self._update(now)  # throttle frames update only when addressed to this ESC's channel
-        return handler(self, frame, now) is not False
+        return handler(self, frame, now) is not False or kept
 
     @property
     def _counts_foreign(self) -> bool:

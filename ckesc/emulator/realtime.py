@@ -56,6 +56,7 @@ from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame, frame_bits
 from .control import ControlServer, Handler, Reply, dispatch
 from .emulated_bench import EmulatedBench
+from .host_alone import HostAlone
 from .model import EscModel
 from .realtime_control import ControlCommands
 from .realtime_timing import clock_offset, durations, set_timer_slack
@@ -101,6 +102,7 @@ class RealtimeEmulator(ControlCommands):
         echo_own: bool = True,
         handles: str = "shared",
         rt_priority: int | None = None,
+        host_alone: str = "deliver",
         log: Callable[[str], None] | None = None,
     ) -> None:
         if stamp not in ("due", "send"):
@@ -123,6 +125,8 @@ class RealtimeEmulator(ControlCommands):
         self.lateness = durations()  # per frame: handed to the bus - due
         self.wakeup = durations()  # per timed wake: select() returned - the deadline it waited for
         self.counters = {"tx": 0, "rx": 0, "tx_other_bitrate": 0, "tx_errors": 0, "rx_malformed": 0, "clients": 0}
+        self.host_alone = HostAlone(host_alone)  # the host's frames while no ESC acknowledges them (--host-alone)
+        self.counters.update(self.host_alone.counters)
         self._escs: list[EscModel] = list(bench.escs)
         self._deadlines: list[float | None] = [None] * len(self._escs)
         self._deadlines_stale = True
@@ -328,7 +332,7 @@ class RealtimeEmulator(ControlCommands):
     def _next_wake(self) -> float | None:
         self._refresh_deadlines()
         times = [t for t in self._deadlines if t is not None]
-        for t in (self._power_on_at, self._stop_at):
+        for t in (self._power_on_at, self._stop_at, self._controller_up()):
             if t is not None:
                 times.append(t)
         return min(times) if times else None
@@ -393,7 +397,23 @@ class RealtimeEmulator(ControlCommands):
             self._do_power_on(self._power_on_at)
         if self._stop_at is not None and now >= self._stop_at:
             self._stopping = True
+        if self.host_alone.held and (up := self._controller_up()) is not None and now >= up:
+            self._emit_due(up)
+            for item in self.host_alone.release(True):  # acknowledged at last, back to back: stamped then
+                self._host_delivered(item, max(up, self._model_time))
         self._emit_due(time.monotonic())
+
+    def _controller_up(self) -> float | None:
+        """While the host's frames are held: when the first powered ESC's controller is up (it hears from its
+        ``ready_at``), None when none is powered or nothing is held."""
+        if not self.host_alone.held:
+            return None
+        return min((esc.state.ready_at for esc in self._escs if esc.powered), default=None)
+
+    def _acknowledged(self, t: float) -> bool:
+        """Whether some node acknowledges a host frame at ``t``: an ESC powered with its controller up, or (a bare
+        hub, no ESC of its own) the other clients."""
+        return not self._escs or any(esc.powered and t >= esc.state.ready_at for esc in self._escs)
 
     # ------------------------------------------------------------------ ESC output
 
@@ -475,6 +495,15 @@ class RealtimeEmulator(ControlCommands):
         self._inputs.append(_Input(t, msg, wire, origin))
 
     def _host_frame(self, item: _Input, t: float) -> None:
+        """A host frame heard at ``t``, unless it is held or lost while no ESC acknowledges it (--host-alone hold)."""
+        if self.host_alone.mode == "deliver":
+            self._host_delivered(item, t)
+            return
+        for held in self.host_alone.take(item, self._acknowledged(t)):
+            self._host_delivered(held, t)
+        self.counters.update(self.host_alone.counters)
+
+    def _host_delivered(self, item: _Input, t: float) -> None:
         self.counters["rx"] += 1
         self.bench.deliver(item.msg, t, self.bitrate)
         self._deadlines_stale = True

@@ -54,6 +54,8 @@ class ControlCommands:
             "socketcand": _addr(self.socketcand_address),
             "clients": 0 if self._socketcand is None else len(self._socketcand.conns),
             "counters": dict(self.counters),
+            "host_alone": self.host_alone.mode,
+            "host_waiting": len(self.host_alone.held),  # held now (counters: host_held, host_lost so far)
             "lateness": summary(self.lateness),
             "wakeup": summary(self.wakeup),
             "escs": escs,

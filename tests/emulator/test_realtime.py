@@ -486,6 +486,35 @@ def test_a_bench_of_no_esc_is_a_bare_hub_between_clients(virtual):
         assert emu.bench.escs == []
 
 
+def test_host_alone_frames_are_held_until_the_esc_is_up_and_the_rest_lost(virtual):
+    """``--host-alone hold``: while the bench is off the host's frames get no acknowledgement: the first and
+    SocketCAN's queue of 10 are held (no echo either) and reach the ESC, in order and stamped then, when its controller
+    is up (its boot time after power-on); the rest are lost. The ESC answers the held queries then; counted in the
+    status."""
+    emu, _ = virtual((1,), socketcand_port=0, host_alone="hold")
+    with can.Bus(interface="socketcand", host="127.0.0.1", port=emu.socketcand_address[1], channel="can0") as host:
+        wait_reporting(host, (1,))
+        assert emu.power_off()["powered"] is False
+        collect(host, 0.05)  # what was sent before the power went off
+        queries = [encode("get_esc_id", {"option": 0}, source=0, transfer_id=tid) for tid in range(15)]
+        for wire in queries:
+            host.send(msg_of(wire))
+        assert not collect(host, 0.3), "a frame sent while the host was alone came back (or the unpowered bench sent)"
+        status = emu.status()
+        assert (status["host_alone"], status["host_waiting"]) == ("hold", 11)
+        assert (status["counters"]["host_held"], status["counters"]["host_lost"]) == (11, 4)
+        on_at = time.time()
+        emu.power_on()
+        frames = decoded(collect(host, 2.0, lambda fs: len([f for f in decoded(fs) if f.name == "get_esc_id"]) >= 22))
+    echoes = [f for f in frames if f.name == "get_esc_id" and f.source == 0]
+    replies = [f for f in frames if f.name == "get_esc_id" and f.source == 1]
+    assert [f.transfer_id for f in echoes] == list(range(11)), "the held frames, in order, and none of the lost ones"
+    boot = emu.bench.escs[0].config.boot_time
+    assert all(f.timestamp >= on_at + boot - 0.005 for f in echoes), "a held frame stamped before the ESC's controller was up"
+    assert len(replies) == 11, f"{len(replies)} GET_ESC_ID replies to the 11 held queries"
+    assert emu.status()["host_waiting"] == 0
+
+
 # ---------------------------------------------------------------------------------------------------
 # pieces
 

@@ -18,7 +18,7 @@ from procs import env as _env
 from ckesc import bench as bench_pkg
 
 ERROR_S = 0.004
-SELECT = "comm_loss or node_slot or reply_comes_in"
+SELECT = "comm_loss_flag_sets_after or node_slot or reply_comes_in"  # the per-format comm-loss tests
 COMM, SLOT = "comm_loss", "slot"
 
 

@@ -23,7 +23,7 @@ pytestmark = pytest.mark.xdist_group(__name__)  # its module-scoped runs are mad
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 #: a few sections with every plot's evidence: answer delays of several nodes (4.4.2, 4.4.3), report
 #: intervals at several targets (4.4.22), and the comm-loss timelines (R8)
-SELECTION = "test_s4_4_2_msg_control or test_s4_4_3_get_esc_id or comm_loss or test_s4_4_22"
+SELECTION = "test_s4_4_2_msg_control or test_s4_4_3_get_esc_id or comm_loss_flag_sets_after or test_s4_4_22"
 FAULT = "answer_late"  # MSG Control and GET_ESC_ID answered 80 ms after the request: over the 64 ms limit
 
 

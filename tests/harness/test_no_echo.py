@@ -110,7 +110,7 @@ def test_without_echo_the_host_frames_are_handed_out_in_time_order_and_rules_lea
 # ------------------------------------------------------------------------------------------ ckesc run
 #: the sections that time the host's own frames: comm loss (4.4.4), answer delays (4.4.2, 4.4.3) and report
 #: intervals (4.4.22)
-SECTIONS = "comm_loss or test_s4_4_2_msg_control or test_s4_4_3_get_esc_id or test_s4_4_22_set_freq"
+SECTIONS = "comm_loss_flag_sets_after or test_s4_4_2_msg_control or test_s4_4_3_get_esc_id or test_s4_4_22_set_freq"
 
 
 def _run(tmp: Path, port: int, name: str, k: str) -> tuple[dict, str, ET.Element, int]:
@@ -160,7 +160,7 @@ def test_a_bench_without_echo_judges_what_one_with_echo_judges(tmp_path):
 def test_a_comm_loss_fault_is_caught_without_echo(tmp_path):
     emu = Emulator(tmp_path, "--no-echo-own", "--faults", "comm_loss_early")
     try:
-        doc, summary, _, code = _run(tmp_path, emu.port, "fault", "comm_loss")
+        doc, summary, _, code = _run(tmp_path, emu.port, "fault", "comm_loss_flag_sets_after")
     finally:
         emu.close()
     assert doc["info"]["echo"] is False
