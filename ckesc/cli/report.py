@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..reporting.exits import ExitStatus
 from ..reporting.html_report import build
+from .common import check_file
 
 
 def add_report_command(sub) -> None:
@@ -22,6 +23,7 @@ def _report_command(args) -> int:
     if not (out / "results.json").is_file():
         print(f"ckesc report: no results.json in {out} (give a run's directory, e.g. reports/latest)", file=sys.stderr)
         return ExitStatus.USAGE
+    check_file(str(out / "report.html"), "REPORT_DIR", "report page")
     try:
         path = build(out)
     except (ValueError, KeyError, TypeError, AttributeError) as exc:  # JSONDecodeError is a ValueError
