@@ -7,6 +7,7 @@ same words whichever command meets it, before any work."""
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 from typing import Callable
@@ -131,6 +132,30 @@ def non_negative_float(text: str) -> float:
 def positive_int(text: str) -> int:
     """An integer more than zero (a count of programs, steps or jobs)."""
     return int(_number(text, int, zero=False))
+
+
+def check_faults(text: str | None, option: str) -> None:
+    """Emulator fault names given to ``option`` (comma-separated; ``NAME@NODE`` and ``NAME=SECONDS`` taken as NAME), in
+    the words ``ckesc run --emulator-faults`` says them: the unknown one, what it was close to, where they are listed."""
+    from ..bench.checks import fault_names
+    from ..bench.errors import PreflightError
+
+    names = [n.partition("@")[0] for n in (text or "").split(",") if n.strip() and n.strip() not in ("none", "all")]
+    try:
+        fault_names(",".join(names), option)
+    except PreflightError as exc:
+        raise UsageError(str(exc)) from None
+
+
+# ------------------------------------------------------------------------------------------- what a command reads
+def check_readable(path: str | None, option: str, what: str = "file") -> None:
+    """A file the command will read: a :class:`UsageError` naming ``option`` when it is not there or not readable."""
+    if path is None:
+        return
+    if not os.path.isfile(path):
+        raise UsageError(f"{option} {path}: no such {what}" if not os.path.exists(path) else f"{option} {path}: a directory, not a {what}")
+    if not os.access(path, os.R_OK):
+        raise UsageError(f"{option} {path}: the {what} is not readable (permission denied)")
 
 
 # ------------------------------------------------------------------------------------------- where a command writes

@@ -12,7 +12,7 @@ from ..emulator import variants
 from ..emulator.socketcand import HANDLES
 from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
-from .common import UsageError, check_file, int_arg, non_negative_float, positive_float
+from .common import UsageError, check_faults, check_file, int_arg, non_negative_float, positive_float
 
 
 def _node_ids(text: str) -> list[int]:
@@ -99,6 +99,7 @@ def _run_emulate(args: argparse.Namespace) -> int:
     if args.interface is not None and args.channel is None:
         raise UsageError(f"--interface {args.interface} needs --channel")
     check_file(args.flash_path, "--flash-path", "flash file")
+    check_faults(args.faults, "--faults")
     if args.rt_priority is not None and not 1 <= args.rt_priority <= 99:
         raise UsageError(f"--rt-priority must be 1..99 (SCHED_FIFO), not {args.rt_priority}")
     faults = _fault_spec(args.faults, args.nodes)

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..reporting.exits import ExitStatus
-from .common import UsageError, check_dir, check_file, duration_arg, positive_int
+from .common import UsageError, check_dir, check_faults, check_file, check_readable, duration_arg, positive_int
 from .run import add_bench_options
 
 #: ``--budget``'s type: ``90``, ``90s``, ``10m``, ``1h``, ``1h30m`` -> seconds, more than zero
@@ -55,6 +55,8 @@ def add_explore_command(sub: argparse._SubParsersAction) -> None:
         if args.database not in (None, "none"):
             check_dir(args.database, "--database", "database directory")
         check_file(args.out, "--out")
+        check_readable(args.replay, "--replay", "replay file")
+        check_faults(args.selftest, "--selftest")
         given = {k for k in command.BENCH_OPTIONS if getattr(args, k) != p.get_default(k)}
         try:
             return command.main(args, given, out=sys.stdout)

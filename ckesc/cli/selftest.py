@@ -10,7 +10,7 @@ from pathlib import Path
 from .. import selftest as selftest_lib
 from ..reporting.exits import ExitStatus
 from ..selftest import SCOPES, VARIANT_SETS, FaultRun, VariantRun, selftest, table
-from .common import UsageError, check_file, positive_int
+from .common import UsageError, check_faults, check_file, positive_int
 
 
 def add_selftest_command(sub: argparse._SubParsersAction) -> None:
@@ -40,14 +40,8 @@ def _seeds(text: str) -> list[int]:
 
 
 def selftest_command(args: argparse.Namespace) -> int:
-    from ..bench.checks import fault_names
-    from ..bench.errors import PreflightError
-
     faults = [f for f in args.faults.split(",") if f and f != "none"] if args.faults else None
-    try:
-        fault_names(",".join(faults or ()), "--faults")
-    except PreflightError as exc:
-        raise UsageError(str(exc)) from None
+    check_faults(args.faults, "--faults")
     check_file(args.out, "--out")
     if args.out:
         check_file(str(Path(args.out).with_suffix(".json")), "--out", "output file (the JSON beside it)")
