@@ -173,7 +173,7 @@ def _reach(kwargs: dict[str, Any], timeout: float) -> None:
     host, port = kwargs.get("host"), kwargs.get("port")
     try:
         socket.create_connection((str(host), int(port)), timeout=timeout).close()
-    except (TimeoutError, socket.timeout):
+    except TimeoutError:
         raise PreflightError(f"cannot open the CAN bus ({bus_where(kwargs)}): {host}:{port} does not answer within "
                              f"{timeout:g} s (a host that drops the connection? --bus-open-timeout gives it longer)") from None
     except (OSError, ValueError, OverflowError) as exc:

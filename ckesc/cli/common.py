@@ -12,9 +12,13 @@ import re
 import sys
 from typing import Callable
 
+from ..bench.arguments import non_negative_float, positive_float, positive_int
 from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
 from ..reporting.paths import not_writable
+
+__all__ = ["Handler", "Parser", "UsageError", "check_dir", "check_faults", "check_file", "check_readable", "duration_arg",
+           "int_arg", "non_negative_float", "port_arg", "positive_float", "positive_int", "seconds_of"]
 
 #: a value that starts with a minus sign and a digit: a number below zero given to an option, not an option
 _NEGATIVE = re.compile(r"^-\.?\d")
@@ -106,32 +110,12 @@ def duration_arg(text: str) -> float:
     return seconds
 
 
-def _number(text: str, kind: type, *, zero: bool) -> float:
-    try:
-        value = kind(text) if kind is float else parse_int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}" if kind is float else f"not an integer: {text!r}") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}")
-    if value < 0 or (value == 0 and not zero):
-        raise argparse.ArgumentTypeError(f"{text} is {'below zero' if value < 0 else 'zero'}: give "
-                                         f"{'0 or more' if zero else 'more than 0'}")
-    return value
-
-
-def positive_float(text: str) -> float:
-    """A number more than zero (a rate, a timeout)."""
-    return _number(text, float, zero=False)
-
-
-def non_negative_float(text: str) -> float:
-    """A number, 0 or more (a delay, a tolerance)."""
-    return _number(text, float, zero=True)
-
-
-def positive_int(text: str) -> int:
-    """An integer more than zero (a count of programs, steps or jobs)."""
-    return int(_number(text, int, zero=False))
+def port_arg(text: str) -> int:
+    """A TCP port, 0..65535 (0: the system picks a free one)."""
+    port = int_arg(text)
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{text} is not a port: give 0..65535 (0: a free one)")
+    return port
 
 
 def check_faults(text: str | None, option: str) -> None:

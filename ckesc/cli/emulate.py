@@ -12,7 +12,7 @@ from ..emulator import variants
 from ..emulator.socketcand import HANDLES
 from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
-from .common import UsageError, check_faults, check_file, int_arg, non_negative_float, positive_float
+from .common import UsageError, check_faults, check_file, int_arg, non_negative_float, port_arg, positive_float
 
 
 def _node_ids(text: str) -> list[int]:
@@ -187,13 +187,13 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--faults", metavar="NAMES", help="faults for every ESC, name@node for one (see ckesc.emulator.faults)")
     p.add_argument("--flash-path", metavar="FILE", help="flash file: settings and counters persist across runs (default: none)")
     p.add_argument("--seed", type=int_arg, default=0, metavar="N", help="seed of the models' noise (default 0)")
-    p.add_argument("--socketcand", type=int_arg, metavar="PORT", help="serve socketcand on 127.0.0.1:PORT (0: a free port)")
+    p.add_argument("--socketcand", type=port_arg, metavar="PORT", help="serve socketcand on 127.0.0.1:PORT (0: a free port)")
     p.add_argument("--interface", metavar="NAME", help="python-can interface to sit on (socketcan, virtual, ...)")
     p.add_argument("--channel", metavar="NAME", help="python-can channel (vcan0, ...)")
     p.add_argument("--bitrate", type=int_arg, default=DEFAULT_BITRATE, metavar="BIT/S",
                    help=f"bit rate of the emulated bus; ESCs at another rate neither hear nor are heard (default {DEFAULT_BITRATE})")
     p.add_argument("--bus-arg", action="append", metavar="KEY=VALUE", help="extra python-can bus argument (repeatable)")
-    p.add_argument("--control", type=int_arg, metavar="PORT", help="control channel on 127.0.0.1:PORT (0: a free port); see ckesc control")
+    p.add_argument("--control", type=port_arg, metavar="PORT", help="control channel on 127.0.0.1:PORT (0: a free port); see ckesc control")
     p.add_argument("--duration", type=positive_float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
     p.add_argument("--stamp", choices=("due", "send"), default="due",
                    help="bus timestamp of ESC frames: their end (as SocketCAN stamps), had they started when they were due (default) or when they were sent")

@@ -50,6 +50,11 @@ MISTAKES = [
     (["control", "--port", "1", "--timeout", "0", "status"], ["--timeout", "zero"]),
     (["control", "--port", "1", "power", "cycle", "--off-time", "-1"], ["--off-time", "below zero"]),
     (["report", "{blocked}"], ["no results.json"]),
+    (["emulate", "--socketcand", "70000"], ["--socketcand", "not a port"]),
+    (["control", "--port", "70000", "status"], ["--port", "not a port"]),
+    (["run", "--time-from", "{tmp}/no-such-results.json"], ["--time-from", "no such results.json"]),
+    (["run", "--bus-open-timeout", "-1"], ["--bus-open-timeout", "below zero"]),
+    (["soak", "--power-cmd-timeout", "0"], ["--power-cmd-timeout", "zero"]),
     (["explore", "--replay", "{tmp}/no-such.replay.json"], ["--replay", "no such replay file"]),
     # the same words for the same mistake, whichever command meets it
     (["run", "--emulator-faults", "answer_lat"], ["--emulator-faults: unknown fault 'answer_lat'", "did you mean"]),
