@@ -93,6 +93,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:
         _silence_stdout()
         return ExitStatus.BROKEN_PIPE
+    except OSError as exc:  # a file the user named that went away or filled up after the checks: one line
+        if exc.filename is None:
+            raise
+        print(f"{name}: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+        return ExitStatus.USAGE
 
 
 def _silence_stdout() -> None:
