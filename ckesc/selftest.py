@@ -42,6 +42,7 @@ from .emulator import variants
 from .emulator.faults import FAULTS, INTERACTION, SINGLE, SOAK
 from .protocol.requirements import Verdict, requirement
 from .reporting.causes import broken_outside_a_fail
+from .reporting.durations import duration_text
 from .reporting.results import RunRecord
 
 RUN_TIMEOUT_S = 600  # one suite run takes seconds in the simulated lane; this only stops a hang
@@ -177,11 +178,8 @@ def judge(run: FaultRun, results: list[Any]) -> FaultRun:
 
 
 def _minutes(seconds: float | None) -> str:
-    """An onset for people: ``20 min``, ``54 min 37 s``."""
-    if seconds is None:
-        return "-"
-    m, sec = divmod(round(seconds), 60)
-    return f"{m} min" + (f" {sec} s" if sec else "")
+    """An onset for people: ``20 min``, ``54 min 37 s`` (:func:`~ckesc.reporting.durations.duration_text`)."""
+    return "-" if seconds is None else duration_text(seconds)
 
 
 def observe_only(rules: tuple[str, ...]) -> bool:

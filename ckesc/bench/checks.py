@@ -50,21 +50,22 @@ def node_list(text: str) -> list[int]:
     return ids
 
 
-def fault_names(text: str) -> list[str]:
-    """--emulator-faults: fault names, each maybe ``NAME=SECONDS`` (a soak fault's onset moved), checked."""
+def fault_names(text: str, option: str = "--emulator-faults") -> list[str]:
+    """--emulator-faults: fault names, each maybe ``NAME=SECONDS`` (a soak fault's onset moved), checked (a mistake
+    said in the same words for every option that takes fault names: ``option``)."""
     names = [f.strip() for f in text.split(",") if f.strip()]
     unknown = [f for f in names if f.partition("=")[0].strip() not in FAULTS]
     if unknown:
         import difflib
 
         close = difflib.get_close_matches(unknown[0], list(FAULTS), n=3)
-        raise PreflightError(f"--emulator-faults: unknown fault {unknown[0]!r}"
+        raise PreflightError(f"{option}: unknown fault {unknown[0]!r}"
                              + (f" (did you mean {', '.join(close)}?)" if close else "")
                              + "; `ckesc control faults` or ckesc/emulator/faults.py lists them")
     try:
         onsets_in(names)
     except ValueError as exc:
-        raise PreflightError(f"--emulator-faults: {exc}") from None
+        raise PreflightError(f"{option}: {exc}") from None
     return names
 
 
@@ -123,6 +124,8 @@ def open_bus_bounded(kwargs: dict[str, Any], timeout: float = BUS_OPEN_TIMEOUT_S
 
     import can
 
+    if kwargs.get("interface") == "socketcand":
+        _reach(kwargs, timeout)
     box: dict[str, Any] = {}
     late = threading.Event()
 
@@ -164,6 +167,23 @@ def open_bus_bounded(kwargs: dict[str, Any], timeout: float = BUS_OPEN_TIMEOUT_S
     return box["bus"]
 
 
+def _reach(kwargs: dict[str, Any], timeout: float) -> None:
+    """A socketcand daemon's address, tried once before python-can's client (which retries for 10 s): nobody
+    listening there is said at once, and is not helped by a longer --bus-open-timeout."""
+    host, port = kwargs.get("host"), kwargs.get("port")
+    try:
+        socket.create_connection((str(host), int(port)), timeout=timeout).close()
+    except TimeoutError:
+        raise PreflightError(f"cannot open the CAN bus ({bus_where(kwargs)}): {host}:{port} does not answer within "
+                             f"{timeout:g} s (a host that drops the connection? --bus-open-timeout gives it longer)") from None
+    except (OSError, ValueError, OverflowError) as exc:
+        why = "nobody listens there (connection refused)" if isinstance(exc, ConnectionRefusedError) else (
+            getattr(exc, "strerror", None) or str(exc))
+        raise PreflightError(f"cannot open the CAN bus ({bus_where(kwargs)}): {host}:{port}: {why}; is the socketcand "
+                             f"daemon or `ckesc emulate --socketcand PORT` running at that address, and --can-config "
+                             "host and port right?") from None
+
+
 def _shutdown(bus: Any) -> None:
     try:
         bus.shutdown()
@@ -202,6 +222,12 @@ def bus_kwargs(options: BenchOptions) -> dict[str, Any]:
                              f"{', '.join(sorted(can.interfaces.VALID_INTERFACES))})") from None
     if not resolved.get("interface"):
         raise PreflightError(no_interface())
+    if resolved["interface"] == "socketcand":  # python-can's own word would be a TypeError about positional arguments
+        missing = [k for k in ("host", "port") if resolved.get(k) in (None, "")]
+        if missing:
+            raise PreflightError("--can-interface socketcand needs the daemon's address: give "
+                                 + " ".join(f"--can-config {k}={k.upper()}" for k in missing)
+                                 + " (`ckesc emulate --socketcand PORT` serves one on 127.0.0.1)")
     return dict(resolved)
 
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..emulator import variants
+from .arguments import non_negative_float, positive_float, positive_int
 from .power import POWER_COMMAND_TIMEOUT_S
 from .power import names as power_names
 from .profile import DEFAULT_BUS_ERROR_S
@@ -88,7 +89,7 @@ BENCH_ROWS: tuple[Option, ...] = (
                 "socketcand (real time)"),
     Option("can_interface", rig="bus.interface", help="python-can interface for --dut bus (else can.conf / CAN_INTERFACE)"),
     Option("can_channel", rig="bus.channel", help="python-can channel, e.g. can0 (else can.conf / CAN_CHANNEL)"),
-    Option("can_bitrate", type=int, rig="bus.bitrate", help="bit rate of the host's bus (else can.conf / CAN_BITRATE)"),
+    Option("can_bitrate", type=positive_int, rig="bus.bitrate", help="bit rate of the host's bus (else can.conf / CAN_BITRATE)"),
     Option("can_config", action="append", default=[], metavar="KEY=VALUE", rig="bus.<any other key>",
            help="extra python-can bus argument (repeatable)"),
     Option("can_bitrate_cmd", metavar="CMD", rig="bitrate_cmd",
@@ -96,12 +97,12 @@ BENCH_ROWS: tuple[Option, ...] = (
                 "replaced. python-can cannot set a SocketCAN bit rate: e.g. a script running `ip link set can0 down; ip link "
                 "set can0 type can bitrate {bitrate}; ip link set can0 up`, or `ckesc control --port P bitrate {bitrate}` "
                 "for the emulator on vcan0"),
-    Option("host_send_error", type=float, default=DEFAULT_BUS_ERROR_S * 1000, run_default=None, metavar="MS",
+    Option("host_send_error", type=non_negative_float, default=DEFAULT_BUS_ERROR_S * 1000, run_default=None, metavar="MS",
            rig="host_send_error_ms",
            help="--dut bus, an adapter that does not echo the host's frames: how much later than the host clock at send a "
                 "frame may reach the bus (driver, USB, TX queue), in ms; the error of every time taken from the host's own "
                 f"frames (default {DEFAULT_BUS_ERROR_S * 1000:g})"),
-    Option("bus_open_timeout", type=float, default=BUS_OPEN_TIMEOUT_S, metavar="S",
+    Option("bus_open_timeout", type=positive_float, default=BUS_OPEN_TIMEOUT_S, metavar="S",
            help="--dut bus: how long the preflight waits for the bus to open (a socketcand daemon or adapter that does not "
                 f"answer) before it stops the run with exit 2 (default {BUS_OPEN_TIMEOUT_S:g})"),
     Option("node_id", type=int, rig="node_id", help="the DUT's node id (default: discovered with GET_ESC_ID)"),
@@ -113,7 +114,7 @@ BENCH_ROWS: tuple[Option, ...] = (
            help="power control (default: emulator for --dut emulator, none for --dut bus)"),
     Option("power_off_cmd", rig="power.command.off", help="--power command: shell command that switches the DUT off"),
     Option("power_on_cmd", rig="power.command.on", help="--power command: shell command that switches the DUT on"),
-    Option("power_cmd_timeout", type=float, default=POWER_COMMAND_TIMEOUT_S, metavar="S",
+    Option("power_cmd_timeout", type=positive_float, default=POWER_COMMAND_TIMEOUT_S, metavar="S",
            help="--power command: a power command still running after S seconds has failed (default "
                 f"{POWER_COMMAND_TIMEOUT_S:g})"),
     Option("labgrid_env", metavar="FILE", rig="power.labgrid.env",

@@ -8,6 +8,10 @@ module and one entry in :data:`COMMANDS`; nothing else here needs to change. ``c
 commands share (the parser class, :class:`UsageError`, argument types); the exit codes are one table,
 :class:`ckesc.reporting.exits.ExitStatus`.
 
+The front door (issue #38): every mistake a user can make is found before any work and said in one line that names
+the option and what would work, exit 2, in the same words whichever command meets it (``common``: the argument types,
+the checks of what a command reads and writes, the unknown fault names); no traceback reaches a user for it.
+
 Exit codes: 0 success; 1 the input had frames that do not decode (``decode``), the emulator
 answered a control request with an error (``control``) or could not write its flash file at the end
 (``emulate``), or a run regressed (``compare``), or a soak found something (``soak``); 2 usage or input the wire format cannot carry (``encode``), or the emulator cannot start
@@ -78,16 +82,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     if handler is None:
         parser.print_help(sys.stderr)
         return ExitStatus.USAGE
+    name = " ".join(["ckesc", args.command, *([args.action] if args.command == "profile" else [])])
     try:
         return handler(args)
     except UsageError as exc:
-        print(f"ckesc {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         return ExitStatus.USAGE
     except KeyboardInterrupt:
         return ExitStatus.INTERRUPTED
     except BrokenPipeError:
         _silence_stdout()
         return ExitStatus.BROKEN_PIPE
+    except OSError as exc:  # a file the user named that went away or filled up after the checks: one line
+        if exc.filename is None:
+            raise
+        print(f"{name}: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+        return ExitStatus.USAGE
 
 
 def _silence_stdout() -> None:

@@ -12,6 +12,7 @@ from ..evidence.checklog import DEFAULT_TOLERANCE_S, check_capture, summary_html
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import BAUD_RATES
 from ..reporting.exits import ExitStatus
+from .common import check_file, non_negative_float
 
 
 def _bitrate_arg(text: str) -> int:
@@ -29,6 +30,8 @@ def _run_check_log(args: argparse.Namespace) -> int:
     if not Path(path).is_file():
         print(f"ckesc check-log: error: no such file: {path}", file=sys.stderr)
         return ExitStatus.USAGE
+    check_file(args.json, "--json")
+    check_file(args.html, "--html")
     jitter = 0.0
     if args.profile:
         from ..bench.profile import DutProfile, ProfileError
@@ -72,7 +75,7 @@ def add_check_log_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bitrate", type=_bitrate_arg, default=cat.DEFAULT_BITRATE,
                    help=f"the bus's bit rate, for frame durations (default {cat.DEFAULT_BITRATE}, the factory rate; a lower "
                         "value than the real one only makes the timing checks more lenient)")
-    p.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE_S * 1000, metavar="MS",
+    p.add_argument("--tolerance", type=non_negative_float, default=DEFAULT_TOLERANCE_S * 1000, metavar="MS",
                    help=f"timing error of the capture's timestamps in ms (default {DEFAULT_TOLERANCE_S * 1000:g})")
     p.add_argument("--complete", action="store_true",
                    help="the capture holds every frame on the bus (no drops): a missing frame is then the sender's fault")

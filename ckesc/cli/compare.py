@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..reporting import compare, soak_compare
 from ..reporting.exits import ExitStatus
+from .common import check_file
 
 
 def _percent(text: str) -> float:
@@ -75,4 +76,6 @@ def _check_count(args: argparse.Namespace) -> int:
     if len(args.runs) < 2:
         print("ckesc compare: error: give two runs or more (see ckesc compare --help)", file=sys.stderr)
         return ExitStatus.USAGE
+    check_file(args.json, "--json")
+    check_file(args.html, "--html")
     return _run_compare(args)

@@ -10,7 +10,7 @@ from typing import Any
 
 from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
-from .common import Parser, UsageError, int_arg
+from .common import Parser, UsageError, int_arg, non_negative_float, port_arg, positive_float
 
 
 def _control_port(args: argparse.Namespace) -> int:
@@ -72,13 +72,13 @@ def add_control_command(sub: argparse._SubParsersAction) -> None:
         "          CKESC_CONTROL_PORT=29536 ckesc control power cycle --off-time 0.5",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--port", type=int_arg, metavar="P", help="the emulator's control port (default: $CKESC_CONTROL_PORT)")
-    p.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for the answer (default 10, plus the off time)")
+    p.add_argument("--port", type=port_arg, metavar="P", help="the emulator's control port (default: $CKESC_CONTROL_PORT)")
+    p.add_argument("--timeout", type=positive_float, metavar="S", help="seconds to wait for the answer (default 10, plus the off time)")
     actions = p.add_subparsers(dest="action", metavar="ACTION", parser_class=Parser, required=True)
     actions.add_parser("status", help="power state, bit rate, per-ESC node ids, faults and counters, timing")
     power = actions.add_parser("power", help="power off / on / cycle")
     power.add_argument("state", choices=("off", "on", "cycle"))
-    power.add_argument("--off-time", type=float, metavar="S", help="cycle: seconds without power (default 1.0)")
+    power.add_argument("--off-time", type=non_negative_float, metavar="S", help="cycle: seconds without power (default 1.0)")
     fault = actions.add_parser("fault", help="switch a fault on or off")
     fault.add_argument("name", metavar="NAME", help="fault name (ckesc control faults lists them)")
     fault.add_argument("state", choices=("on", "off"))

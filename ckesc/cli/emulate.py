@@ -13,7 +13,7 @@ from ..emulator.host_alone import HOST_ALONE, TX_QUEUE_LEN
 from ..emulator.socketcand import HANDLES
 from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
-from .common import UsageError, int_arg
+from .common import UsageError, check_faults, check_file, int_arg, non_negative_float, port_arg, positive_float
 
 
 def _node_ids(text: str) -> list[int]:
@@ -99,8 +99,8 @@ def _run_emulate(args: argparse.Namespace) -> int:
         raise UsageError("give --socketcand PORT (a hub for python-can's socketcand client) or --interface/--channel (a python-can bus)")
     if args.interface is not None and args.channel is None:
         raise UsageError(f"--interface {args.interface} needs --channel")
-    if min(args.boot_spread, args.boot_time, args.report_delay) < 0 or (args.duration is not None and args.duration < 0):
-        raise UsageError("--boot-spread, --boot-time, --report-delay and --duration are seconds, 0 or more")
+    check_file(args.flash_path, "--flash-path", "flash file")
+    check_faults(args.faults, "--faults")
     if args.rt_priority is not None and not 1 <= args.rt_priority <= 99:
         raise UsageError(f"--rt-priority must be 1..99 (SCHED_FIFO), not {args.rt_priority}")
     faults = _fault_spec(args.faults, args.nodes)
@@ -188,26 +188,26 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--faults", metavar="NAMES", help="faults for every ESC, name@node for one (see ckesc.emulator.faults)")
     p.add_argument("--flash-path", metavar="FILE", help="flash file: settings and counters persist across runs (default: none)")
     p.add_argument("--seed", type=int_arg, default=0, metavar="N", help="seed of the models' noise (default 0)")
-    p.add_argument("--socketcand", type=int_arg, metavar="PORT", help="serve socketcand on 127.0.0.1:PORT (0: a free port)")
+    p.add_argument("--socketcand", type=port_arg, metavar="PORT", help="serve socketcand on 127.0.0.1:PORT (0: a free port)")
     p.add_argument("--interface", metavar="NAME", help="python-can interface to sit on (socketcan, virtual, ...)")
     p.add_argument("--channel", metavar="NAME", help="python-can channel (vcan0, ...)")
     p.add_argument("--bitrate", type=int_arg, default=DEFAULT_BITRATE, metavar="BIT/S",
                    help=f"bit rate of the emulated bus; ESCs at another rate neither hear nor are heard (default {DEFAULT_BITRATE})")
     p.add_argument("--bus-arg", action="append", metavar="KEY=VALUE", help="extra python-can bus argument (repeatable)")
-    p.add_argument("--control", type=int_arg, metavar="PORT", help="control channel on 127.0.0.1:PORT (0: a free port); see ckesc control")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
+    p.add_argument("--control", type=port_arg, metavar="PORT", help="control channel on 127.0.0.1:PORT (0: a free port); see ckesc control")
+    p.add_argument("--duration", type=positive_float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
     p.add_argument("--stamp", choices=("due", "send"), default="due",
                    help="bus timestamp of ESC frames: their end (as SocketCAN stamps), had they started when they were due (default) or when they were sent")
     p.add_argument("--frame-stamp", choices=("end", "start"), default="end",
                    help="which end of a frame its bus timestamp marks: end (default, as SocketCAN stamps, and socketcand "
                    "passes on) or start (as an adapter stamping the start of frame: its DUT profile says [timing] stamp = "
                    "\"start\")")
-    p.add_argument("--boot-spread", type=float, default=0.02, metavar="S",
+    p.add_argument("--boot-spread", type=non_negative_float, default=0.02, metavar="S",
                    help="ESC k of n boots k/n x S later than the first, so that their reports are not in lockstep, as on a "
                    "real bench (default 0.02: one MSG1 interval; 0: all at once, as the simulated lane)")
-    p.add_argument("--boot-time", type=float, default=EscConfig.boot_time, metavar="S",
+    p.add_argument("--boot-time", type=non_negative_float, default=EscConfig.boot_time, metavar="S",
                    help=f"power-on to the first answer: the ESC hears nothing before (default {EscConfig.boot_time})")
-    p.add_argument("--report-delay", type=float, default=0.0, metavar="S",
+    p.add_argument("--report-delay", type=non_negative_float, default=0.0, metavar="S",
                    help="boot to the first report: an ESC that answers before it reports (default 0)")
     p.add_argument("--report-timer", choices=REPORT_TIMERS, default="restart",
                    help="when reporting comes back (a resume, leaving CAN Test or MSG_EXP mode): restart (default: the first "

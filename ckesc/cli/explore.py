@@ -3,21 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 
 from ..reporting.exits import ExitStatus
-from .common import UsageError
+from .common import UsageError, check_dir, check_faults, check_file, check_readable, duration_arg, positive_int
 from .run import add_bench_options
 
-
-def parse_budget(text: str) -> float:
-    """``90``, ``90s``, ``10m``, ``1h``, ``1h30m`` -> seconds."""
-    m = re.fullmatch(r"\s*(?:(\d+(?:\.\d+)?)h)?\s*(?:(\d+(?:\.\d+)?)m)?\s*(?:(\d+(?:\.\d+)?)s?)?\s*", text)
-    if not m or not any(m.groups()):
-        raise argparse.ArgumentTypeError(f"a duration like 90s, 10m or 1h, not {text!r}")
-    h, mins, s = (float(g) if g else 0.0 for g in m.groups())
-    return h * 3600 + mins * 60 + s
+#: ``--budget``'s type: ``90``, ``90s``, ``10m``, ``1h``, ``1h30m`` -> seconds, more than zero
+parse_budget = duration_arg
 
 
 def add_explore_command(sub: argparse._SubParsersAction) -> None:
@@ -38,7 +31,7 @@ def add_explore_command(sub: argparse._SubParsersAction) -> None:
     x.add_argument("--seed", type=int, default=0, help="same seed, same programs (default 0)")
     x.add_argument("--replay", metavar="FILE", help="run the program of a replay file once (a finding's "
                    "findings/finding_N.replay.json) on the bench it names, or on the bench options given")
-    x.add_argument("--max-steps", type=int, default=12, help="the longest program generated (default 12)")
+    x.add_argument("--max-steps", type=positive_int, default=12, help="the longest program generated (default 12)")
     x.add_argument("--database", metavar="DIR", help="where every finding's program is kept: the next exploration runs them first "
                    "(default: <reports>/explore-db; 'none' for none)")
     x.add_argument("--load", action="store_true", help="also draw foreign-load steps (R18: the suite's load generator at "
@@ -48,7 +41,7 @@ def add_explore_command(sub: argparse._SubParsersAction) -> None:
     x.add_argument("--selftest", metavar="FAULTS", help="the self-test: for each emulator fault (comma-separated, or "
                    "'all'), explore a fresh emulated bench from --seed until it is found or --budget is spent, and "
                    "say within how many programs, steps and seconds (a Markdown table; --out writes it and its JSON)")
-    x.add_argument("--max-programs", type=int, help="also stop after this many programs (per fault with --selftest)")
+    x.add_argument("--max-programs", type=positive_int, help="also stop after this many programs (per fault with --selftest)")
     x.add_argument("--out", metavar="FILE", help="--selftest: write the table here and its JSON beside it")
     o = p.add_argument_group("output")
     o.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
@@ -57,6 +50,13 @@ def add_explore_command(sub: argparse._SubParsersAction) -> None:
     def handler(args: argparse.Namespace) -> int:
         from ..explore import command
 
+        if not args.replay:  # (a replay writes no report)
+            check_dir(args.reports, "--reports")
+        if args.database not in (None, "none"):
+            check_dir(args.database, "--database", "database directory")
+        check_file(args.out, "--out")
+        check_readable(args.replay, "--replay", "replay file")
+        check_faults(args.selftest, "--selftest")
         given = {k for k in command.BENCH_OPTIONS if getattr(args, k) != p.get_default(k)}
         try:
             return command.main(args, given, out=sys.stdout)

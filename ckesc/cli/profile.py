@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ..bench.profile import DutProfile, ProfileError, find_profile, profile_dirs
 from ..reporting.exits import ExitStatus
-from .common import UsageError
+from .common import UsageError, check_file
 from .run import add_bench_options
 
 READS_ONLY = ("The DUT is asked with reads only: GET_ESC_ID, ESC Information (240), Maintenance Information (241), "
@@ -138,6 +138,7 @@ def _init(args: argparse.Namespace) -> int:
 
     if args.output and Path(args.output).exists() and not args.force:
         raise UsageError(f"{args.output} exists (give --force to overwrite it)")
+    check_file(args.output, "--output", "profile file")
     session, observed = _ask(args)
     if session is None:
         return ExitStatus.ABORTED

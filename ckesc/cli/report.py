@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from ..reporting.exits import ExitStatus
 from ..reporting.html_report import build
+from .common import UsageError, check_file
 
 
 def add_report_command(sub) -> None:
@@ -20,12 +20,11 @@ def add_report_command(sub) -> None:
 def _report_command(args) -> int:
     out = Path(args.report_dir)
     if not (out / "results.json").is_file():
-        print(f"ckesc report: no results.json in {out} (give a run's directory, e.g. reports/latest)", file=sys.stderr)
-        return ExitStatus.USAGE
+        raise UsageError(f"no results.json in {out} (give a run's directory, e.g. reports/latest)")
+    check_file(str(out / "report.html"), "REPORT_DIR", "report page")
     try:
         path = build(out)
     except (ValueError, KeyError, TypeError, AttributeError) as exc:  # JSONDecodeError is a ValueError
-        print(f"ckesc report: {out / 'results.json'} is not a results record this version reads: {exc!r}", file=sys.stderr)
-        return ExitStatus.USAGE
+        raise UsageError(f"{out / 'results.json'} is not a results record this version reads: {exc!r}") from None
     print(path)
     return ExitStatus.OK

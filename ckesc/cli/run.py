@@ -12,7 +12,7 @@ from typing import Any
 
 from .. import run as run_lib
 from ..session import options
-from .common import UsageError
+from .common import UsageError, check_dir, check_readable
 
 USAGE = "%(prog)s [OPTION ...] [SECTION | MODULE[::TEST] ...] [-- PYTEST_ARGUMENT ...]"
 
@@ -52,6 +52,8 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
         if unknown is not None:
             way_out = shlex.join(["ckesc", "run", *args.free[:unknown], "--", *args.free[unknown:], *args.after_dashes])
             raise UsageError(f"{args.free[unknown]} is not an option of ckesc run: pytest's options go after `--` ({way_out})")
+        check_dir(args.ckesc_reports, "--reports")
+        check_readable(args.ckesc_durations, "--time-from", "results.json")
         args.selection, args.pytest_args = args.free, args.after_dashes
         return run_lib.run_command(args)
 

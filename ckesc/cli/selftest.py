@@ -8,16 +8,16 @@ import sys
 from pathlib import Path
 
 from .. import selftest as selftest_lib
-from ..emulator.faults import FAULTS
 from ..reporting.exits import ExitStatus
 from ..selftest import SCOPES, VARIANT_SETS, FaultRun, VariantRun, selftest, table
+from .common import UsageError, check_faults, check_file, positive_int
 
 
 def add_selftest_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("selftest", help="show that the suite passes the emulator and fails each of its faults",
                        description=selftest_lib.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--faults", help="comma-separated fault names (default: all; none: only the faultless emulator)")
-    p.add_argument("--jobs", type=int, help="parallel suite runs (default: CPU count)")
+    p.add_argument("--jobs", type=positive_int, help="parallel suite runs (default: CPU count)")
     p.add_argument("--out", help="write the fault -> failing tests table (Markdown) and JSON beside it")
     p.add_argument("--scope", choices=SCOPES, default="full",
                    help="full (default): the whole suite per fault; cited: per fault only the modules with a test "
@@ -41,10 +41,10 @@ def _seeds(text: str) -> list[int]:
 
 def selftest_command(args: argparse.Namespace) -> int:
     faults = [f for f in args.faults.split(",") if f and f != "none"] if args.faults else None
-    unknown = set(faults or ()) - set(FAULTS)
-    if unknown:
-        print(f"ckesc selftest: unknown fault(s) {', '.join(sorted(unknown))}", file=sys.stderr)
-        return ExitStatus.USAGE
+    check_faults(args.faults, "--faults")
+    check_file(args.out, "--out")
+    if args.out:
+        check_file(str(Path(args.out).with_suffix(".json")), "--out", "output file (the JSON beside it)")
 
     def progress(run: FaultRun, i: int, n: int) -> None:
         status = "ok" if run.ok else "PROBLEM"
@@ -57,8 +57,7 @@ def selftest_command(args: argparse.Namespace) -> int:
     try:
         matrix = selftest_lib.variant_matrix(args.variants, _seeds(args.seeds)) if args.variants else []
     except ValueError:
-        print(f"ckesc selftest: --seeds takes 1,5,9 or 1-8, got {args.seeds!r}", file=sys.stderr)
-        return ExitStatus.USAGE
+        raise UsageError(f"--seeds takes 1,5,9 or 1-8, not {args.seeds!r}") from None
 
     def variant_progress(run: VariantRun, i: int, n: int) -> None:
         print(f"[{i:>3}/{n}] {run.label[:60]:<60} {len(run.inconclusive):>3} inconclusive  "

@@ -12,8 +12,7 @@ import sys
 
 from ..reporting.exits import ExitStatus
 from ..soak import trace
-from .common import UsageError
-from .explore import parse_budget
+from .common import UsageError, check_dir, check_file, duration_arg, positive_float, seconds_of
 from .run import add_bench_options
 
 
@@ -36,7 +35,10 @@ def parse_throttle(text: str) -> tuple[tuple[float, int], ...]:
         at, _, value = part.partition(":")
         if not value.strip().isdigit():
             raise argparse.ArgumentTypeError(f"a throttle profile like 0:0,10m:200,1h:0, not {text!r}")
-        steps.append((parse_budget(at), int(value)))
+        try:
+            steps.append((seconds_of(at), int(value)))
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(f"{exc} (in the throttle profile {text!r})") from None
     return tuple(sorted(steps))
 
 
@@ -66,9 +68,9 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
     )
     add_bench_options(p)
     s = p.add_argument_group("soak")
-    s.add_argument("--duration", type=parse_budget, default=600.0, metavar="DURATION",
+    s.add_argument("--duration", type=duration_arg, default=600.0, metavar="DURATION",
                    help="how long to run, lane time (8h, 30m, 90s, 1h30m; default 10m)")
-    s.add_argument("--rate", type=float, default=400.0, metavar="HZ", help="RawCommand rate, 50-500 Hz (default 400)")
+    s.add_argument("--rate", type=positive_float, default=400.0, metavar="HZ", help="RawCommand rate, 50-500 Hz (default 400)")
     s.add_argument("--format", choices=("14b", "12b", "10b"), default="14b", help="RawCommand format (default 14b)")
     s.add_argument("--channels", type=parse_channels, metavar="LIST",
                    help="throttle channels the stream commands, e.g. 1-4 (default: every channel of one frame)")
@@ -99,6 +101,8 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
         from ..bench.station import BenchOptions
         from ..soak import runner
 
+        check_dir(args.reports, "--reports")
+        check_file(args.status_file, "--status-file", "status file")
         spin = bool(args.allow_motor_spin) or bool(args.rig)  # (a rig's bench says whether its motor may spin)
         if args.throttle_profile and any(v for _, v in args.throttle_profile) and not spin:
             raise UsageError("--throttle-profile spins the motor: give --allow-motor-spin too (PROPELLERS OFF)")

@@ -13,6 +13,7 @@ from ..bench.dut import DutError
 from ..bench.errors import PreflightError
 from ..bench.lanes import BenchGone
 from ..bench.station import BenchOptions
+from ..reporting.durations import duration_text
 from ..reporting.exits import ExitStatus
 from ..reporting.report import run_dir
 from .engine import Stats, explore
@@ -86,7 +87,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
     def say(line: str) -> None:
         print(line, file=out, flush=True)
 
-    say(f"explore: a budget of {_duration(args.budget)} wall time, shrinking what it finds included")
+    say(f"explore: a budget of {duration_text(args.budget)} wall time, shrinking what it finds included")
     if session.load_note:
         say(session.load_note)
     try:
@@ -105,13 +106,6 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
     write_reports(where, found, stats, info)
     print(summary_text(found, stats, where), file=out)
     return ExitStatus.FAILED if found else ExitStatus.OK
-
-
-def _duration(seconds: float) -> str:
-    """``90`` -> ``1 min 30 s``, as a person reads a budget."""
-    minutes, secs = divmod(round(seconds), 60)
-    return " ".join(part for part in (f"{minutes} min" if minutes else "", f"{secs} s" if secs or not minutes else "")
-                    if part)
 
 
 def selftest_command(args: argparse.Namespace, out: TextIO) -> int:

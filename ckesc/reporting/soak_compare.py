@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .compare import EXTRA_CSS, RunError
+from .durations import duration_text
 from .htmlkit import CSS, badge, e
 
 #: what a soak record must hold for the comparison (``ckesc soak``'s results.json)
@@ -96,7 +97,7 @@ def flags(runs: list[SoakRun]) -> list[str]:
     for i, r in enumerate(runs):
         if r.doc["status"] != "COMPLETED":
             out.append(f"{_letter(i)} ({r.label}) is {r.doc['status']}"
-                       + (f": {r.doc['problem']}" if r.doc.get("problem") else "") + f", after {r.doc['ran_s']:g} s")
+                       + (f": {r.doc['problem']}" if r.doc.get("problem") else "") + f", after {duration_text(r.doc['ran_s'])}")
     return out
 
 
@@ -149,7 +150,7 @@ def text(doc: dict[str, Any]) -> str:
     """The comparison for the console."""
     runs = doc["runs"]
     lines = [f"ckesc compare: {len(runs)} soak runs, oldest first; each compared with the one before it"]
-    lines += [f"  {r['letter']}  {r['label']}  {r['path']}  {r['status']}, {r['ran_s']:g} s on {r['lane']}"
+    lines += [f"  {r['letter']}  {r['label']}  {r['path']}  {r['status']}, {duration_text(r['ran_s'])} on {r['lane']}"
               + (f", faults {r['faults']}" if r["faults"] else "") + f", {r['findings']} findings" for r in runs]
     lines += [f"! {f}" for f in doc["flags"]]
     watches = list(dict.fromkeys(w for r in runs for w in r["properties"]))

@@ -15,30 +15,24 @@ labgrid place released on every way out). Once the tests are collected, the benc
 from __future__ import annotations
 
 import os
-import tempfile
 from contextlib import nullcontext
-from pathlib import Path
 
 import pytest
 
 from ..bench.errors import PreflightError
 from ..bench.power import Prompt
 from ..bench.station import BenchOptions, Station, build
+from ..reporting.paths import not_writable
 
 __all__ = ["PreflightError", "prompt", "reports_writable", "run"]
 
 
 def reports_writable(base: str | os.PathLike) -> None:
-    """``base`` is a directory this user can write into (made if missing; a file is written to it and
-    removed again, since permission bits alone do not tell about a read-only or special file system)."""
-    path = Path(base)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path, prefix=".ckesc-preflight-"):
-            pass
-    except OSError as exc:
-        raise PreflightError(f"reports directory {str(base)!r} is not writable: {exc.strerror or exc} "
-                             "(give another with --reports)") from None
+    """``base`` is a directory this user can write into, or could make (nothing is made here: a mistake found after
+    this one leaves no directory behind), in the words every command uses (:func:`ckesc.reporting.paths.not_writable`)."""
+    said = not_writable(base, "--reports", "reports directory")
+    if said:
+        raise PreflightError(said)
 
 
 def run(config: pytest.Config) -> Station:

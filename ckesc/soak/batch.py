@@ -29,13 +29,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, TextIO
 
+from ..reporting.durations import duration_text
 from ..reporting.exits import ExitStatus, worst
 from ..reporting.report import run_dir
 from ..rigs import rig as rigs
 from ..session import options
 from . import report
 from .runner import LIVE_LOG_S, LIVE_TTY_S, live_text
-from .statement import duration_text
 
 #: how often the benches' status files are read (s of wall time)
 POLL_S = 0.2
@@ -254,7 +254,7 @@ def batch_record(rig: str, runs: list[BenchRun], started_utc: str, seconds: floa
 
 def summary(doc: dict[str, Any], batch_dir: Path) -> str:
     """The batch's end, for the console and ``summary.txt``: per bench its end and its statement."""
-    lines = [f"soak batch: {len(doc['benches'])} benches in {doc['seconds']:.1f} s of wall time, exit {doc['exit_status']}"
+    lines = [f"soak batch: {len(doc['benches'])} benches in {duration_text(doc['seconds'])} of wall time, exit {doc['exit_status']}"
              + (" (interrupted)" if doc["interrupted"] else "")]
     for b in doc["benches"]:
         lines.append(f"bench {b['name']}: exit {b['exit']}, " + (

@@ -14,8 +14,8 @@ from typing import Any
 
 from junit_xml import TestCase, TestSuite, to_xml_report_string
 
+from ..reporting.durations import duration_text
 from ..reporting.report import run_dir
-from .statement import duration_text
 
 #: findings printed in the summary (every kept one is in results.json)
 SUMMARY_FINDINGS = 10
@@ -73,7 +73,7 @@ def summary_text(record: dict[str, Any], where: Path | None = None) -> str:
     host = record["host"]
     late = host["send_lateness"]
     lines = [f"soak {head}: {duration_text(record['ran_s'])} of {duration_text(record['duration_s'])} on "
-             f"{record['lane']} ({record['clock']} clock) in {record['wall_s']:g} s of wall time, node {record['node_id']}, "
+             f"{record['lane']} ({record['clock']} clock) in {duration_text(record['wall_s'])} of wall time, node {record['node_id']}, "
              f"{record['frames']['total']} frames",
              f"host stream: {host['stream_frames']} RawCommand_{record['plan']['format']} at {record['plan']['rate_hz']:g} Hz, "
              f"{host['stream_skipped']} skipped; sent late by p50 {late['p50_ms']} ms, p99 {late['p99_ms']} ms, "

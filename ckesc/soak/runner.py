@@ -28,10 +28,11 @@ from ..bench.station import BENCH_ROWS, BenchOptions, build
 from ..protocol import catalogue as cat
 from ..protocol.frame import WireFrame
 from ..protocol.histogram import Histogram
+from ..reporting.durations import duration_text
 from . import report
 from .monitor import Monitor
 from .player import FORMATS, FlightPlan, Player
-from .statement import Statement, duration_text
+from .statement import Statement
 from .trace import DEFAULT_BUDGET, Trace
 from .watch import WatchConfig
 

@@ -7,18 +7,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from ..reporting.durations import duration_text
+
 #: the rule of three: -ln(0.05) = 2.996, rounded up as it is quoted (the 95 % upper bound of a rate with no event)
 RULE_OF_THREE = 3
 CONFIDENCE = "95 %"
-
-
-def duration_text(seconds: float) -> str:
-    """``28800`` -> ``8 h 0 min``; ``600`` -> ``10 min``; ``42.5`` -> ``42.5 s``."""
-    if seconds < 60:
-        return f"{round(seconds, 1):g} s"
-    minutes = int(seconds // 60)
-    h, m = divmod(minutes, 60)
-    return f"{h} h {m} min" if h else f"{m} min"
 
 
 def _rate(value: float) -> str:

@@ -365,7 +365,7 @@ def test_emulate_start_errors_are_one_line(tmp_path, capsys):
     assert "not a flash file" in err and err.count("\n") == 1
 
     assert main(["emulate", "--socketcand", "0", "--faults", "nope"]) == 2
-    assert "unknown fault(s) nope" in capsys.readouterr().err
+    assert "--faults: unknown fault 'nope'" in capsys.readouterr().err  # the words of ckesc run --emulator-faults
     assert main(["emulate", "--nodes", "1"]) == 2
     assert "--socketcand" in capsys.readouterr().err
     assert main(["emulate", "--socketcand", "0", "--rt-priority", "100"]) == 2
