@@ -232,7 +232,7 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
             if self._counts_foreign:
                 self._heard_foreign(msg, now)
             return False
-        handler = _HANDLERS.get((frame.kind, frame.name))
+        handler = _HANDLERS.get((frame.kind, frame.spec.name))  # (spec.name: Frame.name's, without its call)
         if handler is None or (frame.source and self.config.foreign_host == "ignore"):
             self.counters["rx_ignored"] += 1
             return False
