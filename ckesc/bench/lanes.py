@@ -25,12 +25,13 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from collections import deque
-from typing import Any
+from typing import Any, Iterator
 
 import can
 
 from ..emulator import sim_bus
 from ..protocol.catalogue import DEFAULT_BITRATE
+from ..protocol.frame import WireFrame
 from .epochs import PowerEpoch
 from .power import EmulatorPower, PowerControl
 from .profile import DEFAULT_BUS_ERROR_S
@@ -128,10 +129,21 @@ class Lane(ABC):
     def recv(self, timeout: float) -> can.Message | None:
         return self.heard(self.bus.recv(timeout=max(timeout, 0.0)))
 
+    def send_wire(self, wire: WireFrame) -> None:
+        """Send one data frame as it goes on the wire, on the host's handle (``bus.send``): a long run's stream
+        (``ckesc soak``), every frame of it."""
+        self.bus.send(can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id))
+
     def recv_until(self, deadline: float) -> can.Message | None:
         """The next frame read before lane time ``deadline`` (``recv(deadline - now())``), else None: a long run's
         read loop (``ckesc soak``), every frame of it."""
         return self.recv(deadline - self.now())
+
+    def frames_until(self, deadline: float) -> Iterator[can.Message]:
+        """Every frame read before lane time ``deadline``, one :meth:`recv_until` after another (the clock at
+        ``deadline`` once it ends): a long run's read loop, every frame of it."""
+        while (msg := self.recv_until(deadline)) is not None:
+            yield msg
 
     @abstractmethod
     def reopen(self, bitrate: int) -> None:
@@ -177,20 +189,34 @@ class SimLane(Lane):
         return self.clock, 0.0  # the host acts in simulated time, exactly
 
     def now(self) -> float:
-        return self.sim.now()
+        return self.sim.world.now
+
+    peek_now = now
 
     def recv_until(self, deadline: float) -> can.Message | None:
         # Lane.recv_until with the calls between it and the simulated clock taken out (hours of soak read here)
-        msg = self.heard(self.sim.recv(timeout=max(deadline - self.sim.world.now, 0.0)))
+        msg = self.sim.recv_until(deadline)
         if self.sim.world.ack:
             _check_controller(self.sim)
-        return msg
+        return self.heard(msg) if msg is not None else None
 
     def recv(self, timeout: float) -> can.Message | None:
         msg = super().recv(timeout)
         if self.sim.world.ack:
             _check_controller(self.sim)
         return msg
+
+    def frames_until(self, deadline: float) -> Iterator[can.Message]:
+        # Lane.frames_until with the calls between it and the simulated bus taken out (hours of soak read here); the
+        # listeners are looked for once per call. A bus with acknowledgement reads frame by frame: the host's
+        # controller is looked at after each (its bus-off is the bench's failure, not the DUT's)
+        if self.sim.world.ack:
+            return super().frames_until(deadline)
+        frames = self.sim.frames_until(deadline)
+        return map(self.heard, frames) if self.__dict__.get("_listeners") else frames
+
+    def send_wire(self, wire: WireFrame) -> None:
+        self.sim.send_wire(wire)  # (no can.Message built: hours of soak send here)
 
     def wait_power(self, seconds: float) -> None:
         self.sim.advance(seconds)

@@ -122,8 +122,10 @@ class EmulatedBench:
         Frames no ESC acts on (other ESCs' reports) are only counted, and a throttle frame goes only
         to the ESCs it can address (:meth:`EscModel.throttle_keys`): the hot path of a busy bus."""
         plain = type(frame) is WireFrame  # a data frame (the simulated lane's; remote and error frames come as Messages)
-        key = None
-        if frame.is_extended_id if plain else getattr(frame, "is_extended_id", True):
+        key = (frame.arbitration_id, frame.data) if plain and frame.is_extended_id else None
+        # a throttle frame heard before (a stream's: hours of them) is known by its id and bytes alone
+        decoded: Frame | DecodeError | None = self._throttle_decoded.get(key) if key is not None else None
+        if decoded is None and (frame.is_extended_id if plain else getattr(frame, "is_extended_id", True)):
             can_id = frame.arbitration_id
             known = self._classified.get(can_id)
             if known is None:
@@ -132,13 +134,11 @@ class EmulatedBench:
                 kind, _, _, _, spec = classify(can_id)
                 known = self._classified[can_id] = (kind, spec.name if spec is not None else None)
             kind, name = known
-            if name is not None:
-                if (kind, name) not in HANDLED:
-                    self.ignored += 1  # other ESCs' reports and answers: nobody acts on them, no need to decode
-                    return
-                if plain and name in THROTTLE_FRAMES:
-                    key = (frame.arbitration_id, frame.data)
-        decoded: Frame | DecodeError | None = self._throttle_decoded.get(key) if key is not None else None
+            if name is not None and (kind, name) not in HANDLED:
+                self.ignored += 1  # other ESCs' reports and answers: nobody acts on them, no need to decode
+                return
+            if name is None or name not in THROTTLE_FRAMES:
+                key = None  # (only throttle frames are kept decoded)
         if decoded is None:
             try:
                 decoded = self._decoder.decode(frame)

@@ -139,7 +139,7 @@ class Motor:
 
     def _on_throttle(self, f: Frame, now: float) -> None:
         channel = 1 if "throttle_channel_ignored" in self.faults else self.nvm["throttle_channel"]
-        name = f.name
+        name = f.spec.name  # (a handled frame's spec is known)
         value: int | None = None
         if name == "raw_command_14b":
             channels = f.fields["channels"]

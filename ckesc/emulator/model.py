@@ -233,7 +233,7 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
                 self._heard_foreign(msg, now)
             return False
         kept = "comm_watchdog_kept_alive" in self.faults and self._keep_alive(frame, now)
-        handler = _HANDLERS.get((frame.kind, frame.name))
+        handler = _HANDLERS.get((frame.kind, frame.spec.name))  # (spec.name: Frame.name's, without its call)
         if handler is None or (frame.source and self.config.foreign_host == "ignore"):
             self.counters["rx_ignored"] += 1
             return kept

@@ -41,7 +41,7 @@ import heapq
 import itertools
 import os
 from collections import deque
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import can
 from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
@@ -173,7 +173,7 @@ class SimWorld(CanNodes):
         if deadlines and (deadlines[0] if len(deadlines) == 1 else min(deadlines)) <= t:
             for esc, wire in self.bench.poll(t):
                 self._queue(wire, esc, esc.state.bitrate, ready=wire.timestamp)
-        if self._in_flight is None:
+        if self._in_flight is None and (self._ready or self._waiting):
             self._start_transmission()
         return True
 
@@ -272,7 +272,7 @@ class SimWorld(CanNodes):
         sender = origin if isinstance(origin, EscModel) else None
         flags = p.flags
         if not flags:
-            self.bench.deliver(wire, end, bitrate, sender=sender)
+            self.bench.deliver(wire, end, bitrate, sender)
             for bus in self.buses:
                 if bus.bitrate == bitrate and (bus is not origin or bus.receive_own_messages):
                     bus._deliver(wire, bus is not origin)
@@ -305,6 +305,10 @@ class SimWorld(CanNodes):
         self._sources = [s for s in self._sources if s.name != name]
 
     # ------------------------------------------------------------------ host side
+    def send_wire(self, bus: SimEscBus, wire: WireFrame) -> None:
+        """A host's data frame as it goes on the wire (``send`` without the ``can.Message``: a soak's stream)."""
+        self._queue(wire, bus, bus.bitrate, ready=self.now)
+
     def send(self, bus: SimEscBus, msg: can.Message) -> None:
         """Queue ``msg`` on ``bus``'s controller; raises :class:`~ckesc.protocol.canbus.QueueFull`."""
         flags = None
@@ -513,8 +517,21 @@ class SimEscBus(can.BusABC):
         try:
             self.world.send(self, msg)
         except QueueFull as exc:
-            raise can.CanOperationError(f"Failed to transmit: {os.strerror(errno.ENOBUFS)} ({exc}; controller "
-                                        f"{self.world.controller(self).state.value})", errno.ENOBUFS) from exc
+            raise self._enobufs(exc) from exc
+
+    def send_wire(self, wire: WireFrame) -> None:
+        """:meth:`send` of a data frame given as it goes on the wire (its ``timestamp`` unused): no ``can.Message``
+        built for it, as a soak's stream sends hours of them."""
+        if self._is_shutdown:
+            self._check_open()
+        try:
+            self.world.send_wire(self, wire)
+        except QueueFull as exc:
+            raise self._enobufs(exc) from exc
+
+    def _enobufs(self, exc: QueueFull) -> can.CanOperationError:
+        return can.CanOperationError(f"Failed to transmit: {os.strerror(errno.ENOBUFS)} ({exc}; controller "
+                                     f"{self.world.controller(self).state.value})", errno.ENOBUFS)
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """The next frame, advancing simulated time up to ``timeout`` seconds to wait for it."""
@@ -522,19 +539,48 @@ class SimEscBus(can.BusABC):
         if self._rx:
             return self._rx.popleft()
         world = self.world
-        deadline = float("inf") if timeout is None else world.now + max(timeout, 0.0)
-        while not self._rx:
-            t = world.next_event()
+        return self._until(float("inf") if timeout is None else world.now + max(timeout, 0.0), timeout is None)
+
+    def recv_until(self, deadline: float) -> can.Message | None:
+        """:meth:`recv` with ``timeout`` ``deadline - now`` (a lane's read loop: every frame of a soak)."""
+        if self._is_shutdown:
+            self._check_open()
+        if self._rx:
+            return self._rx.popleft()
+        now = self.world.now
+        return self._until(now + max(deadline - now, 0.0), False)  # (recv's arithmetic: the same instant)
+
+    def frames_until(self, deadline: float) -> Iterator[can.Message]:
+        """Every frame until ``deadline``: :meth:`recv_until` again and again until it gives none (the clock then at
+        ``deadline``), without a call per frame between the reader and the simulated clock."""
+        rx, world, until = self._rx, self.world, self._until
+        while True:
+            if self._is_shutdown:
+                self._check_open()
+            if rx:
+                yield rx.popleft()
+                continue
+            now = world.now
+            msg = until(now + max(deadline - now, 0.0), False)
+            if msg is None:
+                return
+            yield msg
+
+    def _until(self, deadline: float, forever: bool) -> can.Message | None:
+        world, rx = self.world, self._rx
+        next_event, step = world.next_event, world.step
+        while not rx:
+            t = next_event()
             if t is None:
-                if timeout is None:
+                if forever:
                     raise can.CanOperationError("ckesc-sim: recv() without timeout on a bus where nothing will ever happen")
                 world.now = max(world.now, deadline)
                 return None
             if t > deadline:
                 world.now = deadline
                 return None
-            world.step(t)
-        return self._rx.popleft()
+            step(t)
+        return rx.popleft()
 
     def _recv_internal(self, timeout: float | None):
         return (self._rx.popleft() if self._rx else None), True

@@ -155,7 +155,7 @@ class Player:
         return encode(name, fields, source=self.plan.host_node, transfer_id=tid, nibble_order=self.plan.nibble_order, **kw)
 
     def _command(self, name: str, fields: dict[str, Any]) -> WireFrame:
-        """A stream frame's command, encoded (its transfer id set by :meth:`_renew` as it goes out)."""
+        """A stream frame's command, encoded (its transfer id set as it goes out, :meth:`_renewed`)."""
         return encode(name, fields, source=self.plan.host_node, transfer_id=0, nibble_order=self.plan.nibble_order)
 
     def _request(self, name: str, fields: dict[str, Any]) -> WireFrame:
@@ -167,18 +167,21 @@ class Player:
         plan = self.plan
         value = plan.throttle_at(due - self.start) if plan.throttle else 0
         self.sent_stream += 1
-        if value == self._value and self._wires:  # the same command again: only the transfer ids move on
-            return [Planned("stream", self._renew(w), due) for w in self._wires]
-        self._value, self._wires = value, [p.wire for p in self._stream_of(value, due)]
-        return [Planned("stream", self._renew(w), due) for w in self._wires]
+        if value != self._value or not self._wires:  # else the same command again: only the transfer ids move on
+            self._value, self._wires = value, [self._renewed(p.wire) for p in self._stream_of(value, due)]
+        key = self._key
+        if key is None:  # RawCommand_10b has no tail, hence no transfer id (R5)
+            return [Planned("stream", w[0], due) for w in self._wires]
+        nxt = self.tids.next
+        return [Planned("stream", w[nxt(key)], due) for w in self._wires]
 
-    def _renew(self, wire: WireFrame) -> WireFrame:
-        """The command ``wire`` (encoded once) with the stream's next transfer id in its tail byte (RawCommand_10b
-        has none, R5)."""
+    def _renewed(self, wire: WireFrame) -> tuple[WireFrame, ...]:
+        """The command ``wire`` (encoded once) with each transfer id in its tail byte, by transfer id (0..31: the
+        stream's counter's modulo); RawCommand_10b has no tail: the wire itself."""
         if self._key is None:
-            return wire
-        tid = self.tids.next(self._key)  # (0..31: the counter's modulo)
-        return new_wire((wire.arbitration_id, wire.data[:-1] + TAIL_BYTES[tid], wire.timestamp, wire.is_extended_id))
+            return (wire,)
+        return tuple(new_wire((wire.arbitration_id, wire.data[:-1] + tail, wire.timestamp, wire.is_extended_id))
+                     for tail in TAIL_BYTES)
 
     def _stream_of(self, value: int, due: float) -> list[Planned]:
         plan = self.plan

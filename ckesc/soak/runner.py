@@ -182,11 +182,6 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
 
     watch, keep = monitor.feed, (trace.frame if trace is not None else None)
 
-    def feed(msg: can.Message) -> None:
-        watch(msg)
-        if keep is not None:
-            keep(msg.timestamp, msg.arbitration_id, msg.data)
-
     def write_findings(final: bool = False) -> None:
         nonlocal written
         if trace is None:
@@ -212,7 +207,11 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     def line() -> str:
         return live_text(figures())
 
-    send, peek, recv_until = lane.bus.send, lane.peek_now, lane.recv_until
+    # (bound once: the loop below runs once per stream tick, hours of them)
+    send, now_of, peek, frames_until, sent, add_lateness = (lane.send_wire, lane.now, lane.peek_now,
+                                                            lane.frames_until, monitor.sent, lateness.add)
+    due_by, next_deadline = player.due, player.next_deadline
+    show = not soak.quiet or soak.status_file is not None
     stopped_at = t0
     try:
         say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
@@ -222,25 +221,31 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             + (f"; foreign traffic: {station.foreign.name} (other nodes' frames, not judged as the ESC's)"
                if station.foreign is not None else ""))
         while True:
-            now = lane.now()
+            now = now_of()
             if now >= end:
                 break
-            for planned in player.due(now):
+            for planned in due_by(now):
                 wire = planned.wire
-                monitor.sent(wire.arbitration_id, wire.data, peek())  # its echo's stamp: how late the bench stamped it
-                send(_message(wire))
+                sent(wire.arbitration_id, wire.data, peek())  # its echo's stamp: how late the bench stamped it
+                send(wire)
                 if planned.what == "stream":
-                    lateness.add(max(now - planned.due, 0.0))
-            deadline = min(player.next_deadline(), end)
-            while (msg := recv_until(deadline)) is not None:
-                feed(msg)
+                    late = now - planned.due
+                    add_lateness(late if late > 0.0 else 0.0)
+            deadline = next_deadline()
+            if deadline > end:
+                deadline = end
+            for msg in frames_until(deadline):
+                watch(msg)
+                if keep is not None:
+                    keep(msg.timestamp, msg.arbitration_id, msg.data)
             if written < len(monitor.findings):
                 write_findings()
             if soak.stop_on_finding and monitor.count and monitor.settled:  # (the frames after it read)
                 status = STOPPED
                 break
-            live.maybe(line)
-            status_file.maybe(figures)
+            if show:
+                live.maybe(line)
+                status_file.maybe(figures)
     except KeyboardInterrupt:
         status = INTERRUPTED
     except (BenchGone, BusFault) as exc:  # the bench failed, not the DUT: the run stops, its report says why
