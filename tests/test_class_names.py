@@ -17,10 +17,6 @@ PENDING_OWNERS = ("ckesc/soak/", "ckesc/explore/")
 #: class name -> the modules that may define it while a soak/explore class of that name waits for its owner to rename
 #: it; remove the entry when that class is renamed
 KNOWN: dict[str, tuple[str, ...]] = {
-    "Finding": ("ckesc/soak/watch.py", "ckesc/explore/finding.py"),
-    "Outcome": ("ckesc/soak/runner.py", "ckesc/explore/runner.py"),
-    # ckesc/run.py's is RunBatchError; the soak's goes when its owner renames it
-    "BatchError": ("ckesc/soak/batch.py",),
     # the explorer's bench facts share a name with ckesc/rigs/rig.py's Bench (a rig file's bench, which
     # ckesc/soak/batch.py names too), so the explorer's owner renames theirs
     "Bench": ("ckesc/rigs/rig.py", "ckesc/explore/actions.py"),
