@@ -173,7 +173,7 @@ class SimWorld(CanNodes):
         if deadlines and (deadlines[0] if len(deadlines) == 1 else min(deadlines)) <= t:
             for esc, wire in self.bench.poll(t):
                 self._queue(wire, esc, esc.state.bitrate, ready=wire.timestamp)
-        if self._in_flight is None and (self._ready or self._waiting):
+        if self._in_flight is None and (self._ready or self._waiting or self._contending):
             self._start_transmission()
         return True
 
