@@ -76,20 +76,31 @@ def _pairings(dut) -> dict[int, ReplyPairing]:
 
 
 def query_esc_id(dut, read_s: float):
-    """Broadcast the GET_ESC_ID query and read ``read_s``: the host's ``Sent``. A reply is a broadcast that names
-    no query, so where a reply since then may answer another node's query (a flight controller's, once a second,
-    asked within 64 ms before it: :func:`esc_id_pairings`), the replies read are not all the host's: the host asks
-    again, at most :data:`QUERY_TRIES` times, and is INCONCLUSIVE if it never had the bus to itself. On a quiet bus:
-    one query. (A reply that answers no query is the DUT's, judged by the caller.)"""
+    """Broadcast the GET_ESC_ID query and read ``read_s``: the host's ``Sent``; its replies are :func:`host_replies`.
+    A reply is a broadcast that names no query, so where a reply since then may answer the host's query or another
+    node's (a flight controller's, once a second, asked within 64 ms before it: :func:`esc_id_pairings`), which
+    cannot be told: the host asks again, at most :data:`QUERY_TRIES` times, and is INCONCLUSIVE if it never could
+    tell. A reply that answers the other node's query only is that node's, and no reason to ask again. On a quiet
+    bus: one query. (A reply that answers no query is the DUT's, judged by the caller.)"""
     for _ in range(QUERY_TRIES):
         sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
         dut.wait(read_s)
         paired = _pairings(dut)
-        if not any(p.may_answer_another(dut.host_node) for f in dut.frames("get_esc_id", since=sent.time)
+        if not any(p.ambiguous(dut.host_node) for f in dut.frames("get_esc_id", since=sent.time)
                    if (p := paired.get(id(f))) is not None):
             return sent
     raise Inconclusive(f"another node's GET_ESC_ID queries came within {ms(cat.ANSWER_DELAY_MAX_S)} ms of the replies "
                        f"to each of {QUERY_TRIES} queries: which query a reply answers cannot be told")
+
+
+def host_replies(dut, sent, *, source: int | None = None) -> list[Frame]:
+    """The GET_ESC_ID replies since the host's query ``sent`` (:func:`query_esc_id`; ``source``: one node's) that
+    are the host's to judge: every one but those that answer another node's query only (a flight controller's, F6)."""
+    paired = _pairings(dut)
+    return [f for f in dut.frames("get_esc_id", since=sent.time, source=source)
+            if f.layout is not None and f.layout.name == "reply"
+            and not ((p := paired.get(id(f))) is not None and p.may_answer_another(dut.host_node)
+                     and not p.ambiguous(dut.host_node))]
 
 
 def answers_another_node(dut, f) -> bool:
@@ -182,8 +193,7 @@ def check_answer_slot(dut, answer, sent, node: int, what: str, max_requirement: 
 def esc_id_replies(dut) -> list[tuple[int, int]]:
     """(node id, throttle channel) of each GET_ESC_ID reply (R1) to one broadcast query, by the reply's source."""
     sent = query_esc_id(dut, BROADCAST_WINDOW_S)  # every ESC answers within 64 ms (R2)
-    return [(f.source, f.fields["throttle_channel"]) for f in dut.frames("get_esc_id", since=sent.time)
-            if f.layout is not None and f.layout.name == "reply"]
+    return [(f.source, f.fields["throttle_channel"]) for f in host_replies(dut, sent)]
 
 
 def esc_ids(dut) -> list[tuple[int, int]]:

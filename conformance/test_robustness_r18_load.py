@@ -45,7 +45,7 @@ from ckesc.protocol.judgements import (
 )
 from ckesc.protocol.load import LoadSource
 
-from .answers import answer_window_s, check_answer_slot, query_esc_id, settle, slot_node
+from .answers import answer_window_s, check_answer_slot, host_replies, query_esc_id, settle, slot_node
 from .settings import changes, move_request
 from .telemetry import frame_start, interval_s, ms
 
@@ -219,8 +219,7 @@ def test_get_esc_id_answered_in_its_slot_under_load(dut, priority):
             dut.wait(CATCH_UP_S)
             _bench_reached(load)
             for n, sent in enumerate(replies):
-                got = [f for f in dut.frames("get_esc_id", since=sent.time, source=node)
-                       if f.layout is not None and f.layout.name == "reply"]
+                got = host_replies(dut, sent, source=node)
                 assert got, (f"query {n + 1}: no GET_ESC_ID reply from node {node} within "
                              f"{ms(answer_window_s(dut)):g} ms under {share:.0%} {priority}-priority load (R18: the ESC "
                              "keeps R2 and the 64 ms bound under load)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from . import multi_esc
-from .answers import answer_window_s, check_answer_slot, query_esc_id, settle, slot_node
+from .answers import answer_window_s, check_answer_slot, host_replies, query_esc_id, settle, slot_node
 from .multi_esc import several_escs
 from .telemetry import describe_garbled, garbled, ms
 
@@ -22,7 +22,7 @@ def _query(dut):
 
 
 def _replies(dut, sent, node: int) -> list:
-    return [f for f in dut.frames("get_esc_id", since=sent.time, source=node) if f.layout is not None and f.layout.name == "reply"]
+    return host_replies(dut, sent, source=node)
 
 
 def _check_reply(dut, sent, node: int) -> object:

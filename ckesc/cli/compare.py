@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from ..reporting import compare, soak_compare
+from ..reporting import compare, comparing, soak_compare
 from ..reporting.exits import ExitStatus
 from .common import check_file
 
@@ -24,8 +24,8 @@ def _percent(text: str) -> float:
 
 def _run_compare(args: argparse.Namespace) -> int:
     try:
-        docs = [compare.read_doc(path) for path in args.runs]
-        soaks = [soak_compare.is_soak(doc) for _, doc in docs]
+        docs = [comparing.read_doc(path) for path in args.runs]
+        soaks = [comparing.is_soak(doc) for _, doc in docs]
         if any(soaks) and not all(soaks):
             kinds = ", ".join(f"{path} a {'soak' if s else 'conformance'} run" for path, s in zip(args.runs, soaks))
             print(f"ckesc compare: error: cannot compare a soak run with a conformance run ({kinds}): give runs of "
@@ -39,7 +39,7 @@ def _run_compare(args: argparse.Namespace) -> int:
             doc = compare.compare([compare.parse_run(d, label=label, path=str(path))
                                    for path, (label, d) in zip(args.runs, docs)], threshold=args.margin_threshold)
             render = compare
-    except compare.RunError as exc:
+    except comparing.RunError as exc:
         print(f"ckesc compare: error: cannot read run {exc}", file=sys.stderr)
         return ExitStatus.USAGE
     try:

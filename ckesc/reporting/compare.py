@@ -19,12 +19,13 @@ that a margin shrinking release after release shows before it fails. Runs from d
 suite revisions, and incomplete runs, are flagged, never refused.
 
 :func:`compare` takes parsed ``results.json`` documents (:func:`parse_run`) and returns one JSON-ready
-dict; :func:`text` and :func:`page` render it. Only :func:`read_run` touches the file system.
+dict; :func:`text` and :func:`page` render it. Only :func:`read_run` touches the file system. The skeleton it shares
+with the soak's comparison (reading a record, the letters, the pairs, the flags' form, the page's frame) is
+:mod:`.comparing`'s.
 """
 
 from __future__ import annotations
 
-import json
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +33,9 @@ from typing import Any
 
 from ..protocol.catalogue import firmware_date
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICT_LEGEND, VERDICT_SHORT, VERDICTS, Verdict, section_key
-from .htmlkit import CSS, badge, e, new_figure, svg
+from .comparing import RunError, comparison, differs, first_line, is_soak, last_line, letter, pair_name, read_doc
+from .comparing import page as page_frame
+from .htmlkit import badge, e, new_figure, svg
 from .results import NotRun, Result, RunInfo, RunRecord, broken_requirements, incomplete_banner, requirement_result
 
 GOOD = (Verdict.PASS, Verdict.OBSERVED)
@@ -43,10 +46,6 @@ NOT_RUN = "NOT RUN"
 TIMING_UNITS = {"ms": 1.0, "s": 1000.0}
 DEFAULT_THRESHOLD = 0.10
 _NOISE_MS = 1e-6  # float noise of the simulated clock: never a shrink
-
-
-class RunError(Exception):
-    """A run that cannot be read: one line saying which and why."""
 
 
 @dataclass
@@ -68,34 +67,12 @@ def read_run(path: str | Path) -> Run:
     return parse_run(doc, label=label, path=str(path))
 
 
-def read_doc(path: str | Path) -> tuple[str, Any]:
-    """The parsed ``results.json`` at ``path`` (a run's directory or the file) and the run's label (its directory's
-    name): a conformance run's or a soak run's (:mod:`.soak_compare`). Raises :class:`RunError`."""
-    p = Path(path)
-    if p.is_dir():
-        if not (p / "results.json").is_file():
-            hint = " (that is the reports directory: give one run, e.g. reports/latest)" if (p / "latest").exists() else ""
-            raise RunError(f"{path}: no results.json in this directory{hint}")
-        label, p = p.resolve().name, p / "results.json"
-    elif p.is_file():
-        label = p.resolve().parent.name
-    else:
-        raise RunError(f"{path}: no such run directory or results.json")
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise RunError(f"{path}: cannot read {p}: {exc.strerror}") from None
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise RunError(f"{path}: {p.name} is not JSON: {exc}") from None
-    return label, doc
-
-
 def parse_run(doc: Any, *, label: str = "", path: str = "") -> Run:
     """A :class:`Run` from a :class:`~.results.RunRecord` or a parsed ``results.json``; :class:`RunError` when it
     is not one."""
     where = path or label or "run"
     if not isinstance(doc, RunRecord):
-        if isinstance(doc, dict) and doc.get("kind") == "soak":
+        if is_soak(doc):
             raise RunError(f"{where}: a soak run (`ckesc soak`), not a conformance run: compare it with soak runs")
         if not isinstance(doc, dict) or not isinstance(doc.get("results"), list) or not isinstance(doc.get("info"), dict):
             raise RunError(f"{where}: not a results record of `ckesc run` (an object with 'info' and 'results')")
@@ -273,28 +250,20 @@ def flags(runs: list[Run]) -> list[str]:
     out = []
     for key, what in (("profile", "DUT profiles"), ("lane", "lanes"), ("dut", "kinds of DUT"),
                       ("timing_error_s", "stated timing errors"), ("bitrate", "bit rates")):
-        values = [r.info.get(key) for r in runs]
-        if len({str(v) for v in values if v is not None}) > 1:  # a run that does not say is not flagged for it
-            out.append(f"different {what}: " + ", ".join(f"{_letter(i)} {'?' if v is None else v}" for i, v in enumerate(values)))
+        out += differs(what, [r.info.get(key) for r in runs])  # a run that does not say is not flagged for it
     suites = [(r.info.get("suite_version"), r.info.get("git_revision")) for r in runs]
     if all(v for v, _ in suites) and len(set(suites)) > 1:  # runs older than these fields: nothing to tell
         out.append("different suite revisions (a verdict may have changed with the suite, not the DUT): "
-                   + ", ".join(f"{_letter(i)} {v or '?'} {g or ''}".rstrip() for i, (v, g) in enumerate(suites)))
+                   + ", ".join(f"{letter(i)} {v or '?'} {g or ''}".rstrip() for i, (v, g) in enumerate(suites)))
     for i, r in enumerate(runs):
         if r.info.get("complete") is not True:
-            out.append(f"{_letter(i)} ({r.label}) is incomplete: "
+            out.append(f"{letter(i)} ({r.label}) is incomplete: "
                        + (incomplete_banner(r.info) or "the record does not say it was complete"))
     return out
 
 
-def _letter(i: int) -> str:
-    return chr(ord("A") + i) if i < 26 else f"R{i + 1}"
-
-
 def compare(runs: list[Run], *, threshold: float = DEFAULT_THRESHOLD) -> dict[str, Any]:
     """The comparison of two or more runs, oldest first, as one JSON-ready dict."""
-    if len(runs) < 2:
-        raise ValueError("compare needs two runs or more")
     req_results = [requirement_results(r) for r in runs]
     rids = sorted(set().union(*req_results), key=_req_key)
     matrix = [{"requirement": rid, "strength": REQUIREMENTS[rid].strength if rid in REQUIREMENTS else "",
@@ -310,22 +279,17 @@ def compare(runs: list[Run], *, threshold: float = DEFAULT_THRESHOLD) -> dict[st
                  and shrank(series[i - 1], series[i], threshold=threshold, error_ms=max(errors[i - 1], errors[i]))]
         known = [s for s in series if s is not None]
         trends.append({"measurement": key, "test": first["test"], "name": first["name"], "limit": first["limit"],
-                       "margins_ms": series, "shrank_at": [_letter(i) for i in steps],
+                       "margins_ms": series, "shrank_at": [letter(i) for i in steps],
                        "change_ms": known[-1] - known[0] if len(known) > 1 else 0.0})
     trends.sort(key=lambda t: (not t["shrank_at"], t["change_ms"], t["measurement"]))
-    pairs = [diff(a, b, threshold=threshold) for a, b in zip(runs, runs[1:])]
-    return {
-        "runs": [{"letter": _letter(i), "label": r.label, "path": r.path, "identity": identity(r.info, r.label),
-                  "complete": r.info.get("complete") is True, "incomplete": r.info.get("incomplete") or "",
-                  "counts": {str(v): n for v, n in Counter(x.outcome for x in r.results.values()).items()}, "not_run": len(r.not_run)}
-                 for i, r in enumerate(runs)],
-        "threshold": threshold,
-        "flags": flags(runs),
-        "pairs": pairs,
-        "matrix": matrix,
-        "trends": trends,
-        "regressed": any(p["regressed"] for p in pairs),
-    }
+    return comparison(runs, lambda a, b: diff(a, b, threshold=threshold), _run_row, flags(runs), threshold=threshold,
+                      matrix=matrix, trends=trends)
+
+
+def _run_row(r: Run) -> dict[str, Any]:
+    return {"label": r.label, "path": r.path, "identity": identity(r.info, r.label), "complete": r.info.get("complete") is True,
+            "incomplete": r.info.get("incomplete") or "",
+            "counts": {str(v): n for v, n in Counter(x.outcome for x in r.results.values()).items()}, "not_run": len(r.not_run)}
 
 
 # ------------------------------------------------------------------------------------------ text
@@ -341,7 +305,7 @@ def text(doc: dict[str, Any]) -> str:
     """The comparison for the console."""
     runs = doc["runs"]
     letters = [r["letter"] for r in runs]
-    lines = [f"ckesc compare: {len(runs)} runs, oldest first; each compared with the one before it"]
+    lines = [first_line(doc)]
     for r in runs:
         ident = r["identity"]
         lines.append(f"  {r['letter']}  {r['label']}  {r['path']}  " + ", ".join(
@@ -399,8 +363,7 @@ def text(doc: dict[str, Any]) -> str:
         if moving:
             lines += ["", f"timing margins that shrank from one run to the next ({len(moving)}):"]
             lines += [f"  {t['measurement']}: " + " -> ".join(_ms(v) for v in t["margins_ms"]) for t in moving[:_LISTED]]
-    lines += ["", "REGRESSED: " + "; ".join(f"{_pair_name(doc, p)}: {_pair_counts(p)}" for p in doc["pairs"] if p["regressed"])
-              if doc["regressed"] else "no regression"]
+    lines += ["", last_line(doc, _pair_counts)]
     return "\n".join(lines)
 
 
@@ -411,8 +374,7 @@ def _identity_keys(runs: list[dict[str, Any]]) -> list[str]:
 
 
 def _pair_name(doc: dict[str, Any], pair: dict[str, Any]) -> str:
-    i = next(n for n, p in enumerate(doc["pairs"]) if p is pair)
-    return f"{doc['runs'][i]['letter']} -> {doc['runs'][i + 1]['letter']}"
+    return pair_name(doc, next(n for n, p in enumerate(doc["pairs"]) if p is pair))
 
 
 def _pair_counts(p: dict[str, Any]) -> str:
@@ -426,16 +388,9 @@ def _pair_counts(p: dict[str, Any]) -> str:
 def page(doc: dict[str, Any]) -> str:
     """The comparison as one self-contained HTML page, in report.html's style."""
     runs = doc["runs"]
-    overall = "REGRESSED" if doc["regressed"] else "NO REGRESSION"
-    parts = [f"<header><h1>CKESC run comparison</h1><p class=run>{badge(overall)} {len(runs)} runs, oldest first; each "
-             f"compared with the one before it</p>"
-             + "".join(f"<p class=banner role=alert>{e(f)}</p>" for f in doc["flags"]) + "</header>",
-             identity_table(runs)]
-    parts += [_pair_section(doc, p) for p in doc["pairs"]]
-    parts += [matrix_table(doc), _trend_section(doc)]
-    return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC run comparison "
-            f"{e(' / '.join(r['label'] for r in runs))}</title><style>{CSS}{EXTRA_CSS}</style></head><body>\n"
-            + "\n".join(parts) + "\n</body></html>\n")
+    parts = [identity_table(runs), *(_pair_section(doc, p) for p in doc["pairs"]), matrix_table(doc), _trend_section(doc)]
+    return page_frame(doc, heading="CKESC run comparison", lead=f"{len(runs)} runs, oldest first; each compared with the "
+                      "one before it", body=parts, title="CKESC run comparison " + " / ".join(r["label"] for r in runs))
 
 
 def _run_heads(runs: list[dict[str, Any]]) -> str:
@@ -556,13 +511,3 @@ def _sparkline(series: list[float | None]) -> str:
     ax.set_xlim(-0.3, len(series) - 0.7)
     ax.set_axis_off()
     return svg(fig)
-
-
-EXTRA_CSS = """
-.v-REGRESSED{background:#cf222e}.v-NO-REGRESSION{background:#1a7f37}.v-NOT-RUN{background:#6e7781}
-tr.diff>td:not(.cell),tr.diff>th{background:#fff8c5}#identity table{width:100%;table-layout:fixed}td{overflow-wrap:anywhere}
-.num,.lim,.chg td.vv{white-space:nowrap}.num{text-align:right;font-variant-numeric:tabular-nums}.what{min-width:16rem}
-.matrix td.cell{text-align:center;font-size:.8rem;font-weight:600}.matrix tr.group th{background:#eaeef2;text-align:left}
-.matrix td.c-NOT-CHECKED{color:#afb8c1}.trend td{font-size:.8rem}.trend td.spark{padding:0;width:10rem}
-.chg td{font-size:.85rem}details{margin:.4rem 0}summary{cursor:pointer;font-weight:600}
-"""

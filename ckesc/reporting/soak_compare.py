@@ -7,7 +7,9 @@ in the later run and had none in the earlier one; **fixed** the other way. Runs 
 emulator faults, or an incomplete run (INTERRUPTED, STOPPED, ABORTED) are flagged, never refused.
 
 This reads the soak's ``results.json`` as JSON (the reporting layer does not import :mod:`ckesc.soak`): the keys it
-needs are checked, and a record without them is a :class:`~.compare.RunError`.
+needs are checked, and a record without them is a :class:`~.comparing.RunError`. The skeleton it shares with the
+suite's comparison (reading a record, the letters, the pairs, the flags' form, the page's frame) is
+:mod:`.comparing`'s.
 """
 
 from __future__ import annotations
@@ -15,17 +17,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from .compare import EXTRA_CSS, RunError
+from .comparing import RunError, comparison, differs, first_line, last_line, letter, pair_name
+from .comparing import page as page_frame
 from .durations import duration_text
-from .htmlkit import CSS, badge, e
+from .htmlkit import badge, e
 
 #: what a soak record must hold for the comparison (``ckesc soak``'s results.json)
 REQUIRED = ("status", "ran_s", "duration_s", "statement", "watches", "findings", "r9_per_minute_ms")
-
-
-def is_soak(doc: Any) -> bool:
-    """``doc`` (a parsed results.json) is a ``ckesc soak`` record."""
-    return isinstance(doc, dict) and doc.get("kind") == "soak"
 
 
 @dataclass
@@ -36,16 +34,12 @@ class SoakRun:
 
 
 def parse_soak(doc: dict[str, Any], *, label: str = "", path: str = "") -> SoakRun:
-    """A :class:`SoakRun`, or :class:`~.compare.RunError` when the record lacks what the comparison reads."""
+    """A :class:`SoakRun`, or :class:`~.comparing.RunError` when the record lacks what the comparison reads."""
     missing = [k for k in REQUIRED if k not in doc]
     if missing or not isinstance(doc.get("statement"), list) or not isinstance(doc.get("watches"), dict):
         raise RunError(f"{path or label}: a soak record without {', '.join(missing) or 'a statement list'} (not one "
                        "this version reads)")
     return SoakRun(label=label or path, path=path, doc=doc)
-
-
-def _letter(i: int) -> str:
-    return chr(ord("A") + i) if i < 26 else f"R{i + 1}"
 
 
 # ------------------------------------------------------------------------------------------ facts of one run
@@ -91,14 +85,16 @@ def flags(runs: list[SoakRun]) -> list[str]:
                       ("stream rates", lambda d: _num((d.get("plan") or {}).get("rate_hz"), " Hz")),
                       ("durations", lambda d: _num(d.get("duration_s"), " s")), ("emulator faults", lambda d: d.get("faults") or "none"),
                       ("foreign traffic", lambda d: (d.get("foreign_traffic") or {}).get("profile"))):
-        values = [get(r.doc) for r in runs]
-        if len({str(v) for v in values}) > 1:
-            out.append(f"different {what}: " + ", ".join(f"{_letter(i)} {'-' if v is None else v}" for i, v in enumerate(values)))
+        out += differs(what, [_said(get(r.doc)) for r in runs])  # a soak record that does not say differs too
     for i, r in enumerate(runs):
         if r.doc["status"] != "COMPLETED":
-            out.append(f"{_letter(i)} ({r.label}) is {r.doc['status']}"
+            out.append(f"{letter(i)} ({r.label}) is {r.doc['status']}"
                        + (f": {r.doc['problem']}" if r.doc.get("problem") else "") + f", after {duration_text(r.doc['ran_s'])}")
     return out
+
+
+def _said(v: Any) -> Any:
+    return "-" if v is None else v
 
 
 # ------------------------------------------------------------------------------------------ comparing
@@ -125,16 +121,14 @@ def diff(a: SoakRun, b: SoakRun) -> dict[str, Any]:
 
 def compare(runs: list[SoakRun]) -> dict[str, Any]:
     """Two or more soak runs, oldest first, as one JSON-ready dict."""
-    if len(runs) < 2:
-        raise ValueError("compare needs two runs or more")
-    pairs = [diff(a, b) for a, b in zip(runs, runs[1:])]
-    return {"kind": "soak",
-            "runs": [{"letter": _letter(i), "label": r.label, "path": r.path, "status": r.doc["status"],
-                      "ran_s": r.doc["ran_s"], "lane": r.doc.get("lane"), "profile": r.doc.get("profile"),
-                      "faults": r.doc.get("faults") or "", "findings": len(r.doc["findings"]) + int(r.doc.get("findings_not_kept") or 0),
-                      "properties": properties(r), "r9": r9(r), "delays": delays(r), "resets": resets(r)}
-                     for i, r in enumerate(runs)],
-            "flags": flags(runs), "pairs": pairs, "regressed": any(p["regressed"] for p in pairs)}
+    return {"kind": "soak", **comparison(runs, diff, _run_row, flags(runs))}
+
+
+def _run_row(r: SoakRun) -> dict[str, Any]:
+    return {"label": r.label, "path": r.path, "status": r.doc["status"], "ran_s": r.doc["ran_s"], "lane": r.doc.get("lane"),
+            "profile": r.doc.get("profile"), "faults": r.doc.get("faults") or "",
+            "findings": len(r.doc["findings"]) + int(r.doc.get("findings_not_kept") or 0), "properties": properties(r),
+            "r9": r9(r), "delays": delays(r), "resets": resets(r)}
 
 
 # ------------------------------------------------------------------------------------------ text
@@ -142,14 +136,10 @@ def _num(v: Any, unit: str = "") -> str:
     return "-" if v is None else f"{v:g}{unit}"
 
 
-def _pair_name(doc: dict[str, Any], i: int) -> str:
-    return f"{doc['runs'][i]['letter']} -> {doc['runs'][i + 1]['letter']}"
-
-
 def text(doc: dict[str, Any]) -> str:
     """The comparison for the console."""
     runs = doc["runs"]
-    lines = [f"ckesc compare: {len(runs)} soak runs, oldest first; each compared with the one before it"]
+    lines = [first_line(doc, "soak")]
     lines += [f"  {r['letter']}  {r['label']}  {r['path']}  {r['status']}, {duration_text(r['ran_s'])} on {r['lane']}"
               + (f", faults {r['faults']}" if r["faults"] else "") + f", {r['findings']} findings" for r in runs]
     lines += [f"! {f}" for f in doc["flags"]]
@@ -178,13 +168,11 @@ def text(doc: dict[str, Any]) -> str:
                                           f"{_num(r['resets']['power_ups'])})" for r in runs)]
     for i, p in enumerate(doc["pairs"]):
         lines.append("")
-        lines.append(f"{_pair_name(doc, i)}: " + (f"REGRESSED {', '.join(p['regressed'])}" if p["regressed"] else "no regression")
+        lines.append(f"{pair_name(doc, i)}: " + (f"REGRESSED {', '.join(p['regressed'])}" if p["regressed"] else "no regression")
                      + (f"; fixed {', '.join(p['fixed'])}" if p["fixed"] else ""))
         lines += [f"  {r['watch']}: {r['before']} -> {r['after']} findings" for r in p["properties"]
                   if r["change"] in ("regressed", "fixed")]
-    lines += ["", "REGRESSED: " + "; ".join(f"{_pair_name(doc, i)}: {', '.join(p['regressed'])}"
-                                             for i, p in enumerate(doc["pairs"]) if p["regressed"])
-              if doc["regressed"] else "no regression"]
+    lines += ["", last_line(doc, lambda p: ", ".join(p["regressed"]))]
     return "\n".join(lines)
 
 
@@ -207,14 +195,10 @@ def page(doc: dict[str, Any]) -> str:
             f"{r['r9'][n]['worst_error_ms']:+g} ms)</td>" for r in runs) + "</tr>" for n in reports)
     delay_rows = "".join(f"<tr><td>{k.removesuffix('_ms')}</td>" + "".join(f"<td>{e(_num(r['delays'][k]))}</td>" for r in runs)
                          + "</tr>" for k in ("answers", "missing", "p50_ms", "p90_ms", "p99_ms", "max_ms"))
-    pairs = "".join(f"<li>{e(_pair_name(doc, i))}: {badge('REGRESSED' if p['regressed'] else 'NO REGRESSION')} "
+    pairs = "".join(f"<li>{e(pair_name(doc, i))}: {badge('REGRESSED' if p['regressed'] else 'NO REGRESSION')} "
                     + e("; ".join(f"{r['watch']} {r['before']} -> {r['after']} findings" for r in p["properties"]
                                   if r["change"] in ("regressed", "fixed"))) + "</li>" for i, p in enumerate(doc["pairs"]))
-    overall = "REGRESSED" if doc["regressed"] else "NO REGRESSION"
-    return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC soak comparison</title><style>{CSS}{EXTRA_CSS}"
-            f"</style></head><body><header><h1>CKESC soak comparison</h1><p class=run>{badge(overall)} {len(runs)} soak "
-            "runs, oldest first</p>" + "".join(f"<p class=banner role=alert>{e(f)}</p>" for f in doc["flags"])
-            + f"</header><ul id=pairs>{pairs}</ul><h2>Findings per watched property</h2><table id=properties><tr><th>"
-              f"property</th>{heads}</tr>{prop_rows}</table><h2>R9: mean gap per minute</h2><table id=r9><tr><th>report"
-              f"</th>{heads}</tr>{r9_rows}</table><h2>GET_ESC_ID answer delays (ms)</h2><table id=delays><tr><th></th>"
-              f"{heads}</tr>{delay_rows}</table></body></html>\n")
+    return page_frame(doc, heading="CKESC soak comparison", lead=f"{len(runs)} soak runs, oldest first", body=[
+        f"<ul id=pairs>{pairs}</ul><h2>Findings per watched property</h2><table id=properties><tr><th>property</th>{heads}"
+        f"</tr>{prop_rows}</table><h2>R9: mean gap per minute</h2><table id=r9><tr><th>report</th>{heads}</tr>{r9_rows}"
+        f"</table><h2>GET_ESC_ID answer delays (ms)</h2><table id=delays><tr><th></th>{heads}</tr>{delay_rows}</table>"])

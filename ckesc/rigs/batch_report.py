@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from ..protocol.requirements import SECTION_TITLES, VERDICTS, section_key
-from ..reporting import compare
+from ..reporting import compare, comparing
 from ..reporting.exits import ExitStatus, failing, failing_verdicts, worst
 from ..reporting.htmlkit import CSS, badge, e
 from ..reporting.report import classname
@@ -178,7 +178,7 @@ def page(doc: dict[str, Any], batch_dir: Path) -> str:
         if d is not None:
             try:
                 run = compare.parse_run(d, label=rec["name"])
-            except compare.RunError:
+            except comparing.RunError:
                 continue
             runs.append((rec["name"], run))
     if len(runs) >= 2:
@@ -192,7 +192,7 @@ def page(doc: dict[str, Any], batch_dir: Path) -> str:
         parts.append(compare.identity_table([{"letter": name, "label": run.label,
                                                 "identity": compare.identity(run.info, run.label)}]))
     return (f"<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>CKESC batch {e(batch_dir.name)}</title>"
-            f"<style>{CSS}{compare.EXTRA_CSS}{_EXTRA_CSS}</style></head><body>\n"
+            f"<style>{CSS}{comparing.EXTRA_CSS}{_EXTRA_CSS}</style></head><body>\n"
             + "\n".join(parts) + "\n</body></html>\n")
 
 

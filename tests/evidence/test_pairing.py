@@ -142,16 +142,17 @@ class _Dut:
                 and (until is None or f.timestamp <= until) and (source is None or f.source == source)]
 
 
-def test_a_flight_controller_querying_while_the_host_reads_is_told_apart_and_the_host_asks_again():
+def test_a_flight_controller_querying_while_the_host_reads_is_told_apart_and_the_host_asks_once():
     """Host at t, flight controller at t + 30 ms, the ESC at node 1 answering each in its 2 ms slot: the first reply
-    answers the host's query only, the second the flight controller's only. The host asks again all the same: its
-    callers read every reply since its query as its own."""
-    dut = _Dut(lambda t: [_wire(t + 0.0025, 1, reply=True), _wire(t + 0.030, FC), _wire(t + 0.0325, 1, reply=True)]
-               if t < 1.1 else [_wire(t + 0.0025, 1, reply=True)])
+    answers the host's query only, the second the flight controller's only. Nothing is ambiguous, so the host asks
+    once, and its replies (:func:`host_replies`, which its callers read) leave the flight controller's out."""
+    dut = _Dut(lambda t: [_wire(t + 0.0025, 1, reply=True), _wire(t + 0.030, FC), _wire(t + 0.0325, 1, reply=True)])
     sent = answers.query_esc_id(dut, answers.BROADCAST_WINDOW_S)
-    assert dut.queries == 2 and sent.time > 1.1
+    assert dut.queries == 1 and sent.time == 1.0
     replies = [f for f in dut.trace if f.layout.name == "reply"]
-    assert [answers.answers_another_node(dut, f) for f in replies] == [False, True, False]
+    assert [answers.answers_another_node(dut, f) for f in replies] == [False, True]
+    assert answers.host_replies(dut, sent) == replies[:1] == answers.host_replies(dut, sent, source=1)
+    assert answers.esc_id_replies(dut) == [(1, 1)], "the next query's replies: the flight controller's left out"
 
 
 def test_the_host_asks_again_while_a_reply_may_answer_another_nodes_query():

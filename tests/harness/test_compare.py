@@ -269,6 +269,26 @@ def test_flags_name_what_differs_and_only_that(runs):
         f"different DUT profiles: A {doc['info']['profile']}, B {generic['info']['profile']}"]
 
 
+def test_both_kinds_of_comparison_share_one_skeleton():
+    """The suite's comparison and the soak's are one skeleton (issue #35 item 6): the letters, the pairs, the flags'
+    form, the first and last lines and the page's frame are :mod:`ckesc.reporting.comparing`'s."""
+    from ckesc.reporting import comparing, soak_compare
+
+    assert [comparing.letter(i) for i in (0, 1, 25, 26)] == ["A", "B", "Z", "R27"]
+    assert comparing.differs("lanes", ["sim", None, "sim"]) == []
+    assert comparing.differs("lanes", ["sim", None, "vcan0"], unknown="-") == ["different lanes: A sim, B -, C vcan0"]
+    with pytest.raises(ValueError, match="two runs or more"):
+        comparing.comparison([1], lambda a, b: {}, dict, [])
+    doc = comparing.comparison([1, 2, 3], lambda a, b: {"regressed": b == 3, "to": b}, lambda r: {"n": r}, ["flag"], x=1)
+    assert doc == {"runs": [{"letter": "A", "n": 1}, {"letter": "B", "n": 2}, {"letter": "C", "n": 3}], "flags": ["flag"],
+                   "pairs": [{"regressed": False, "to": 2}, {"regressed": True, "to": 3}], "x": 1, "regressed": True}
+    assert comparing.last_line(doc, lambda p: f"to {p['to']}") == "REGRESSED: B -> C: to 3"
+    assert "<p class=banner role=alert>flag</p>" in comparing.page(doc, heading="h", lead="l", body=[])
+    for kind in (compare, soak_compare):
+        assert kind.comparison is comparing.comparison and kind.page_frame is comparing.page
+        assert kind.RunError is comparing.RunError and not hasattr(kind, "_letter")
+
+
 # ------------------------------------------------------------------------------------------ soak runs (issue #31 item 6)
 SOAK = ("--duration", "2m", "--rate", "50", "-q")  # two simulated minutes: two R9 minutes per report, a second each
 
