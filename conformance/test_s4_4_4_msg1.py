@@ -211,7 +211,9 @@ def _other_traffic(dut) -> Iterator[str]:
     yields what it is (for the messages)."""
     from ckesc.bench import foreign  # imports dronecan (about a second): only for this test
 
-    played = [s for s in foreign.ardupilot().streams if s.name in OTHER_FOREIGN and s.node == foreign.FLIGHT_CONTROLLER_NODE]
+    # the run's own foreign traffic (--foreign-traffic) plays these already, from the same node: not twice
+    played = [] if dut.lane.foreign_traffic is not None else [
+        s for s in foreign.ardupilot().streams if s.name in OTHER_FOREIGN and s.node == foreign.FLIGHT_CONTROLLER_NODE]
     streams = [("get_esc_id", {"option": 0}, {"layout": "query"}),
                *((n, f, {"destination": dut.node_id}) for n, f in OTHER_READS),
                *((s.name, None, {"frames": [foreign.encode(s.make(t), source=s.node, priority=s.priority, transfer_id=t)[0]
@@ -227,6 +229,8 @@ def _other_traffic(dut) -> Iterator[str]:
             names.append(n)
             dut.wait(phase)
         what = f"{', '.join(names)} each every {ms(OTHER_TRAFFIC_PERIOD_S):g} ms"
+        if dut.lane.foreign_traffic is not None:
+            what += f", and the run's foreign traffic ({dut.lane.foreign_traffic.name})"
         dut.record.observe("other traffic during the comm-loss test (R20)", what)
         yield what
 

@@ -68,7 +68,7 @@ class TransferIdCounter:
         tid = self._next.get(slot)
         if tid is None:
             tid = self._first() % TRANSFER_ID_MODULO if self._first else 0
-        self._next[slot] = next_transfer_id(tid)
+        self._next[slot] = (tid + 1) % TRANSFER_ID_MODULO  # (next_transfer_id's, inline: every frame a sender sends)
         return tid
 
     def peek(self, key: object, destination: int | None = None) -> int:

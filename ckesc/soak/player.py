@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, NamedTuple
 
 from ..protocol import catalogue as cat
@@ -40,6 +41,11 @@ class Planned(NamedTuple):
     wire: WireFrame
     due: float
     fields: dict[str, Any] | None = None
+
+
+#: ``_new_planned((what, wire, due, fields))``: a :class:`Planned` of all four fields, made without the Python-level
+#: constructor namedtuple adds (``new_wire``'s way: a stream's 400 a second, hours long)
+_new_planned = partial(tuple.__new__, Planned)
 
 
 @dataclass(frozen=True)
@@ -99,7 +105,9 @@ class _Every:
     def take(self, now: float) -> tuple[float, int]:
         """The slot due (at or before ``now``) and how many later slots, also past, are skipped."""
         due = self.due
-        behind = max(math.floor((now - self.start) / self.period) - self.k, 0)
+        behind = math.floor((now - self.start) / self.period) - self.k
+        if behind < 0:
+            behind = 0
         self.k += behind + 1
         self.due = self.start + self.k * self.period
         return due, behind
@@ -171,9 +179,9 @@ class Player:
             self._value, self._wires = value, [self._renewed(p.wire) for p in self._stream_of(value, due)]
         key = self._key
         if key is None:  # RawCommand_10b has no tail, hence no transfer id (R5)
-            return [Planned("stream", w[0], due) for w in self._wires]
+            return [_new_planned(("stream", w[0], due, None)) for w in self._wires]
         nxt = self.tids.next
-        return [Planned("stream", w[nxt(key)], due) for w in self._wires]
+        return [_new_planned(("stream", w[nxt(key)], due, None)) for w in self._wires]
 
     def _renewed(self, wire: WireFrame) -> tuple[WireFrame, ...]:
         """The command ``wire`` (encoded once) with each transfer id in its tail byte, by transfer id (0..31: the

@@ -11,7 +11,8 @@ import pytest
 from ckesc.bench.lanes import SimLane
 from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.protocol.errors import EncodeError
-from ckesc.protocol.frame import WireFrame, encode
+from ckesc.protocol.frame import Decoder, WireFrame, encode
+from ckesc.soak.player import FORMATS, FlightPlan, Player
 from ckesc.soak.trace import BATCH_LINES, MIN_BUDGET, ROLL_FILES, Trace, candump_line
 
 
@@ -33,29 +34,67 @@ def test_the_trace_writes_candumps_lines_in_order_across_its_rolls_and_at_its_cl
     assert sum((tmp_path / p.name).stat().st_size for p in trace.files) == len(kept)
 
 
-def test_the_simulated_lanes_recv_until_reads_what_recv_did(tmp_path):
-    """Two lanes of the same seed side by side, one read with ``recv(deadline - now())``, one with
-    ``recv_until(deadline)``: the same frames at the same times, the clock at the same place after each read."""
-    lanes = [SimLane(seed=3), SimLane(seed=3)]
+def test_the_simulated_lanes_recv_until_and_frames_until_read_what_recv_did(tmp_path):
+    """Three lanes of the same seed side by side, one read with ``recv(deadline - now())``, one with
+    ``recv_until(deadline)``, one with ``frames_until(deadline)`` (and a listener on it), the last two sent to with
+    ``send_wire`` (no ``can.Message``): the same frames at the same times, the clock at the same place after each
+    read, and the listener handed every frame."""
+    lanes = [SimLane(seed=3), SimLane(seed=3), SimLane(seed=3)]
+    heard: list[can.Message] = []
+    lanes[2].listeners.append(type("L", (can.Listener,), {"on_message_received": lambda self, m: heard.append(m)})())
     try:
-        seen: list[list[tuple]] = [[], []]
+        seen: list[list[tuple]] = [[], [], []]
         for step in range(1, 200):
             deadline = step * 0.0123
             for i, lane in enumerate(lanes):
                 if step % 10 == 0:  # a command now and then: the ESC acts on it, its answers and echo read too
                     wire = throttle(100 * (step % 3), step % 32, node=100)
-                    lane.bus.send(can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True))
-                while (msg := read(i, lane, deadline)) is not None:
-                    seen[i].append((msg.timestamp, msg.arbitration_id, bytes(msg.data), lane.now()))
-                seen[i].append((None, None, None, lane.now()))
-        assert seen[0] == seen[1] and sum(1 for s in seen[0] if s[0] is not None) > 100
+                    if i == 0:
+                        lane.bus.send(can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True))
+                    else:
+                        lane.send_wire(wire)
+                for msg in read(i, lane, deadline):
+                    seen[i].append((msg.timestamp, msg.arbitration_id, bytes(msg.data), msg.is_rx, lane.now()))
+                seen[i].append((None, None, None, None, lane.now()))
+        assert seen[0] == seen[1] == seen[2] and sum(1 for s in seen[0] if s[0] is not None) > 100
+        assert [(m.timestamp, m.arbitration_id) for m in heard] == [s[:2] for s in seen[2] if s[0] is not None]
     finally:
         for lane in lanes:
             lane.close()
 
 
-def read(i: int, lane: SimLane, deadline: float) -> can.Message | None:
-    return lane.recv(deadline - lane.now()) if i == 0 else lane.recv_until(deadline)
+def read(i: int, lane: SimLane, deadline: float):
+    if i == 2:
+        yield from lane.frames_until(deadline)
+        return
+    while (msg := lane.recv(deadline - lane.now()) if i == 0 else lane.recv_until(deadline)) is not None:
+        yield msg
+
+
+@pytest.mark.parametrize("fmt, channels", [("14b", (1, 2)), ("12b", (1, 5, 9)), ("10b", (1, 6))])
+def test_the_players_stream_frames_are_a_fresh_encoding_with_the_counters_transfer_id(fmt, channels):
+    """The player encodes each command once with every tail: each frame it plays is the command encoded anew with
+    the transfer id its counter gives (R5: RawCommand_10b has none), the throttle changing on the way."""
+    plan = FlightPlan(host_node=0, node_id=1, format=fmt, rate_hz=400.0, channels=channels,
+                      throttle=((0.0, 0), (0.05, 300), (0.1, 0)), allow_motor_spin=True)
+    player = Player(plan, 0.0)
+    name, per = FORMATS[fmt]
+    tid = played = 0
+    while player.sent_stream < 80:  # 0.2 s: the transfer ids wrap, the command changes twice
+        for planned in (p for p in player.due(player.next_deadline()) if p.what == "stream"):
+            value = plan.throttle_at(planned.due)
+            fields = Decoder().decode(planned.wire).fields
+            if fmt == "12b":
+                group = fields["group"]
+                expected = {"group": group, "channels": [value if (group - 1) * per + i + 1 in channels else 0
+                                                         for i in range(per)]}
+            else:
+                expected = {"channels": [value if i + 1 in channels else 0 for i in range(per)]}
+            fresh = encode(name, expected, source=0, transfer_id=tid % 32)
+            assert planned.wire == fresh
+            tid += fmt != "10b"
+            played += 1
+    assert played == 80 * (3 if fmt == "12b" else 1) and player.sent_stream == 80
 
 
 def throttle(value: int, tid: int, node: int = 0) -> WireFrame:

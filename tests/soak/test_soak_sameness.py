@@ -1,0 +1,47 @@
+"""A simulated soak made faster must read the same bus: two short soaks' every frame (the trace, candump's lines with
+their times) and every finding (time, watch, rules, message), as a digest pinned when issue #35 took the soak's
+per-frame waste out (the revision before it, cb4704d, gives the same digests). One faultless at the default 400 Hz
+stream with a flight controller's traffic (the bench's own frames, other nodes', the DUT's answers to both), one with
+an emulator fault found at 50 Hz in RawCommand_12b with the motor spun up and down (the throttle changing, a finding
+and its frames). A change that moves a frame or a finding fails here: if it is meant (the emulator or a watch changed
+on purpose), check the new findings and pin the new digest."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+
+import pytest
+
+from ckesc.bench.station import BenchOptions
+from ckesc.soak import runner
+
+CASES = {
+    "faultless, 400 Hz, foreign traffic": (BenchOptions(foreign_traffic="ardupilot"), {"duration_s": 12.0},
+                                           0, "83c900519ba2fef775cbced542473e6d192858a18b449c75e985a94a46144ace"),
+    "report_interval_wrong, 50 Hz 12b, throttle profile": (
+        BenchOptions(emulator_faults="report_interval_wrong", allow_motor_spin=True),
+        {"duration_s": 40.0, "rate_hz": 50.0, "format": "12b", "throttle": ((0.0, 0), (10.0, 200), (25.0, 0))},
+        1, "ab2027f3d7fa942f5f425d8de90fb2f57e164d29673ea3824246726b52f89028"),
+}
+
+
+def soak_digest(tmp_path, bench: BenchOptions, options: dict) -> tuple[int, str]:
+    outcome = runner.run(bench, runner.SoakOptions(reports=str(tmp_path), quiet=True, **options), out=io.StringIO())
+    assert outcome.where is not None
+    doc = json.loads((outcome.where / "results.json").read_text())
+    h = hashlib.sha256()
+    for log in sorted(outcome.where.glob("*.log")):  # the rolling trace and each finding's frames
+        h.update(log.name.encode() + b"\n" + log.read_bytes())
+    h.update(json.dumps([[f["t_s"], f["watch"], f["rules"], f["message"]] for f in doc["findings"]]).encode())
+    h.update(json.dumps(doc["frames"]).encode())
+    return outcome.findings, h.hexdigest()
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_a_short_simulated_soak_reads_the_frames_and_finds_what_it_did_before(tmp_path, case):
+    bench, options, findings, pinned = CASES[case]
+    found, digest = soak_digest(tmp_path, bench, options)
+    assert found == findings
+    assert digest == pinned, f"{case}: the soak's frames or findings changed (digest {digest})"
