@@ -34,7 +34,8 @@ judges only what it can tell:
 * **Restarts.** A node silent for longer than two shortest report intervals (40 ms) may have been power
   cycled (transfer ids and cadence restart, R13 keeps the settings): F3 and R9 compare only frames of
   one unbroken stretch of the node's traffic. A power cycle within 40 ms is assumed impossible (an ESC
-  boots and self-tests first).
+  boots and self-tests first). Where every power switch is reported (``power_known``) and none came, the
+  silence is the node's own: a report that comes back counting on (+1) is a late one, judged across it (R9).
 * **Cadence.** MSG Control (suspend, resume, MSG_EXP), CAN Test on/off and Set/Get Freq writes restart
   the cadence they concern; Set ID (a pseudo-broadcast) makes every node's intervals unknown again.
 * **R9a restarts.** After a resume (MSG Control 0xAAAAAAAA, which also leaves MSG_EXP mode) or CAN Test off,
