@@ -231,6 +231,7 @@ class SimWorld(CanNodes):
             p = ctls[node].head()
             if winner is None or (p.wire.arbitration_id, p.seq) < (winner.wire.arbitration_id, winner.seq):
                 winner = p
+        ctls[winner.origin].begin()
         bitrate, n = winner.bitrate, len(winner.wire.data)
         if self.now < self._short_until:
             self._outcome = Attempt.SHORT

@@ -174,6 +174,7 @@ class CanController:
         self._fifo: deque[Any] = deque()
         self._heap: list[tuple[int, int, Any]] = []
         self._seq = itertools.count()
+        self._sending: Any | None = None  # the frame on the bus now (:meth:`begin`), until its try ends
         self._reports: list[ErrorFrame] = []
 
     # ------------------------------------------------------------------ the transmit queue
@@ -200,18 +201,37 @@ class CanController:
             heapq.heappush(self._heap, (can_id, next(self._seq), frame))
 
     def head(self) -> Any | None:
-        """The frame the controller tries next (None: nothing to send)."""
+        """The frame the controller tries next, or the one it is trying (None: nothing to send)."""
+        if self._sending is not None:
+            return self._sending
         if self._fifo:
             return self._fifo[0]
         return self._heap[0][2] if self._heap else None
+
+    def begin(self) -> Any:
+        """The head frame goes on the bus: it stays the head until its try ends (:meth:`attempt`), so that a frame of
+        a higher priority queued meanwhile waits for the next arbitration, as a controller's mailbox in transmission
+        is not overtaken."""
+        self._sending = self.head()
+        return self._sending
 
     def clear(self) -> None:
         """Drop every queued frame (a power cycle, an interface taken down)."""
         self._fifo.clear()
         self._heap.clear()
+        self._sending = None
 
     def _pop(self) -> Any:
-        return self._fifo.popleft() if self._fifo else heapq.heappop(self._heap)[2]
+        sending, self._sending = self._sending, None
+        if self._fifo:
+            return self._fifo.popleft()
+        if sending is None or self._heap[0][2] is sending:
+            return heapq.heappop(self._heap)[2]
+        i = next(i for i, item in enumerate(self._heap) if item[2] is sending)
+        self._heap[i] = self._heap[-1]
+        self._heap.pop()
+        heapq.heapify(self._heap)
+        return sending
 
     # ------------------------------------------------------------------ what the bus did
     @property
@@ -252,6 +272,7 @@ class CanController:
             self.tec += TX_ERROR
             self._bus_error(now, 0, CAN_ERR_PROT_BIT0 if outcome is Attempt.SHORT else 0,
                             CAN_ERR_PROT_LOC_SOF if outcome is Attempt.SHORT else 0)
+        self._sending = None  # the next try arbitrates again: a frame of a higher priority queued meanwhile goes first
         self._settle(now)
         return None
 

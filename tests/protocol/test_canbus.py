@@ -162,6 +162,20 @@ def test_fifo_keeps_the_send_order_and_priority_sends_the_lowest_id_first():
         CanController(BITRATE, order="lifo")
 
 
+def test_a_frame_on_the_bus_is_not_overtaken_by_one_of_a_higher_priority_queued_meanwhile():
+    ctl = CanController(500_000, order="priority")
+    ctl.submit("low", 0x300)
+    assert ctl.begin() == "low"
+    ctl.submit("high", 0x100)  # arrives while "low" is on the bus: it waits for the next arbitration
+    assert ctl.head() == "low" and ctl.attempt(Attempt.ACKED, 0.001) == "low"
+    assert ctl.head() == "high" and list(ctl) == ["high"]
+    ctl.submit("low2", 0x300)
+    ctl.begin()
+    ctl.submit("higher", 0x050)
+    assert ctl.attempt(Attempt.NO_ACK, 0.002) is None
+    assert ctl.head() == "higher"  # a failed try arbitrates again: the higher priority goes first
+
+
 def test_attempt_bits():
     assert canbus.attempt_bits(8, Attempt.ACKED) == 131  # frame_bits(8)
     assert canbus.attempt_bits(8, Attempt.NO_ACK) == 120 + 17
