@@ -123,3 +123,23 @@ def test_a_missing_reports_directory_that_could_be_made_is_fine_and_made_by_noth
                            "9.9.9"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "no conformance section '9.9.9'" in done.stderr, done.stderr
     assert not (tmp_path / "new").exists()
+
+
+def test_a_daemon_that_takes_the_connection_and_never_answers_is_given_the_open_limit(tmp_path):
+    """The other side of the refusal: something listens but never says socketcand's hello, so the bus-open limit is
+    what ends the wait, and only then is a longer one suggested."""
+    import socket
+
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        port = silent.getsockname()[1]
+        started = time.monotonic()
+        done = subprocess.run([sys.executable, "-m", "ckesc", "run", "--dut", "bus", "--can-interface", "socketcand",
+                               "--can-channel", "can0", "--can-config", "host=127.0.0.1", "--can-config", f"port={port}",
+                               "--bus-open-timeout", "1"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+        took = time.monotonic() - started
+    lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
+    assert done.returncode == 2 and len(lines) == 1, done.stdout + done.stderr
+    assert "no answer within 1 s" in lines[0] and "--bus-open-timeout gives it longer" in lines[0], lines[0]
+    assert "Traceback" not in done.stdout + done.stderr and took < 15, took
