@@ -118,10 +118,13 @@ def test_a_refused_connection_is_said_at_once_and_suggests_no_longer_limit(tmp_p
 
 
 def test_a_missing_reports_directory_that_could_be_made_is_fine_and_made_by_nothing_but_the_run(tmp_path):
-    """The check makes nothing: a mistake found after it (here the selection) leaves no directory behind."""
+    """The check makes nothing: a mistake found after it (here the bus, opened after the reports directory was
+    checked) leaves no directory behind (the check made it, and the refused run left it, before issue #38)."""
     done = subprocess.run([sys.executable, "-m", "ckesc", "run", "--reports", str(tmp_path / "new" / "reports"),
-                           "9.9.9"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
-    assert done.returncode == 2 and "no conformance section '9.9.9'" in done.stderr, done.stderr
+                           "--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0", "--can-config",
+                           "host=127.0.0.1", "--can-config", f"port={_closed_port()}"], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2 and "connection refused" in done.stderr, done.stdout + done.stderr
     assert not (tmp_path / "new").exists()
 
 
