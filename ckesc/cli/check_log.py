@@ -12,7 +12,7 @@ from ..evidence.checklog import DEFAULT_TOLERANCE_S, check_capture, summary_html
 from ..protocol import catalogue as cat
 from ..protocol.catalogue import BAUD_RATES
 from ..reporting.exits import ExitStatus
-from .common import check_file, non_negative_float
+from .common import check_file, check_readable, non_negative_float
 
 
 def _bitrate_arg(text: str) -> int:
@@ -27,9 +27,7 @@ def _bitrate_arg(text: str) -> int:
 
 def _run_check_log(args: argparse.Namespace) -> int:
     path = args.file
-    if not Path(path).is_file():
-        print(f"ckesc check-log: error: no such file: {path}", file=sys.stderr)
-        return ExitStatus.USAGE
+    check_readable(path, "FILE", "capture")
     check_file(args.json, "--json")
     check_file(args.html, "--html")
     jitter = 0.0

@@ -7,7 +7,6 @@ same words whichever command meets it, before any work."""
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import sys
 from typing import Callable
@@ -15,7 +14,7 @@ from typing import Callable
 from ..bench.arguments import non_negative_float, positive_float, positive_int
 from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
-from ..reporting.paths import not_writable
+from ..reporting.paths import not_readable, not_writable
 
 __all__ = ["Handler", "Parser", "UsageError", "check_dir", "check_faults", "check_file", "check_readable", "duration_arg",
            "int_arg", "non_negative_float", "port_arg", "positive_float", "positive_int", "seconds_of"]
@@ -133,13 +132,10 @@ def check_faults(text: str | None, option: str) -> None:
 
 # ------------------------------------------------------------------------------------------- what a command reads
 def check_readable(path: str | None, option: str, what: str = "file") -> None:
-    """A file the command will read: a :class:`UsageError` naming ``option`` when it is not there or not readable."""
-    if path is None:
-        return
-    if not os.path.isfile(path):
-        raise UsageError(f"{option} {path}: no such {what}" if not os.path.exists(path) else f"{option} {path}: a directory, not a {what}")
-    if not os.access(path, os.R_OK):
-        raise UsageError(f"{option} {path}: the {what} is not readable (permission denied)")
+    """A file the command will read: a :class:`UsageError` naming ``option`` when it is not there or not readable
+    (``ckesc/reporting/paths.py``, in the shape of the words for what a command cannot write)."""
+    if path is not None and path != "-" and (said := not_readable(path, option, what)):
+        raise UsageError(said)
 
 
 # ------------------------------------------------------------------------------------------- where a command writes

@@ -1,4 +1,4 @@
-"""Whether a command can write where it was told to, asked before any work and without making anything (issue #38):
+"""Whether a command can read what it was given and write where it was told to, asked before any work and without making anything (issue #38):
 a reports directory that is missing is fine when it could be made, a file in the way or a directory this user cannot
 write into is one line that names the option. The command line (``ckesc/cli/common.py``) and a run's preflight
 (``ckesc/session/preflight.py``) say it in the same words, :func:`not_writable`."""
@@ -54,3 +54,14 @@ def not_writable(path: str | os.PathLike, option: str, what: str, *, file: bool 
     given with ``option``; None when it can (:func:`why_not_writable`)."""
     why = why_not_writable(path, file=file)
     return None if why is None else f"{what} {str(path)!r} is not writable ({why}): give another with {option}"
+
+
+def not_readable(path: str | os.PathLike, option: str, what: str) -> str | None:
+    """The one line a command says when it cannot read the file ``what`` ("replay file") at ``path``, given with
+    ``option``; None when it can. The same shape as :func:`not_writable`'s."""
+    given = Path(path).expanduser()
+    if given.is_file():
+        why = None if os.access(given, os.R_OK) else "permission denied"
+    else:
+        why = "a directory, not a file" if given.is_dir() else "no such file" if not given.exists() else "not a file"
+    return None if why is None else f"{what} {str(path)!r} is not readable ({why}): give another with {option}"

@@ -43,6 +43,7 @@ MISTAKES = [
     (["compare", "{tmp}/a", "{tmp}/b", "--json", "{blocked}/c.json"], ["output file", "--json"]),
     (["compare", "{tmp}/a", "{tmp}/b", "--html", "{tmp}"], ["is a directory", "--html"]),
     (["check-log", "{log}", "--json", "{blocked}/s.json"], ["output file", "--json"]),
+    (["check-log", "{tmp}/no-such.log"], ["capture", "is not readable (no such file)"]),
     (["check-log", "{log}", "--tolerance", "-1"], ["--tolerance", "below zero"]),
     (["emulate", "--socketcand", "0", "--duration", "0"], ["--duration", "zero"]),
     (["emulate", "--socketcand", "0", "--boot-time", "-1"], ["--boot-time", "below zero"]),
@@ -52,10 +53,10 @@ MISTAKES = [
     (["report", "{blocked}"], ["no results.json"]),
     (["emulate", "--socketcand", "70000"], ["--socketcand", "not a port"]),
     (["control", "--port", "70000", "status"], ["--port", "not a port"]),
-    (["run", "--time-from", "{tmp}/no-such-results.json"], ["--time-from", "no such results.json"]),
+    (["run", "--time-from", "{tmp}/no-such-results.json"], ["results.json", "(no such file)", "--time-from"]),
     (["run", "--bus-open-timeout", "-1"], ["--bus-open-timeout", "below zero"]),
     (["soak", "--power-cmd-timeout", "0"], ["--power-cmd-timeout", "zero"]),
-    (["explore", "--replay", "{tmp}/no-such.replay.json"], ["--replay", "no such replay file"]),
+    (["explore", "--replay", "{tmp}/no-such.replay.json"], ["replay file", "is not readable (no such file): give another with --replay"]),
     # the same words for the same mistake, whichever command meets it
     (["run", "--emulator-faults", "answer_lat"], ["--emulator-faults: unknown fault 'answer_lat'", "did you mean"]),
     (["emulate", "--socketcand", "0", "--faults", "answer_lat@1"], ["--faults: unknown fault 'answer_lat'", "did you mean"]),
@@ -118,8 +119,31 @@ def test_a_refused_connection_is_said_at_once_and_suggests_no_longer_limit(tmp_p
 
 
 def test_a_missing_reports_directory_that_could_be_made_is_fine_and_made_by_nothing_but_the_run(tmp_path):
-    """The check makes nothing: a mistake found after it (here the selection) leaves no directory behind."""
+    """The check makes nothing: a mistake found after it (here the bus, opened after the reports directory was
+    checked) leaves no directory behind (the check made it, and the refused run left it, before issue #38)."""
     done = subprocess.run([sys.executable, "-m", "ckesc", "run", "--reports", str(tmp_path / "new" / "reports"),
-                           "9.9.9"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
-    assert done.returncode == 2 and "no conformance section '9.9.9'" in done.stderr, done.stderr
+                           "--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0", "--can-config",
+                           "host=127.0.0.1", "--can-config", f"port={_closed_port()}"], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2 and "connection refused" in done.stderr, done.stdout + done.stderr
     assert not (tmp_path / "new").exists()
+
+
+def test_a_daemon_that_takes_the_connection_and_never_answers_is_given_the_open_limit(tmp_path):
+    """The other side of the refusal: something listens but never says socketcand's hello, so the bus-open limit is
+    what ends the wait, and only then is a longer one suggested."""
+    import socket
+
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        port = silent.getsockname()[1]
+        started = time.monotonic()
+        done = subprocess.run([sys.executable, "-m", "ckesc", "run", "--dut", "bus", "--can-interface", "socketcand",
+                               "--can-channel", "can0", "--can-config", "host=127.0.0.1", "--can-config", f"port={port}",
+                               "--bus-open-timeout", "1"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+        took = time.monotonic() - started
+    lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
+    assert done.returncode == 2 and len(lines) == 1, done.stdout + done.stderr
+    assert "no answer within 1 s" in lines[0] and "--bus-open-timeout gives it longer" in lines[0], lines[0]
+    assert "Traceback" not in done.stdout + done.stderr and took < 15, took

@@ -110,8 +110,8 @@ def test_on_a_terminal_the_benches_lines_are_rewritten_in_place(tmp_path):
     console.refresh(runs, force=True)
     first, second = out.getvalue().split("\x1b[2F")  # the second drawing goes back up over the two lines
     assert first == "\x1b[2Ksoak a: starting\n\x1b[2Ksoak b: starting\n"
-    assert second == ("\x1b[2Ksoak a: 1 min elapsed, 30 s left, 1234 frames, 0 findings\n"
-                      "\x1b[2Ksoak b: exit 1, FINDINGS (stopped, 1 min, 999 frames, 1 findings)\n")
+    assert second == ("\x1b[2Ksoak a: 1 min 30 s elapsed, 30 s left, 1234 frames, 0 findings\n"
+                      "\x1b[2Ksoak b: exit 1, FINDINGS (stopped, 1 min 1 s, 999 frames, 1 findings)\n")
 
 
 def test_ctrl_c_stops_every_bench_with_its_report_and_exit_130(tmp_path):
