@@ -171,6 +171,7 @@ class CanController:
         self.state = ErrorState.ACTIVE
         self.bus_off_at: float | None = None  #: when it went bus-off (None: it is not)
         self.counts = {"sent": 0, "no_ack": 0, "errors": 0, "bus_off": 0, "recovered": 0}
+        self.size = 0  #: frames queued, the head included (len(), kept as a number: read once per frame)
         self._fifo: deque[Any] = deque()
         self._heap: list[tuple[int, int, Any]] = []
         self._seq = itertools.count()
@@ -178,7 +179,7 @@ class CanController:
 
     # ------------------------------------------------------------------ the transmit queue
     def __len__(self) -> int:
-        return len(self._fifo) + len(self._heap)
+        return self.size
 
     def __iter__(self) -> Iterator[Any]:
         """The queued frames, the head first."""
@@ -188,7 +189,8 @@ class CanController:
 
     @property
     def full(self) -> bool:
-        return self.txqueuelen is not None and len(self) >= self.txqueuelen
+        n = self.txqueuelen
+        return n is not None and self.size >= n
 
     def submit(self, frame: Any, can_id: int) -> None:
         """Queue ``frame`` (any object; ``can_id`` orders a priority queue). Raises :class:`QueueFull`."""
@@ -198,6 +200,7 @@ class CanController:
             self._fifo.append(frame)
         else:
             heapq.heappush(self._heap, (can_id, next(self._seq), frame))
+        self.size += 1
 
     def head(self) -> Any | None:
         """The frame the controller tries next (None: nothing to send)."""
@@ -209,9 +212,7 @@ class CanController:
         """Drop every queued frame (a power cycle, an interface taken down)."""
         self._fifo.clear()
         self._heap.clear()
-
-    def _pop(self) -> Any:
-        return self._fifo.popleft() if self._fifo else heapq.heappop(self._heap)[2]
+        self.size = 0
 
     # ------------------------------------------------------------------ what the bus did
     @property
@@ -235,12 +236,13 @@ class CanController:
         the queue and is returned, any other stays at the head (None). A bus-off controller does not try."""
         if self.state is ErrorState.BUS_OFF or not self:
             raise RuntimeError(f"no try possible: the controller is {self.state.value} with {len(self)} frame(s)")
-        if outcome is Attempt.ACKED:
+        if outcome is Attempt.ACKED:  # (the hot path of a simulated run: every frame on the bus)
+            self.counts["sent"] += 1
+            frame = self._fifo.popleft() if self._fifo else heapq.heappop(self._heap)[2]
+            self.size -= 1
             if self.tec:
                 self.tec -= 1
-            self.counts["sent"] += 1
-            frame = self._pop()
-            self._settle(now)
+                self._settle(now)
             return frame
         if outcome is Attempt.NO_ACK:
             self.counts["no_ack"] += 1
