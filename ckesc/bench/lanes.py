@@ -247,8 +247,9 @@ class _SimSend:
             self._bus.send(msg, timeout)
         except BUS_ERRORS as exc:
             ctl = self._bus.controller
+            why = "nobody acknowledged them" if ctl.tec else "sent faster than the bus carries them"
             raise BusFault(f"the host's CAN send failed ({type(exc).__name__}: {exc}; its controller {ctl.state.value}, "
-                           f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting: nobody acknowledged them)") from exc
+                           f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting: {why})") from exc
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._bus, name)

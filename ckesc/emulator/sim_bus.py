@@ -203,11 +203,13 @@ class SimWorld(CanNodes):
             return
         node = p.origin
         ctl = self._ctl.get(node) or self.controller(node)
-        if ctl.full and not isinstance(node, SimEscBus):
+        n = ctl.txqueuelen
+        if n is not None and ctl.size >= n and not isinstance(node, SimEscBus):
             self.stats["dropped"] += 1
             return
         ctl.submit(p, p.wire.arbitration_id)
-        if ctl.state is not ErrorState.BUS_OFF and node not in self._parked and node not in self._contending:
+        # a queue that was empty: its node starts to contend (a node with frames contends, is parked or is bus-off)
+        if ctl.size == 1 and ctl.state is not ErrorState.BUS_OFF and node not in self._parked:
             self._contending.append(node)
 
     def _start_transmission(self) -> None:
@@ -226,12 +228,15 @@ class SimWorld(CanNodes):
         ctls = self._ctl
         # arbitration: the lowest head id wins (a frame at another bit rate than its listeners' is garbage to
         # them; a mixed-rate bus is broken anyway, so rates do not interact here)
-        winner = None
-        for node in contending:
-            p = ctls[node].head()
-            if winner is None or (p.wire.arbitration_id, p.seq) < (winner.wire.arbitration_id, winner.seq):
-                winner = p
-        ctls[winner.origin].begin()
+        winner = ctls[contending[0]].head()
+        if len(contending) > 1:
+            best = winner.wire.arbitration_id
+            for node in contending:
+                p = ctls[node].head()
+                can_id = p.wire.arbitration_id
+                if can_id < best or (can_id == best and p.seq < winner.seq):
+                    winner, best = p, can_id
+        ctls[winner.origin].begin()  # on the bus: a frame its node queues meanwhile waits, whatever its priority
         bitrate, n = winner.bitrate, len(winner.wire.data)
         if self.now < self._short_until:
             self._outcome = Attempt.SHORT
@@ -260,7 +265,7 @@ class SimWorld(CanNodes):
                 return
             was = ctl.state
             ctl.attempt(Attempt.ACKED, end)
-            if not ctl:
+            if not ctl.size:
                 self._contending.remove(origin)
             if was is not ErrorState.ACTIVE:  # (only a controller past 95 can change its state by a success)
                 self._report(origin, ctl)

@@ -171,6 +171,7 @@ class CanController:
         self.state = ErrorState.ACTIVE
         self.bus_off_at: float | None = None  #: when it went bus-off (None: it is not)
         self.counts = {"sent": 0, "no_ack": 0, "errors": 0, "bus_off": 0, "recovered": 0}
+        self.size = 0  #: frames queued, the head included (len(), kept as a number: read once per frame)
         self._fifo: deque[Any] = deque()
         self._heap: list[tuple[int, int, Any]] = []
         self._seq = itertools.count()
@@ -179,7 +180,7 @@ class CanController:
 
     # ------------------------------------------------------------------ the transmit queue
     def __len__(self) -> int:
-        return len(self._fifo) + len(self._heap)
+        return self.size
 
     def __iter__(self) -> Iterator[Any]:
         """The queued frames, the head first."""
@@ -189,7 +190,8 @@ class CanController:
 
     @property
     def full(self) -> bool:
-        return self.txqueuelen is not None and len(self) >= self.txqueuelen
+        n = self.txqueuelen
+        return n is not None and self.size >= n
 
     def submit(self, frame: Any, can_id: int) -> None:
         """Queue ``frame`` (any object; ``can_id`` orders a priority queue). Raises :class:`QueueFull`."""
@@ -199,6 +201,7 @@ class CanController:
             self._fifo.append(frame)
         else:
             heapq.heappush(self._heap, (can_id, next(self._seq), frame))
+        self.size += 1
 
     def head(self) -> Any | None:
         """The frame the controller tries next, or the one it is trying (None: nothing to send)."""
@@ -220,6 +223,7 @@ class CanController:
         self._fifo.clear()
         self._heap.clear()
         self._sending = None
+        self.size = 0
 
     def _pop(self) -> Any:
         sending, self._sending = self._sending, None
@@ -227,7 +231,7 @@ class CanController:
             return self._fifo.popleft()
         if sending is None or self._heap[0][2] is sending:
             return heapq.heappop(self._heap)[2]
-        i = next(i for i, item in enumerate(self._heap) if item[2] is sending)
+        i = next(i for i, item in enumerate(self._heap) if item[2] is sending)  # a frame overtaken while on the bus
         self._heap[i] = self._heap[-1]
         self._heap.pop()
         heapq.heapify(self._heap)
@@ -255,12 +259,13 @@ class CanController:
         the queue and is returned, any other stays at the head (None). A bus-off controller does not try."""
         if self.state is ErrorState.BUS_OFF or not self:
             raise RuntimeError(f"no try possible: the controller is {self.state.value} with {len(self)} frame(s)")
-        if outcome is Attempt.ACKED:
-            if self.tec:
-                self.tec -= 1
+        if outcome is Attempt.ACKED:  # (the hot path of a simulated run: every frame on the bus)
             self.counts["sent"] += 1
             frame = self._pop()
-            self._settle(now)
+            self.size -= 1
+            if self.tec:
+                self.tec -= 1
+                self._settle(now)
             return frame
         if outcome is Attempt.NO_ACK:
             self.counts["no_ack"] += 1

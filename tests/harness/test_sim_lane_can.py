@@ -37,8 +37,16 @@ def test_a_full_queue_is_a_bus_fault_naming_it(lane):
     with pytest.raises(BusFault) as raised:
         lane.bus.send(_query(10))
     line = str(raised.value)
-    assert "\n" not in line and "No buffer space available" in line and "ERROR-PASSIVE" in line and "10 frame(s)" in line
+    assert "\n" not in line and "No buffer space available" in line and "ERROR-PASSIVE" in line
+    assert "10 frame(s) waiting: nobody acknowledged them" in line
     assert isinstance(raised.value, BENCH_FAILED)
+
+
+def test_a_burst_past_the_queue_is_a_bus_fault_too(lane):
+    """The ESC listens, but eleven frames at one instant do not fit (as a host faster than the bus meets SocketCAN)."""
+    with pytest.raises(BusFault, match=r"ERROR-ACTIVE, TEC 0, 10 frame\(s\) waiting: sent faster than the bus carries them"):
+        for n in range(canbus.DEFAULT_TXQUEUELEN + 1):
+            lane.bus.send(_query(n))
 
 
 def test_the_hosts_bus_off_is_a_bus_fault(lane):
