@@ -109,3 +109,17 @@ def test_an_answer_to_a_malformed_request_answers_nothing():
     assert [(v.rules, v.check) for v in found] == [(("F4",), "response-match")], [str(v) for v in found]
     good = encode("set_rotation", {"rotation": 1}, source=0, destination=NODE, transfer_id=3)
     assert _read([_host(good), reply]) == []
+
+
+def test_check_log_reads_the_malformed_suspend_as_the_live_rules_do(tmp_path, capsys):
+    """One reader in every mode: ``ckesc check-log --power-on`` over a capture of the same frames finds the same reset
+    (before, it took the malformed frame for a suspend too, and judged nothing across it)."""
+    from ckesc.cli import main
+
+    host = _host(_bad("msg_control", SUSPEND, r17.START))
+    log = tmp_path / "trace.log"
+    log.write_text("".join(f"({m.timestamp:.6f}) can0 {m.arbitration_id:08X}#{bytes(m.data).hex().upper()}\n"
+                           for m in _heard(host, lambda tid, k: None if k < 15 else (k - 15) % 32)))
+    assert main(["check-log", "--complete", "--power-on", str(log)]) == 1
+    out = capsys.readouterr().out
+    assert "a reset the host did not make: msg1 stopped for" in out, out
