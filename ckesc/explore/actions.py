@@ -151,7 +151,7 @@ def field_values(name: str, field_name: str) -> list[int]:
 
 
 @dataclass(frozen=True)
-class Bench:
+class ProgramBench:
     """What a program may do on this bench: power control, the DUT's node id and bit rate code (Set ID / Set
     Baud values), whether the 120 s window may be waited out (in real time it costs two minutes), the
     functions the profile declares absent (R9b)."""
@@ -170,7 +170,7 @@ class Bench:
     load: bool = False
 
 
-def _request_fields(name: str, bench: Bench):
+def _request_fields(name: str, bench: ProgramBench):
     """A Hypothesis strategy of the fields of one request."""
     from hypothesis import strategies as st
 
@@ -198,7 +198,7 @@ def _request_fields(name: str, bench: Bench):
     return st.fixed_dictionaries(out)
 
 
-def node_moves(bench: Bench) -> list[int]:
+def node_moves(bench: ProgramBench) -> list[int]:
     """The node ids a legal Set ID moves the DUT to: its own (a no-op write), its neighbour, and the one half the
     answer slots away (R2: (node_id % 32) x 2 ms), whose slot tells an ESC that kept its old one on any bench."""
     half = cat.ANSWER_SLOTS // 2
@@ -206,7 +206,7 @@ def node_moves(bench: Bench) -> list[int]:
     return [bench.node_id, bench.node_id % (DEFAULT_ESC_NODE_ID - 1) + 1, far]
 
 
-def _other_bauds(bench: Bench) -> list[int]:
+def _other_bauds(bench: ProgramBench) -> list[int]:
     """The legal Set Baud codes other than the bench's, where the runner can follow the DUT to them."""
     return [c for c in cat.BAUD_RATES if c != bench.baud_code] if bench.bitrates else []
 
@@ -242,7 +242,7 @@ def asking() -> list[Action]:
     return out
 
 
-def legal_write(name: str, bench: Bench, *, save: bool = False, same: bool = False):
+def legal_write(name: str, bench: ProgramBench, *, save: bool = False, same: bool = False):
     """A write the document says takes effect (every field legal; Set ID to one of :func:`node_moves`),
     to a value other than the baseline's where there is one (now and then the baseline's): the settings a program
     changes, so that what clobbers or forgets them can show. ``save``: Set Led with option 1 (saved in flash,
@@ -281,7 +281,7 @@ def legal_write(name: str, bench: Bench, *, save: bool = False, same: bool = Fal
     return st.fixed_dictionaries(fields).map(lambda v: Action("send", name, v))
 
 
-def families(bench: Bench) -> dict[str, Any]:
+def families(bench: ProgramBench) -> dict[str, Any]:
     """A Hypothesis strategy per family of actions (reads, modes, writes, streams, waits, power, episodes): of single
     actions (``[action]``) or of whole episodes. A program draws from a random subset of them (swarm testing, Groce
     et al. 2012), so that one feature comes many times in one program, as a second suspend needs."""
@@ -330,7 +330,7 @@ def families(bench: Bench) -> dict[str, Any]:
     return out
 
 
-def episodes(bench: Bench) -> list[Any]:
+def episodes(bench: ProgramBench) -> list[Any]:
     """Strategies of short action sequences that take one feature through a whole round trip (on, effect, off,
     effect): two of them in one program meet where one's state change is the other's context (a comm loss after a
     resume, a save before a bit rate change), which single steps drawn at random rarely line up."""
@@ -386,7 +386,7 @@ def episodes(bench: Bench) -> list[Any]:
     return out
 
 
-def _command(name: str, bench: Bench):
+def _command(name: str, bench: ProgramBench):
     """A Hypothesis strategy of a command of ``name`` that shows if it is taken: a mode change, a settings write (or
     any request, its boundaries and illegal values), a read that is answered, zero on every channel."""
     from hypothesis import strategies as st
@@ -405,7 +405,7 @@ def _command(name: str, bench: Bench):
     return sent
 
 
-def malformed(bench: Bench, names: tuple[str, ...] = MALFORMED, toggle: bool = True):
+def malformed(bench: ProgramBench, names: tuple[str, ...] = MALFORMED, toggle: bool = True):
     """A Hypothesis strategy of one malformed step: a command of one of ``names`` (:func:`_command`) in one of R17's
     classes that applies to it (:func:`ckesc.protocol.malformed.applies`), or with ``toggle`` a single frame with
     toggle 1 of a frame type the DUT answers (R17-toggle)."""
@@ -421,7 +421,7 @@ def malformed(bench: Bench, names: tuple[str, ...] = MALFORMED, toggle: bool = T
         lambda fields: Action("malformed", n, fields, form=form))))
 
 
-def programs(bench: Bench, max_size: int = 12):
+def programs(bench: ProgramBench, max_size: int = 12):
     """A Hypothesis strategy of whole programs (the state they start from: :mod:`ckesc.explore.runner`): a random
     subset of the action families (swarm testing), then up to ``max_size`` items from them, an episode counting as
     one item (its steps are flattened into the program)."""

@@ -38,7 +38,7 @@ from ..protocol.frame import Decoder, Frame
 from ..protocol.ids import Kind
 from ..protocol.judgements import r18_judged
 from ..protocol.load import LoadSource
-from .actions import Action, Bench, stream_fields
+from .actions import Action, ProgramBench, stream_fields
 from .judge import ExploreFinding, Params, cite_r17, cite_r18, judge
 from .oracle import SETTING_KEYS, Oracle
 
@@ -164,8 +164,8 @@ class Session:
                              bitrate=self.lane.bitrate, host_node=self.dut.host_node)
 
     @property
-    def bench(self) -> Bench:
-        return Bench(power=self.lane.power.available, node_id=self.baseline_node, baud_code=self.baud_code,
+    def bench(self) -> ProgramBench:
+        return ProgramBench(power=self.lane.power.available, node_id=self.baseline_node, baud_code=self.baud_code,
                      window_waits=self.lane.clock == "simulated", bitrates=self.bitrates,
                      settings=tuple(sorted(self.baseline.items())),
                      absent=frozenset(self.profile.absent), load=self.draw_load and self._world is not None)

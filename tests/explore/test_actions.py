@@ -6,10 +6,10 @@ from __future__ import annotations
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ckesc.explore.actions import Bench, asking, asks_only, episodes, legal_write, node_moves
+from ckesc.explore.actions import ProgramBench, asking, asks_only, episodes, legal_write, node_moves
 from ckesc.protocol import catalogue as cat
 
-BENCH = Bench(node_id=1, settings=(("led_blink", 0), ("led_color", 2), ("msg1_interval", 10), ("msg2_interval", 50),
+BENCH = ProgramBench(node_id=1, settings=(("led_blink", 0), ("led_color", 2), ("msg1_interval", 10), ("msg2_interval", 50),
                                    ("msg3_interval", 250), ("rotation", 0), ("throttle_channel", 1), ("throttle_source", 0)))
 SOME = settings(max_examples=60, database=None, deadline=None, suppress_health_check=list(HealthCheck))
 
@@ -18,7 +18,7 @@ def test_node_moves_include_one_whose_answer_slot_is_half_the_64_ms_away():
     """R2: an ESC that keeps its old slot after Set ID shows on any bench only at a node whose slot is far from its
     own (at +-2 ms of bench error a neighbour's 2 ms slot does not tell)."""
     for node in (1, 2, 31, 100, 124):
-        moves = node_moves(Bench(node_id=node))
+        moves = node_moves(ProgramBench(node_id=node))
         assert moves[0] == node and all(1 <= m < 0x7D for m in moves)
         assert any(abs(m % 32 - node % 32) == 16 for m in moves), moves
 

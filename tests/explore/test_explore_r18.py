@@ -18,7 +18,7 @@ import pytest
 
 from ckesc.emulator.faults import FAULTS
 from ckesc.emulator.variants import ABOVE_HALF_WINDOW_S
-from ckesc.explore.actions import ABOVE_HALF_SHARE, LOAD_SHARES, Action, Bench, families, program_from_json, program_json
+from ckesc.explore.actions import ABOVE_HALF_SHARE, LOAD_SHARES, Action, ProgramBench, families, program_from_json, program_json
 from ckesc.explore.engine import explore
 from ckesc.explore.runner import Session
 from ckesc.explore.selftest import find_faults
@@ -118,7 +118,7 @@ def test_explore_shrinks_it_to_a_program_whose_load_step_is_needed():
 
 
 def test_load_steps_are_drawn_only_when_asked_and_where_the_lane_can_play_them():
-    assert "load" in families(Bench(load=True)) and "load" not in families(Bench())
+    assert "load" in families(ProgramBench(load=True)) and "load" not in families(ProgramBench())
     for asked in (True, False):
         session = Session({}, load=asked)
         try:
