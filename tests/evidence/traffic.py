@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import can
 
+from ckesc.bench.lanes import SIM_CAN
 from ckesc.emulator import sim_bus
 from ckesc.evidence import BusRules, Violation
 from ckesc.protocol import catalogue as cat
@@ -45,8 +46,10 @@ class Run:
 class ScriptedHost:
     def __init__(self, nodes=(1, 2), faults=(), *, bitrate: int = BITRATE, keep: bool = False) -> None:
         self.channel = f"evidence-{next(_CHANNELS)}"
+        # the bus as the suite's simulated lane opens it (SIM_CAN): every frame sent, acknowledged or not; these
+        # scripts power-cycle ESCs under a stream, which a bus with acknowledgement holds (tests/emulator/test_sim_can.py)
         self.bus = can.Bus(interface="ckesc-sim", channel=self.channel, nodes=list(nodes), faults=list(faults),
-                           bitrate=bitrate, receive_own_messages=True, ignore_config=True)
+                           bitrate=bitrate, receive_own_messages=True, ignore_config=True, **SIM_CAN)
         self.nodes = list(nodes)
         self.host = HostProtocol(0)
         self.run = Run(BusRules(tolerance=0.0, bitrate=bitrate, complete=True))
