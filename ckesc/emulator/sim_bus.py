@@ -121,71 +121,75 @@ class SimWorld(CanNodes):
             self.power_on()
 
     # ------------------------------------------------------------------ event loop
-    def next_event(self) -> float | None:
-        # the hot path of every simulated run (hours of soak): plain comparisons, no min() of pairs
-        deadlines = self.bench._deadlines
-        t = (deadlines[0] if len(deadlines) == 1 else min(deadlines)) if deadlines else INF
-        in_flight = self._in_flight
-        if in_flight is not None:
-            if in_flight[0] < t:
-                t = in_flight[0]
-        elif self._contending or self._ready:
-            t = self.now
-        elif self._waiting:
-            if self._waiting[0][0] < t:
-                t = self._waiting[0][0]
-        if self._alarm < t:
-            t = self._alarm
-        for task in self._tasks:
-            if task.next_time < t:
-                t = task.next_time
-        for source in self._sources:
-            due = source.next_due()
-            if due < t:
-                t = due
-        if t == INF:
-            return None
-        return t if t > self.now else self.now
+    def advance(self, deadline: float, rx: deque | None = None, stop: Callable[[], bool] | None = None) -> bool | None:
+        """Process the events due by ``deadline``, the earliest first, until ``rx`` (a host bus's queue) holds a frame
+        or ``stop()`` says so: True then, the clock at the event that did it. False once the next event is after
+        ``deadline``, None when nothing is scheduled at all: the clock then at ``deadline`` (where it was, if that is
+        later; as it was, for an infinite ``deadline``).
 
-    def step(self, t: float | None = None) -> bool:
-        """Process the earliest event (at ``t`` when the caller just asked :meth:`next_event`).
-        False when nothing is scheduled."""
-        if t is None:
-            t = self.next_event()
-            if t is None:
-                return False
-        self.now = t
-        if self._in_flight is not None and self._in_flight[0] <= t:
-            self._finish_transmission()
-        if self._alarm <= t:
-            self._on_alarm(t)
-        if self._tasks:
-            for task in self._tasks:
-                if task.next_time <= t:
-                    task.fire(t)
-        if self._sources:
-            for source in self._sources:
-                if source.next_due() <= t:
-                    bitrate = source.bitrate or self._host_bitrate()
-                    for wire in source.take_due(t):
-                        self._queue(wire, source, bitrate, ready=wire.timestamp)
+        The event loop of every simulated run (hours of soak: each frame two events or three): finding the next event
+        and processing it in one loop, plain comparisons, no min() of pairs, no call but the events' own work."""
         deadlines = self.bench._deadlines
-        if deadlines and (deadlines[0] if len(deadlines) == 1 else min(deadlines)) <= t:
-            for esc, wire in self.bench.poll(t):
-                self._queue(wire, esc, esc.state.bitrate, ready=wire.timestamp)
-        if self._in_flight is None and (self._ready or self._waiting or self._contending):
-            self._start_transmission()
-        return True
+        while True:
+            if rx or (stop is not None and stop()):
+                return True
+            # the next event: the ESCs' earliest deadline, the frame on the bus ending (else one ready to contend
+            # now, else the first waiting one), a controller's alarm (a recovery, a retry), a periodic task, another
+            # node's frame
+            now = self.now
+            t = (deadlines[0] if len(deadlines) == 1 else min(deadlines)) if deadlines else INF
+            in_flight = self._in_flight
+            if in_flight is not None:
+                if in_flight[0] < t:
+                    t = in_flight[0]
+            elif self._contending or self._ready:
+                t = now
+            elif self._waiting:
+                if self._waiting[0][0] < t:
+                    t = self._waiting[0][0]
+            if self._alarm < t:
+                t = self._alarm
+            for task in self._tasks:
+                if task.next_time < t:
+                    t = task.next_time
+            for source in self._sources:
+                due = source.next_due()
+                if due < t:
+                    t = due
+            if t == INF:
+                if deadline != INF and deadline > now:
+                    self.now = deadline
+                return None
+            if t < now:
+                t = now
+            if t > deadline:
+                if deadline > now:
+                    self.now = deadline
+                return False
+            # ... and what happens at it
+            self.now = t
+            if in_flight is not None and in_flight[0] <= t:
+                self._finish_transmission()
+            if self._alarm <= t:
+                self._on_alarm(t)
+            if self._tasks:
+                for task in self._tasks:
+                    if task.next_time <= t:
+                        task.fire(t)
+            if self._sources:
+                for source in self._sources:
+                    if source.next_due() <= t:
+                        bitrate = source.bitrate or self._host_bitrate()
+                        for wire in source.take_due(t):
+                            self._queue(wire, source, bitrate, ready=wire.timestamp)
+            if deadlines and (deadlines[0] if len(deadlines) == 1 else min(deadlines)) <= t:
+                for esc, wire in self.bench.poll(t):
+                    self._queue(wire, esc, esc.state.bitrate, ready=wire.timestamp)
+            if self._in_flight is None and (self._ready or self._waiting or self._contending):
+                self._start_transmission()
 
     def run_until(self, t_end: float, stop: Callable[[], bool] | None = None) -> None:
-        while True:
-            if stop is not None and stop():
-                return
-            t = self.next_event()
-            if t is None or t > t_end:
-                self.now = max(self.now, t_end)
-                return
-            self.step(t)
+        self.advance(t_end, None, stop)
 
     def _queue(self, wire: WireFrame, origin: Any, bitrate: int, ready: float, flags: dict[str, bool] | None = None) -> None:
         now = self.now
@@ -559,7 +563,8 @@ class SimEscBus(can.BusABC):
     def frames_until(self, deadline: float) -> Iterator[can.Message]:
         """Every frame until ``deadline``: :meth:`recv_until` again and again until it gives none (the clock then at
         ``deadline``), without a call per frame between the reader and the simulated clock."""
-        rx, world, until = self._rx, self.world, self._until
+        rx, world = self._rx, self.world
+        advance = world.advance
         while True:
             if self._is_shutdown:
                 self._check_open()
@@ -567,26 +572,17 @@ class SimEscBus(can.BusABC):
                 yield rx.popleft()
                 continue
             now = world.now
-            msg = until(now + max(deadline - now, 0.0), False)
-            if msg is None:
+            if not advance(now + max(deadline - now, 0.0), rx):  # (recv_until's arithmetic, as :meth:`_until` reads)
                 return
-            yield msg
 
     def _until(self, deadline: float, forever: bool) -> can.Message | None:
-        world, rx = self.world, self._rx
-        next_event, step = world.next_event, world.step
-        while not rx:
-            t = next_event()
-            if t is None:
-                if forever:
-                    raise can.CanOperationError("ckesc-sim: recv() without timeout on a bus where nothing will ever happen")
-                world.now = max(world.now, deadline)
-                return None
-            if t > deadline:
-                world.now = deadline
-                return None
-            step(t)
-        return rx.popleft()
+        rx = self._rx
+        came = self.world.advance(deadline, rx)
+        if came:
+            return rx.popleft()
+        if came is None and forever:
+            raise can.CanOperationError("ckesc-sim: recv() without timeout on a bus where nothing will ever happen")
+        return None
 
     def _recv_internal(self, timeout: float | None):
         return (self._rx.popleft() if self._rx else None), True
