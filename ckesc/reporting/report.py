@@ -35,7 +35,7 @@ from ..protocol.requirements import (
     section_heading,
     section_key,
 )
-from . import causes, html_report
+from . import causes, gate, html_report
 from .results import RunRecord, claim_text, incomplete_banner, profile_warnings
 
 
@@ -271,7 +271,8 @@ def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: li
     info.setdefault("git_revision", git_revision())
     (out / "junit.xml").write_text(junit_xml(results, info, out, not_run), encoding="utf-8")
     RunRecord(info, list(results), list(not_run), coverage(results), causes.rule_failures(results)).write(out / "results.json")  # type: ignore[arg-type]
-    (out / "summary.txt").write_text(summary_text(results, info) + "\n", encoding="utf-8")
+    (out / "summary.txt").write_text("\n".join([*gate.lines(info.get("gate")), summary_text(results, info)]) + "\n",
+                                     encoding="utf-8")  # the release gate's verdict and reasons first (--baseline)
     point_latest(out)
     if html:
         html_report.build(out)
