@@ -26,7 +26,7 @@ REGRESSED, NO_REGRESSION, NOT_JUDGED = "REGRESSED", "NO REGRESSION", "NOT JUDGED
 #: reasons shown on the console and in summary.txt; results.json keeps them all
 SHOWN = 20
 __all__ = ["DEFAULT_THRESHOLD", "NOT_JUDGED", "NO_REGRESSION", "REGRESSED", "Run", "RunError", "judge", "lines", "load",
-           "not_judged", "shared_tests"]
+           "not_judged", "properties", "shared_tests"]
 
 
 def load(path: str | Path) -> Run:
@@ -78,6 +78,12 @@ def judge(baseline: Run, current: Run, *, threshold: float = DEFAULT_THRESHOLD) 
 def not_judged(path: str, why: str) -> dict[str, Any]:
     """The gate's record of a run it did not judge (``why``: the run aborted, was interrupted, the baseline went)."""
     return {"baseline": path, "verdict": NOT_JUDGED, "reasons": [], "why": why}
+
+
+def properties(gate: dict[str, Any]) -> dict[str, str]:
+    """The gate as JUnit testsuite properties: its baseline, verdict and each reason (``gate.reason.0``, ...)."""
+    return {"gate.baseline": str(gate.get("baseline")), "gate.verdict": str(gate.get("verdict")),
+            **{f"gate.reason.{n}": r for n, r in enumerate(gate.get("reasons", []))}}
 
 
 def lines(gate: dict[str, Any] | None) -> list[str]:

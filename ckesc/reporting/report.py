@@ -82,10 +82,13 @@ def suite_properties(info: dict[str, Any]) -> dict[str, str]:
     """The run's info as JUnit testsuite properties: every plain value as it is (``complete``, ``lane``,
     ``node_id``, ``timing_error_s``, ...), ESC Information 240 as ``esc_information.<field>`` and
     ``firmware_date`` (``esc_information`` = ``no answer`` when the DUT gave none), and ``none`` for an
-    unknown value (``git_revision`` outside a checkout)."""
+    unknown value (``git_revision`` outside a checkout); the release gate as ``gate.verdict``, ``gate.baseline`` and
+    ``gate.reason.<n>``."""
     props: dict[str, str] = {}
     for key, value in info.items():
-        if isinstance(value, dict):
+        if key == "gate":  # the release gate (--baseline): its verdict and one property per reason
+            props.update(gate.properties(value))
+        elif isinstance(value, dict):
             props.update({f"{key}.{k}": "none" if v is None else str(v) for k, v in value.items()})
         else:
             props[key] = "none" if value is None else str(value)

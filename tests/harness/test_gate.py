@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -73,6 +74,11 @@ def test_one_fault_fails_the_gate_naming_the_regressed_requirement_first(tmp_pat
     assert [f"  {r}" for r in gate["reasons"][:len(said) - 1]] == said[1:]  # the console's reasons are the record's
     summary = (tmp_path / "reports" / "latest" / "summary.txt").read_text(encoding="utf-8").splitlines()
     assert summary[:3] == said[:3]  # the gate leads summary.txt
+    run = tmp_path / "reports" / "latest"
+    props = {p.get("name"): p.get("value") for p in ET.parse(run / "junit.xml").getroot().find("testsuite/properties")}
+    assert (props["gate.verdict"], props["gate.reason.0"]) == ("REGRESSED", gate["reasons"][0])
+    page = (run / "report.html").read_text(encoding="utf-8")
+    assert '<div class=banner role=alert id=gate>gate: REGRESSED' in page
 
 
 def _widened(baseline: Path, into: Path) -> tuple[Path, str]:
@@ -98,6 +104,9 @@ def test_a_margin_that_shrank_beyond_the_threshold_fails_the_gate_while_every_te
     said = _gate_lines(done.stdout)
     assert said[0].endswith(": 1 reason"), said
     assert said[1].startswith(f"  timing margin shrank: {test} :: "), said
+    # every test passed, and the page does not say PASS: the run exits 1
+    page = (tmp_path / "shrank" / "latest" / "report.html").read_text(encoding="utf-8")
+    assert '<span class="v v-REGRESSED">REGRESSED</span> 3 tests' in page
     # the same shrink inside a looser threshold: no reason (the margin fell by half of the baseline's)
     done = _run(tmp_path, "loose", SECTION, "--baseline", str(wider), "--baseline-threshold", "60")
     assert done.returncode == 0, done.stdout + done.stderr
