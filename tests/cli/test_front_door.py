@@ -58,6 +58,7 @@ MISTAKES = [
     (["run", "--baseline", "{tmp}/a"], ["--baseline", "no results.json"]),
     (["run", "--baseline", "{log}"], ["--baseline", "not JSON"]),
     (["run", "--baseline-threshold", "-5"], ["--baseline-threshold", "not between 0 and 100"]),
+    (["run", "--rig", "{tmp}/rig.toml", "--baseline", "{tmp}/a"], ["--baseline gates one bench's run"]),
     (["soak", "--power-cmd-timeout", "0"], ["--power-cmd-timeout", "zero"]),
     (["explore", "--replay", "{tmp}/no-such.replay.json"], ["--replay", "no such replay file"]),
     # the same words for the same mistake, whichever command meets it
