@@ -37,3 +37,14 @@ def non_negative_float(text: str) -> float:
 def positive_int(text: str) -> int:
     """An integer more than zero (a count of programs, steps or jobs)."""
     return int(_number(text, int, zero=False))
+
+
+def percentage(text: str) -> float:
+    """A percentage, 0 to 100, as given (a threshold: ``10`` is 10 %)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a percentage: {text!r}") from None
+    if not 0 <= value <= 100:  # (NaN too)
+        raise argparse.ArgumentTypeError(f"{text} is not between 0 and 100")
+    return value

@@ -16,7 +16,7 @@ from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
 from ..reporting.paths import not_readable, not_writable
 
-__all__ = ["Handler", "Parser", "UsageError", "check_dir", "check_faults", "check_file", "check_readable", "duration_arg",
+__all__ = ["Handler", "Parser", "UsageError", "check_dir", "check_faults", "check_file", "check_readable", "check_run", "duration_arg",
            "int_arg", "non_negative_float", "port_arg", "positive_float", "positive_int", "seconds_of"]
 
 #: a value that starts with a minus sign and a digit: a number below zero given to an option, not an option
@@ -136,6 +136,20 @@ def check_readable(path: str | None, option: str, what: str = "file") -> None:
     (``ckesc/reporting/paths.py``, in the shape of the words for what a command cannot write)."""
     if path is not None and path != "-" and (said := not_readable(path, option, what)):
         raise UsageError(said)
+
+
+def check_run(path: str | None, option: str) -> None:
+    """An earlier conformance run the command will read (a report directory or its results.json, as ``ckesc compare``
+    reads one): a :class:`UsageError` naming ``option`` when it is missing, unreadable or not a run."""
+    if path is None:
+        return
+    from ..reporting.comparing import RunError
+    from ..reporting.gate import load
+
+    try:
+        load(path)
+    except RunError as exc:
+        raise UsageError(f"{option} {exc}") from None
 
 
 # ------------------------------------------------------------------------------------------- where a command writes

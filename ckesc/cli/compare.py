@@ -7,19 +7,14 @@ import json
 import sys
 from pathlib import Path
 
+from ..bench.arguments import percentage
 from ..reporting import compare, comparing, soak_compare
 from ..reporting.exits import ExitStatus
 from .common import check_file
 
 
 def _percent(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a percentage: {text!r}") from None
-    if not 0 <= value <= 100:
-        raise argparse.ArgumentTypeError(f"{text} is not between 0 and 100")
-    return value / 100
+    return percentage(text) / 100
 
 
 def _run_compare(args: argparse.Namespace) -> int:

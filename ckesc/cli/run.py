@@ -12,7 +12,7 @@ from typing import Any
 
 from .. import run as run_lib
 from ..session import options
-from .common import UsageError, check_dir, check_readable
+from .common import UsageError, check_dir, check_readable, check_run
 
 USAGE = "%(prog)s [OPTION ...] [SECTION | MODULE[::TEST] ...] [-- PYTEST_ARGUMENT ...]"
 
@@ -54,6 +54,10 @@ def add_run_command(sub: argparse._SubParsersAction) -> None:
             raise UsageError(f"{args.free[unknown]} is not an option of ckesc run: pytest's options go after `--` ({way_out})")
         check_dir(args.ckesc_reports, "--reports")
         check_readable(args.ckesc_durations, "--time-from", "results.json")
+        if args.rig and args.ckesc_baseline:
+            raise UsageError("--baseline gates one bench's run against its own earlier run: run each bench of the rig "
+                             "alone with it, or compare the batch's bench directories with ckesc compare")
+        check_run(args.ckesc_baseline, "--baseline")
         args.selection, args.pytest_args = args.free, args.after_dashes
         return run_lib.run_command(args)
 

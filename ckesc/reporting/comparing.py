@@ -13,7 +13,7 @@ from typing import Any, Callable, Sequence
 from .htmlkit import CSS, badge, e
 
 EXTRA_CSS = """
-.v-REGRESSED{background:#cf222e}.v-NO-REGRESSION{background:#1a7f37}.v-NOT-RUN{background:#6e7781}
+.v-NO-REGRESSION{background:#1a7f37}.v-NOT-RUN{background:#6e7781}
 tr.diff>td:not(.cell),tr.diff>th{background:#fff8c5}#identity table{width:100%;table-layout:fixed}td{overflow-wrap:anywhere}
 .num,.lim,.chg td.vv{white-space:nowrap}.num{text-align:right;font-variant-numeric:tabular-nums}.what{min-width:16rem}
 .matrix td.cell{text-align:center;font-size:.8rem;font-weight:600}.matrix tr.group th{background:#eaeef2;text-align:left}

@@ -21,7 +21,7 @@ class ExitStatus(IntEnum):
     OK = 0
     #: something found: a test FAILed or ERRORed (or, ``--strict``, was INCONCLUSIVE), a bus rule was broken while a
     #: test that is not that FAIL ran, a soak's or the explorer's finding, a rule broken in a log, frames that do not
-    #: decode, a regression, a profile claim the DUT contradicts, an error answer of the emulator's control
+    #: decode, a regression (``ckesc compare``, ``ckesc run --baseline``'s gate), a profile claim the DUT contradicts, an error answer of the emulator's control
     FAILED = 1
     #: a set-up mistake or bad input (one line on stderr, no report)
     USAGE = 2
@@ -62,13 +62,14 @@ def failing(results: Iterable[Result], *, strict: bool = False) -> list[Result]:
     return [r for r in results if r.outcome in bad or broken_outside_a_fail(r)]
 
 
-def of_run(results: Iterable[Result], *, stopped: str | None, strict: bool = False) -> ExitStatus:
+def of_run(results: Iterable[Result], *, stopped: str | None, strict: bool = False, regressed: bool = False) -> ExitStatus:
     """A conformance run's status: ABORTED or INTERRUPTED when it stopped so (``stopped``: "aborted: ...",
-    "interrupted ..."), FAILED when a result fails it (:func:`failing`), else OK (``ckesc run`` fails a run in which no
-    test ran; ``pytest --collect-only`` runs none)."""
+    "interrupted ..."), FAILED when a result fails it (:func:`failing`) or the release gate found a regression against
+    its baseline (``regressed``: :mod:`.gate`), else OK (``ckesc run`` fails a run in which no test ran; ``pytest
+    --collect-only`` runs none)."""
     results = list(results)
     if (stopped or "").startswith("aborted"):
         return ExitStatus.ABORTED
     if (stopped or "").startswith("interrupted"):
         return ExitStatus.INTERRUPTED
-    return ExitStatus.FAILED if failing(results, strict=strict) else ExitStatus.OK
+    return ExitStatus.FAILED if regressed or failing(results, strict=strict) else ExitStatus.OK

@@ -24,6 +24,7 @@ from typing import Any
 
 from ..protocol import catalogue as cat
 from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICTS, Verdict, section_key
+from . import gate
 from .causes import groups
 from .htmlkit import CSS, anchor, badge, e, figure, new_figure, svg
 from .results import (
@@ -48,6 +49,17 @@ def build(out: Path) -> Path:
 
 
 # ----------------------------------------------------------------------------------------- page
+def _gate(record: dict[str, Any] | None) -> str:
+    """The release gate's verdict and reasons (``--baseline``), as summary.txt leads with them: a banner when it
+    regressed or could not judge."""
+    said = gate.lines(record)
+    if not said:
+        return ""
+    kind = "claim" if record and record.get("verdict") == gate.NO_REGRESSION else "banner role=alert"
+    return (f"<div class={kind} id=gate>{e(said[0])}" + ("<ul>" + "".join(f"<li>{e(x.strip())}</li>" for x in said[1:])
+            + "</ul>" if said[1:] else "") + "</div>")
+
+
 def render(doc: RunRecord | dict[str, Any], *, run: str = "") -> str:
     """The page of a run, from its :class:`RunRecord` (or a parsed results.json)."""
     record = doc if isinstance(doc, RunRecord) else RunRecord.from_json(doc)
@@ -57,12 +69,15 @@ def render(doc: RunRecord | dict[str, Any], *, run: str = "") -> str:
     banner = incomplete_banner(info)
     # never a green PASS for less than the whole suite: ABORTED / INTERRUPTED / SUBSET / INCOMPLETE
     overall = Verdict.FAIL if counts[Verdict.FAIL] or counts[Verdict.ERROR] else (banner.split(" ")[0] if banner else Verdict.PASS)
+    if overall != Verdict.FAIL and (info.get("gate") or {}).get("verdict") == gate.REGRESSED:  # (--baseline: exit 1)
+        overall = gate.REGRESSED
     parts = [
         f"<header><h1>CKESC conformance report</h1><p class=run>run {e(run)} &middot; "
         f"{badge(overall)} {len(results)} tests: "
         + ", ".join(f"{counts[v]} {v}" for v in VERDICTS if counts[v])
         + (f", {info.get('not_run', 0)} not run" if info.get("not_run") else "") + "</p>"
         + (f'<p class=banner role=alert>{e(banner)}</p>' if banner else "")
+        + _gate(info.get("gate"))
         + (f"<p class=claim>{e(claim_text(info))}</p>" if info.get("not_claimed") else "")
         + "".join(f"<p class=claim>{e(w)}</p>" for w in profile_warnings(info)) + "</header>",
         _causes(results),

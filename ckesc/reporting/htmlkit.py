@@ -11,7 +11,8 @@ from typing import Any
 #: a badge's colour per verdict, status and banner word
 COLOURS = {"PASS": "#1a7f37", "FAIL": "#cf222e", "ERROR": "#8250df", "INCONCLUSIVE": "#bf8700", "OBSERVED": "#0969da",
            "SKIPPED": "#6e7781", "NOT CHECKED": "#6e7781",
-           "ABORTED": "#cf222e", "INTERRUPTED": "#bf8700", "SUBSET": "#6e7781", "INCOMPLETE": "#bf8700"}
+           "ABORTED": "#cf222e", "INTERRUPTED": "#bf8700", "SUBSET": "#6e7781", "INCOMPLETE": "#bf8700",
+           "REGRESSED": "#cf222e"}
 
 
 def e(value: Any) -> str:

@@ -35,7 +35,7 @@ from ..protocol.requirements import (
     section_heading,
     section_key,
 )
-from . import causes, html_report
+from . import causes, gate, html_report
 from .results import RunRecord, claim_text, incomplete_banner, profile_warnings
 
 
@@ -82,10 +82,13 @@ def suite_properties(info: dict[str, Any]) -> dict[str, str]:
     """The run's info as JUnit testsuite properties: every plain value as it is (``complete``, ``lane``,
     ``node_id``, ``timing_error_s``, ...), ESC Information 240 as ``esc_information.<field>`` and
     ``firmware_date`` (``esc_information`` = ``no answer`` when the DUT gave none), and ``none`` for an
-    unknown value (``git_revision`` outside a checkout)."""
+    unknown value (``git_revision`` outside a checkout); the release gate as ``gate.verdict``, ``gate.baseline`` and
+    ``gate.reason.<n>``."""
     props: dict[str, str] = {}
     for key, value in info.items():
-        if isinstance(value, dict):
+        if key == "gate":  # the release gate (--baseline): its verdict and one property per reason
+            props.update(gate.properties(value))
+        elif isinstance(value, dict):
             props.update({f"{key}.{k}": "none" if v is None else str(v) for k, v in value.items()})
         else:
             props[key] = "none" if value is None else str(value)
@@ -271,7 +274,8 @@ def write_reports(out: Path, results: list, info: dict[str, Any], *, not_run: li
     info.setdefault("git_revision", git_revision())
     (out / "junit.xml").write_text(junit_xml(results, info, out, not_run), encoding="utf-8")
     RunRecord(info, list(results), list(not_run), coverage(results), causes.rule_failures(results)).write(out / "results.json")  # type: ignore[arg-type]
-    (out / "summary.txt").write_text(summary_text(results, info) + "\n", encoding="utf-8")
+    (out / "summary.txt").write_text("\n".join([*gate.lines(info.get("gate")), summary_text(results, info)]) + "\n",
+                                     encoding="utf-8")  # the release gate's verdict and reasons first (--baseline)
     point_latest(out)
     if html:
         html_report.build(out)

@@ -1,5 +1,6 @@
 """The session's end: whether the run was the whole suite run to its end (or why not, and which tests it did not
-run), its exit status (decided here, once: :func:`~ckesc.reporting.exits.of_run`; ``ckesc run`` returns it), and its
+run), the release gate's verdict against ``--baseline`` (:mod:`.baseline`), its exit status (decided here, once, from
+both: :func:`~ckesc.reporting.exits.of_run`; ``ckesc run`` returns it), and its
 reports written (``ckesc/reporting``) and summarised on the console."""
 
 from __future__ import annotations
@@ -12,8 +13,9 @@ import pytest
 from ..protocol.requirements import Verdict
 from ..reporting import report
 from ..reporting.exits import ExitStatus, of_run
+from ..reporting.gate import REGRESSED
 from ..reporting.results import profile_warnings
-from . import trace_hooks
+from . import baseline, trace_hooks
 from .collection import conformance_dir, item_requirements, section_of
 from .state import RunState, report_dir, state
 
@@ -81,7 +83,9 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     st.info["complete"] = reason is None
     st.info["incomplete"] = reason or ""
     st.info["not_run"] = len(not_run)
-    st.exit_status = of_run(st.results.values(), stopped=reason, strict=session.config.getoption("ckesc_strict"))
+    gate = baseline.judged(session.config, st, reason, not_run)  # (--baseline: the release gate, into st.info)
+    st.exit_status = of_run(st.results.values(), stopped=reason, strict=session.config.getoption("ckesc_strict"),
+                            regressed=bool(gate and gate["verdict"] == REGRESSED))
     if st.exit_status in (ExitStatus.ABORTED, ExitStatus.FAILED):  # (a bus rule broken while a SKIPPED test ran)
         session.exitstatus = st.exit_status  # pytest's own statuses otherwise: its INTERRUPTED is 2
     out = report_dir(session.config)

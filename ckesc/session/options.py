@@ -16,13 +16,16 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from ..bench.arguments import percentage
 from ..bench.station import BENCH_ROWS, DUT, SAME, Option
+from ..reporting.compare import DEFAULT_THRESHOLD
 from .trace_files import TRACE_FORMATS
 
 #: ``ckesc run --help``'s groups, in its order (pytest's ``--help`` lists every option under one "ckesc" group)
-RIG, OUTPUT = ("several benches at once (pytest-xdist: pip install 'ckesc-conformance[rig]')", "output")
+RIG, OUTPUT, GATE = ("several benches at once (pytest-xdist: pip install 'ckesc-conformance[rig]')", "output",
+                     "release gate (docs/compare.md)")
 PYTEST_GROUP = ("ckesc", "CKESC conformance: device under test")
-__all__ = ["DUT", "OUTPUT", "RIG", "SAME", "Option"]  # DUT, SAME and Option: the bench's (ckesc/bench/station.py)
+__all__ = ["DUT", "GATE", "OUTPUT", "RIG", "SAME", "Option"]  # DUT, SAME and Option: the bench's (ckesc/bench/station.py)
 
 
 def _absolute(text: str) -> str:
@@ -60,6 +63,16 @@ OPTIONS: tuple[Option, ...] = (
     Option("ckesc_progress", group=OUTPUT, choices=("on", "off"), default="on", run=("--progress",),
            help="a line per section with the protocol time planned, elapsed and an estimate of what is left (on a "
                 "terminal also after pytest's counter); off: none"),
+    Option("ckesc_baseline", group=GATE, type=_absolute, metavar="DIR", run=("--baseline",),
+           help="end with the comparison against this earlier run of the bench (its report directory or results.json, "
+                "as `ckesc compare` reads it) over the tests both ran, and exit 1 on a regression: a requirement or test "
+                "that passed and now does not, a timing margin that shrank beyond --baseline-threshold; the reasons lead "
+                "summary.txt and the console's end. A baseline that is not a run, or shares no test with the "
+                "selection, is exit 2 before any test"),
+    Option("ckesc_baseline_threshold", group=GATE, type=percentage, default=DEFAULT_THRESHOLD * 100, metavar="PCT",
+           run=("--baseline-threshold",),
+           help="--baseline: a timing margin regressed when it fell by more than PCT %% of the baseline's (and by more "
+                f"than the runs' stated timing error); default {DEFAULT_THRESHOLD * 100:g}, as ckesc compare's"),
     Option("ckesc_durations", group=OUTPUT, type=_absolute, metavar="RESULTS_JSON", run=("--time-from",),
            help="time left: expect each test to take the lane time it took in this earlier run of the bench (its "
                 "results.json; default: the suite's own table of a faultless simulated run, conformance/durations.json)"),

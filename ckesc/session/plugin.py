@@ -15,6 +15,7 @@ and reading and writing the run's typed record (:mod:`.state`):
     bus_rules     the rules that hold at all times, live over every frame
     verdicts      each test's phase reports -> its one Result, and the console's count of it
     finish        the session's end: complete or why not, exit status, the reports written
+    baseline      the release gate (--baseline): the baseline checked before any test, judged at the end
 
 How they load, on purpose: this module registers them in ``pytest_configure`` with
 ``config.pluginmanager.register(module, name)``, as pytest-xdist registers its session object. Not through
@@ -28,12 +29,12 @@ from __future__ import annotations
 
 import pytest
 
-from . import bus_rules, cold_boots, collection, finish, fixtures, options, order, trace_hooks, verdicts
+from . import baseline, bus_rules, cold_boots, collection, finish, fixtures, options, order, trace_hooks, verdicts
 from .progress import ProgressReporter
 from .state import state
 
 #: the plugin's modules, registered in this order (pluggy calls the later registered first, among equals)
-MODULES = (collection, order, cold_boots, fixtures, trace_hooks, bus_rules, verdicts, finish)
+MODULES = (collection, order, cold_boots, fixtures, trace_hooks, bus_rules, verdicts, finish, baseline)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -55,6 +55,11 @@ MISTAKES = [
     (["control", "--port", "70000", "status"], ["--port", "not a port"]),
     (["run", "--time-from", "{tmp}/no-such-results.json"], ["results.json", "(no such file)", "--time-from"]),
     (["run", "--bus-open-timeout", "-1"], ["--bus-open-timeout", "below zero"]),
+    (["run", "--baseline", "{tmp}/no-such-run"], ["--baseline", "no such run directory"]),
+    (["run", "--baseline", "{tmp}/a"], ["--baseline", "no results.json"]),
+    (["run", "--baseline", "{log}"], ["--baseline", "not JSON"]),
+    (["run", "--baseline-threshold", "-5"], ["--baseline-threshold", "not between 0 and 100"]),
+    (["run", "--rig", "{tmp}/rig.toml", "--baseline", "{tmp}/a"], ["--baseline gates one bench's run"]),
     (["soak", "--power-cmd-timeout", "0"], ["--power-cmd-timeout", "zero"]),
     (["explore", "--replay", "{tmp}/no-such.replay.json"], ["replay file", "is not readable (no such file): give another with --replay"]),
     # the same words for the same mistake, whichever command meets it
