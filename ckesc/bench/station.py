@@ -25,8 +25,8 @@ from typing import Any
 
 from ..emulator import variants
 from . import checks, firmware, proof
-from .lanes import BusLane, Lane, SimLane
 from .errors import PreflightError
+from .lanes import BusLane, Lane, SimLane
 from .link import DutError, DutUnreachable, Link, echo_probe
 from .options import BENCH_ROWS, BUS_OPEN_TIMEOUT_S, DUT, SAME, BenchOptions, Option  # noqa: F401 - imported from here
 from .power import PowerControl, Prompt, open_power
