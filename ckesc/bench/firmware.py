@@ -78,7 +78,8 @@ def _checked(key: str, value: Any, where: str) -> Any:
     try:
         value = _KEYS[key](value)
     except (TypeError, ValueError):
-        raise PreflightError(f"{where}: {key} = {value!r} is not a {_KEYS[key].__name__}") from None
+        kind = {"int": "a whole number", "float": "a number"}.get(_KEYS[key].__name__, "text")
+        raise PreflightError(f"{where}: {key} = {value!r} is not {kind}") from None
     if key == "firmware_date" and not _DATE.match(value):
         raise PreflightError(f"{where}: firmware_date = {value!r} is not a date YYYY-MM-DD from 2000 on")
     return value

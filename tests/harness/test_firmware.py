@@ -42,7 +42,7 @@ def test_a_binary_is_proven_by_its_sidecar_then_firmware_toml_and_the_command_li
 
 
 @pytest.mark.parametrize("text, said", [("firmware_date=24-10-11", "not a date"), ("colour=red", "not a field 240"),
-                                        ("protocol_version", "not KEY=VALUE"), ("hardware_version=x", "not a int")])
+                                        ("protocol_version", "not KEY=VALUE"), ("hardware_version=x", "not a whole number")])
 def test_a_wrong_expectation_is_named(text, said):
     with pytest.raises(PreflightError, match=said):
         firmware.parse_expect(text)
@@ -117,3 +117,20 @@ def test_a_series_of_32_images_shows_the_fault_from_the_19th_on(tmp_path):
     good, bad = _counters(paths[17]), _counters(paths[18])
     assert good["power_ups"] >= 1 and good["stops"] == 0, good
     assert (bad["power_ups"], bad["stops"]) == (good["stops"], good["power_ups"]), (good, bad)
+
+
+def test_every_report_names_the_image_in_the_same_words(tmp_path):
+    from ckesc.reporting.compare import identity
+    from ckesc.reporting.report import suite_properties, summary_text
+    from ckesc.reporting.results import firmware_rows
+
+    (tmp_path / "esc.bin.toml").write_text(IMAGE)
+    image = firmware.load(str(_binary(tmp_path)))
+    info = {"dut": "bus", "firmware": firmware.report(image, "flash {image}", "verified", ANSWER)}
+    rows = dict(firmware_rows(info))
+    assert rows["image SHA-256"] == image.sha256 and rows["flash output"] == "verified"
+    assert rows["240 answered"] == "firmware_date=2024-10-11, protocol_version=21, hardware_version=3"
+    assert identity(info)["image SHA-256"] == image.sha256
+    assert suite_properties(info)["firmware.sha256"] == image.sha256
+    assert f"image SHA-256: {image.sha256}" in summary_text([], info)
+    assert firmware_rows({"dut": "emulator"}) == []
