@@ -133,6 +133,9 @@ class Station:
         caller's listeners: its trace and live rules read every frame from the first), then on a real bus whether the
         host's own frames come back (:meth:`.lanes.BusLane.find_echo`), and only then the foreign traffic
         (``--foreign-traffic``), so that without an echo every frame it plays is handed out from its first."""
+        if self.image is not None and not self.emulated and self.firmware is None:
+            raise PreflightError("--firmware on a real bus is flashed and proven by ckesc run's bench proof: this "
+                                 "command does not flash (run ckesc run --firmware first, then this without it)")
         if self.lane is None:
             self.lane = self._new_lane()
             try:
