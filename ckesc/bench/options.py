@@ -13,6 +13,7 @@ from typing import Any
 
 from ..emulator import variants
 from .arguments import non_negative_float, positive_float, positive_int
+from .firmware import FLASH_TIMEOUT_S
 from .power import POWER_COMMAND_TIMEOUT_S
 from .power import names as power_names
 from .profile import DEFAULT_BUS_ERROR_S
@@ -127,6 +128,18 @@ BENCH_ROWS: tuple[Option, ...] = (
     Option("labgrid_coordinator", metavar="HOST:PORT",
            help="--power labgrid: the labgrid coordinator (default: the env file's coordinator_address, LG_COORDINATOR, "
                 "127.0.0.1:20408)"),
+    Option("firmware", metavar="IMAGE",
+           help="the firmware image under test: flashed with --flash-cmd before the bench proof, then proven to be the one "
+                "running by ESC Information (240) against IMAGE.toml, firmware.toml beside it or --expect-firmware; --dut "
+                "emulator: an emulator image (a TOML file: its 240 answer, faults and options; docs/firmware.md)"),
+    Option("flash_cmd", metavar="CMD",
+           help="--firmware: the command that writes the image into the DUT, {image} replaced by its path (run without a "
+                "shell); a non-zero exit or a hang is exit 2 before any test. --dut emulator: none needed (builtin)"),
+    Option("flash_timeout", type=positive_float, default=FLASH_TIMEOUT_S, metavar="S",
+           help=f"--flash-cmd: a flash still running after S seconds has failed and is killed (default {FLASH_TIMEOUT_S:g})"),
+    Option("expect_firmware", metavar="KEY=VALUE,...",
+           help="--firmware: what 240 must answer (firmware_date=YYYY-MM-DD, protocol_version, hardware_version), over the "
+                "image's sidecar"),
     Option("allow_motor_spin", action="store_true", default=None, rig="allow_motor_spin",
            help="allow non-zero throttle (default: only for the emulator). PROPELLERS OFF."),
     Option("foreign_traffic", choices=("ardupilot",),

@@ -16,7 +16,9 @@ only switches.
 
 from __future__ import annotations
 
+import os
 import shlex
+import signal
 import subprocess
 from collections.abc import Callable
 from importlib.metadata import entry_points
@@ -33,6 +35,40 @@ ENTRY_POINT_GROUP = "ckesc.power"
 #: well under a second, a Python script (``ckesc control``) in one or two, several on a loaded host in a few; one
 #: that hangs (a network PSU that does not answer) must not hold the run
 POWER_COMMAND_TIMEOUT_S = 10.0
+
+def run_command(cmd: str, timeout: float, *, what: str, longer: str) -> str:
+    """Run a bench command (a power switch, a flash tool), without a shell, and return its output (stdout and
+    stderr together, in their order); a :class:`PowerFailed` naming it as ``what`` when it cannot start, exits
+    non-zero (its output's tail said) or is still running after ``timeout`` s: then it is killed with every process
+    it started (its own session), so that a child holding its output open cannot hold the run either. ``longer``:
+    the option that gives it more time."""
+    try:
+        proc = subprocess.Popen(shlex.split(cmd), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                errors="replace", start_new_session=True)
+    except (OSError, ValueError) as exc:
+        raise PowerFailed(f"{what} {cmd!r} could not be run: {getattr(exc, 'strerror', None) or exc}") from None
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except BaseException as exc:  # the limit, or Ctrl-C: nothing of it outlives the run
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except OSError:
+            pass
+        proc.communicate()
+        if isinstance(exc, subprocess.TimeoutExpired):
+            raise PowerFailed(f"{what} {cmd!r} did not return within {timeout:g} s (killed; {longer} gives it "
+                              "longer)") from None
+        raise
+    if proc.returncode != 0:
+        said = output_tail(out, 300)
+        raise PowerFailed(f"{what} {cmd!r} failed (exit status {proc.returncode})" + (f": {said}" if said else ""))
+    return out
+
+
+def output_tail(text: str, chars: int) -> str:
+    """A command's output as one line: its words, the last ``chars`` characters of them."""
+    return " ".join(text.split())[-chars:]
+
 
 class EmulatorPower(PowerControl):
     name = "emulator"
@@ -59,18 +95,7 @@ class CommandPower(PowerControl):
         self.timeout = timeout
 
     def _run(self, cmd: str) -> None:
-        """Run ``cmd``; a :class:`PowerFailed` when it cannot start, exits non-zero or is still running after
-        :attr:`timeout` s (it is then killed)."""
-        try:
-            done = subprocess.run(shlex.split(cmd), capture_output=True, text=True, timeout=self.timeout)
-        except subprocess.TimeoutExpired:
-            raise PowerFailed(f"power command {cmd!r} did not return within {self.timeout:g} s (killed; "
-                              "--power-cmd-timeout gives it longer)") from None
-        except OSError as exc:
-            raise PowerFailed(f"power command {cmd!r} could not be run: {exc.strerror or exc}") from None
-        if done.returncode != 0:
-            err = " ".join(done.stderr.split())[-300:]
-            raise PowerFailed(f"power command {cmd!r} failed (exit status {done.returncode})" + (f": {err}" if err else ""))
+        run_command(cmd, self.timeout, what="power command", longer="--power-cmd-timeout")
 
     def off(self) -> None:
         self._run(self.off_cmd)

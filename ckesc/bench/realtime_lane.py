@@ -25,9 +25,10 @@ class RealtimeEmulatorLane(BusLane):
     name = "realtime"
 
     def __init__(self, *, nodes=(1,), faults=None, flash_path: str | None = None, seed: int = 0,
-                 timing_error: float = DEFAULT_BUS_ERROR_S, temp_flash: bool = False, esc_options: dict[str, Any] | None = None) -> None:
+                 timing_error: float = DEFAULT_BUS_ERROR_S, temp_flash: bool = False, esc_options: dict[str, Any] | None = None,
+                 firmware: str | None = None) -> None:
         cmd = [sys.executable, "-m", "ckesc", "emulate", "--nodes", ",".join(map(str, nodes)), "--socketcand", "0",
-               "--control", "0", "--seed", str(seed)]
+               "--control", "0", "--seed", str(seed), *(("--firmware", firmware) if firmware else ())]
         for key, value in (esc_options or {}).items():  # conforming variants: --option NAME=VALUE; others (boot_spread):
             cmd += ["--option", f"{key}={value}"] if key in FREEDOMS else [f"--{key.replace('_', '-')}", str(value)]
         if faults:

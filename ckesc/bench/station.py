@@ -24,9 +24,10 @@ from collections.abc import Callable
 from typing import Any
 
 from ..emulator import variants
-from . import checks, proof
+from . import checks, firmware, proof
+from .errors import PreflightError
 from .lanes import BusLane, Lane, SimLane
-from .link import echo_probe
+from .link import DutError, DutUnreachable, Link, echo_probe
 from .options import BENCH_ROWS, BUS_OPEN_TIMEOUT_S, DUT, SAME, BenchOptions, Option  # noqa: F401 - imported from here
 from .power import PowerControl, Prompt, open_power
 from .profile import DEFAULT_BUS_ERROR_S, DutProfile
@@ -52,6 +53,7 @@ def build(options: BenchOptions, *, prompt: Prompt = console_prompt,
     bench's and before anything is opened (the session's reports directory). A mistake is a
     :class:`.errors.PreflightError`; nothing is left open by one."""
     profile = checks.check(options)
+    image = firmware_image(options)
     if before_opening is not None:
         before_opening()
     power: PowerControl | None = None
@@ -64,7 +66,29 @@ def build(options: BenchOptions, *, prompt: Prompt = console_prompt,
         except BaseException:
             _close_power(power)
             raise
-    return Station(options, profile, power, kwargs)
+    return Station(options, profile, power, kwargs, image)
+
+
+def firmware_image(options: BenchOptions) -> firmware.Image | None:
+    """``--firmware``, ``--flash-cmd`` and ``--expect-firmware`` checked (:mod:`.firmware`): the image under test,
+    or None when none is given; a mistake is a :class:`.errors.PreflightError`."""
+    if not options.firmware:
+        for given, flag in ((options.flash_cmd, "--flash-cmd"), (options.expect_firmware, "--expect-firmware")):
+            if given:
+                raise PreflightError(f"{flag} needs --firmware IMAGE (the image it flashes or proves)")
+        return None
+    image = firmware.load(options.firmware, options.expect_firmware)
+    if options.dut == "bus" and not options.flash_cmd:
+        raise PreflightError("--firmware on a real bus needs --flash-cmd \"CMD {image}\" (the command that writes the "
+                             "image into the ESC)")
+    if options.dut == "emulator" and not image.emulated:
+        raise PreflightError(f"--firmware {options.firmware}: --dut emulator runs an emulator image (a TOML file with an "
+                             "[esc_information] table: docs/firmware.md), not a binary")
+    if options.flash_cmd and options.flash_cmd != firmware.BUILTIN:
+        checks.command(firmware.command_line(options.flash_cmd, image), "--flash-cmd")
+    checks.fault_names(",".join(image.faults), f"{image.path.name}: faults")
+    checks.emulator_options(image.options)
+    return image
 
 
 def _close_power(power: PowerControl | None) -> None:
@@ -82,11 +106,16 @@ class Station:
     the bench proof; :meth:`close` closes the lane and releases the power control (idempotent)."""
 
     def __init__(self, options: BenchOptions, profile: DutProfile, power: PowerControl | None,
-                 bus_kwargs: dict[str, Any] | None) -> None:
+                 bus_kwargs: dict[str, Any] | None, image: firmware.Image | None = None) -> None:
         self.options = options
         self.emulated = options.dut == "emulator"
-        #: the conforming variant the emulated ESCs play ({EscConfig field: value}; checked by :func:`build`)
-        self.played: dict[str, Any] = (checks.emulator_options(options.emulator_option, options.emulator_variants)
+        #: the firmware image under test (``--firmware``) and, once flashed and proven, what the reports say of it
+        self.image = image
+        self.firmware: dict[str, Any] | None = None
+        own = image.options if image is not None and self.emulated else ()
+        #: the conforming variant the emulated ESCs play ({EscConfig field: value}; checked by :func:`build`): an
+        #: emulator image's options, then the command line's
+        self.played: dict[str, Any] = (checks.emulator_options([*own, *options.emulator_option], options.emulator_variants)
                                        if self.emulated else {})
         for key, value in variants.declared(self.played).items():  # what the emulated ESC's vendor would state
             if value > getattr(profile, key):
@@ -104,6 +133,9 @@ class Station:
         caller's listeners: its trace and live rules read every frame from the first), then on a real bus whether the
         host's own frames come back (:meth:`.lanes.BusLane.find_echo`), and only then the foreign traffic
         (``--foreign-traffic``), so that without an echo every frame it plays is handed out from its first."""
+        if self.image is not None and not self.emulated and self.firmware is None:
+            raise PreflightError("--firmware on a real bus is flashed and proven by ckesc run's bench proof: this "
+                                 "command does not flash (run ckesc run --firmware first, then this without it)")
         if self.lane is None:
             self.lane = self._new_lane()
             try:
@@ -121,13 +153,14 @@ class Station:
     def _new_lane(self) -> Lane:
         o, profile = self.options, self.profile
         if self.emulated:
-            faults = checks.fault_names(o.emulator_faults)
+            faults = self._faults()
             nodes = checks.node_list(o.nodes or "1")
             if o.lane == "realtime":
                 return RealtimeEmulatorLane(nodes=nodes, faults=faults, temp_flash=True, esc_options=self.played,
-                                            seed=o.emulator_seed, timing_error=max(profile.error_s, DEFAULT_BUS_ERROR_S))
+                                            seed=o.emulator_seed, timing_error=max(profile.error_s, DEFAULT_BUS_ERROR_S),
+                                            firmware=str(self.image.path) if self.image else None)
             # in one process the emulated ESCs keep their flash contents across power cycles: no file needed
-            lane = SimLane(nodes=nodes, faults=faults, seed=o.emulator_seed, esc_config={"boot_time": 0.25, **self.played})
+            lane = SimLane(nodes=nodes, faults=faults, seed=o.emulator_seed, esc_config=self._esc_config())
             # exact timestamps; a profile may still state a bench's error (0 for the emulator's own): margins below it
             # are then INCONCLUSIVE as on that bench, e.g. to see what a 2 ms bench can tell
             lane.timing_error = profile.error_s
@@ -141,11 +174,20 @@ class Station:
         caller closes it."""
         o = self.options
         if o.lane == "realtime":
-            return RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=timing_error, esc_options=self.played)
-        lane = SimLane(nodes=MULTI_NODES, faults=checks.fault_names(o.emulator_faults), seed=o.emulator_seed,
-                       esc_config={"boot_time": 0.25, **self.played})
+            return RealtimeEmulatorLane(nodes=MULTI_NODES, timing_error=timing_error, esc_options=self.played,
+                                        firmware=str(self.image.path) if self.image else None)
+        lane = SimLane(nodes=MULTI_NODES, faults=self._faults(), seed=o.emulator_seed, esc_config=self._esc_config())
         lane.timing_error = timing_error  # the profile's stated error, as on the DUT's lane
         return lane
+
+    def _faults(self) -> list[str]:
+        """The emulated ESCs' faults: an emulator image's, then ``--emulator-faults``."""
+        own = self.image.faults if self.image is not None else ()
+        return checks.fault_names(",".join([*own, self.options.emulator_faults]))
+
+    def _esc_config(self) -> dict[str, Any]:
+        """The simulated lane's EscConfig fields: its short boot, an emulator image's 240 answer, the variant played."""
+        return {"boot_time": 0.25, **(self.image.esc_config if self.image is not None else {}), **self.played}
 
     def close_lane(self) -> None:
         lane, self.lane = self.lane, None
@@ -170,9 +212,10 @@ class Station:
         GET_ESC_ID, the node id given among them, and where the run may cycle power (``cycles_power``) and a switch
         is given (not manual: an operator is the proof), the switch itself. A failure is a
         :class:`.errors.PreflightError`; returns what was proven, for the run to say."""
-        if self.emulated:
-            return []
         o = self.options
+        output = firmware.flash(self.image, o.flash_cmd or firmware.BUILTIN, o.flash_timeout) if self.image else ""
+        if self.emulated:
+            return self._prove_image(output) if self.image else []
         lane = self._new_lane()
         assert isinstance(lane, BusLane)
         try:
@@ -181,14 +224,43 @@ class Station:
             said = [f"bench: {', '.join(f'node {n}' for n in link.nodes)} answered GET_ESC_ID on the bus ({where}); the "
                     f"DUT is node {link.node_id}"]
             kind = o.power or "none"
-            if lane.power.available and kind != "manual" and cycles_power:
+            # a flash tool that does not reset the ESC: the proven power cycle starts the image
+            if lane.power.available and kind != "manual" and (cycles_power or self.image is not None):
                 named = ({"off": f"--power-off-cmd {o.power_off_cmd!r}", "on": f"--power-on-cmd {o.power_on_cmd!r}"}
                          if kind == "command" else
                          {"off": f"power off ({lane.power.name})", "on": f"power on ({lane.power.name})"})
                 said.append(f"bench: power switch ({kind}) {proof.prove_power(link, named)}")
+            if self.image is not None:
+                said.append(self._image_answers(link, output))
             return said
         finally:
             lane.close()
+
+    def _prove_image(self, output: str) -> list[str]:
+        """An emulator image proven as a real one is: the emulated ESC asked 240 on a lane of its own."""
+        lane = self._new_lane()
+        try:
+            nodes = checks.node_list(self.options.nodes or "1")
+            link = Link(lane, self.profile, node_id=self.options.node_id or nodes[0])
+            try:
+                link.discover()  # booted: it answers GET_ESC_ID
+            except DutUnreachable:
+                pass  # 240 gets no answer either: said so
+            return [self._image_answers(link, output)]
+        finally:
+            lane.close()
+
+    def _image_answers(self, link: Link, output: str) -> str:
+        """240 asked and judged against the image's expectation (:func:`.firmware.prove`); what the reports say of
+        the image kept in :attr:`firmware`."""
+        assert self.image is not None
+        try:
+            ex = link.request("esc_information", {"option": 0})
+            fields = ex.response.physical() if ex.response is not None else None
+        except DutError:
+            fields = None
+        self.firmware = firmware.report(self.image, self.options.flash_cmd, output, fields)
+        return firmware.prove(self.image, fields)
 
 
 class ForeignPlay:

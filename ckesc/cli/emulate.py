@@ -103,9 +103,10 @@ def _run_emulate(args: argparse.Namespace) -> int:
     check_faults(args.faults, "--faults")
     if args.rt_priority is not None and not 1 <= args.rt_priority <= 99:
         raise UsageError(f"--rt-priority must be 1..99 (SCHED_FIFO), not {args.rt_priority}")
-    faults = _fault_spec(args.faults, args.nodes)
+    image = _image(args.firmware)
+    faults = _fault_spec(",".join([*(image.faults if image else ()), *([args.faults] if args.faults else [])]), args.nodes)
     try:
-        bench = EmulatedBench(args.nodes, faults=faults, flash=args.flash_path, seed=args.seed, config=_model_options(args))
+        bench = EmulatedBench(args.nodes, faults=faults, flash=args.flash_path, seed=args.seed, config=_model_options(args, image))
     except FlashError as exc:
         raise UsageError(str(exc)) from None
     except ValueError as exc:  # unknown fault names, listed with the known ones
@@ -156,12 +157,30 @@ def _run_emulate(args: argparse.Namespace) -> int:
     return ExitStatus.OK
 
 
-def _model_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The EscConfig fields the command line sets for every ESC: --boot-time, --report-delay, --report-timer,
-    then the conforming combination --variants SEED draws, then each --option NAME=VALUE."""
-    out = {"boot_time": args.boot_time, "report_delay": args.report_delay, "report_timer": args.report_timer}
+def _image(path: str | None):
+    """``--firmware IMAGE``: the emulator image every ESC runs (:mod:`ckesc.bench.firmware`), or None."""
+    from ..bench import firmware
+    from ..bench.errors import PreflightError
+
+    if path is None:
+        return None
     try:
-        return {**out, **variants.combination(args.option or (), args.variants)}
+        image = firmware.load(path)
+    except PreflightError as exc:
+        raise UsageError(str(exc)) from None
+    if not image.emulated:
+        raise UsageError(f"--firmware {path}: not an emulator image (a TOML file with an [esc_information] table)")
+    return image
+
+
+def _model_options(args: argparse.Namespace, image: Any = None) -> dict[str, Any]:
+    """The EscConfig fields the command line sets for every ESC: --boot-time, --report-delay, --report-timer, an
+    emulator image's 240 answer, then the conforming combination --variants SEED draws, then the image's options and
+    each --option NAME=VALUE."""
+    out = {"boot_time": args.boot_time, "report_delay": args.report_delay, "report_timer": args.report_timer,
+           **(image.esc_config if image else {})}
+    try:
+        return {**out, **variants.combination([*(image.options if image else ()), *(args.option or ())], args.variants)}
     except variants.VariantError as exc:
         raise UsageError(f"--option: {exc}") from None
 
@@ -186,6 +205,9 @@ def add_emulate_command(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--nodes", type=_node_ids, default=[1], metavar="IDS", help="node ids of factory-fresh ESCs: 1,2,3 or 1-20 (default 1); none: a bare hub for other clients")
     p.add_argument("--faults", metavar="NAMES", help="faults for every ESC, name@node for one (see ckesc.emulator.faults)")
+    p.add_argument("--firmware", metavar="IMAGE",
+                   help="an emulator image (a TOML file: its ESC Information 240 answer, faults and options; "
+                   "docs/firmware.md) every ESC runs")
     p.add_argument("--flash-path", metavar="FILE", help="flash file: settings and counters persist across runs (default: none)")
     p.add_argument("--seed", type=int_arg, default=0, metavar="N", help="seed of the models' noise (default 0)")
     p.add_argument("--socketcand", type=port_arg, metavar="PORT", help="serve socketcand on 127.0.0.1:PORT (0: a free port)")

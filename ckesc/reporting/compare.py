@@ -36,7 +36,7 @@ from ..protocol.requirements import REQUIREMENTS, SECTION_TITLES, VERDICT_LEGEND
 from .comparing import RunError, comparison, differs, first_line, is_soak, last_line, letter, pair_name, read_doc
 from .comparing import page as page_frame
 from .htmlkit import badge, e, new_figure, svg
-from .results import NotRun, Result, RunInfo, RunRecord, broken_requirements, incomplete_banner, requirement_result
+from .results import NotRun, Result, RunInfo, RunRecord, broken_requirements, firmware_rows, incomplete_banner, requirement_result
 
 GOOD = (Verdict.PASS, Verdict.OBSERVED)
 BAD = (Verdict.FAIL, Verdict.ERROR, Verdict.INCONCLUSIVE)
@@ -101,6 +101,7 @@ def identity(info: dict[str, Any], label: str = "") -> dict[str, str]:
         rows.update({k.replace("_", " "): v for k, v in esc.items() if not k.startswith("firmware_")})
     elif "esc_information" in info:
         rows["ESC information (240)"] = "no answer"
+    rows.update(firmware_rows(info))
     rows.update({"DUT": info.get("dut"), "node id": info.get("node_id"), "profile": info.get("profile"),
                  "lane": info.get("lane"), "clock": info.get("clock"),
                  "bit rate": f"{info['bitrate']} bit/s" if info.get("bitrate") else None, "power": info.get("power"),

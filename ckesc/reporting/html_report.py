@@ -34,6 +34,7 @@ from .results import (
     RunRecord,
     broken_requirements,
     claim_text,
+    firmware_rows,
     incomplete_banner,
     profile_warnings,
     requirement_result,
@@ -109,6 +110,7 @@ def _identity(info: dict[str, Any]) -> str:
         rows += [(k.replace("_", " "), v) for k, v in esc.items() if not k.startswith("firmware_")]
     elif "esc_information" in info:
         rows.append(("ESC information (240)", "no answer"))
+    rows += firmware_rows(info)
     body = "".join(f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in rows if v not in (None, ""))
     return f'<section id=dut><h2>Device under test</h2><table class="kv">{body}</table></section>'
 

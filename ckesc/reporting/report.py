@@ -36,7 +36,7 @@ from ..protocol.requirements import (
     section_key,
 )
 from . import causes, gate, html_report
-from .results import RunRecord, claim_text, incomplete_banner, profile_warnings
+from .results import RunRecord, claim_text, firmware_rows, incomplete_banner, profile_warnings
 
 
 def _properties(r) -> dict[str, str]:
@@ -204,6 +204,7 @@ def summary_text(results: list, info: dict[str, Any]) -> str:
                  + (f" ({', '.join(cov['uncovered'][:12])}{' ...' if len(cov['uncovered']) > 12 else ''})" if cov["uncovered"] else ""))
     dut = ", ".join(f"{k}={info[k]}" for k in ("dut", "lane", "profile", "node_id", "bitrate", "power", "faults") if info.get(k) not in (None, ""))
     lines.append(f"DUT: {dut}")
+    lines += [f"{label}: {value}" for label, value in firmware_rows(info)]
     if info.get("emulator_variants") not in (None, "", "defaults"):  # a conforming variant: replayable from these
         seed = info.get("emulator_variants_seed")
         lines.append(f"variant: {info['emulator_variants']}" + (f" (drawn from --emulator-variants {seed})" if seed is not None else ""))

@@ -130,7 +130,8 @@ class RunInfo(TypedDict, total=False):
     The DUT and bench: ``dut`` (emulator / bus), ``lane``, ``clock`` (simulated, bus timestamp, host clock),
     ``profile``, ``node_id``, ``bitrate``, ``power``, ``power_labgrid``, ``faults`` and ``emulator_variants``
     (``emulator_variants_seed``) of an emulator, ``esc_information`` (ESC Information 240's fields; None: no
-    answer), ``not_claimed`` (the functions the profile declares absent, R9b), ``profile_warnings`` (its claims the DUT
+    answer), ``firmware`` (``--firmware``: the image, its ``sha256``, the ``flash_cmd`` and its ``flash_output``'s tail, what
+    240 was ``expected`` to answer and ``answered``), ``not_claimed`` (the functions the profile declares absent, R9b), ``profile_warnings`` (its claims the DUT
     contradicted at the run's start) and ``profile_check`` (what the DUT was asked for them). Timing: ``timing_error_s`` (the
     bench's stated error), ``jitter_s`` (the DUT's allowance), ``interval_tolerance_ms`` (what the plots band),
     ``echo``, ``echo_note``, ``own_frames_clock``, ``own_frames_error_s`` (what times the host's own frames),
@@ -153,6 +154,7 @@ class RunInfo(TypedDict, total=False):
     emulator_variants: str
     emulator_variants_seed: int | None
     esc_information: dict[str, Any] | None
+    firmware: dict[str, str]
     not_claimed: str
     profile_warnings: list[str]
     profile_check: str
@@ -180,6 +182,18 @@ class RunInfo(TypedDict, total=False):
     run_id: str
     suite_version: str
     git_revision: str | None
+
+
+def firmware_rows(info: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """The image under test (``info["firmware"]``, ``--firmware``) as (label, value) rows, in the words every report
+    uses (the HTML header, summary.txt, ``ckesc compare``'s identity table); none without an image."""
+    fw = info.get("firmware")
+    if not isinstance(fw, Mapping):
+        return []
+    rows = [("firmware image", fw.get("image")), ("image SHA-256", fw.get("sha256")),
+            ("240 expected", fw.get("expected")), ("240 answered", fw.get("answered")),
+            ("flash command", fw.get("flash_cmd")), ("flash output", fw.get("flash_output"))]
+    return [(k, str(v)) for k, v in rows if v not in (None, "")]
 
 
 class NotRun(TypedDict, total=False):

@@ -137,6 +137,8 @@ def bench_proof(config: pytest.Config, items: list[pytest.Item]) -> None:
         said = [*(st.profile.defaults_taken if st.profile else ()), *proven]
     except PreflightError as exc:
         raise pytest.UsageError(f"preflight: {exc}") from None
+    if st.station is not None and st.station.firmware is not None:  # the image flashed and proven (--firmware)
+        st.info["firmware"] = st.station.firmware
     if said:
         st.info["bench"] = said
         tr = config.pluginmanager.get_plugin("terminalreporter")
