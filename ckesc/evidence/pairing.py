@@ -1,6 +1,7 @@
 """Which GET_ESC_ID query a reply answers, sans-IO: the one owner of that decision. The suite's helpers
-(``conformance/answers.py``), the bus rules and check-log (:mod:`.tracker`) and the soak's ``AnswerWatch`` feed
-it every query and every reply, with their times, and take its word.
+(``conformance/answers.py``) and the bus reader (:mod:`.tracker`: the bus rules, check-log, and the soak, whose
+``AnswerWatch`` takes the reader's word with each reply) feed it every query and every reply, with their times, and
+take its word.
 
 A reply is a broadcast that names no query (R1). Every ESC answers each query once, in its slot after it, within
 64 ms (R2); another host on the bus (a flight controller at node 10, F6) queries too, and the ESC may answer it as
@@ -40,16 +41,13 @@ QUERIES_KEPT = 64
 NODES_KEPT = 256
 #: decisions kept whole (the rest are counted in :attr:`QueryPairing.tally`)
 KEPT = 100
-#: a query's source when the feeder knows only that it was not the host (the soak's other nodes)
-ANOTHER_NODE = -1
 
 HOST, OTHER, AMBIGUOUS, NONE = "host", "another node", "ambiguous", "none"
 
 
 @dataclass(frozen=True, slots=True)
 class Query:
-    """A GET_ESC_ID query heard: when, from which node (:data:`ANOTHER_NODE`: not the host, which one unknown), and
-    its place in the order heard."""
+    """A GET_ESC_ID query heard: when, from which node, and its place in the order heard."""
 
     t: float
     source: int
