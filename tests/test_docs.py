@@ -220,6 +220,9 @@ BY_HAND = {
     ("docs/emulator.md", "603 s"): "the same measurement",
     ("docs/soak.md", "532 s"): "one event of a diagnosis told as a story (when it happened), no figure a generator owns",
     ("docs/soak.md", "1.2 s"): "the same event",
+    ("docs/cli.md", "30 s"): "examples of how a duration is written (1 min 30 s), not a figure of anything",
+    ("docs/cli.md", "37 s"): "the same examples",
+    ("docs/cli.md", "42.5 s"): "the same examples",
 }
 
 
