@@ -1,4 +1,4 @@
-"""Whether a command can read what it was given and write where it was told to, asked before any work and without making anything (issue #38):
+"""Whether a command can read what it was given and write where it was told to, asked before any work and without leaving anything made (issue #38):
 a reports directory that is missing is fine when it could be made, a file in the way or a directory this user cannot
 write into is one line that names the option. The command line (``ckesc/cli/common.py``) and a run's preflight
 (``ckesc/session/preflight.py``) say it in the same words, :func:`not_writable`."""
@@ -6,6 +6,7 @@ write into is one line that names the option. The command line (``ckesc/cli/comm
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 
@@ -17,9 +18,15 @@ def _nearest(path: Path) -> Path:
 
 
 def _refused(where: Path) -> str | None:
-    """Why this user cannot make entries in the existing directory ``where`` (None: it can)."""
+    """Why this user cannot make entries in the existing directory ``where`` (None: it can). Where the permissions
+    say yes, the kernel is asked too, with an entry made and removed at once: root passes ``os.access`` everywhere,
+    and /proc, sysfs or a read-only mount refuse it anyway."""
     if os.access(where, os.W_OK | os.X_OK):
-        return None
+        try:
+            os.rmdir(tempfile.mkdtemp(prefix=".ckesc-probe-", dir=where))
+            return None
+        except OSError as exc:
+            return f"{where}: {(exc.strerror or str(exc)).lower()}"
     try:
         if os.statvfs(where).f_flag & os.ST_RDONLY:
             return f"{where} is on a read-only file system"

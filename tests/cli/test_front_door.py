@@ -22,6 +22,9 @@ MISTAKES = [
     (["profile", "init", "--output", "{blocked}/p.toml"], ["profile file", "--output"]),
     (["profile", "init", "--output", "{tmp}/no-such-dir/p.toml"], ["no directory", "--output"]),
     (["soak", "--reports", "{blocked}/reports"], ["reports directory", "--reports"]),
+    # a directory whose permissions say yes to root and whose file system says no (/proc): the kernel decides
+    (["explore", "--budget", "5s", "--reports", "/proc/ckesc-reports"], ["reports directory", "--reports"]),
+    (["soak", "--reports", "/proc/ckesc-reports"], ["reports directory", "--reports"]),
     (["soak", "--duration", "0"], ["--duration", "0 is zero"]),
     (["soak", "--duration", "-5m"], ["--duration", "below zero"]),
     (["soak", "--duration", "90x"], ["--duration", "'90x' is not a duration"]),
