@@ -147,9 +147,12 @@ class BusRules(Tracker):
         """One frame as it was on the bus: its timestamp is when it ended (SocketCAN, the simulated lane).
         ``own``: the host's own frame (its echo). Returns the violations it shows (usually none)."""
         self.frames += 1
-        if ts < self.last_ts:
+        if ts >= self.last_ts:
+            self.last_ts = ts
+        elif ts < self.last_ts - self.tolerance:  # back by more than the stamps' stated error: the clock went back
             self._time_jump(ts)
-        self.last_ts = ts
+            self.last_ts = ts
+        # (back by less: two frames stamped in the other order within their error, e.g. by two handles; no jump)
         if self.first_ts is None:
             self.first_ts = ts
         n = len(data)

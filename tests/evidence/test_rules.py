@@ -324,6 +324,16 @@ def test_time_going_back_restarts_the_comparisons():
     assert rules.summary()["time_jumps"] == 1
 
 
+def test_two_frames_stamped_in_the_other_order_within_the_stated_error_are_no_time_jump():
+    """A bench's stamps may reorder two frames by less than its stated error (two handles, a hub stamping on arrival:
+    16 us seen): that is no clock going back, so the comparisons across it are not restarted."""
+    rules = BusRules(tolerance=0.002, complete=True)
+    rules.feed(0x1E321A32, b"\x01", 1.07)
+    rules.feed(0x1E321A32, b"\x01", 1.07 - 0.000016)  # back by 16 us: within the 2 ms stated
+    rules.feed(0x1E321A32, b"\x01", 1.07 - 0.5)  # back by half a second: the clock went back
+    assert rules.summary()["time_jumps"] == 1
+
+
 # ------------------------------------------------------------------------------------------ comm loss and memory
 def test_comm_loss_events():
     rules = BusRules()
