@@ -261,9 +261,10 @@ def test_commands_obeyed_under_load(dut, share, priority):
 
 
 @contextlib.contextmanager
-def timing_unjudged(dut, what: str):
+def timing_unjudged(dut, what: str, why: str = "R18: OBSERVE above half load"):
     """While the block runs, the live bus rules' report timing (R9, R9a) fails no test: R18 makes it OBSERVE above
-    half load. What they found is recorded."""
+    half load (``why``: another reading that does, R20's reports held through a bus fault). What they found is
+    recorded."""
     watchers = [w for w in dut.lane.listeners if isinstance(w, LaneRules)]
     for w in watchers:
         w.excuse(UNJUDGED_ABOVE_HALF)
@@ -272,7 +273,7 @@ def timing_unjudged(dut, what: str):
     finally:
         excused = [v for w in watchers for v in w.excuse(frozenset())]
         if excused:
-            dut.record.observe(f"bus rules' report timing {what} (R18: OBSERVE above half load)",
+            dut.record.observe(f"bus rules' report timing {what} ({why})",
                                f"{len(excused)}: " + "; ".join(v.message for v in excused[:3]))
 
 
