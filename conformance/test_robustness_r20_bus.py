@@ -60,7 +60,7 @@ def _flushed(dut, s: dict, end: float, bound: float) -> None:
 def _restore(dut, control) -> None:
     """An ESC still silent (bus-off without recovery) comes back at a power cycle, as on a real bench."""
     if not control.settle():
-        dut.power_cycle()
+        dut.switch_power()  # (not proven by 241: the ESC was silent before it; the verdict is the test's own)
         control.settle()
 
 
