@@ -2,14 +2,19 @@
 
 A test asks :func:`bus_fault_control` for its lane's control and calls ``cause(kind, seconds)``; it returns once the
 fault has ended. Kinds: ``"short"`` (CANH to CANL, every bit dominant: every transmitter meets bit errors and goes
-bus-off). A lane without a control gives None: the test SKIPs (:data:`NO_CONTROL`), never PASSes.
+bus-off), ``"other_bitrate"`` (a node at another bit rate sending: each of its frames is a run of errors to every
+other node, and a frame another node tries meanwhile meets a bit error). A lane without a control gives None: the
+test SKIPs (:data:`NO_CONTROL`), never PASSes.
 
 - The simulated lane: its world's :meth:`~ckesc.emulator.sim_can.CanNodes.short`. The lane runs without
   acknowledgement (``SIM_CAN`` in :mod:`.lanes`), where nothing can go bus-off; the control turns the CAN model's
   acknowledgement and error confinement on for the fault and its recovery only (from an idle bus), and back off once
   every controller is error-active again with an empty queue, so the rest of the suite keeps its bus. A controller
   that does not recover by itself keeps it on until :meth:`SimBusFault.settle` after a power cycle.
-- A real bench: ``--bus-fault-cmd "CMD {seconds}"`` (a relay across CANH-CANL closed for ``{seconds}``), run as the
+  A node at another bit rate is played as what the others meet: a short of :data:`FOREIGN_FRAME_S` (a frame at 250
+  kbit/s) every :data:`FOREIGN_PERIOD_S` (the CAN model does not mix bit rates on its wires).
+- A real bench: ``--bus-fault-cmd "CMD {seconds}"`` (a relay across CANH-CANL closed for ``{seconds}``; with
+  ``{kind}`` in it, the command is asked for ``other_bitrate`` too, else only ``short``), run as the
   power commands are (:mod:`.power`): a command that fails or outlives ``seconds`` plus ``--power-cmd-timeout`` is a
   bench error (:class:`~.errors.PowerFailed`'s kind: :class:`BusFaultFailed`).
 """
@@ -25,7 +30,11 @@ from .errors import BenchError
 #: the skip of a test whose lane cannot disturb the bus
 NO_CONTROL = "no bus-fault control: give --bus-fault-cmd"
 #: the kinds of fault a control may cause
-KINDS = ("short",)
+KINDS = ("short", "other_bitrate")
+#: ``other_bitrate`` in the simulated lane: how long each frame of the node at another bit rate holds the bus (an
+#: 8-byte extended frame at 250 kbit/s) and how often it sends one (1 kHz: a babbling node)
+FOREIGN_FRAME_S = 0.0005
+FOREIGN_PERIOD_S = 0.001
 #: how long the simulated control waits, after a fault, for every controller to settle (recovered, queue empty)
 SETTLE_S = 0.5
 
@@ -55,11 +64,19 @@ class SimBusFault:
             # their controllers (every frame from now on goes through its sender's queue)
             world.run_until(world.now + SETTLE_S, stop=lambda: not world._ready and world._in_flight is None)
             world.ack = self._opened = True
-        world.short(seconds)
-        self.lane.wait_power(seconds)
+        if kind == "short":
+            world.short(seconds)
+            self.lane.wait_power(seconds)
+        else:
+            for _ in range(round(seconds / FOREIGN_PERIOD_S)):
+                world.short(FOREIGN_FRAME_S)
+                self.lane.wait_power(FOREIGN_PERIOD_S)
         end = world.now
         self.settle()
         return end
+
+    def can(self, kind: str) -> bool:
+        return kind in KINDS
 
     def settled(self) -> bool:
         """Every controller error-active (or warning) with nothing to send, nothing on the bus."""
@@ -91,10 +108,14 @@ class CommandBusFault:
             raise ValueError("--bus-fault-cmd needs {seconds} (how long the relay shorts the bus)")
         self.cmd, self.timeout = cmd, timeout
 
+    def can(self, kind: str) -> bool:
+        """Whether the command causes ``kind`` (it names ``{kind}``, or ``kind`` is a short)."""
+        return kind == "short" or "{kind}" in self.cmd
+
     def cause(self, kind: str, seconds: float) -> float | None:
         if kind not in KINDS:
             raise ValueError(f"bus fault {kind!r}: one of {', '.join(KINDS)}")
-        cmd = self.cmd.replace("{seconds}", f"{seconds:g}")
+        cmd = self.cmd.replace("{seconds}", f"{seconds:g}").replace("{kind}", kind)
         limit = seconds + self.timeout
         try:
             done = subprocess.run(shlex.split(cmd), capture_output=True, text=True, timeout=limit)
