@@ -20,6 +20,7 @@ import pytest
 from ckesc.bench.bus_fault import NO_CONTROL, bus_fault_control
 from ckesc.bench.dut import DutError
 from ckesc.bench.outcomes import Inconclusive
+from ckesc.bench.power import POWER_COMMAND_TIMEOUT_S
 from ckesc.protocol.canbus import recovery_seconds
 from ckesc.protocol.catalogue import Status
 
@@ -35,8 +36,9 @@ SECTION = "robustness"
 SHORT_S = 0.5
 
 
-def _control(dut, kind: str = "short"):
-    control = bus_fault_control(dut.lane)
+def _control(dut, config, kind: str = "short"):
+    control = bus_fault_control(dut.lane, config.getoption("bus_fault_cmd"),
+                                config.getoption("power_cmd_timeout") or POWER_COMMAND_TIMEOUT_S)
     if control is None:
         pytest.skip(NO_CONTROL)
     if not control.can(kind):
@@ -75,11 +77,11 @@ FAULTS = {"short": "bus short (CANH-CANL)", "other_bitrate": "node at another bi
 
 @pytest.mark.requirement("R20-recovery")
 @pytest.mark.parametrize("kind", list(FAULTS))
-def test_reports_go_on_after_a_bus_fault(dut, kind):
+def test_reports_go_on_after_a_bus_fault(dut, kind, pytestconfig):
     """After a short that sent it bus-off, or a node at another bit rate sending: MSG1 again within the recovery
     time + two MSG1 intervals + the bench's error, no reset (no report gap with the transfer ids starting again, 241's
     power-up count unmoved) and the settings (242) unchanged."""
-    control = _control(dut, kind)
+    control = _control(dut, pytestconfig, kind)
     s = dut.settings()
     ups = dut.power_up_count()
     interval = interval_s(s, "msg1")
@@ -121,12 +123,12 @@ def _flag(f) -> bool:
 
 
 @pytest.mark.requirement("R20-comm", "R8", "R20-recovery")
-def test_comm_flag_rises_through_a_bus_short_and_clears(dut):
+def test_comm_flag_rises_through_a_bus_short_and_clears(dut, pytestconfig):
     """Under a zero-throttle stream the flag is clear; the stream stops as the bus is shorted (the commands cannot
     reach the ESC) for longer than R8's timeout and an MSG1 interval: the ESC's reports once they are back carry the
     comm flag, and the next command clears it within two MSG1 intervals. It counts on R20-recovery (the ESC back by
     itself, without a reset: 241's power-up count is read before and after, so that a reset shows in this test)."""
-    control = _control(dut)
+    control = _control(dut, pytestconfig)
     s = can_throttle(dut)
     ups = dut.power_up_count()
     interval = interval_s(s, "msg1")

@@ -26,6 +26,7 @@ import subprocess
 from typing import Any
 
 from .errors import BenchError
+from .power import POWER_COMMAND_TIMEOUT_S
 
 #: the skip of a test whose lane cannot disturb the bus
 NO_CONTROL = "no bus-fault control: give --bus-fault-cmd"
@@ -134,12 +135,15 @@ class CommandBusFault:
         return True
 
 
-def bus_fault_control(lane: Any) -> SimBusFault | CommandBusFault | None:
-    """``lane``'s bus-fault control: the one the bench gave it (``lane.bus_fault``, from ``--bus-fault-cmd``), the
-    simulated lane's own, or None."""
+def bus_fault_control(lane: Any, cmd: str | None = None, timeout: float = POWER_COMMAND_TIMEOUT_S) -> SimBusFault | CommandBusFault | None:
+    """``lane``'s bus-fault control, kept on it: ``cmd`` (``--bus-fault-cmd``, run with ``timeout``:
+    ``--power-cmd-timeout``), else the simulated lane's own, else None."""
     given = lane.__dict__.get("bus_fault")
     if given is not None:
         return given
+    if cmd:
+        control = lane.__dict__["bus_fault"] = CommandBusFault(cmd, timeout)
+        return control
     if hasattr(lane, "sim") and hasattr(lane.sim, "world"):
         control = lane.__dict__["bus_fault"] = SimBusFault(lane)
         return control

@@ -25,7 +25,6 @@ from typing import Any
 
 from ..emulator import variants
 from . import checks, proof
-from .bus_fault import CommandBusFault
 from .lanes import BusLane, Lane, SimLane
 from .link import echo_probe
 from .options import BENCH_ROWS, BUS_OPEN_TIMEOUT_S, DUT, SAME, BenchOptions, Option  # noqa: F401 - imported from here
@@ -114,8 +113,6 @@ class Station:
                     self.lane.find_echo(echo_probe(nibble_order=self.profile.nibble_order))
                 if self.options.foreign_traffic:
                     self.foreign = ForeignPlay(self.options.foreign_traffic, self.lane)
-                if self.options.bus_fault_cmd:  # (the simulated lane has its own: bus_fault.bus_fault_control)
-                    self.lane.bus_fault = CommandBusFault(self.options.bus_fault_cmd, self.options.power_cmd_timeout)
             except BaseException:
                 self.close_lane()
                 raise
