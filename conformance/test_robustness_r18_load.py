@@ -31,7 +31,6 @@ import pytest
 from ckesc.bench.errors import HarnessError
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.bench.traffic_player import TrafficPlayer
-from ckesc.evidence.live import LaneRules
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.judgements import (
     R9_GAPS,
@@ -47,7 +46,7 @@ from ckesc.protocol.load import LoadSource
 
 from .answers import answer_window_s, check_answer_slot, host_replies, query_esc_id, settle, slot_node
 from .settings import changes, move_request
-from .telemetry import frame_start, interval_s, ms
+from .telemetry import frame_start, interval_s, ms, timing_unjudged
 
 SECTION = "robustness"
 
@@ -260,22 +259,6 @@ def test_commands_obeyed_under_load(dut, share, priority):
                           + " (R18: the ESC obeys its commands under load)")
 
 
-@contextlib.contextmanager
-def timing_unjudged(dut, what: str):
-    """While the block runs, the live bus rules' report timing (R9, R9a) fails no test: R18 makes it OBSERVE above
-    half load. What they found is recorded."""
-    watchers = [w for w in dut.lane.listeners if isinstance(w, LaneRules)]
-    for w in watchers:
-        w.excuse(UNJUDGED_ABOVE_HALF)
-    try:
-        yield
-    finally:
-        excused = [v for w in watchers for v in w.excuse(frozenset())]
-        if excused:
-            dut.record.observe(f"bus rules' report timing {what} (R18: OBSERVE above half load)",
-                               f"{len(excused)}: " + "; ".join(v.message for v in excused[:3]))
-
-
 @pytest.mark.requirement("R18-above-half")
 def test_above_half_load_is_recorded(dut):
     """At 70 % of the bus, each burst above the reports or below everything the ESC sends: the reports' intervals and
@@ -283,7 +266,7 @@ def test_above_half_load_is_recorded(dut):
     priority = "mixed"
     s = _short_intervals(dut)
     longest = max(interval_s(s, r) for r in cat.REPORT_FRAMES)
-    with timing_unjudged(dut, f"under {ABOVE_HALF:.0%} {priority} load"):
+    with timing_unjudged(dut, f"under {ABOVE_HALF:.0%} {priority} load", UNJUDGED_ABOVE_HALF, "R18: OBSERVE above half load"):
         with loaded(dut, ABOVE_HALF, priority, "above half") as load:
             t0 = dut.now()
             dut.wait((R9_GAPS + 1) * longest)

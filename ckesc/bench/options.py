@@ -98,6 +98,10 @@ BENCH_ROWS: tuple[Option, ...] = (
                 "replaced. python-can cannot set a SocketCAN bit rate: e.g. a script running `ip link set can0 down; ip link "
                 "set can0 type can bitrate {bitrate}; ip link set can0 up`, or `ckesc control --port P bitrate {bitrate}` "
                 "for the emulator on vcan0"),
+    Option("bus_fault_cmd", metavar="CMD",
+           help="--dut bus: command that disturbs the DUT's bus for the robustness section's R20 tests and returns when it "
+                "has ended; {seconds} is replaced (how long), {kind} (if given) by short or other_bitrate: e.g. a script "
+                "closing a relay across CANH-CANL for {seconds} (docs/robustness.md). Without it those tests SKIP"),
     Option("host_send_error", type=non_negative_float, default=DEFAULT_BUS_ERROR_S * 1000, run_default=None, metavar="MS",
            rig="host_send_error_ms",
            help="--dut bus, an adapter that does not echo the host's frames: how much later than the host clock at send a "

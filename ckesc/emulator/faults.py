@@ -94,6 +94,11 @@ _FAULTS = (
           "the comm watchdog is refreshed by any frame addressed to the ESC (a read, a setting request) and by a "
           "GET_ESC_ID query, not by RawCommand alone (a keep-alive beside the commands, as in the public cases): while "
           "queries and reads go on the comm-loss flag never rises, and one clears it as a command would"),
+    # the bus as CAN hardware makes it (R20)
+    Fault("no_busoff_recovery", ("R20-recovery",), "the CAN controller does not recover from bus-off by itself (no "
+          "automatic recovery, none by the firmware): after a bus short the ESC is silent until a power cycle"),
+    Fault("busoff_recovery_resets", ("R20-recovery",), "the ESC recovers from bus-off by rebooting (its firmware resets "
+          "on a bus-off): the power-up count moves and the transfer ids start again"),
     # throttle (4.4.15 - 4.4.17)
     Fault("throttle_channel_ignored", ("4.4.18-6",), "the ESC always follows channel 1, not its own throttle channel"),
     Fault("twelve_bit_nibbles_swapped", ("R4",), "RawCommand_12b is read with the nibbles of p1/p4 swapped"),

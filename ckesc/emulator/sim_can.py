@@ -46,7 +46,8 @@ class CanNodes:
             if options is not None:
                 ctl = CanController(node.bitrate, **options)
             elif isinstance(node, EscModel):
-                ctl = CanController(node.state.bitrate, txqueuelen=ESC_TX_MAILBOXES, order="priority")
+                ctl = CanController(node.state.bitrate, txqueuelen=ESC_TX_MAILBOXES, order="priority",
+                                    auto_recovery="no_busoff_recovery" not in node.faults)
             else:
                 ctl = CanController(node.bitrate or self._host_bitrate(), txqueuelen=None, order="priority")
             self._ctl[node] = ctl
@@ -133,6 +134,10 @@ class CanNodes:
         woke = False
         for node, ctl in list(self._ctl.items()):
             if ctl.bus_off_at is not None and ctl.poll(t):
+                if isinstance(node, EscModel) and "busoff_recovery_resets" in node.faults:
+                    self._reboot(node, t)
+                    woke = True
+                    continue
                 self._report(node, ctl)
                 if ctl and node not in self._contending:
                     self._contending.append(node)
@@ -145,6 +150,13 @@ class CanNodes:
         if woke:
             self._wake()
         self._set_alarm()
+
+    def _reboot(self, esc: EscModel, t: float) -> None:
+        """Fault ``busoff_recovery_resets``: the ESC's firmware resets at bus-off's end (its queue goes with it)."""
+        self._forget(esc)
+        esc.power_off(t)
+        esc.power_on(t)
+        self.bench.touch(esc)
 
     def short(self, seconds: float) -> None:
         """Short the bus (CANH to CANL) for ``seconds`` from now: every try meets a bit error, nothing is
