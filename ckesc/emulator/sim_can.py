@@ -125,7 +125,7 @@ class CanNodes:
             t = min(t, resume)
         for ctl in self._ctl.values():
             if ctl.bus_off_at is not None:
-                due = ctl.recovery_due()
+                due = ctl.recovery_due(self._short_until)  # (a short holds the bus dominant: no bit counts)
                 if due is not None:
                     t = min(t, due)
         self._alarm = t
@@ -133,7 +133,7 @@ class CanNodes:
     def _on_alarm(self, t: float) -> None:
         woke = False
         for node, ctl in list(self._ctl.items()):
-            if ctl.bus_off_at is not None and ctl.poll(t):
+            if ctl.bus_off_at is not None and ctl.poll(t, self._short_until):
                 if isinstance(node, EscModel) and "busoff_recovery_resets" in node.faults:
                     self._reboot(node, t)
                     woke = True

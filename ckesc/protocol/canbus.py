@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from collections import deque
 from enum import Enum
 from typing import Any, Iterator, NamedTuple
@@ -297,15 +298,17 @@ class CanController:
         self._settle(now)
 
     # ------------------------------------------------------------------ bus-off and its end
-    def recovery_due(self) -> float | None:
-        """When bus-off ends by itself (None: it is not bus-off, or it waits for :meth:`restart`)."""
+    def recovery_due(self, recessive_from: float = -math.inf) -> float | None:
+        """When bus-off ends by itself (None: it is not bus-off, or it waits for :meth:`restart`): 128 x 11 recessive
+        bits after it went bus-off, counted from ``recessive_from`` where the bus was held dominant until then (a
+        short: no recessive bit to count)."""
         if self.bus_off_at is None or not self.auto_recovery:
             return None
-        return self.bus_off_at + recovery_seconds(self.bitrate)
+        return max(self.bus_off_at, recessive_from) + recovery_seconds(self.bitrate)
 
-    def poll(self, now: float) -> bool:
-        """Recover from bus-off if its time has come; whether it did."""
-        due = self.recovery_due()
+    def poll(self, now: float, recessive_from: float = -math.inf) -> bool:
+        """Recover from bus-off if its time has come (:meth:`recovery_due`); whether it did."""
+        due = self.recovery_due(recessive_from)
         if due is None or now < due:
             return False
         self._reset(due, CAN_ERR_CRTL, bytes([0, CAN_ERR_CRTL_ACTIVE]))

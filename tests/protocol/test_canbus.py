@@ -132,6 +132,16 @@ def test_bus_off_ends_by_itself_after_128_times_11_recessive_bits():
     assert ctl.counts["recovered"] == 1
 
 
+def test_bus_off_recovery_counts_its_recessive_bits_only_once_a_short_has_ended():
+    ctl = CanController(BITRATE)
+    ctl.submit("frame", 0x100)
+    while not ctl.bus_off:
+        ctl.attempt(Attempt.SHORT, 0.001)
+    short_ends = 0.5  # the bus held dominant until then: not one recessive bit to count
+    assert ctl.recovery_due(short_ends) == pytest.approx(short_ends + 128 * 11 / BITRATE)
+    assert not ctl.poll(short_ends + 0.001, short_ends) and ctl.poll(short_ends + 0.003, short_ends)
+
+
 def test_without_automatic_recovery_only_a_restart_ends_bus_off():
     ctl = _bus_off(auto_recovery=False)
     assert ctl.recovery_due() is None
