@@ -51,7 +51,7 @@ def command_line(env_file: str, target: str | None) -> str:
     return " ".join(map(shlex.quote, argv)) + " {image}"
 
 
-def _driver(target: Any) -> tuple[Any, Any]:
+def _driver(target: Any, where: str) -> tuple[Any, Any]:
     """The target's flashing driver (the docstring's order) and how it writes an image."""
     from labgrid.exceptions import NoDriverFoundError
 
@@ -65,7 +65,7 @@ def _driver(target: Any) -> tuple[Any, Any]:
         if name == "FlashScriptDriver":
             return driver, lambda image, script=driver: script.flash(args=[*script.args, image])
         return driver, driver.flash
-    raise LookupError(f"it has no flashing driver ({', '.join(FLASH_DRIVERS)}: e.g. FlashromDriver on a Flashrom "
+    raise LookupError(f"{where} has no flashing driver ({', '.join(FLASH_DRIVERS)}: e.g. FlashromDriver on a Flashrom "
                       "resource, OpenOCDDriver on a USBDebugger)")
 
 
@@ -84,7 +84,7 @@ def flash(env_file: str, name: str | None, image: str) -> str:
         if name not in targets:
             raise LookupError(f"no target {name!r} (targets: {', '.join(targets) or 'none'})")
         target = env.get_target(name)
-        driver, write = _driver(target)
+        driver, write = _driver(target, f"target {name}")
         target.activate(driver)
         write(image)
         return f"labgrid: {Path(image).name} written by {type(driver).__name__} of target {name} of {env_file}"
@@ -102,6 +102,9 @@ def main(argv: list[str] | None = None) -> int:
         print(flash(args.labgrid_env, args.labgrid_target, args.image))
     except Exception as exc:  # noqa: BLE001 - labgrid's drivers raise many kinds; each is a failed flash, one line
         text = " ".join(str(exc).split()) or type(exc).__name__
+        said = getattr(exc, "output", None)  # a flashing tool's CalledProcessError (labgrid's processwrapper)
+        if isinstance(said, bytes) and said.strip():
+            text += ": " + " ".join(said.decode(errors="replace").split())[-300:]
         print(f"labgrid flash with {args.labgrid_env}: {type(exc).__name__}: {text}", file=sys.stderr)
         return 1
     return 0
