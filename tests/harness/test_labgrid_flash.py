@@ -76,6 +76,42 @@ def test_labgrids_flashrom_driver_writes_the_image_then_240_proves_it(tmp_path):
     assert fw["answered"].startswith("firmware_date=2024-10-11")
 
 
+@needs_labgrid
+@pytest.mark.realtime  # `ckesc emulate` behind socketcand, its power switched over HTTP
+def test_one_labgrid_target_switches_the_power_and_flashes_the_image_of_a_bus_bench(tmp_path):
+    """--power labgrid and --flash-cmd labgrid through the same env file's target: the image written, the DUT power
+    cycled by labgrid's NetworkPowerDriver and proven by its counter, then 240 proves the image (``ckesc emulate``
+    runs it)."""
+    pytest.importorskip("requests", reason="labgrid's REST power models need requests (comes with labgrid)")
+    from labgrid_lab import PowerSwitch
+    from procs import Emulator
+
+    image = _image(tmp_path, date="2025-02-03")
+    emu = Emulator(tmp_path, "--firmware", str(image))
+    switch = PowerSwitch(emu.control)
+    try:
+        env_file = _lab(tmp_path, 'echo "flashrom: wrote $2"', driver="FlashromDriver: {}\n      NetworkPowerDriver: {}")
+        env_file.write_text(env_file.read_text().replace(
+            "    drivers:", f"      NetworkPowerPort:\n        model: simplerest\n        host: '{switch.url}'\n"
+            "        index: 0\n    drivers:"))
+        profile = tmp_path / "bench.toml"
+        profile.write_text('[dut]\nname = "bench"\n[capabilities]\nled = true\nmotor = true\n'
+                           "[timing]\nerror_s = 0.002\nboot_s = 0.5\noff_s = 0.5\n")
+        done = _ckesc(tmp_path, "run", "-q", "--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0",
+                      "--can-config", "host=127.0.0.1", "--can-config", f"port={emu.port}", "--profile", str(profile),
+                      "--power", "labgrid", "--labgrid-env", str(env_file), "--firmware", str(image), "--flash-cmd",
+                      "labgrid", "--reports", str(tmp_path / "reports"), "--", "-k", "power_up_counter_counts_each_power_up")
+    finally:
+        switch.close()
+        emu.close()
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    assert _flashed(tmp_path) == [f"-w {image} -p ch341a_spi"]
+    assert switch.switched[:2] == ["off", "on"], switch.switched  # the flash's power cycle, proven
+    info = json.loads((tmp_path / "reports" / "latest" / "results.json").read_text())["info"]
+    assert info["firmware"]["answered"].startswith("firmware_date=2025-02-03")
+    assert "NetworkPowerDriver of target esc" in info["power_labgrid"]
+
+
 LABGRID_FAILURES = [
     pytest.param('echo "no programmer found" >&2; exit 3', "FlashromDriver: {}", {},
                  ["returned non-zero exit status 3", "no programmer found"], id="tool-fails"),
