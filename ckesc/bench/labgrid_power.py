@@ -215,9 +215,12 @@ LABGRID_OPTIONS = ("labgrid_env", "labgrid_target", "labgrid_place", "labgrid_co
 def labgrid_options(get: Callable[[str], Any]) -> None:
     """--power labgrid's options: given together, the environment file there (labgrid itself is not needed yet)."""
     if get("power") != "labgrid":
-        for opt in LABGRID_OPTIONS:
+        # --flash-cmd labgrid flashes through the target of the same file (:mod:`.labgrid_flash` checks it)
+        flashes = get("flash_cmd") == "labgrid"
+        for opt in LABGRID_OPTIONS[2:] if flashes else LABGRID_OPTIONS:
             if get(opt):
-                raise PreflightError(f"--{opt.replace('_', '-')} is for --power labgrid")
+                also = " or --flash-cmd labgrid" if opt in LABGRID_OPTIONS[:2] else ""
+                raise PreflightError(f"--{opt.replace('_', '-')} is for --power labgrid{also}")
         return
     env_file = get("labgrid_env")
     if not env_file:

@@ -123,25 +123,27 @@ BENCH_ROWS: tuple[Option, ...] = (
            help="--power command: a power command still running after S seconds has failed (default "
                 f"{POWER_COMMAND_TIMEOUT_S:g})"),
     Option("labgrid_env", metavar="FILE", rig="power.labgrid.env",
-           help="--power labgrid: labgrid environment file whose target has a power driver (PowerProtocol)"),
+           help="--power labgrid, --flash-cmd labgrid: labgrid environment file whose target has a power driver "
+                "(PowerProtocol), a flashing driver or both"),
     Option("labgrid_target", metavar="NAME", rig="power.labgrid.target",
-           help="--power labgrid: the target in --labgrid-env (default: its only one)"),
+           help="--power / --flash-cmd labgrid: the target in --labgrid-env (default: its only one)"),
     Option("labgrid_place", metavar="NAME", rig="place",
            help="--power labgrid: acquire this labgrid place for the run, release it at the end (default: the target's "
                 "RemotePlace, if any)"),
     Option("labgrid_coordinator", metavar="HOST:PORT",
            help="--power labgrid: the labgrid coordinator (default: the env file's coordinator_address, LG_COORDINATOR, "
                 "127.0.0.1:20408)"),
-    Option("firmware", metavar="IMAGE",
+    Option("firmware", rig="firmware", metavar="IMAGE",
            help="the firmware image under test: flashed with --flash-cmd before the bench proof, then proven to be the one "
                 "running by ESC Information (240) against IMAGE.toml, firmware.toml beside it or --expect-firmware; --dut "
                 "emulator: an emulator image (a TOML file: its 240 answer, faults and options; docs/firmware.md)"),
-    Option("flash_cmd", metavar="CMD",
+    Option("flash_cmd", rig="flash_cmd", metavar="CMD",
            help="--firmware: the command that writes the image into the DUT, {image} replaced by its path (run without a "
-                "shell); a non-zero exit or a hang is exit 2 before any test. --dut emulator: none needed (builtin)"),
-    Option("flash_timeout", type=positive_float, default=FLASH_TIMEOUT_S, metavar="S",
+                "shell); a non-zero exit or a hang is exit 2 before any test. --dut emulator: none needed (builtin). labgrid: the "
+                "flashing driver of --labgrid-env's target (FlashromDriver, OpenOCDDriver, FlashScriptDriver, ...)"),
+    Option("flash_timeout", rig="flash_timeout", type=positive_float, default=FLASH_TIMEOUT_S, metavar="S",
            help=f"--flash-cmd: a flash still running after S seconds has failed and is killed (default {FLASH_TIMEOUT_S:g})"),
-    Option("expect_firmware", metavar="KEY=VALUE,...",
+    Option("expect_firmware", rig="expect_firmware", metavar="KEY=VALUE,...",
            help="--firmware: what 240 must answer (firmware_date=YYYY-MM-DD, protocol_version, hardware_version), over the "
                 "image's sidecar"),
     Option("allow_motor_spin", action="store_true", default=None, rig="allow_motor_spin",

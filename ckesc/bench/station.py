@@ -24,7 +24,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ..emulator import variants
-from . import checks, firmware, proof
+from . import checks, firmware, labgrid_flash, proof
 from .errors import PreflightError
 from .lanes import BusLane, Lane, SimLane
 from .link import DutError, DutUnreachable, Link, echo_probe
@@ -84,7 +84,9 @@ def firmware_image(options: BenchOptions) -> firmware.Image | None:
     if options.dut == "emulator" and not image.emulated:
         raise PreflightError(f"--firmware {options.firmware}: --dut emulator runs an emulator image (a TOML file with an "
                              "[esc_information] table: docs/firmware.md), not a binary")
-    if options.flash_cmd and options.flash_cmd != firmware.BUILTIN:
+    if options.flash_cmd == labgrid_flash.LABGRID:
+        labgrid_flash.check(options.labgrid_env)
+    elif options.flash_cmd and options.flash_cmd != firmware.BUILTIN:
         checks.command(firmware.command_line(options.flash_cmd, image), "--flash-cmd")
     checks.fault_names(",".join(image.faults), f"{image.path.name}: faults")
     checks.emulator_options(image.options)
@@ -213,7 +215,9 @@ class Station:
         is given (not manual: an operator is the proof), the switch itself. A failure is a
         :class:`.errors.PreflightError`; returns what was proven, for the run to say."""
         o = self.options
-        output = firmware.flash(self.image, o.flash_cmd or firmware.BUILTIN, o.flash_timeout) if self.image else ""
+        cmd = (labgrid_flash.command_line(o.labgrid_env, o.labgrid_target) if o.flash_cmd == labgrid_flash.LABGRID
+               else o.flash_cmd or firmware.BUILTIN)
+        output = firmware.flash(self.image, cmd, o.flash_timeout) if self.image else ""
         if self.emulated:
             return self._prove_image(output) if self.image else []
         lane = self._new_lane()

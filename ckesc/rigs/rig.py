@@ -18,6 +18,9 @@
       bitrate_cmd, host_send_error_ms, allow_motor_spin: as --can-bitrate-cmd, --host-send-error,
                      --allow-motor-spin
       emulator       --dut emulator: { nodes = [1], faults = [...], seed = 0, options = { boot_time = 0.2 }, variants = SEED }
+      firmware       the bench's image under test (relative to the rig file), with flash_cmd ("CMD {image}",
+                     "builtin" or "labgrid"), flash_timeout (s) and expect_firmware = { firmware_date = "...", ... }:
+                     as --firmware, --flash-cmd, --flash-timeout, --expect-firmware (docs/firmware.md)
 
 A rig is checked against this schema (pydantic) when it is loaded, as DUT profiles are: an unknown
 section or key, a wrong type or a value out of range is a :class:`RigError` naming the file, the bench
@@ -115,6 +118,10 @@ class _BenchDoc(Section):
     host_send_error_ms: float | None = Field(None, ge=0.0, le=1000.0)
     allow_motor_spin: bool = False
     emulator: _Emulator | None = None
+    firmware: str | None = Field(None, min_length=1)
+    flash_cmd: str | None = Field(None, min_length=1)
+    flash_timeout: float | None = Field(None, gt=0.0)
+    expect_firmware: dict[str, Scalar] | None = None
 
     @field_validator("power", mode="before")
     @classmethod
@@ -310,6 +317,13 @@ def _bench(name: str, doc: _BenchDoc, base: Path) -> Bench:
         s["host_send_error"] = doc.host_send_error_ms
     if doc.allow_motor_spin:
         s["allow_motor_spin"] = True
+    if doc.firmware is not None:
+        s["firmware"] = _relative(doc.firmware, base)
+    for key in ("flash_cmd", "flash_timeout"):
+        if getattr(doc, key) is not None:
+            s[key] = getattr(doc, key)
+    if doc.expect_firmware:
+        s["expect_firmware"] = ",".join(f"{k}={v}" for k, v in doc.expect_firmware.items())
     return Bench(name=name, description=doc.description, settings=s)
 
 

@@ -81,6 +81,10 @@ bitrate_cmd = "b {bitrate}"
 host_send_error_ms = 3
 allow_motor_spin = true
 profile = "x"
+firmware = "esc.bin"
+flash_cmd = "labgrid"
+flash_timeout = 60
+expect_firmware = { firmware_date = "2024-10-11" }
 [bench.emu]
 lane = "realtime"
 power = "emulator"
