@@ -30,6 +30,7 @@ from typing import Callable, Sequence
 
 from .. import __version__
 from ..reporting.exits import ExitStatus
+from .bisect import add_bisect_command
 from .check_log import add_check_log_command
 from .common import Handler, Parser, UsageError
 from .compare import add_compare_command
@@ -54,6 +55,7 @@ COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
     add_profile_command,
     add_report_command,
     add_compare_command,
+    add_bisect_command,
     add_decode_command,
     add_check_log_command,
     add_encode_command,
