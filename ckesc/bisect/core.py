@@ -17,13 +17,13 @@ between runs (OpenTitan's lesson): the bisect says so instead of blaming a build
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 
 #: the canary's choices: after the first bad image is found only, or after every step too
 CANARY_CHOICES = ("end", "every")
 
 
-class Outcome(str, Enum):
+class Outcome(StrEnum):
     """What one run of the selection on one image said."""
 
     GOOD = "good"  # the selection passed
@@ -31,7 +31,7 @@ class Outcome(str, Enum):
     ERROR = "bench error"  # the run could not judge the image: flash, proof or bench
 
 
-class Ending(str, Enum):
+class Ending(StrEnum):
     """How a bisect ended."""
 
     FOUND = "found"  # the first bad image is named
