@@ -51,7 +51,7 @@ class Step:
 
 
 @dataclass(frozen=True)
-class Result:
+class BisectEnd:
     """The end: how it ended, the first bad image (FOUND), the images still between a good and a bad one (``good``,
     ``bad``: the last image known good and the first known bad when it stopped) and the one line that says it."""
 
@@ -86,7 +86,7 @@ class Bisection:
         self.tries, self.canary = tries, canary
         self.good, self.bad = 0, count - 1
         self.steps: list[Step] = []
-        self.result: Result | None = None
+        self.result: BisectEnd | None = None
         self._open = self._new_step(canary=self.bad - self.good <= 1)  # two images: only the canary is left to run
 
     # ------------------------------------------------------------------------------------------- what to run
@@ -137,13 +137,13 @@ class Bisection:
         if canary_due:
             self._open = self._new_step(canary=True)
         elif narrowed:
-            self.result = Result(Ending.FOUND, self.good, self.bad, self.bad,
+            self.result = BisectEnd(Ending.FOUND, self.good, self.bad, self.bad,
                                  f"image {self.bad + 1} is the first bad image (image {self.good + 1} the last good)")
         else:
             self._open = self._new_step()
 
     def _end(self, ending: Ending, reason: str, step: Step) -> Step:
-        self.result = Result(ending, self.good, self.bad, None, reason)
+        self.result = BisectEnd(ending, self.good, self.bad, None, reason)
         return step
 
     @staticmethod

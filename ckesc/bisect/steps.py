@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from ..reporting.exits import ExitStatus
-from .core import Bisection, Outcome, Result, Step
+from .core import BisectEnd, Bisection, Outcome, Step
 
 #: what a run's exit status says of its image
 OUTCOMES = {ExitStatus.OK: Outcome.GOOD, ExitStatus.FAILED: Outcome.BAD}
@@ -55,7 +55,7 @@ def image_list(path: str) -> list[Path]:
 
 
 @dataclass
-class Run:
+class StepRun:
     """One run of a step: its outcome, seconds of wall time, where its report is, the failing tests, the image's
     SHA-256 (from results.json) and, for a bench error, the end of its console."""
 
@@ -68,7 +68,7 @@ class Run:
     said: str = ""
 
 
-def run_once(image: Path, run_args: Sequence[str], selection: Sequence[str], out: Path) -> Run:
+def run_once(image: Path, run_args: Sequence[str], selection: Sequence[str], out: Path) -> StepRun:
     """``ckesc run --firmware IMAGE RUN_ARGS --reports OUT -q SELECTION``, its console in ``OUT/console.txt``."""
     out.mkdir(parents=True, exist_ok=True)
     argv = [sys.executable, "-m", "ckesc", "run", "--firmware", str(image), *run_args, "--reports", str(out), "-q",
@@ -80,7 +80,7 @@ def run_once(image: Path, run_args: Sequence[str], selection: Sequence[str], out
         status = subprocess.run(argv, stdout=console, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL).returncode
     seconds = time.monotonic() - started
     outcome = OUTCOMES.get(status, Outcome.ERROR)
-    run = Run(outcome, seconds, str(out), status)
+    run = StepRun(outcome, seconds, str(out), status)
     try:
         doc = json.loads((out / "latest" / "results.json").read_text(encoding="utf-8"))
         run.failing = [r["nodeid"] for r in doc["results"] if r.get("outcome") in FAILING]
@@ -95,7 +95,7 @@ def run_once(image: Path, run_args: Sequence[str], selection: Sequence[str], out
     return run
 
 
-Runner = Callable[[Path, Path], Run]
+Runner = Callable[[Path, Path], StepRun]
 
 
 @dataclass
@@ -106,8 +106,8 @@ class Bisect:
     tries: int
     canary: str
     selection: list[str]
-    steps: list[tuple[Step, list[Run]]] = field(default_factory=list)
-    result: Result | None = None
+    steps: list[tuple[Step, list[StepRun]]] = field(default_factory=list)
+    result: BisectEnd | None = None
     seconds: float = 0.0
 
     def name(self, i: int) -> str:
@@ -132,7 +132,7 @@ class Bisect:
         }
 
 
-def step_line(b: Bisect, n: int, step: Step, runs: list[Run]) -> str:
+def step_line(b: Bisect, n: int, step: Step, runs: list[StepRun]) -> str:
     """The console's line for a step: which, the image, each run's outcome, the verdict, the time."""
     what = "canary" if step.canary else f"step {n}"
     verdict = step.verdict.value if step.verdict else "no verdict"
@@ -148,7 +148,7 @@ def bisect(images: list[Path], selection: Sequence[str], runner: Runner, steps_d
     b = Bisect(list(images), tries, canary, list(selection))
     machine = Bisection(len(images), tries=tries, canary=canary)
     started = time.monotonic()
-    runs: list[Run] = []
+    runs: list[StepRun] = []
     bisect_steps = 0
     while machine.next_image is not None:
         step, image = machine.step, machine.next_image
