@@ -74,7 +74,7 @@ def test_a_bench_that_keeps_state_is_caught_by_the_canary_not_blamed_on_a_build(
                                 "--flash-cmd", flash_cmd("--sticky"))
     assert status == ExitStatus.FAILED, lines
     assert doc["ending"] == "bench kept state" and doc["first_bad"] is None
-    assert lines[-2].startswith("no first bad image: the known-good image 1 now fails"), lines
+    assert lines[-3].startswith("no first bad image: the known-good image 1 now fails"), lines
     assert doc["steps"][-1]["canary"] and doc["steps"][-1]["verdict"] == "bad"
 
 
