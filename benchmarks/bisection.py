@@ -11,7 +11,7 @@ The flaky image and the stateful bench are played by the tests' stand-in flash t
 Timed: the ``ckesc bisect`` process's wall time and its children's CPU time (user + sys, from rusage: every step's
 ``ckesc run``), which other processes on a shared machine disturb far less; the load average beside them.
 
-    python benchmarks/bisect.py [--only clean,flaky,stateful] [--out benchmarks/results/bisect.json]
+    python benchmarks/bisection.py [--only clean,flaky,stateful] [--out benchmarks/results/bisection.json]
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ def met(r: dict) -> bool:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--only", default="clean,flaky,stateful")
-    p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "bisect.json")
+    p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "bisection.json")
     a = p.parse_args()
     results = []
     for name in a.only.split(","):
