@@ -14,8 +14,10 @@ from .steps import Bisect, step_line
 def last_lines(b: Bisect) -> list[str]:
     """The lines that end the console and lead the text report: the first bad image named, or why there is none."""
     r = b.result
-    assert r is not None, "a bisect is reported once it ended"
     canaries = sum(1 for s, _ in b.steps if s.canary)
+    if r is None:
+        return [f"bisect: interrupted after {len(b.steps) - canaries} steps and {canaries} canary step(s): no first bad "
+                "image named"]
     head = (f"bisect: {r.ending.value} after {len(b.steps) - canaries} steps and {canaries} canary step(s), "
             f"{sum(len(rs) for _, rs in b.steps)} runs, {b.seconds:.1f} s")
     if r.ending is Ending.FOUND and r.first_bad is not None:

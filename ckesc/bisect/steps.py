@@ -109,6 +109,7 @@ class Bisect:
     steps: list[tuple[Step, list[StepRun]]] = field(default_factory=list)
     result: BisectEnd | None = None
     seconds: float = 0.0
+    interrupted: bool = False
 
     def name(self, i: int) -> str:
         return f"{i + 1}/{len(self.images)} {self.images[i]}"
@@ -119,10 +120,11 @@ class Bisect:
             "kind": "bisect", "images": [str(p) for p in self.images], "tries": self.tries, "canary": self.canary,
             "selection": self.selection, "seconds": round(self.seconds, 2), "runs": sum(len(rs) for _, rs in self.steps),
             "bisect_steps": sum(1 for s, _ in self.steps if not s.canary),
-            "ending": r.ending.value if r else None, "reason": r.reason if r else None,
+            "ending": r.ending.value if r else ("interrupted" if self.interrupted else None), "reason": r.reason if r else None,
             "first_bad": None if r is None or r.first_bad is None else {"number": r.first_bad + 1,
                                                                         "image": str(self.images[r.first_bad])},
             "last_good": None if r is None else {"number": r.good + 1, "image": str(self.images[r.good])},
+            "interrupted": self.interrupted,
             "steps": [{"image": str(self.images[s.image]), "number": s.image + 1, "canary": s.canary,
                        "verdict": s.verdict.value if s.verdict else None,
                        "runs": [{"outcome": run.outcome.value, "seconds": round(run.seconds, 2), "status": run.status,
@@ -150,14 +152,17 @@ def bisect(images: list[Path], selection: Sequence[str], runner: Runner, steps_d
     started = time.monotonic()
     runs: list[StepRun] = []
     bisect_steps = 0
-    while machine.next_image is not None:
-        step, image = machine.step, machine.next_image
-        run = runner(images[image], steps_dir / f"{len(b.steps) + 1:02d}-{images[image].stem}-{len(runs) + 1}")
-        runs.append(run)
-        if machine.record(run.outcome) is not None:
-            b.steps.append((step, runs))
-            bisect_steps += not step.canary
-            say(step_line(b, bisect_steps, step, runs))
-            runs = []
+    try:
+        while machine.next_image is not None:
+            step, image = machine.step, machine.next_image
+            run = runner(images[image], steps_dir / f"{len(b.steps) + 1:02d}-{images[image].stem}-{len(runs) + 1}")
+            runs.append(run)
+            if machine.record(run.outcome) is not None:
+                b.steps.append((step, runs))
+                bisect_steps += not step.canary
+                say(step_line(b, bisect_steps, step, runs))
+                runs = []
+    except KeyboardInterrupt:  # Ctrl-C: the step's run stopped with zero throttle (its own handler); the steps so far reported
+        b.interrupted = True
     b.result, b.seconds = machine.result, time.monotonic() - started
     return b

@@ -90,6 +90,6 @@ def add_bisect_command(sub: argparse._SubParsersAction) -> None:
         for line in report.last_lines(done):
             print(line)
         print(f"report: {where / 'bisect.txt'}")
-        return EXITS[done.result.ending]  # type: ignore[union-attr]
+        return ExitStatus.INTERRUPTED if done.result is None else EXITS[done.result.ending]
 
     p.set_defaults(handler=handler)
