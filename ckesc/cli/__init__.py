@@ -17,7 +17,8 @@ answered a control request with an error (``control``) or could not write its fl
 (``emulate``), or a run regressed (``compare``), or a soak found something (``soak``); 2 usage or input the wire format cannot carry (``encode``), or the emulator cannot start
 (``emulate``: port in use, unreadable flash file, bus that does not open); 3 no emulator answers on
 the control port (``control``), or the bench could not be used (``explore``, ``profile init`` / ``check``, ``soak``); 1 also
-a profile the DUT contradicts (``profile check --strict``); 130 interrupted; 141 stdout closed early (``| head``).
+a profile the DUT contradicts (``profile check --strict``); ``bisect``: 0 the first bad image named, 1 no first bad
+image (a step without a majority, the canary failed), 2 its arguments or a step's bench error; 130 interrupted; 141 stdout closed early (``| head``).
 """
 
 from __future__ import annotations
