@@ -17,7 +17,8 @@ answered a control request with an error (``control``) or could not write its fl
 (``emulate``), or a run regressed (``compare``), or a soak found something (``soak``); 2 usage or input the wire format cannot carry (``encode``), or the emulator cannot start
 (``emulate``: port in use, unreadable flash file, bus that does not open); 3 no emulator answers on
 the control port (``control``), or the bench could not be used (``explore``, ``profile init`` / ``check``, ``soak``); 1 also
-a profile the DUT contradicts (``profile check --strict``); 130 interrupted; 141 stdout closed early (``| head``).
+a profile the DUT contradicts (``profile check --strict``); ``bisect``: 0 the first bad image named, 1 no first bad
+image (a step without a majority, the canary failed), 2 its arguments or a step's bench error; 130 interrupted; 141 stdout closed early (``| head``).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from typing import Callable, Sequence
 
 from .. import __version__
 from ..reporting.exits import ExitStatus
+from .bisect import add_bisect_command
 from .check_log import add_check_log_command
 from .common import Handler, Parser, UsageError
 from .compare import add_compare_command
@@ -54,6 +56,7 @@ COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
     add_profile_command,
     add_report_command,
     add_compare_command,
+    add_bisect_command,
     add_decode_command,
     add_check_log_command,
     add_encode_command,

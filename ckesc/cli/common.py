@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from pathlib import Path
 from typing import Callable
 
 from ..bench.arguments import non_negative_float, positive_float, positive_int
@@ -16,7 +17,7 @@ from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
 from ..reporting.paths import not_readable, not_writable
 
-__all__ = ["Handler", "Parser", "UsageError", "check_dir", "check_faults", "check_file", "check_readable", "check_run", "duration_arg",
+__all__ = ["Handler", "Parser", "UsageError", "check_dir", "check_faults", "check_file", "check_images", "check_readable", "check_run", "duration_arg",
            "int_arg", "non_negative_float", "port_arg", "positive_float", "positive_int", "seconds_of"]
 
 #: a value that starts with a minus sign and a digit: a number below zero given to an option, not an option
@@ -136,6 +137,20 @@ def check_readable(path: str | None, option: str, what: str = "file") -> None:
     (``ckesc/reporting/paths.py``, in the shape of the words for what a command cannot write)."""
     if path is not None and path != "-" and (said := not_readable(path, option, what)):
         raise UsageError(said)
+
+
+def check_images(path: str, option: str) -> list:
+    """A bisect's image list (``ckesc bisect --images``): its images, oldest first (:func:`ckesc.bisect.steps.image_list`);
+    a :class:`UsageError` when it is missing or unreadable, holds fewer than 2 images or names a missing file."""
+    from ..bisect.steps import image_list
+
+    if not Path(path).is_dir():
+        check_readable(path, option, "image list")
+    try:
+        return image_list(path)
+    except (ValueError, OSError, UnicodeDecodeError) as exc:
+        raise UsageError(str(exc) if isinstance(exc, ValueError) and not isinstance(exc, UnicodeDecodeError)
+                         else f"{option} {path}: not a readable list of image paths ({exc})") from None
 
 
 def check_run(path: str | None, option: str) -> None:

@@ -65,6 +65,11 @@ MISTAKES = [
     (["run", "--rig", "{tmp}/rig.toml", "--baseline", "{tmp}/a"], ["--baseline gates one bench's run"]),
     (["soak", "--power-cmd-timeout", "0"], ["--power-cmd-timeout", "zero"]),
     (["explore", "--replay", "{tmp}/no-such.replay.json"], ["replay file", "is not readable (no such file): give another with --replay"]),
+    (["bisect", "--images", "{tmp}/no-such.txt", "4.4.27"], ["image list", "is not readable (no such file): give another with --images"]),
+    (["bisect", "--images", "{log}", "4.4.27"], ["--images", "1 image(s): a bisect needs the known-good image first"]),
+    (["bisect", "--images", "{tmp}/a", "4.4.27"], ["--images", "holds no image"]),
+    (["bisect", "--images", "{tmp}", "--reports", "{blocked}/reports", "4.4.27"], ["reports directory", "--reports"]),
+    (["bisect", "--images", "{tmp}", "--tries", "0", "4.4.27"], ["--tries"]),
     # the same words for the same mistake, whichever command meets it
     (["run", "--emulator-faults", "answer_lat"], ["--emulator-faults: unknown fault 'answer_lat'", "did you mean"]),
     (["emulate", "--socketcand", "0", "--faults", "answer_lat@1"], ["--faults: unknown fault 'answer_lat'", "did you mean"]),
