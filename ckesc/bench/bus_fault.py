@@ -7,7 +7,7 @@ other node, and a frame another node tries meanwhile meets a bit error). A lane 
 test SKIPs (:data:`NO_CONTROL`), never PASSes.
 
 - The simulated lane: its world's :meth:`~ckesc.emulator.sim_can.CanNodes.short`. The lane runs without
-  acknowledgement (``SIM_CAN`` in :mod:`.lanes`), where nothing can go bus-off; the control turns the CAN model's
+  acknowledgement (``SIM_CAN`` in :mod:`.sim_lane`), where nothing can go bus-off; the control turns the CAN model's
   acknowledgement and error confinement on for the fault and its recovery only (from an idle bus), and back off once
   every controller is error-active again with an empty queue, so the rest of the suite keeps its bus. A controller
   that does not recover by itself keeps it on until :meth:`SimBusFault.settle` after a power cycle.

@@ -1,6 +1,7 @@
 """Lanes: where the DUT lives and which clock the suite measures with.
 
-* :class:`SimLane` - the emulator in simulated time (``ckesc-sim``): exact timing, clock "simulated".
+* :class:`~.sim_lane.SimLane` (:mod:`.sim_lane`) - the emulator in simulated time (``ckesc-sim``): exact timing,
+  clock "simulated".
 * :class:`BusLane` - a real python-can bus (a real ESC on SocketCAN, or ``ckesc emulate`` behind
   socketcand): the clock is the bus timestamps, with the DUT profile's stated measurement error. The
   lane finds out at the start (:meth:`BusLane.find_echo`) whether the host's own frames come back
@@ -15,9 +16,7 @@ Tests never read the wall clock or sleep: they ask the lane (through the ``dut``
 
 from __future__ import annotations
 
-import itertools
 import math
-import os
 import shlex
 import socket
 import subprocess
@@ -29,14 +28,11 @@ from typing import Any, Iterator
 
 import can
 
-from ..emulator import sim_bus
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame
 from .epochs import PowerEpoch
-from .power import EmulatorPower, PowerControl
+from .power import PowerControl
 from .profile import DEFAULT_BUS_ERROR_S
-
-_SIM_CHANNELS = itertools.count()
 
 #: How long the lane waits for the echo of its probe frame, and how often it tries while the bus is silent
 ECHO_PROBE_S = 0.25
@@ -157,110 +153,6 @@ class Lane(ABC):
 
     def close(self) -> None:
         self.bus.shutdown()
-
-
-# ------------------------------------------------------------------------------------------ simulated
-
-
-#: the simulated lane's CAN (ckesc/emulator/sim_bus.py): no acknowledgement needed and no limit to the host's
-#: transmit queue, until the suite's bus rules and bursts are ready for the CAN model of issue #36 (with it, a frame
-#: the host sends while the ESC boots is held for it: every later frame moves, and R9's queueing allowance FAILs a
-#: report delayed by an answer that started as it fell due; the robustness section sends bursts of more than 10)
-SIM_CAN: dict[str, Any] = {"ack": False, "txqueuelen": None}
-
-
-class SimLane(Lane):
-    name = "simulated"
-    clock = "simulated"
-    timing_error = 0.0
-
-    def __init__(self, *, nodes=(1,), faults=None, flash_path: str | None = None, seed: int = 0,
-                 bitrate: int = DEFAULT_BITRATE, esc_config: dict[str, Any] | None = None) -> None:
-        self.channel = f"ckesc-suite-{os.getpid()}-{next(_SIM_CHANNELS)}"
-        self.bitrate = bitrate
-        self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, nodes=list(nodes), faults=faults,
-                           flash_path=flash_path, seed=seed, bitrate=bitrate, esc_config=esc_config,
-                           receive_own_messages=True, ignore_config=True, **SIM_CAN)
-        self.bus = _SimSend(self.sim)
-        self.power = EmulatorPower(self)
-
-    @property
-    def host_clock(self) -> tuple[str, float]:
-        return self.clock, 0.0  # the host acts in simulated time, exactly
-
-    def now(self) -> float:
-        return self.sim.world.now
-
-    peek_now = now
-
-    def recv_until(self, deadline: float) -> can.Message | None:
-        # Lane.recv_until with the calls between it and the simulated clock taken out (hours of soak read here)
-        msg = self.sim.recv_until(deadline)
-        if self.sim.world.ack:
-            _check_controller(self.sim)
-        return self.heard(msg) if msg is not None else None
-
-    def recv(self, timeout: float) -> can.Message | None:
-        msg = super().recv(timeout)
-        if self.sim.world.ack:
-            _check_controller(self.sim)
-        return msg
-
-    def frames_until(self, deadline: float) -> Iterator[can.Message]:
-        # Lane.frames_until with the calls between it and the simulated bus taken out (hours of soak read here); the
-        # listeners are looked for once per call. A bus with acknowledgement reads frame by frame: the host's
-        # controller is looked at after each (its bus-off is the bench's failure, not the DUT's)
-        if self.sim.world.ack:
-            return super().frames_until(deadline)
-        frames = self.sim.frames_until(deadline)
-        return map(self.heard, frames) if self.__dict__.get("_listeners") else frames
-
-    def send_wire(self, wire: WireFrame) -> None:
-        self.sim.send_wire(wire)  # (no can.Message built: hours of soak send here)
-
-    def wait_power(self, seconds: float) -> None:
-        self.sim.advance(seconds)
-
-    def reopen(self, bitrate: int) -> None:
-        old = self.sim
-        self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, bitrate=bitrate,
-                           receive_own_messages=True, ignore_config=True, **SIM_CAN)
-        self.bus = _SimSend(self.sim)
-        old.shutdown()
-        self.bitrate = bitrate
-
-    def close(self) -> None:
-        self.sim.shutdown()
-        sim_bus.discard(self.channel)
-
-
-class _SimSend:
-    """The simulated bus as the suite sends on it: a send that fails (a full transmit queue, ENOBUFS) is the bench's
-    failure under the test (:class:`BusFault`: an ERROR, its one line naming the queue and the controller's state),
-    as on a real bus; everything else is the bus's own."""
-
-    def __init__(self, bus: Any) -> None:
-        self._bus = bus
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        try:
-            self._bus.send(msg, timeout)
-        except BUS_ERRORS as exc:
-            ctl = self._bus.controller
-            why = "nobody acknowledged them" if ctl.tec else "sent faster than the bus carries them"
-            raise BusFault(f"the host's CAN send failed ({type(exc).__name__}: {exc}; its controller {ctl.state.value}, "
-                           f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting: {why})") from exc
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._bus, name)
-
-
-def _check_controller(bus: Any) -> None:
-    """The host's own controller bus-off: the bench failed under the test (:class:`BusFault`), not the DUT."""
-    ctl = bus.controller
-    if ctl.bus_off:
-        raise BusFault(f"the host's CAN controller is bus-off (TEC {ctl.tec}, {ctl.counts['bus_off']} time(s) this run; "
-                       f"{'it recovers by itself' if ctl.auto_recovery else 'no automatic recovery: restart it'})")
 
 
 # ------------------------------------------------------------------------------------------ real bus

@@ -26,12 +26,13 @@ from typing import Any
 from ..emulator import variants
 from . import checks, firmware, labgrid_flash, proof
 from .errors import PreflightError
-from .lanes import BusLane, Lane, SimLane
+from .lanes import BusLane, Lane
 from .link import DutError, DutUnreachable, Link, echo_probe
 from .options import BENCH_ROWS, BUS_OPEN_TIMEOUT_S, DUT, SAME, BenchOptions, Option  # noqa: F401 - imported from here
 from .power import PowerControl, Prompt, open_power
 from .profile import DEFAULT_BUS_ERROR_S, DutProfile
 from .realtime_lane import RealtimeEmulatorLane
+from .sim_lane import SimLane
 from .traffic_player import PlayerStats, TrafficPlayer
 
 #: The private bench of the ``multi_dut`` fixture in the emulator lanes: node ids chosen so that

@@ -46,7 +46,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import can
 from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
 
-from ..protocol.canbus import DEFAULT_TXQUEUELEN, Attempt, CanController, ErrorFrame, ErrorState, QueueFull, attempt_bits
+from ..protocol.canbus import DEFAULT_TXQUEUELEN, Attempt, CanController, ErrorFrame, ErrorState, QueueFull
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame, frame_bits, new_wire
 from ..protocol.traffic import TrafficSource
@@ -199,63 +199,8 @@ class SimWorld(CanNodes):
         else:
             heapq.heappush(self._waiting, (ready, seq, _Pending(ready, seq, wire, origin, bitrate, flags)))
 
-    # ------------------------------------------------------------------ the nodes' controllers
-    def _submit(self, p: _Pending) -> None:
-        """A frame joins its sender's queue (an ESC's that does not fit is dropped; a bus's raises QueueFull)."""
-        if not self.ack:  # the bus before issue #36: no queue of its own for a node, every frame contends at once
-            heapq.heappush(self._ready, (p.wire.arbitration_id, p.seq, p))
-            return
-        node = p.origin
-        ctl = self._ctl.get(node) or self.controller(node)
-        n = ctl.txqueuelen
-        if n is not None and ctl.size >= n and not isinstance(node, SimEscBus):
-            self.stats["dropped"] += 1
-            return
-        ctl.submit(p, p.wire.arbitration_id)
-        # a queue that was empty: its node starts to contend (a node with frames contends, is parked or is bus-off)
-        if ctl.size == 1 and ctl.state is not ErrorState.BUS_OFF and node not in self._parked:
-            self._contending.append(node)
-
-    def _start_transmission(self) -> None:
-        waiting = self._waiting
-        while waiting and waiting[0][0] <= self.now:
-            self._submit(heapq.heappop(waiting)[2])
-        if self._ready:
-            winner = heapq.heappop(self._ready)[2]
-            duration = (67 + 8 * len(winner.wire.data)) / winner.bitrate  # frame_bits, inline: once per frame
-            self._in_flight = (round(self.now + duration, 12), winner)
-            self.stats["busy_s"] += duration
-            return
-        contending = self._contending
-        if not contending:
-            return
-        ctls = self._ctl
-        # arbitration: the lowest head id wins (a frame at another bit rate than its listeners' is garbage to
-        # them; a mixed-rate bus is broken anyway, so rates do not interact here)
-        winner = ctls[contending[0]].head()
-        if len(contending) > 1:
-            best = winner.wire.arbitration_id
-            for node in contending:
-                p = ctls[node].head()
-                can_id = p.wire.arbitration_id
-                if can_id < best or (can_id == best and p.seq < winner.seq):
-                    winner, best = p, can_id
-        ctls[winner.origin].begin()  # on the bus: a frame its node queues meanwhile waits, whatever its priority
-        bitrate, n = winner.bitrate, len(winner.wire.data)
-        if self.now < self._short_until:
-            self._outcome = Attempt.SHORT
-        elif self._acknowledged(winner.origin, bitrate):
-            self._outcome = Attempt.ACKED
-            duration = (67 + 8 * n) / bitrate  # frame_bits, inline: once per frame
-            self._in_flight = (round(self.now + duration, 12), winner)
-            self.stats["busy_s"] += duration
-            return
-        else:
-            self._outcome = Attempt.NO_ACK
-        duration = attempt_bits(n, self._outcome, ctls[winner.origin].passive) / bitrate
-        self._in_flight = (round(self.now + duration, 12), winner)
-        self.stats["busy_s"] += duration
-
+    # ------------------------------------------------------------------ the nodes' controllers (sim_can.CanNodes: a
+    # frame joining its node's queue, arbitration and the frame's try)
     def _finish_transmission(self) -> None:
         end, p = self._in_flight  # type: ignore[misc]
         self._in_flight = None

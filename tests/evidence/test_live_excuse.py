@@ -2,8 +2,8 @@
 above half load): what breaks them then fails no test, and is handed back to be recorded."""
 
 from ckesc.bench.dut import Dut
-from ckesc.bench.lanes import SimLane
 from ckesc.bench.profile import DutProfile
+from ckesc.bench.sim_lane import SimLane
 from ckesc.evidence.live import LaneRules
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import can
 
-from ckesc.bench.lanes import SIM_CAN
+from ckesc.bench.sim_lane import SIM_CAN
 from ckesc.emulator import sim_bus
 from ckesc.evidence import BusRules, Violation
 from ckesc.protocol import catalogue as cat

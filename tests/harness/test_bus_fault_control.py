@@ -7,7 +7,7 @@ import sys
 import pytest
 
 from ckesc.bench.bus_fault import NO_CONTROL, BusFaultFailed, CommandBusFault, SimBusFault, bus_fault_control
-from ckesc.bench.lanes import SimLane
+from ckesc.bench.sim_lane import SimLane
 
 
 def test_the_command_gets_the_seconds_and_the_kind():

@@ -9,8 +9,8 @@ from there. Played in simulated time: the host's send stalls by advancing the si
 from __future__ import annotations
 
 from ckesc.bench.dut import Dut
-from ckesc.bench.lanes import SimLane
 from ckesc.bench.profile import DutProfile
+from ckesc.bench.sim_lane import SimLane
 
 STALL_S = 0.19
 

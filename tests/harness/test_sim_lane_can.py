@@ -8,15 +8,16 @@ from __future__ import annotations
 import can
 import pytest
 
-from ckesc.bench import lanes
-from ckesc.bench.lanes import BusFault, SimLane
+from ckesc.bench import sim_lane
+from ckesc.bench.lanes import BusFault
+from ckesc.bench.sim_lane import SimLane
 from ckesc.protocol import canbus
 from ckesc.session.verdicts import BENCH_FAILED
 
 
 @pytest.fixture
 def lane(monkeypatch):
-    monkeypatch.setattr(lanes, "SIM_CAN", {"ack": True})  # SocketCAN's: acknowledgement, 10 frames of queue
+    monkeypatch.setattr(sim_lane, "SIM_CAN", {"ack": True})  # SocketCAN's: acknowledgement, 10 frames of queue
     lane = SimLane(nodes=(1,))
     lane.wait_power(0.5)
     while lane.recv(0) is not None:

@@ -12,7 +12,7 @@ from pathlib import Path
 import can
 import pytest
 
-from ckesc.bench.lanes import SimLane
+from ckesc.bench.sim_lane import SimLane
 from ckesc.bench.station import MULTI_NODES
 from ckesc.protocol import DecodeError, Decoder, encode
 from ckesc.protocol.ids import parse_can_id

@@ -8,7 +8,7 @@ from __future__ import annotations
 import can
 import pytest
 
-from ckesc.bench.lanes import SimLane
+from ckesc.bench.sim_lane import SimLane
 from ckesc.emulator.emulated_bench import EmulatedBench
 from ckesc.protocol.errors import EncodeError
 from ckesc.protocol.frame import Decoder, WireFrame, encode
