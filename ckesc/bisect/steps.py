@@ -32,9 +32,10 @@ FAILING = ("FAIL", "ERROR")
 
 def image_list(path: str) -> list[Path]:
     """The images of ``--images LIST``, oldest first: a file of paths (one a line, relative to the file; blank
-    lines and ``#`` comments skipped) or a directory's files ordered by name (an image's sidecar, ``IMAGE.toml`` or
-    ``firmware.toml``, left out). A :class:`ValueError` in one line for a list with fewer than 2 images or one that
-    names a missing file."""
+    lines and ``#`` comments skipped) or a directory's files (an image's sidecar, ``IMAGE.toml`` or ``firmware.toml``,
+    left out) ordered by the firmware date each says 240 answers (:func:`by_firmware_date`), by name where one does
+    not say it. A :class:`ValueError` in one line for a list with fewer than 2 images or one that names a missing
+    file."""
     where = Path(path)
     if where.is_dir():
         files = sorted(p for p in where.iterdir() if p.is_file() and not p.name.startswith("."))
@@ -42,6 +43,7 @@ def image_list(path: str) -> list[Path]:
         images = [p for p in files if p.name != "firmware.toml" and not (p.suffix == ".toml" and p.stem in names)]
         if not images:
             raise ValueError(f"--images {path}: the directory holds no image")
+        images = by_firmware_date(images)
     else:
         lines = (ln.split("#", 1)[0].strip() for ln in where.read_text(encoding="utf-8").splitlines())
         images = [(where.parent / ln) for ln in lines if ln]
@@ -52,6 +54,39 @@ def image_list(path: str) -> list[Path]:
     if missing is not None:
         raise ValueError(f"--images {path}: {missing} is not a file")
     return images
+
+
+def by_firmware_date(images: list[Path]) -> list[Path]:
+    """``images`` (in name order) ordered by the firmware date 240 must answer for each (its expectation as
+    ``ckesc run --firmware`` finds it: a sidecar, or an emulator image's own), the name deciding between equal dates;
+    in name order when one of them says no date (a build history is ordered one way, never by a mix of the two)."""
+    from ..bench.errors import PreflightError
+    from ..bench.firmware import load
+
+    dates = []
+    for image in images:
+        try:
+            dates.append(str(load(str(image)).expected["firmware_date"]))
+        except (PreflightError, KeyError, OSError, ValueError):
+            return images
+    return [image for _, image in sorted(zip(dates, images), key=lambda pair: pair[0])]
+
+
+def regressed_tests(old: str, new: str) -> list[str]:
+    """The tests that passed in the run ``old`` and do not in the run ``new`` (``ckesc compare``'s regressions): a
+    bisect's selection "whatever regressed in this compare". A :class:`ValueError` in one line when none did or a run
+    cannot be read."""
+    from ..reporting.compare import diff, read_run
+    from ..reporting.comparing import RunError
+
+    try:
+        changes = diff(read_run(old), read_run(new))
+    except RunError as exc:
+        raise ValueError(f"--regressed: {exc}") from None
+    tests = [row["test"] for row in changes["tests"]["regressed"]]
+    if not tests:
+        raise ValueError(f"--regressed {old} {new}: no test regressed between them: nothing to bisect")
+    return tests
 
 
 @dataclass

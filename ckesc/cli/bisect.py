@@ -20,7 +20,8 @@ from ..reporting.report import run_dir
 from ..session import options
 from .common import UsageError, check_dir, check_images, positive_int
 
-USAGE = "%(prog)s [BENCH OPTION ...] --images LIST [--flash-cmd \"CMD {image}\"] [--tries N] [--canary every|end] SELECTION ..."
+USAGE = ("%(prog)s [BENCH OPTION ...] --images LIST [--flash-cmd \"CMD {image}\"] [--tries N] [--canary every|end] "
+         "(SELECTION ... | --regressed OLD_RUN NEW_RUN)")
 #: the bench options a bisect does not take: it names each step's image itself, and each image says its own 240
 NOT_PASSED = ("firmware", "expect_firmware")
 #: each ending's exit status (the one exit table)
@@ -63,19 +64,30 @@ def add_bisect_command(sub: argparse._SubParsersAction) -> None:
     b = p.add_argument_group("bisect")
     b.add_argument("--images", required=True, metavar="LIST",
                    help="a file of image paths, one a line, oldest first: the first known good, the last known bad "
-                        "(or a directory, its images ordered by name)")
+                        "(or a directory, its images ordered by the firmware date 240 answers for each, else by name)")
     b.add_argument("--tries", type=positive_int, default=1, metavar="N",
                    help="runs of each step; more than half of them decide it (default 1)")
     b.add_argument("--canary", choices=CANARY_CHOICES, default="end",
                    help="run the known-good image again at the end (default) or after every step too")
     b.add_argument("--reports", default="reports", metavar="DIR",
                    help="write the bisect's report in DIR/<timestamp>-bisect/ (every step's run under its steps/)")
-    b.add_argument("selection", nargs="+", metavar="SELECTION",
+    b.add_argument("--regressed", nargs=2, metavar=("OLD_RUN", "NEW_RUN"),
+                   help="what each step runs: whatever regressed from one run to the other (ckesc compare's "
+                        "regressions: tests that passed in OLD_RUN and do not in NEW_RUN), instead of a SELECTION")
+    b.add_argument("selection", nargs="*", metavar="SELECTION",
                    help="what each step runs: sections, test modules or test ids, as ckesc run takes them")
 
     def handler(args: argparse.Namespace) -> int:
         images = check_images(args.images, "--images")
         check_dir(args.reports, "--reports")
+        if bool(args.selection) == bool(args.regressed):
+            raise UsageError("give what each step runs: a SELECTION (sections, modules, test ids) or --regressed "
+                             "OLD_RUN NEW_RUN, one of the two")
+        if args.regressed:
+            try:
+                args.selection = steps.regressed_tests(*args.regressed)
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
         if any(s.startswith("-") for s in args.selection):
             raise UsageError(f"{next(s for s in args.selection if s.startswith('-'))} is not an option of ckesc bisect")
         where = run_dir(Path(args.reports), time.time(), "bisect")

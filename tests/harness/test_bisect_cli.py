@@ -125,3 +125,42 @@ def test_the_bench_options_reach_each_steps_run_and_the_image_options_do_not():
                                       "--flash-cmd=fl {image}"]
     with pytest.raises(SystemExit):
         build_parser().parse_args(["bisect", "--images", "x", "--firmware", "a.toml", "4.4.27"])
+
+
+def test_a_directory_of_images_is_ordered_by_the_firmware_date_each_says_240_answers(tmp_path):
+    """By the date each image's expectation says (a sidecar, an emulator image's own), as ckesc run proves it; by
+    name where one says none."""
+    from ckesc.bisect.steps import image_list
+
+    for path in series(tmp_path, 3):  # build-01 oldest ... build-03 newest: named so that their names run backwards
+        path.rename(path.with_name({"build-01.toml": "c.toml", "build-02.toml": "b.toml", "build-03.toml": "a.toml"}[path.name]))
+    (tmp_path / "images.txt").unlink()
+    assert [p.name for p in image_list(str(tmp_path))] == ["c.toml", "b.toml", "a.toml"]
+    (tmp_path / "d.bin").write_text("an image nothing says the date of")
+    assert [p.name for p in image_list(str(tmp_path))] == ["a.toml", "b.toml", "c.toml", "d.bin"], "one way: by name"
+
+
+@pytest.mark.timeout(600)
+def test_whatever_regressed_between_two_runs_is_what_each_step_runs(capsys, tmp_path):
+    from ckesc.bisect.steps import regressed_tests
+
+    pair = tmp_path / "pair"
+    pair.mkdir()
+    good, bad = series(pair, 2, bad_from=2)  # a release and the next, which regressed
+    runs = []
+    for image in (good, bad):
+        main(["run", "-q", "--firmware", str(image), "--reports", str(tmp_path / image.stem), "--trace-format", "none",
+              SECTION])
+        runs.append(str(tmp_path / image.stem / "latest"))
+    capsys.readouterr()
+    regressed = regressed_tests(*runs)
+    assert regressed and all("test_s4_4_27" in t for t in regressed)
+    series(tmp_path, 4, bad_from=3)
+    status = main(["bisect", "--reports", str(tmp_path / "reports"), "--images", str(tmp_path / "images.txt"),
+                   "--regressed", *runs])
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert status == ExitStatus.OK and lines[-3].startswith("first bad image: 3/4"), lines
+    assert main(["bisect", "--images", str(tmp_path / "images.txt"), "--regressed", runs[0], runs[0]]) == ExitStatus.USAGE
+    assert "no test regressed" in capsys.readouterr().err
+    assert main(["bisect", "--images", str(tmp_path / "images.txt"), "--regressed", *runs, SECTION]) == ExitStatus.USAGE
+    assert "one of the two" in capsys.readouterr().err
