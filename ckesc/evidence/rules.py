@@ -179,7 +179,9 @@ class BusRules(Tracker):
         if own:
             if not node.host:
                 node.host = True
-            if side == SIDE_HOST or side == SIDE_EITHER:
+            if info.throttle:  # the host's stream: most frames (what _host_frame does with one, without its tests)
+                self._throttle(info, ts)
+            elif side == SIDE_HOST or side == SIDE_EITHER:
                 self._host_frame(info, data, ts)
             return _NONE
         if side == SIDE_ESC:

@@ -210,7 +210,7 @@ class FrameId:
     """What one CAN id is, worked out once (the hot path looks it up)."""
 
     __slots__ = ("can_id", "kind", "type_id", "source", "dest", "spec", "side", "node", "label", "count", "priority",
-                 "prio_ok", "bad_source", "report", "stream_key", "periodic", "has_tail")
+                 "prio_ok", "bad_source", "report", "stream_key", "periodic", "has_tail", "throttle")
 
     def __init__(self, can_id: int, node: Node) -> None:
         kind, type_id, source, dest, spec = classify(can_id)
@@ -239,6 +239,7 @@ class FrameId:
         counted = kind is Kind.MESSAGE and spec is not None and spec.has_tail and spec.tail_tag is None
         self.stream_key = (source, type_id) if counted else None
         self.periodic = self.report or type_id == CAN_TEST.type_id
+        self.throttle = kind is Kind.MESSAGE and type_id in THROTTLE  # a host's throttle command (the stream: the hot path)
 
 
 
@@ -314,6 +315,13 @@ class Tracker(Findings):
         if node is None:
             node = self._nodes[node_id] = Node(node_id, node_id in self._host_nodes)
         return node
+
+    def frame_id(self, can_id: int) -> FrameId:
+        """What the extended CAN id ``can_id`` is, from the reader's table (worked out once): a consumer reading the same
+        frames (the soak's monitor) takes it from here instead of classifying the id again. The id's node is the
+        reader's from then on, as :meth:`~.rules.BusRules.feed` makes it: ask only for a frame it is fed."""
+        info = self._ids.get(can_id)
+        return info if info is not None else self._new_id(can_id)
 
     def _new_id(self, can_id: int) -> FrameId:
         info = FrameId(can_id, self._node(can_id & 0x7F))
@@ -393,21 +401,25 @@ class Tracker(Findings):
         for node in self._nodes.values():
             node.reset += 1
 
+    def _throttle(self, info: FrameId, ts: float) -> None:
+        """A host's throttle command (R8: the comm flag's clock, the stream's gaps)."""
+        if self.heard is not None:
+            self.heard.commands.append(ts)
+        last = self._last_throttle
+        if last is not None:
+            gap = ts - last[0]
+            if gap > self.longest_command_gap:
+                self.longest_command_gap = gap
+            if gap > cat.COMM_LOSS_TIMEOUT_S:
+                self.command_gaps += 1
+        self.commands += 1
+        self._last_throttle = (ts, info.label, info.type_id)
+
     def _host_frame(self, info: FrameId, data, ts: float) -> None:
         type_id = info.type_id
         if info.kind is Kind.MESSAGE:
-            if type_id in THROTTLE:
-                if self.heard is not None:
-                    self.heard.commands.append(ts)
-                last = self._last_throttle
-                if last is not None:
-                    gap = ts - last[0]
-                    if gap > self.longest_command_gap:
-                        self.longest_command_gap = gap
-                    if gap > cat.COMM_LOSS_TIMEOUT_S:
-                        self.command_gaps += 1
-                self.commands += 1
-                self._last_throttle = (ts, info.label, type_id)
+            if info.throttle:
+                self._throttle(info, ts)
                 return
             if not taken(info.can_id, data):
                 return  # R17: an ESC ignores it (a multi-frame part, a wrong length): it switches nothing

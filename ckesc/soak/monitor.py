@@ -81,7 +81,7 @@ class Monitor:
         self.own_frames = 0
         self.other_frames = 0
         self.last_t = t0
-        self._ids: dict[int, tuple[Any, ...]] = {}
+        self._node, self._host = cfg.node_id, cfg.host_node
         self._frames: dict[tuple[int, bytes], Frame] = {}
         self._sent: dict[tuple[int, bytes], deque[float]] = {}  # the host's send times of frames not echoed yet
         #: how late the bench stamped the host's own frames after the host sent them (:meth:`sent`)
@@ -145,50 +145,51 @@ class Monitor:
         """One frame heard (a ``can.Message`` or anything with its attributes): ``timestamp``, ``arbitration_id``,
         ``data``, ``is_extended_id`` (and the error / remote flags). The reader reads it (its events go to the
         watches); the monitor keeps the frames around findings, the bench's stamp lag and what the reader does not
-        judge (a frame that does not decode, 242's settings, frames normal reporting never sends)."""
+        judge (a frame that does not decode, 242's settings, frames normal reporting never sends). What the CAN id is
+        (whose, which kind) is the reader's (:meth:`~ckesc.evidence.tracker.Tracker.frame_id`): classified once."""
         t = msg.timestamp
         can_id = msg.arbitration_id
         data = bytes(msg.data)
         self.frames += 1
         self.last_t = t
-        if self.answers.pending is not None:
-            self.answers.tick(t)
+        answers = self.answers
+        if answers.pending is not None:
+            answers.tick(t)
         if self._open:
-            line = self._line(t, can_id, data)
-            still = []
-            for f, left in self._open:
-                f.after.append(line)
-                if left > 1:
-                    still.append((f, left - 1))
-            self._open = still
+            self._after(t, can_id, data)
         self.ring.append((t, can_id, data))
         extended = getattr(msg, "is_extended_id", True)
-        info = self._ids.get(can_id)
-        if info is None:
-            if len(self._ids) > MAX_IDS:  # a DUT sending ever new ids must not grow the memory
-                self._ids.clear()
-            info = self._ids[can_id] = classify(can_id) if extended else (None,) * 5
-        kind, _, source, _, spec = info
-        cfg = self.cfg
-        own = source == cfg.host_node and spec is not None
+        error = getattr(msg, "is_error_frame", False)
+        rules = self.rules
+        if extended and not error:
+            info = rules.frame_id(can_id)
+            kind, source = info.kind, info.source
+            own = source == self._host and info.spec is not None
+        elif extended:  # an error frame (the reader takes none of its id)
+            kind, _, source, _, spec = classify(can_id)
+            own = source == self._host and spec is not None
+        else:
+            kind = source = None
+            own = False
         if own:
             self.own_frames += 1
             if self._sent and (q := self._sent.get((can_id, data))):
                 lag = max(t - q.popleft(), 0.0)
                 self.bench_lag.add(lag)
-                self.answers.lagged(t, lag)
+                if answers.query is not None:
+                    answers.lagged(t, lag)
             if kind is Kind.REQUEST:
                 self._decode(msg, data)  # the decoder remembers a 241 request: its answer's layout depends on it
-        elif source != cfg.node_id:
-            self.other_frames += 1
-            self.answers.bus_taken(len(data))
-        else:
-            self.dut_frames += 1
-            self.unexpected.trials += 1  # every frame of the DUT is judged by it
-        self.rules.feed(can_id, data, t, extended, getattr(msg, "is_remote_frame", False),
-                        getattr(msg, "is_error_frame", False), own)
-        if own or source != cfg.node_id:
+            rules.feed(can_id, data, t, extended, getattr(msg, "is_remote_frame", False), error, True)
             return
+        if source != self._node:
+            self.other_frames += 1
+            answers.bus_taken(len(data))
+            rules.feed(can_id, data, t, extended, getattr(msg, "is_remote_frame", False), error, False)
+            return
+        self.dut_frames += 1
+        self.unexpected.trials += 1  # every frame of the DUT is judged by it
+        rules.feed(can_id, data, t, extended, getattr(msg, "is_remote_frame", False), error, False)
         frame = self._decode(msg, data)
         if frame is None:
             return
@@ -196,13 +197,23 @@ class Monitor:
         if kind is Kind.MESSAGE:
             if name in REPORTS or (name == "get_esc_id" and frame.layout is not None and frame.layout.name == "reply"):
                 return  # the reader's (its events)
-        elif kind is Kind.RESPONSE and frame.destination == cfg.host_node:
+        elif kind is Kind.RESPONSE and frame.destination == self._host:
             if name == "maintenance_information":
                 return  # the reader's (its counters' events)
             if name == "get_major_configuration":
                 self.settings.read(frame, t)
                 return
         self.unexpected.frame(frame, t)
+
+    def _after(self, t: float, can_id: int, data: bytes) -> None:
+        """A frame read after the findings still open: each keeps it, the first :data:`AFTER_FRAMES` of them."""
+        line = self._line(t, can_id, data)
+        still = []
+        for f, left in self._open:
+            f.after.append(line)
+            if left > 1:
+                still.append((f, left - 1))
+        self._open = still
 
     def _decode(self, msg: Any, data: bytes, *, judge: bool = True) -> Frame | None:
         """The frame decoded; a message (its layout the frame's own) decoded once per distinct id and bytes: a report

@@ -16,7 +16,8 @@ AFTER_FRAMES = 10
 MAX_FINDINGS = 100
 #: ... and at most this many of one watch (a watch finding all the time must not hide the others' findings)
 MAX_FINDINGS_PER_WATCH = 20
-#: CAN ids whose classification is kept, and messages kept decoded (a DUT sending ever new ones must not grow the memory)
+#: the host's frames kept with their send times, and messages kept decoded (a DUT sending ever new ones must not grow the
+#: memory; what each CAN id is, the bus reader keeps, within its own bound)
 MAX_IDS = 4096
 #: the report frames R9 and the reset watch follow
 REPORTS = cat.REPORT_FRAMES
