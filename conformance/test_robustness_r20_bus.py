@@ -22,7 +22,7 @@ from ckesc.bench.dut import DutError
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.bench.power import POWER_COMMAND_TIMEOUT_S
 from ckesc.protocol.canbus import recovery_seconds
-from ckesc.protocol.catalogue import Status
+from ckesc.protocol.catalogue import REPORT_FRAMES, Status
 
 from .resets import reset_signs
 from .settings import changes
@@ -60,7 +60,7 @@ def _flushed(dut, s: dict, end: float, bound: float) -> None:
     """Read on until the reports an ESC held through bus-off and sent late (what a controller's mailboxes do; R20
     leaves the first reports after recovery OBSERVE) have each been followed by one on its own grid: the longest
     report interval twice from the bound's end."""
-    dut.read_until(end + bound + 2 * max(interval_s(s, k) for k in ("msg1", "msg2", "msg3")))
+    dut.read_until(end + bound + 2 * max(interval_s(s, k) for k in REPORT_FRAMES))
 
 
 def _restore(dut, control) -> None:

@@ -209,7 +209,9 @@ def _remote_places(config: dict) -> list[str]:
     return [name for name in resources.get("RemotePlace", {}) if name]
 
 
-LABGRID_OPTIONS = ("labgrid_env", "labgrid_target", "labgrid_place", "labgrid_coordinator")
+#: the labgrid options: those of the env file and its target (which --flash-cmd labgrid uses too), then the power's own
+LABGRID_TARGET_OPTIONS = ("labgrid_env", "labgrid_target")
+LABGRID_OPTIONS = (*LABGRID_TARGET_OPTIONS, "labgrid_place", "labgrid_coordinator")
 
 
 def labgrid_options(get: Callable[[str], Any]) -> None:
@@ -217,9 +219,9 @@ def labgrid_options(get: Callable[[str], Any]) -> None:
     if get("power") != "labgrid":
         # --flash-cmd labgrid flashes through the target of the same file (:mod:`.labgrid_flash` checks it)
         flashes = get("flash_cmd") == "labgrid"
-        for opt in LABGRID_OPTIONS[2:] if flashes else LABGRID_OPTIONS:
+        for opt in LABGRID_OPTIONS[len(LABGRID_TARGET_OPTIONS):] if flashes else LABGRID_OPTIONS:
             if get(opt):
-                also = " or --flash-cmd labgrid" if opt in LABGRID_OPTIONS[:2] else ""
+                also = " or --flash-cmd labgrid" if opt in LABGRID_TARGET_OPTIONS else ""
                 raise PreflightError(f"--{opt.replace('_', '-')} is for --power labgrid{also}")
         return
     env_file = get("labgrid_env")

@@ -291,7 +291,8 @@ def test_every_bench_option_of_the_plugin_is_in_ckesc_run_help():
     # the plugin's report options are ckesc run's --reports and --trace-format; --ckesc-summary and --ckesc-no-html
     # are set by ckesc run / ckesc selftest themselves
     renamed = {"--ckesc-reports": "--reports", "--ckesc-trace-format": "--trace-format", "--ckesc-order": "--order",
-               "--ckesc-progress": "--progress", "--ckesc-durations": "--time-from", "--ckesc-strict": "--strict"}
+               "--ckesc-progress": "--progress", "--ckesc-durations": "--time-from", "--ckesc-strict": "--strict",
+               "--ckesc-baseline": "--baseline", "--ckesc-baseline-threshold": "--baseline-threshold"}
     missing = [o for o in sorted(options) if o not in ("--ckesc-summary", "--ckesc-no-html")
                and renamed.get(o, o) not in ours]
     assert missing == []
