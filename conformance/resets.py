@@ -11,7 +11,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from ckesc.bench.dut import DutError
 from ckesc.evidence.resets import POWER_UPS, ResetSigns
+
+from .settings import changes
 
 
 def reset_signs(dut, reports: Iterable, interval: float, *, ups: tuple[int | None, int | None] = (None, None)) -> list[str]:
@@ -26,3 +29,15 @@ def reset_signs(dut, reports: Iterable, interval: float, *, ups: tuple[int | Non
         if (sign := signs.counter(POWER_UPS, after, 0.0)) is not None:
             found.append(sign)
     return [f"{sign.text}: the ESC reset" for sign in found]
+
+
+def afterwards(dut, settings: dict | None, ups: int | None, interval: float) -> list[str]:
+    """What a robustness test finds once its disturbance is over, in words: the ESC does not answer, its settings
+    differ from ``settings`` (242 read before; None: not compared), or its power-up count moved from ``ups`` (a reset,
+    :func:`reset_signs`)."""
+    try:
+        after, ups_after = (dut.settings() if settings is not None else None), dut.power_up_count()
+    except DutError as exc:
+        return [f"afterwards it did not answer: {exc}"]
+    problems = [f"its settings changed: {changed}"] if settings is not None and (changed := changes(settings, after)) else []
+    return problems + reset_signs(dut, [], interval, ups=(ups, ups_after))

@@ -17,14 +17,12 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.dut import DutError
 from ckesc.bench.station import ForeignPlay
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.ids import Kind
 
 from .answers import answers_another_node
-from .resets import reset_signs
-from .settings import changes
+from .resets import afterwards, reset_signs
 from .telemetry import interval_s, ms
 
 SECTION = "robustness"
@@ -68,14 +66,7 @@ def _watch(dut, played: ForeignPlay) -> None:
                    and f.name not in cat.REPORT_FRAMES and not answers_another_node(dut, f)})
     if sent:
         problems.append(f"the ESC sent {', '.join(sent)}")
-    try:
-        after, ups_after = dut.settings(), dut.power_up_count()
-    except DutError as exc:
-        problems.append(f"afterwards it did not answer: {exc}")
-    else:
-        if changed := changes(s, after):
-            problems.append(changed)
-        problems += reset_signs(dut, [], interval, ups=(ups, ups_after))
+    problems += afterwards(dut, s, ups, interval)
     replies = [f for f in dut.trace[heard:] if f.source == dut.node_id and f.name == "get_esc_id" and f.kind is Kind.MESSAGE]
     dut.record.observe("foreign traffic watched", f"{played.name} from nodes {nodes} for {WATCH_S:g} s; GET_ESC_ID "
                        f"replies to the flight controller's queries: {len(replies)}")

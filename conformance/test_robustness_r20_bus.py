@@ -18,14 +18,12 @@ from __future__ import annotations
 import pytest
 
 from ckesc.bench.bus_fault import NO_CONTROL, bus_fault_control
-from ckesc.bench.dut import DutError
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.bench.power import POWER_COMMAND_TIMEOUT_S
 from ckesc.protocol.canbus import recovery_seconds
 from ckesc.protocol.catalogue import REPORT_FRAMES, Status
 
-from .resets import reset_signs
-from .settings import changes
+from .resets import afterwards, reset_signs
 from .telemetry import REACT_S, interval_s, ms, timing_unjudged
 from .throttle import FORMAT_CHANNELS, STREAM_PERIOD_S, can_throttle, command_for
 
@@ -102,14 +100,7 @@ def test_reports_go_on_after_a_bus_fault(dut, kind, pytestconfig):
                             f"{ms(dut.lane.timing_error):g} ms)")
         msg1 = dut.frames("msg1", since=t0, source=dut.node_id)
         problems += reset_signs(dut, msg1, interval)
-        try:
-            after, ups_after = dut.settings(), dut.power_up_count()
-        except DutError as exc:
-            problems.append(f"afterwards it did not answer: {exc}")
-        else:
-            if changed := changes(s, after):
-                problems.append(f"its settings changed: {changed}")
-            problems += reset_signs(dut, [], interval, ups=(ups, ups_after))
+        problems += afterwards(dut, s, ups, interval)
         if back:
             dut.record.observe("reports after the fault", f"first MSG1 {ms(back[0].timestamp - end):g} ms after the bus "
                                f"was freed (bound {ms(bound):g} ms)")
@@ -159,10 +150,7 @@ def test_comm_flag_rises_through_a_bus_short_and_clears(dut, pytestconfig):
                                where=lambda f: not _flag(f))
         if cleared is None:
             problems.append(f"the next command did not clear the comm flag within {ms(2 * interval):g} ms")
-        try:
-            problems += reset_signs(dut, [], interval, ups=(ups, dut.power_up_count()))
-        except DutError as exc:
-            problems.append(f"afterwards it did not answer: {exc}")
+        problems += afterwards(dut, None, ups, interval)
     finally:
         dut.stop_throttle()
         _restore(dut, control)
