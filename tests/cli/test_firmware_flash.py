@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import shlex
 import shutil
 import subprocess
 import sys
@@ -19,21 +17,16 @@ from pathlib import Path
 
 import pytest
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "harness"))
+from procs import CKESC, Emulator, one_line_exit_2  # noqa: E402
+from procs import env as _env  # noqa: E402
+
 pytestmark = pytest.mark.realtime  # real processes timed against the wall clock
 
 ROOT = Path(__file__).resolve().parents[2]
 RELEASE = ROOT / "fixtures" / "firmware" / "release-1.0.toml"
-CKESC = [sys.executable, "-m", "ckesc"]
 #: what a mistake may take, the interpreter's start and pytest's collection included
 WITHIN_S = 20.0
-
-
-def _env(tmp: Path) -> dict[str, str]:
-    (tmp / "tmp").mkdir(exist_ok=True)
-    out = dict(os.environ, TMPDIR=str(tmp / "tmp"), PYTHONUNBUFFERED="1")
-    for key in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        out.pop(key, None)
-    return out
 
 
 def _run(tmp: Path, *args: str) -> tuple[subprocess.CompletedProcess, float]:
@@ -44,16 +37,7 @@ def _run(tmp: Path, *args: str) -> tuple[subprocess.CompletedProcess, float]:
 
 
 def _one_line_exit_2(done: subprocess.CompletedProcess, took: float, tmp: Path, *phrases: str) -> str:
-    text = done.stdout + done.stderr
-    assert done.returncode == 2, text
-    lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1, done.stderr
-    for phrase in phrases:
-        assert phrase in lines[0], lines[0]
-    assert took < WITHIN_S, f"{took:.1f} s: {lines[0]}"
-    assert "Traceback" not in text and "PASSED" not in text and "FAIL" not in text, text
-    assert not (tmp / "reports").exists() or not any((tmp / "reports").iterdir()), "a report was written"
-    return lines[0]
+    return one_line_exit_2(done, took, tmp, *phrases, within=WITHIN_S)
 
 
 def test_a_flash_command_that_fails_is_exit_2_before_any_verdict(tmp_path):
@@ -83,39 +67,6 @@ def test_a_good_image_runs_and_results_json_holds_its_sha256(tmp_path):
     assert f"image SHA-256: {info['firmware']['sha256']}" in summary
 
 
-class _Emulator:
-    """``ckesc emulate --firmware IMAGE`` (node 1) behind socketcand, with its control channel."""
-
-    def __init__(self, tmp: Path, image: Path) -> None:
-        self.proc = subprocess.Popen([*CKESC, "emulate", "--nodes", "1", "--socketcand", "0", "--control", "0",
-                                      "--firmware", str(image)], cwd=tmp, env=_env(tmp), stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True)
-        ports: dict[str, int] = {}
-        assert self.proc.stdout is not None
-        while len(ports) < 2:
-            line = self.proc.stdout.readline()
-            assert line, self.proc.stderr.read() if self.proc.stderr else "emulator died"
-            kind, _, addr = line.strip().partition(" ")
-            if kind in ("socketcand", "control"):
-                ports[kind] = int(addr.rsplit(":", 1)[1])
-        self.port, self.control = ports["socketcand"], ports["control"]
-
-    def bench(self, profile: Path) -> list[str]:
-        control = shlex.join([*CKESC, "control", "--port", str(self.control)])
-        return ["--dut", "bus", "--can-interface", "socketcand", "--can-channel", "can0", "--can-config",
-                "host=127.0.0.1", "--can-config", f"port={self.port}", "--can-config", "tcp_tune=True", "--node-id", "1",
-                "--profile", str(profile), "--power", "command", "--power-off-cmd", f"{control} power off",
-                "--power-on-cmd", f"{control} power on"]
-
-    def close(self) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.communicate()
-
-
 def test_on_a_bus_the_flash_is_followed_by_a_proven_power_cycle_and_240_proves_the_image(tmp_path):
     profile = tmp_path / "mine.toml"
     profile.write_text('[dut]\nname = "my ESC"\n[timing]\nboot_s = 0.5\noff_s = 0.5\n')
@@ -123,7 +74,7 @@ def test_on_a_bus_the_flash_is_followed_by_a_proven_power_cycle_and_240_proves_t
     binary.write_bytes(b"\x7fbuild 1.0")
     # what the vendor's build says 240 answers: release-1.0's, which the stand-in ESC runs
     (tmp_path / "esc-1.0.bin.toml").write_text('[esc_information]\nfirmware_date = "2024-10-11"\nprotocol_version = 21\n')
-    emu = _Emulator(tmp_path, RELEASE)
+    emu = Emulator(tmp_path, "--firmware", str(RELEASE))  # the stand-in ESC runs release-1.0
     try:
         done, _ = _run(tmp_path, *emu.bench(profile), "--firmware", str(binary), "--flash-cmd", "echo wrote {image}",
                        "4.4.26")

@@ -11,6 +11,21 @@ from pathlib import Path
 CKESC = [sys.executable, "-m", "ckesc"]
 
 
+def one_line_exit_2(done: subprocess.CompletedProcess, took: float, tmp: Path, *phrases: str, within: float) -> str:
+    """``ckesc run``'s refusal of a set-up mistake, as a user meets it: exit 2 within ``within`` seconds, one line on
+    stderr holding ``phrases``, no traceback, no verdict and no report under ``tmp/reports``; the line."""
+    text = done.stdout + done.stderr
+    assert done.returncode == 2, text
+    lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, done.stderr
+    for phrase in phrases:
+        assert phrase in lines[0], lines[0]
+    assert took < within, f"{took:.1f} s: {lines[0]}"
+    assert "Traceback" not in text and "FAIL" not in text and "PASSED" not in text, text
+    assert not (tmp / "reports").exists() or not any((tmp / "reports").iterdir()), "a report was written"
+    return lines[0]
+
+
 def env(tmp: Path) -> dict[str, str]:
     """The environment of a ``ckesc`` process under ``tmp``: its own temp directory, unbuffered output, and
     no python-can configuration from the caller's environment."""

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
-from procs import CKESC, Emulator
+from procs import CKESC, Emulator, one_line_exit_2
 from procs import env as _env
 
 pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
@@ -59,16 +59,7 @@ def _run(tmp: Path, port: int, *args: str, profile: Path | None = None) -> tuple
 
 
 def _one_line_exit_2(done: subprocess.CompletedProcess, took: float, tmp: Path, *phrases: str) -> str:
-    text = done.stdout + done.stderr
-    assert done.returncode == 2, text
-    lines = [ln for ln in done.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1, done.stderr
-    for phrase in phrases:
-        assert phrase in lines[0], lines[0]
-    assert took < WITHIN_S, f"{took:.1f} s: {lines[0]}"
-    assert "Traceback" not in text and "FAIL" not in text and "PASSED" not in text, text
-    assert not (tmp / "reports").exists() or not any((tmp / "reports").iterdir()), "a report was written"
-    return lines[0]
+    return one_line_exit_2(done, took, tmp, *phrases, within=WITHIN_S)
 
 
 def _free_port() -> int:
