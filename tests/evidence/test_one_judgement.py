@@ -33,6 +33,7 @@ from ckesc.evidence.rules import BusRules
 from ckesc.explore.judge import Params, judge
 from ckesc.explore.oracle import Oracle
 from ckesc.protocol import catalogue as cat
+from ckesc.protocol.errors import DecodeError
 from ckesc.protocol.frame import Decoder, encode, frame_bits
 from ckesc.protocol.judgements import R9_GAPS, r9_judged, r9_mean
 from ckesc.soak.monitor import Monitor
@@ -56,6 +57,18 @@ def request(name: str, fields: dict, t: float, *, source: int = 0, destination: 
     wire = encode(name, fields, source=source, transfer_id=transfer_id, **kw)
     return can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=True, timestamp=t,
                        is_rx=source != 0)
+
+
+def decoded(frames) -> list:
+    """The CKESC frames among ``frames``, decoded (another node's frames, a flight controller's DroneCAN or a load
+    source's, are none and left out)."""
+    decoder, out = Decoder(), []
+    for m in frames:
+        try:
+            out.append(decoder.decode(m))
+        except DecodeError:
+            pass
+    return out
 
 
 def play(events, end: float, *, nvm: dict | None = None, **config) -> list[can.Message]:

@@ -25,14 +25,13 @@ from ckesc.evidence.rules import BusRules
 from ckesc.explore.judge import Params, judge
 from ckesc.explore.oracle import Oracle
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.errors import DecodeError
-from ckesc.protocol.frame import Decoder, frame_bits
+from ckesc.protocol.frame import frame_bits
 from ckesc.protocol.judgements import r8_onset
 from ckesc.soak.monitor import Monitor
 from ckesc.soak.watch import WatchConfig
 from conformance.telemetry import REACT_S
 
-from .test_one_judgement import BOOT_S, NODE, play, request
+from .test_one_judgement import BOOT_S, NODE, decoded, play, request
 
 FC = 10
 HIGH_MINUS_1 = 3  # the flight controller's priority for 1030 (bench/foreign.py)
@@ -66,24 +65,13 @@ def _foreign_esc_command(t: float, tid: int) -> can.Message:
                        is_extended_id=True, timestamp=t)
 
 
-def _decoded(frames) -> list:
-    """The CKESC frames among ``frames``, decoded (the flight controller's DroneCAN frames are none)."""
-    decoder, out = Decoder(), []
-    for m in frames:
-        try:
-            out.append(decoder.decode(m))
-        except DecodeError:
-            pass
-    return out
-
-
 def _flag(f) -> bool:
     return bool(f.fields["status"] & COMM)
 
 
 def _suite(frames) -> set[str]:
     """As ``test_comm_fault_flag`` judges: no flag under the stream, the first flag's onset, cleared again."""
-    msg1 = [f for f in _decoded(frames) if f.name == "msg1" and f.source == NODE]
+    msg1 = [f for f in decoded(frames) if f.name == "msg1" and f.source == NODE]
     commands = [m.timestamp for m in frames if not m.is_rx]
     last = max(t for t in commands if t <= STREAMS[0][1] + 0.001)
     again = min(t for t in commands if t > last)
@@ -123,7 +111,7 @@ def _explorer(frames) -> set[str]:
         if not m.is_rx:
             oracle.host_frame(m)
     oracle.finish(END_S)
-    found = judge(oracle, _decoded(m for m in frames if m.is_rx and m.timestamp >= BOOT_S), BOOT_S, END_S,
+    found = judge(oracle, decoded(m for m in frames if m.is_rx and m.timestamp >= BOOT_S), BOOT_S, END_S,
                   Params(boot_s=BOOT_S))
     return {r for f in found for r in f.requirements}
 

@@ -28,14 +28,13 @@ from ckesc.emulator import sim_bus
 from ckesc.explore.judge import Params, judge
 from ckesc.explore.oracle import Oracle
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.errors import DecodeError
-from ckesc.protocol.frame import Decoder, classify, frame_bits
+from ckesc.protocol.frame import classify, frame_bits
 from ckesc.protocol.judgements import r18_gap, r18_mean
 from ckesc.protocol.load import LoadSource
 from ckesc.soak.monitor import Monitor
 from ckesc.soak.watch import WatchConfig
 
-from .test_one_judgement import NODE, bus_rules, check_log, request
+from .test_one_judgement import NODE, bus_rules, check_log, decoded, request
 
 RATE = cat.DEFAULT_BITRATE
 #: the host reads the intervals at READ, the load plays from LOAD_FROM to the end; judged from JUDGE_FROM
@@ -72,18 +71,8 @@ def _trace(faults: tuple[str, ...], share: float) -> list:
         sim_bus.discard(channel)
 
 
-def _decoded(frames) -> list:
-    decoder, out = Decoder(), []
-    for m in frames:
-        try:
-            out.append(decoder.decode(m))
-        except DecodeError:
-            pass  # a load frame: no CKESC frame
-    return out
-
-
 def _starts(frames, name: str) -> list[float]:
-    return [f.timestamp - frame_bits(len(f.data)) / RATE for f in _decoded(frames)
+    return [f.timestamp - frame_bits(len(f.data)) / RATE for f in decoded(frames)
             if f.name == name and f.source == NODE and JUDGE_FROM < f.timestamp <= LOAD_TO]
 
 
@@ -110,7 +99,7 @@ def _explorer(frames, share: float) -> set[str]:
     oracle.load(LOAD_FROM, share)
     oracle.load(LOAD_TO, 0.0)
     oracle.finish(END_S)
-    found = judge(oracle, _decoded(m for m in frames if m.is_rx and m.timestamp >= START), START, END_S,
+    found = judge(oracle, decoded(m for m in frames if m.is_rx and m.timestamp >= START), START, END_S,
                   Params(boot_s=START))
     return {f"{rule}: {f.subject.split()[0]}" for f in found for rule in f.requirements}
 
