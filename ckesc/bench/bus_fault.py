@@ -21,12 +21,10 @@ test SKIPs (:data:`NO_CONTROL`), never PASSes.
 
 from __future__ import annotations
 
-import shlex
-import subprocess
 from typing import Any
 
-from .errors import BenchError
-from .power import POWER_COMMAND_TIMEOUT_S
+from .errors import BenchError, PowerFailed
+from .power import POWER_COMMAND_TIMEOUT_S, run_command
 
 #: the skip of a test whose lane cannot disturb the bus
 NO_CONTROL = "no bus-fault control: give --bus-fault-cmd"
@@ -117,18 +115,10 @@ class CommandBusFault:
         if kind not in KINDS:
             raise ValueError(f"bus fault {kind!r}: one of {', '.join(KINDS)}")
         cmd = self.cmd.replace("{seconds}", f"{seconds:g}").replace("{kind}", kind)
-        limit = seconds + self.timeout
-        try:
-            done = subprocess.run(shlex.split(cmd), capture_output=True, text=True, timeout=limit)
-        except subprocess.TimeoutExpired:
-            raise BusFaultFailed(f"bus-fault command {cmd!r} did not return within {limit:g} s (killed; "
-                                 "--power-cmd-timeout gives it longer)") from None
-        except OSError as exc:
-            raise BusFaultFailed(f"bus-fault command {cmd!r} could not be run: {exc.strerror or exc}") from None
-        if done.returncode != 0:
-            err = " ".join(done.stderr.split())[-300:]
-            raise BusFaultFailed(f"bus-fault command {cmd!r} failed (exit status {done.returncode})"
-                                 + (f": {err}" if err else ""))
+        try:  # (the bench's one way to run a command: no shell, killed with all it started at the limit)
+            run_command(cmd, seconds + self.timeout, what="bus-fault command", longer="--power-cmd-timeout")
+        except PowerFailed as exc:
+            raise BusFaultFailed(str(exc)) from None
         return None  # it ended as the command returned
 
     def settle(self, within: float = 0.0) -> bool:
