@@ -148,7 +148,7 @@ def test_a_fault_that_takes_a_foreign_frame_fails_the_foreign_traffic_test(tmp_p
     assert quiet["verdicts"] == {FOREIGN_TEST: "FAIL"}
     doc = json.loads((tmp_path / "quiet" / "latest" / "results.json").read_text())
     message = doc["results"][0]["message"]
-    assert message.startswith("[R17") and "a reset" in message and "power-up count" in message, message
+    assert message.startswith("[R17") and "the ESC reset" in message and "power-up count" in message, message
 
 
 @pytest.mark.slow  # `ckesc emulate` in its own process, ~20 s
