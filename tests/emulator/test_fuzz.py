@@ -13,11 +13,11 @@ import itertools
 
 import can
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from ckesc.emulator import FAULTS, EscConfig, EscModel, sim_bus
-from ckesc.protocol import CATALOGUE, Kind, WireFrame, encode, message_id, service_id
+from ckesc.protocol import CATALOGUE, Kind, WireFrame, encode, message_id, service_id, spec
 from ckesc.protocol.catalogue import LED_BLINK
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -159,9 +159,18 @@ RECOVER = [  # the documented way back to reporting: CAN Test off, reports on
     _host("can_test", {"option": 0x55, "count": 0}),
     _host("msg_control", {"option": 0, "command": 0xAAAAAAAA}),
 ]
+MSG_CONTROL, MSG1 = spec("msg_control").type_id, spec("msg1").type_id
+#: Hypothesis's case: a Set ID to the factory id 0x7D, then CAN Test starts with an empty payload (no tail byte: no
+#: single-frame transfer, so ignored, R17). At 0x7D the ESC reports nothing on its own (F7), yet it answers RECOVER's
+#: MSG Control as every ESC on the bus does (4.4.2-2, R2): that answer is no report
+_SET_ID_7D = _host("set_id", {"node_id": 0x7D, "throttle_channel": 1}, destination=1)
+_EMPTY_CAN_TEST = Raw(RECOVER[0].arbitration_id, b"")
 
 
 @FUZZ
+@example(frames=[(0.3, _SET_ID_7D)])
+@example(frames=[(0.3, _SET_ID_7D), (0.01, _EMPTY_CAN_TEST), (0.01, _EMPTY_CAN_TEST)])
+@example(frames=[(0.3, _EMPTY_CAN_TEST)])  # an empty CAN Test starts nothing: MSG1 goes on
 @given(frames=traffic)
 def test_model_survives_random_traffic_and_keeps_reporting(frames):
     esc = EscModel(EscConfig(node_id=1, slot=0))
@@ -174,11 +183,11 @@ def test_model_survives_random_traffic_and_keeps_reporting(frames):
         esc.receive(frame, now)
     out = run(esc, now + 1.2)
     names = {(w.arbitration_id >> 8) & 0xFFFF for w in out if not w.arbitration_id & 0x80}
-    if esc.node_id == 0x7D:  # F7: a random Set ID may have made it the factory id: silent, but it answers
-        assert not names
+    if esc.node_id == 0x7D:  # F7: a random Set ID may have made it the factory id: no report, but it answers
+        assert names == {MSG_CONTROL}, names  # RECOVER's MSG Control (4.4.2-2), and nothing on its own
         node = 0x7D
     else:
-        assert 20050 in names and esc.state.can_test is False  # MSG1 again
+        assert MSG1 in names and esc.state.can_test is False  # MSG1 again
         node = esc.node_id
     esc.receive(_host("self_test", {}, destination=node), now + 1.2)
     answers = run(esc, now + 1.3)
