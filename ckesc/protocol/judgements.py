@@ -168,6 +168,16 @@ def r9a_limit_s(interval: float, old: float | None = None, *, jitter: float = 0.
     return cat.restart_limit_s(interval if old is None else max(interval, old)) + jitter
 
 
+def r9_stopped(silence: float, interval: float, *, error: float = 0.0, jitter: float = 0.0,
+               what: str = "report") -> Judgement:
+    """R9, R19: a report silent at the end of what was heard of a run: ``silence`` from its last report to the last
+    frame heard, at ``interval``. Its next gap is at least that long, and a report may be absent no longer than
+    a restart may take (:func:`r9a_limit_s`, with the DUT's declared ``jitter``), as a reset's gap is read
+    (:func:`r19_report_restart`); longer, it stopped. ``error``: the two ends' stamps' (the bench's)."""
+    return Judgement("R9", silence, r9a_limit_s(interval, jitter=jitter), "<=", error,
+                     f"no {what} since its last one, at the end of what was heard (interval {interval * 1000:g} ms)")
+
+
 def r9a_first(delay: float, limit: float, *, error: float = 0.0, what: str = "the first report") -> Judgement:
     """R9a: the first report ``delay`` after a restart is within ``limit`` (:func:`r9a_limit_s`)."""
     return Judgement("R9a", delay, limit, "<=", error, f"{what} {delay * 1000:.3f} ms after the restart")

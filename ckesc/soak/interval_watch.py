@@ -29,7 +29,7 @@ class _Span:
     (:meth:`reset`): a counter that by chance goes on by one across a reset (one time in 32) shows none of its own."""
 
     __slots__ = ("first", "last", "n", "recent", "spanned", "gaps", "stretches", "skip", "pending", "heard", "seen",
-                 "restarted_at")
+                 "restarted_at", "latest", "found_silent")
 
     def __init__(self) -> None:
         self.first = self.last = self.spanned = 0.0
@@ -38,9 +38,13 @@ class _Span:
         self.pending = False  # the next report is the first after a restart
         self.seen = False  # a report heard in an earlier minute
         self.restarted_at = -math.inf  # the first report after the last restart
+        self.latest = -math.inf  # the last report heard
+        self.found_silent = False  # a silent minute since it was found
 
     def add(self, t: float, restarted: bool) -> None:
         self.heard += 1
+        self.latest = t
+        self.found_silent = False
         if restarted or self.pending:
             self.pending = False
             self.restarted_at = t
@@ -158,7 +162,7 @@ class IntervalWatch(Watch):
         for span in self.spans.values():
             span.reset(since)
 
-    def _close_minute(self, end: float, *, partial: bool = False) -> None:
+    def _close_minute(self, end: float, *, partial: bool = False, stopped: dict[str, jd.Judgement] | None = None) -> None:
         for name in REPORTS:
             interval = self.cfg.intervals.get(name)
             span = self.spans[name]
@@ -167,10 +171,16 @@ class IntervalWatch(Watch):
             if interval is None:
                 self.series[name].append(None)
                 continue
+            if stopped and name in stopped:  # it stopped before the run's end: the last minute's judgement of it
+                self.series[name].append(round(joined.span / joined.gaps * 1000, 4) if joined.gaps else None)
+                self.trials += 1
+                self.find(min(end, self.monitor.last_t), f"minute {self.minute + 1}: {stopped.pop(name)}")
+                continue
             if joined.gaps < 1:
                 self.series[name].append(None)
                 if silent and not partial:
                     self.trials += 1
+                    span.found_silent = True
                     self.find(end, f"no {name} in minute {self.minute + 1} (interval {interval * 1000:g} ms)")
                 continue
             if partial and joined.gaps < jd.R9_GAPS:
@@ -191,11 +201,34 @@ class IntervalWatch(Watch):
         self.minute += 1
 
     def close(self, now: float) -> None:
+        """The run ended at ``now``: the minutes left closed, the last one maybe partial (its mean judged over enough
+        gaps only), and each report's silence at the end judged (:meth:`_stopped`) as that last minute's."""
         minute = int((now - self.t0) // MINUTE_S)
         while minute > self.minute:
             self._close_minute(self.t0 + (self.minute + 1) * MINUTE_S)
+        stopped = self._stopped(min(now, self.monitor.last_t))
         if now - self.t0 > self.minute * MINUTE_S:  # a part of a minute left
-            self._close_minute(now, partial=True)
+            self._close_minute(now, partial=True, stopped=stopped)
+        for judged in stopped.values():  # the run ended as its last minute did, which was judged without them
+            self.trials += 1
+            self.find(min(now, self.monitor.last_t), f"minute {self.minute}: {judged}")
+
+    def _stopped(self, heard: float) -> dict[str, jd.Judgement]:
+        """The reports silent at the end longer than a report may be absent (:func:`~ckesc.protocol.judgements.
+        r9_stopped`), no minute having found their silence already. The silence is measured to ``heard``, the last
+        frame heard, not to the run's end: what the host did not read (its own stop, a bench that delivered nothing
+        more before it failed) is not the ESC's silence."""
+        cfg = self.cfg
+        error = cfg.error + max(cfg.error, cfg.own_error)  # the report's stamp, and the last frame's (maybe the host's)
+        out = {}
+        for name in REPORTS:
+            interval, span = cfg.intervals.get(name), self.spans[name]
+            if interval is None or span.found_silent or span.latest == -math.inf:
+                continue
+            judged = jd.r9_stopped(heard - span.latest, interval, error=error, jitter=cfg.jitter, what=name)
+            if not judged.ok:
+                out[name] = judged
+        return out
 
     def statistics(self) -> dict[str, Any]:
         return {"minutes_judged": self.trials, "worst_mean_error_ms": {k: round(v * 1000, 4) for k, v in self.worst.items()},

@@ -76,6 +76,7 @@ class Monitoring(Protocol):
 
     cfg: WatchConfig
     t0: float
+    last_t: float  #: the time of the last frame heard (any node's)
     intervals: Any
     unexpected: Any
     decoder: Any

@@ -51,6 +51,13 @@ def test_the_faultless_emulator_soaked_as_long_has_no_finding(tmp_path):
     assert doc["findings"] == []
 
 
+def test_the_faultless_emulator_soaked_into_a_partial_minute_has_no_finding(tmp_path):
+    """The run's last minute is partial and each report's silence at its end is judged (R9, R19): the host stops
+    its stream and its reading at the end, and no report of the faultless emulator is cut short by it."""
+    doc = soak(tmp_path, [], 1.5 * MOVED_ONSET_S, spin=False)
+    assert doc["findings"] == [] and doc["watches"]["report intervals"]["trials"] == 3 * 2
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(1800)
 @pytest.mark.parametrize("fault", SOAK_FAULTS)

@@ -37,6 +37,7 @@ class Esc:
     power_ups: list[int] = field(default_factory=lambda: [7])
     run_times: list[int] = field(default_factory=lambda: [0])
     led_after: float | None = None
+    stops_at: dict[str, float] = field(default_factory=dict)  # a report (msg1..3) stops for good here
     extra: list[WireFrame] = field(default_factory=list)
 
     def frames(self, seconds: float) -> list[WireFrame]:
@@ -52,7 +53,7 @@ class Esc:
             out.append(encode("raw_command_14b", {"channels": [0] * 4}, source=HOST, transfer_id=nxt("stream"), timestamp=t))
             t = round(t + 0.02, 9)
         t, k = 0.001, 0
-        while t < seconds:
+        while t < min(seconds, self.stops_at.get("msg1", seconds)):
             if self.reset_at is not None and self.reset_at <= t < self.reset_at + 0.3:
                 t = round(t + self.msg1_interval, 9)
                 if t >= self.reset_at + 0.3:
@@ -66,7 +67,7 @@ class Esc:
         for name, interval, fields in (("msg2", MSG2, {"voltage": 1200, "current": 0, "temperature": 30}),
                                        ("msg3", MSG3, {"mos_t": 30, "cap_t": 30, "motor_t": 30, "mcu_t": 30})):
             n, origin = 0, 0.003
-            while (t := origin + n * interval) < seconds:
+            while (t := origin + n * interval) < min(seconds, self.stops_at.get(name, seconds)):
                 if self.reset_all and self.reset_at is not None and origin < self.reset_at <= t:
                     n, origin = 0, self.reset_at + self.back_at
                     tid[name] = tid[name] if name in self.counting_on else 0
@@ -159,6 +160,41 @@ def test_a_reset_is_found_once_as_a_reset_and_its_restart_gaps_leave_the_minutes
     assert m.intervals.series["msg3"][0] == pytest.approx(500.0) and m.intervals.trials == 3 * 2
     late = watch(Esc(reset_at=30.0, reset_all=True, msg1_interval=MSG1 + 1.5 * jd.SCHEDULING_TOLERANCE_S))
     assert [f.watch for f in late.findings if "msg1 every" in f.message] == ["report intervals"] * 2  # still judged
+
+
+@pytest.mark.parametrize("seconds, stops_at", [(90.0, 70.0), (65.0, 55.0), (120.0, 100.0), (90.0, 89.0)])
+def test_a_report_that_stops_before_the_run_ends_is_found(seconds, stops_at):
+    """A report that stops inside the run's last minute, whole or partial, is found at the run's end (R9, R19): its
+    silence since its last report is longer than a report may be absent even across a restart. Before, the last
+    minute judged only the gaps heard in it, and a partial minute silent throughout was not judged at all."""
+    m = watch(Esc(stops_at={"msg2": stops_at}), seconds)
+    found = only(m, "report intervals")
+    assert len(found) == 1 and found[0].rules == ("R9", "R19"), [f.line() for f in found]
+    assert "msg2" in found[0].message and found[0].t == pytest.approx(seconds, abs=0.03), found[0].line()
+    assert m.intervals.events <= m.intervals.trials
+
+
+def test_a_report_stopped_for_minutes_is_found_once_a_minute_not_again_at_the_end():
+    found = only(watch(Esc(stops_at={"msg3": 50.0}), 200.0), "report intervals")
+    assert [f.message.split(" (")[0] for f in found] == ["no msg3 in minute 2", "no msg3 in minute 3"]
+
+
+@pytest.mark.parametrize("seconds", [60.0, 90.0, 90.0005, 90.02])
+def test_the_runs_end_cuts_no_report_short(seconds):
+    """The host's stop is not the ESC's: reading stops at the run's end, however close to it each report's last
+    one came, and a report not due yet is no silence."""
+    m = watch(Esc(), seconds)
+    assert [f.line() for f in m.findings] == []
+
+
+def test_a_silence_after_the_bench_stopped_delivering_frames_is_not_the_escs():
+    """The run's end is judged as far as the bus was heard: when the bench failed and delivered nothing more (an
+    adapter gone), the run's end time comes later than its last frame, and the silence between is the bench's."""
+    m = Monitor(CFG, t0=0.0)
+    for frame in Esc().frames(80.0):
+        m.feed(frame)
+    m.close(90.0)
+    assert [f.line() for f in m.findings] == []
 
 
 @pytest.mark.parametrize("back_at", [0.303, 0.2995])  # MSG3 back after MSG1 shows the reset, or before it
