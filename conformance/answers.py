@@ -16,7 +16,8 @@ from weakref import WeakKeyDictionary
 
 import pytest
 
-from ckesc.bench.dut import DutError
+from ckesc.bench.dut import restoring
+from ckesc.bench.errors import RestoreFailed
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.evidence.pairing import QueryPairing, ReplyPairing
 from ckesc.protocol import catalogue as cat
@@ -211,21 +212,23 @@ def _set_id_at(dut, ids: list[int], node: int, channel: int) -> None:
 
 
 def put_back(dut, node: int, channel: int) -> None:
-    """Put the DUT back at ``node`` on ``channel`` and verify: DutError when it is not. Set ID (a pseudo-broadcast,
-    R11) goes inside the window of the DUT's current power-up while :data:`RESTORE_IN_WINDOW_S` of it is left (no
-    power cycle), else, or when that did not take, inside a fresh window after a power cycle."""
-    found = esc_ids(dut)
-    if found and found != [(node, channel)] and dut.window_left() >= RESTORE_IN_WINDOW_S:
-        _set_id_at(dut, [n for n, _ in found], node, channel)
+    """Put the DUT back at ``node`` on ``channel`` and verify: RestoreFailed (the harness's, never the DUT's verdict)
+    when it is not. Set ID (a pseudo-broadcast, R11) goes inside the window of the DUT's current power-up while
+    :data:`RESTORE_IN_WINDOW_S` of it is left (no power cycle), else, or when that did not take, inside a fresh window
+    after a power cycle."""
+    with restoring(f"the DUT at node id {node}, channel {channel}"):
         found = esc_ids(dut)
-    if found != [(node, channel)]:
-        dut.switch_power()  # a fresh 120 s window (R11)
-        found = esc_ids(dut)
-        _set_id_at(dut, [n for n, _ in found], node, channel)
-        found = esc_ids(dut)
+        if found and found != [(node, channel)] and dut.window_left() >= RESTORE_IN_WINDOW_S:
+            _set_id_at(dut, [n for n, _ in found], node, channel)
+            found = esc_ids(dut)
+        if found != [(node, channel)]:
+            dut.switch_power()  # a fresh 120 s window (R11)
+            found = esc_ids(dut)
+            _set_id_at(dut, [n for n, _ in found], node, channel)
+            found = esc_ids(dut)
     dut.node_id = node
     if found != [(node, channel)]:
-        raise DutError(f"could not put the DUT back at node id {node}, channel {channel}: GET_ESC_ID answers {found}")
+        raise RestoreFailed(f"could not put the DUT back at node id {node}, channel {channel}: GET_ESC_ID answers {found}")
 
 
 @pytest.fixture
@@ -249,7 +252,7 @@ def slot_node(dut):
     bench's error (:func:`delay_error`) its slot cannot tell an answer in it from one sent at once (:func:`tells`).
     Then the DUT is moved to :func:`wide_node` with Set ID inside the 120 s window of a
     proven power cycle (R11), proven there by GET_ESC_ID, and moved back and proven afterwards on every way
-    out (DutError when it cannot be). Where no node id tells, there is no power control to open the window, or
+    out (RestoreFailed when it cannot be). Where no node id tells, there is no power control to open the window, or
     other ESCs share the bus (Set ID moves every one), the DUT's own node id, saying why: there the answer's start
     is INCONCLUSIVE (:func:`check_answer_slot`) and the slot's end and the 64 ms bound (a SHALL) are still judged.
     INCONCLUSIVE, saying why, when Set ID does not move it (4.4.18's verdict)."""

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import pytest
 
-from ckesc.bench.dut import DutError
+from ckesc.bench.dut import restoring
+from ckesc.bench.errors import RestoreFailed
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 
@@ -67,25 +68,27 @@ def cycle(dut, expect):
 
 
 def restore(dut, rate0):
-    """Put the DUT back at ``rate0`` and the host with it; verified. Set Baud goes inside the window of the
-    DUT's current power-up while enough of it is left, else (or when that did not take) in a fresh one."""
-    rate = find_rate(dut, first=rate0)
-    if rate == rate0:
-        return
-    if rate is None:
-        raise DutError(f"the DUT answers at no rate of the code table; it was at {rate0} bit/s")
-    if dut.window_left() >= RESTORE_IN_WINDOW_S:  # inside the window of the current power-up, while it lasts
-        set_baud(dut, CODES[rate0])
-        try:
-            rate = cycle(dut, rate0)  # proven: the next test may act in this window
-        except Inconclusive:
-            rate = find_rate(dut, first=rate0)
-    if rate != rate0:
-        dut.switch_power()  # a fresh 120 s window (R11)
-        set_baud(dut, CODES[rate0])
-        dut.switch_power()
-    if find_rate(dut, first=rate0) != rate0:
-        raise DutError(f"could not put the DUT back at {rate0} bit/s (it answers at {dut.lane.bitrate})")
+    """Put the DUT back at ``rate0`` and the host with it; verified (RestoreFailed, the harness's, when not). Set Baud
+    goes inside the window of the DUT's current power-up while enough of it is left, else (or when that did not
+    take) in a fresh one."""
+    with restoring(f"the DUT at {rate0} bit/s"):
+        rate = find_rate(dut, first=rate0)
+        if rate == rate0:
+            return
+        if rate is None:
+            raise RestoreFailed(f"could not put the DUT back at {rate0} bit/s: it answers at no rate of the code table")
+        if dut.window_left() >= RESTORE_IN_WINDOW_S:  # inside the window of the current power-up, while it lasts
+            set_baud(dut, CODES[rate0])
+            try:
+                rate = cycle(dut, rate0)  # proven: the next test may act in this window
+            except Inconclusive:
+                rate = find_rate(dut, first=rate0)
+        if rate != rate0:
+            dut.switch_power()  # a fresh 120 s window (R11)
+            set_baud(dut, CODES[rate0])
+            dut.switch_power()
+        if find_rate(dut, first=rate0) != rate0:
+            raise RestoreFailed(f"could not put the DUT back at {rate0} bit/s (it answers at {dut.lane.bitrate})")
 
 
 @pytest.fixture

@@ -24,7 +24,7 @@ from typing import Any
 
 import pytest
 
-from ckesc.bench.dut import DutError
+from ckesc.bench.errors import RestoreFailed
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import Frame, classify, encode
@@ -281,7 +281,7 @@ def test_silent_at_the_default_node_id(dut):
         dut.request("set_id", {"node_id": node, "throttle_channel": channel}, destination=DEFAULT_ESC_NODE_ID)
         restored = dut.request("set_freq", read_request("set_freq")).response is not None
     if not restored:  # (a verdict above is not hidden by this)
-        raise DutError(f"could not set the node id back to {node} (Set ID from 0x7D)")
+        raise RestoreFailed(f"could not set the node id back to {node} (Set ID from 0x7D)")
 
 
 # ------------------------------------------------------------------------------------------ tests: a non-zero host

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 
 import pytest
 
-from ckesc.bench.dut import DutError
+from ckesc.bench.dut import restoring
+from ckesc.bench.errors import RestoreFailed
 from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import classify
@@ -263,9 +264,10 @@ def on_channel(dut, channel: int):
         yield
     finally:
         dut.zero_throttle()
-        dut.request("set_id", {"node_id": dut.node_id, "throttle_channel": before})
-        if dut.settings()["throttle_channel"] != before:
-            raise DutError(f"could not put the DUT back on throttle channel {before}")
+        with restoring(f"the DUT's throttle channel {before}"):
+            dut.request("set_id", {"node_id": dut.node_id, "throttle_channel": before})
+            if dut.settings()["throttle_channel"] != before:
+                raise RestoreFailed(f"could not put the DUT back on throttle channel {before}")
 
 
 @pytest.fixture

@@ -16,12 +16,13 @@ from ..protocol.frame import Frame, classify
 from ..protocol.ids import Kind
 from .epochs import WINDOW_MARGIN_S, PowerEpoch
 from .lanes import Lane
-from .link import MAX_GARBLED, DutError, DutUnreachable, Exchange, Link, Sent, echo_probe
+from .link import MAX_GARBLED, DutError, DutUnreachable, Exchange, Link, Sent, echo_probe, restoring
 from .outcomes import Inconclusive
 from .profile import DutProfile
 from .supply import Supply
 
-__all__ = ["MAX_GARBLED", "Dut", "DutError", "DutUnreachable", "Exchange", "Link", "Sent", "Supply", "echo_probe"]
+__all__ = ["MAX_GARBLED", "Dut", "DutError", "DutUnreachable", "Exchange", "Link", "Sent", "Supply", "echo_probe",
+           "restoring"]
 
 #: type ids of the frames that change how the DUT reports (MSG Control, CAN Test): restore resumes after them
 _MODE_IDS = frozenset(cat.spec(name).type_id for name in ("msg_control", "can_test"))

@@ -17,6 +17,14 @@ class HarnessError(RuntimeError):
     own; an ``assert`` is a verdict on the DUT."""
 
 
+class RestoreFailed(HarnessError):
+    """The harness could not put the bench back as the test found it (the DUT's node id, throttle channel, bit rate,
+    settings), or could not verify it had: the test ERRORs with this message whatever the requirement's strength, an
+    OBSERVE test's too. It is told apart from the DUT not answering what a test asked
+    (:class:`~ckesc.bench.link.DutError`), which in an OBSERVE test is what the DUT did: a restore that meets a DUT
+    not answering raises this (:func:`~ckesc.bench.link.restoring`)."""
+
+
 class BenchError(HarnessError):
     """The bench, not the DUT, failed under a test (a power command that failed or never returned): the test
     ERRORs with this message, whatever the requirement's strength."""

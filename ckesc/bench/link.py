@@ -19,6 +19,7 @@ from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind
 from ..protocol.judgements import timing_tolerance
 from ..protocol.transfer import TAIL_BYTES, TRANSFER_ID_MODULO, tail_transfer_id
 from .epochs import WINDOW_REQUESTS
+from .errors import RestoreFailed
 from .lanes import Lane, OwnFrame, stop_task
 from .outcomes import Inconclusive, NotClaimed, Record
 from .profile import DutProfile
@@ -479,7 +480,21 @@ def echo_probe(host_node: int = 0, *, nibble_order: str = "lsb") -> can.Message:
 
 
 class DutError(RuntimeError):
-    """The harness could not do what a test needed (not a verdict on the DUT)."""
+    """The DUT did not answer what a test needed (a request's answer, a frame after power-up, GET_ESC_ID): no verdict
+    on the DUT in a test of a stronger requirement (ERROR), what the DUT did in an OBSERVE test (OBSERVED). The
+    harness's own failures are :class:`~ckesc.bench.errors.HarnessError`'s, a bench it could not put back
+    :class:`~ckesc.bench.errors.RestoreFailed`'s (:func:`restoring`)."""
+
+
+@contextmanager
+def restoring(what: str) -> Iterator[None]:
+    """A block that puts the bench back (``what``: "the DUT's throttle channel 3"): a DUT that does not answer
+    meanwhile leaves the bench not restored, the harness's failure (:class:`~ckesc.bench.errors.RestoreFailed`),
+    not an observation of the test's."""
+    try:
+        yield
+    except DutError as exc:
+        raise RestoreFailed(f"could not put back {what}: {exc}") from exc
 
 
 class DutUnreachable(DutError):

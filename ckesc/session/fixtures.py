@@ -12,7 +12,8 @@ from typing import Any
 import pytest
 
 from ..bench import statement
-from ..bench.dut import Dut, DutError, DutUnreachable
+from ..bench.dut import Dut, DutError, DutUnreachable, restoring
+from ..bench.errors import RestoreFailed
 from ..bench.lanes import BenchGone, BusLane, Lane
 from ..bench.link import Link
 from ..bench.outcomes import Inconclusive
@@ -158,8 +159,9 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
             st.node_id = d.node_id
         snapshot = restore_point(config, request.node.nodeid, snapshot)
         try:
-            problems = d.restore(snapshot)
-        except (DutError, Inconclusive) as exc:
+            with restoring("the DUT's settings after the test"):
+                problems = d.restore(snapshot)
+        except (RestoreFailed, Inconclusive) as exc:
             if not (st.stopped or "").startswith("interrupted"):
                 raise
             # Ctrl-C / SIGTERM may have come while the DUT was switched off: the run ends INTERRUPTED (exit
@@ -167,7 +169,7 @@ def dut(request: pytest.FixtureRequest, ckesc_lane: Lane):
             st.info.setdefault("not_restored", []).append({"test": request.node.nodeid, "why": str(exc)})
             return
         if problems:
-            raise RuntimeError("settings could not be restored after the test: " + "; ".join(problems))
+            raise RestoreFailed("settings could not be restored after the test: " + "; ".join(problems))
 
 
 def keep_segment(config: pytest.Config, frames: list) -> None:

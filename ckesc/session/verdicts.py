@@ -6,8 +6,11 @@ falls silent.
 A phase's verdict is decided in one place, :func:`_outcome`, from the type of what ended it (as pytest decides
 passed, failed or skipped from the exception's type in one hook): :class:`~ckesc.bench.outcomes.Inconclusive` is
 INCONCLUSIVE (a measurement inside the bench's error is one too), any other skip SKIPPED, a harness or bus error
-(:class:`~ckesc.bench.errors.HarnessError`, ``DutError``, ``BusFault``, ``BenchGone``) ERROR; never a word in the
-message."""
+(:class:`~ckesc.bench.errors.HarnessError`, ``BusFault``, ``BenchGone``) ERROR whatever the requirement's strength;
+never a word in the message. The DUT not answering what a test needed (``DutError``) is no verdict on the DUT
+(ERROR), but in an OBSERVE test, where it is what the DUT did (OBSERVED); a bench the harness could not put back
+afterwards (:class:`~ckesc.bench.errors.RestoreFailed`, a HarnessError, even where the DUT's silence was why) is
+ERROR in an OBSERVE test too."""
 
 from __future__ import annotations
 
@@ -50,7 +53,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
         _harness_failed(item, rep, raised, d)
     elif rep.when == "call" and not isinstance(raised, BENCH_FAILED):
         asserted = call.excinfo is not None and isinstance(call.excinfo.value, AssertionError)
-        if rep.failed and strength == "OBSERVE":
+        if rep.failed and strength == "OBSERVE":  # what the DUT did (an assert, or no answer: DutError) is observed
             rep.outcome = "passed"
             msg = str(call.excinfo.value) if call.excinfo else ""
             if d is not None:
@@ -215,8 +218,8 @@ def _collect(item: pytest.Item, rep: pytest.TestReport, raised: BaseException | 
 #: what, raised under a test, says the suite itself, the bus or the bench (its power control) failed under it, not
 #: the DUT: an ERROR whatever the requirement's strength (:mod:`ckesc.bench.errors`, :mod:`ckesc.bench.lanes`)
 BENCH_FAILED = (BusFault, BenchGone, HarnessError)
-#: ... and with the harness that could not do what the test needed (:class:`~ckesc.bench.dut.DutError`): no verdict
-#: on the DUT
+#: ... and with the DUT that did not answer what the test needed (:class:`~ckesc.bench.dut.DutError`): no verdict on
+#: the DUT, but where the test only observes (an OBSERVE test: what the DUT did)
 NOT_THE_DUT = (DutError, *BENCH_FAILED)
 
 

@@ -11,7 +11,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+from ckesc.bench.dut import Dut
+from ckesc.bench.errors import HarnessError, RestoreFailed
 from ckesc.bench.outcomes import Broken, Record
+from ckesc.bench.profile import DutProfile
+from ckesc.bench.sim_lane import SimLane
 
 CKESC = [sys.executable, "-m", "ckesc"]
 
@@ -46,6 +52,7 @@ _SUITE = '''
 import pytest
 from dataclasses import dataclass
 
+from ckesc.bench.dut import restoring
 from ckesc.bench.errors import HarnessError
 from ckesc.bench.outcomes import Inconclusive
 
@@ -66,6 +73,17 @@ def test_harness_problem(dut):
 @pytest.mark.requirement("R10-answer")
 def test_harness_problem_of_an_observation(dut):
     raise HarnessError("the request did not go out from node 0")
+
+
+@pytest.mark.requirement("R10-answer")
+def test_an_observation_the_dut_did_not_answer(dut):
+    dut.ask("esc_information", {"option": 0}, destination=77)  # no ESC 77: what the DUT did, observed
+
+
+@pytest.mark.requirement("R10-answer")
+def test_an_observation_whose_bench_was_not_put_back(dut):
+    with restoring("the DUT at node id 77"):  # the same silence, met while putting the bench back: the harness's
+        dut.ask("esc_information", {"option": 0}, destination=77)
 
 
 @pytest.mark.requirement("4.4.2-4")
@@ -109,6 +127,12 @@ def test_messages_say_what_the_dut_did_and_a_harness_problem_is_an_error(tmp_pat
     assert after["message"].startswith("the load player could not open its bus\nfailed limits before it:\n[4.4.2-4 SHALL]")
     observe = res["conformance/test_messages.py::test_harness_problem_of_an_observation"]
     assert observe["outcome"] == "ERROR" and observe["message"] == "the request did not go out from node 0", observe
+    silent = res["conformance/test_messages.py::test_an_observation_the_dut_did_not_answer"]
+    assert silent["outcome"] == "OBSERVED", silent
+    assert any("esc_information: no answer from node 77" in str(v) for _, v in silent["observations"]), silent
+    not_back = res["conformance/test_messages.py::test_an_observation_whose_bench_was_not_put_back"]
+    assert not_back["outcome"] == "ERROR", not_back
+    assert not_back["message"].startswith("could not put back the DUT at node id 77: esc_information: no answer"), not_back
     word = res["conformance/test_messages.py::test_a_word_decides_nothing"]
     assert word["outcome"] == "FAIL" and word["message"] == "[4.4.2-4 SHALL] harness: the DUT's answer came late", word
     limits = res["conformance/test_messages.py::test_all_limits"]
@@ -187,3 +211,22 @@ def test_a_setting_taken_while_suspended_names_its_old_and_new_value(tmp_path):
         "test_not_selected_while_reporting_is_suspended"]
     assert "set_freq option 1, msg1_interval 15, msg2_interval 50, msg3_interval 250 took effect while suspended: " \
            "msg1_interval 10 -> 15" in failed["test_settings_do_not_change_while_suspended[set_freq]"]
+
+
+def test_a_bench_the_harness_cannot_put_back_is_its_own_failure():
+    """The conformance helpers that put the bench back raise the harness's typed failure (RestoreFailed, a
+    HarnessError: ERROR whatever the requirement's strength) when the DUT is not back, never DutError (the DUT not
+    answering, which an OBSERVE test records as what the DUT did: its OBSERVED verdict hid a bench left changed).
+    Played on the simulated ESC whose Set ID keeps its throttle channel: put back on channel 5, it stays on 1."""
+    from conformance.answers import put_back
+
+    lane = SimLane(nodes=(1,), faults=["set_id_channel_ignored"])
+    try:
+        dut = Dut(lane, DutProfile(name="test"), node_id=1)
+        dut.wait(0.5)
+        with pytest.raises(RestoreFailed) as caught:
+            put_back(dut, 1, 5)
+        assert isinstance(caught.value, HarnessError), caught.value
+        assert str(caught.value) == "could not put the DUT back at node id 1, channel 5: GET_ESC_ID answers [(1, 1)]"
+    finally:
+        lane.close()
