@@ -6,8 +6,9 @@ and its reports go on within R20's bound, without a reset and with its settings 
 meanwhile raise its comm flag (R8), and the next command clears it.
 
 The fault is the bench's (:mod:`ckesc.bench.bus_fault`): in the simulated lane its world shorts the bus (the CAN
-model's acknowledgement and error confinement on for the fault and its recovery only); on a real bench
-``--bus-fault-cmd`` closes a relay across CANH-CANL (docs/robustness.md). A lane without one SKIPs these tests.
+model's acknowledgement and error confinement on for the fault and its recovery only); in the real-time lane the
+emulator's hub does (``ckesc control bus``); on a real bench ``--bus-fault-cmd`` closes a relay across CANH-CANL,
+a command's or labgrid's (docs/robustness.md). A lane without one SKIPs these tests.
 
 Section ``robustness``, not one of its own: R20's bus clauses are, as R17's and R18's, what the ESC does with a bus
 the document does not describe, judged by the same signs (:mod:`.resets`, :mod:`.settings`).
@@ -39,7 +40,8 @@ def _control(dut, config, kind: str = "short"):
     if control is None:
         pytest.skip(NO_CONTROL)
     if not control.can(kind):
-        pytest.skip(f"the bus-fault control causes no {kind}: give {{kind}} in --bus-fault-cmd")
+        pytest.skip(f"the bench's bus-fault control causes no {kind} (a relay shorts the bus only; a --bus-fault-cmd "
+                    "naming {kind} is asked for it)")
     return control
 
 
