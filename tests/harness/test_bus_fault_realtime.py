@@ -101,8 +101,8 @@ def test_the_r20_bus_tests_run_without_echo_through_a_bus_fault_command(tmp_path
 
 
 #: what each fault FAILs in real time, as in simulated time; besides, a node at another bit rate sends an ESC without
-#: recovery bus-off or not, by where its reports fall against the foreign frames (in either lane: its tries in the
-#: gaps are sent and give back what the others cost), so ``other_bitrate``'s test may FAIL it too, or PASS it
+#: recovery bus-off or not, by the phase of its reports' whole-millisecond grid against the foreign frames' 1 ms
+#: pattern (in either lane: reports in the gaps are sent), so ``other_bitrate``'s test may FAIL it too, or PASS it
 CAUGHT = {
     "busoff_recovery_resets": TESTS,
     "no_busoff_recovery": {"test_reports_go_on_after_a_bus_fault[short]", "test_comm_flag_rises_through_a_bus_short_and_clears"},
