@@ -24,6 +24,7 @@ test SKIPs (:data:`NO_CONTROL`), never PASSes.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from ..emulator.hub_can import FOREIGN_FRAME_S, FOREIGN_PERIOD_S, KINDS
@@ -68,7 +69,7 @@ class SimBusFault:
             world.short(seconds)
             self.lane.wait_power(seconds)
         else:
-            for _ in range(round(seconds / FOREIGN_PERIOD_S)):
+            for _ in range(math.ceil(seconds / FOREIGN_PERIOD_S)):  # (at least ``seconds``)
                 world.short(FOREIGN_FRAME_S)
                 self.lane.wait_power(FOREIGN_PERIOD_S)
         end = world.now

@@ -107,7 +107,7 @@ def add_control_command(sub: argparse._SubParsersAction) -> None:
                              "frames wait (10 behind the first) until an ESC listens again. As --bus-fault-cmd: "
                              "'ckesc control --port P bus {kind} {seconds}'.")
     bus.add_argument("kind", choices=KINDS, help="short (CANH-CANL: all dominant) or other_bitrate (a node "
-                     "at another bit rate sending at 1 kHz)")
+                     "at another bit rate sending at about 1 kHz)")
     bus.add_argument("how", type=_seconds_or_switch, metavar="SECONDS|on|off",
                      help="how long, in seconds; or on (until off)")
     bitrate = actions.add_parser("bitrate", help="set the emulated bus's bit rate")

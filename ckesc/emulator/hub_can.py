@@ -17,7 +17,7 @@ transmit queue behind it, until an ESC listens again (the fault over, its contro
 the emulator keeps them in its :class:`~.host_alone.HostAlone` queue, whatever ``--host-alone`` says.
 
 Kinds (:data:`KINDS`): ``short`` holds the bus dominant from its start to its end; ``other_bitrate`` is a node at
-another bit rate sending at 1 kHz, played as what the others meet: the bus held for :data:`FOREIGN_FRAME_S` (a frame
+another bit rate sending at about 1 kHz, played as what the others meet: the bus held for :data:`FOREIGN_FRAME_S` (a frame
 at 250 kbit/s) every :data:`FOREIGN_PERIOD_S`, as the simulated lane plays it (:mod:`ckesc.bench.bus_fault`). A
 fault lasts a given time, or (a relay: ``on`` / ``off``) until it is ended.
 """
@@ -36,9 +36,12 @@ INF = math.inf
 #: the kinds of fault
 KINDS = ("short", "other_bitrate")
 #: ``other_bitrate``: how long each frame of the node at another bit rate holds the bus (an 8-byte extended frame at
-#: 250 kbit/s) and how often it sends one (1 kHz: a babbling node)
+#: 250 kbit/s) and how often it sends one (about 1 kHz: a babbling node). On its own clock: a period that divides no
+#: whole-millisecond grid, so that an ESC's reports meet its frames at every phase as an unsynchronised node's do (at
+#: exactly 1 ms an ESC whose report grid fell in the gaps never went bus-off, so the fault missed a controller
+#: without recovery at 7 of 20 starting phases)
 FOREIGN_FRAME_S = 0.0005
-FOREIGN_PERIOD_S = 0.001
+FOREIGN_PERIOD_S = 0.00103
 
 
 class Disturbance(NamedTuple):
