@@ -146,3 +146,15 @@ def test_where_the_bus_is_free():
     assert relay.end == INF and relay.dominant_until(100.0) == INF
     with pytest.raises(ValueError, match="one of short, other_bitrate"):
         Disturbance.of("babble", 0.0, 1.0)
+
+
+@pytest.mark.parametrize("phase", range(20))
+def test_a_node_at_another_bit_rate_sends_a_reporting_esc_bus_off_at_every_phase(phase):
+    """Its frames on a clock of its own: an ESC's whole-millisecond report grid meets them at every phase (at exactly
+    1 ms, 7 of these 20 starting phases left the ESC's reports in the gaps, never bus-off)."""
+    hub, esc = HubCan(DEFAULT_BITRATE), _esc()
+    start = 0.3 + phase * 0.00005
+    _drive(hub, esc, 0.0, start)
+    hub.start("other_bitrate", start, 0.5)
+    _drive(hub, esc, start, start + 0.5)
+    assert hub.counters["esc_bus_off"] == 1
