@@ -13,6 +13,9 @@ test SKIPs (:data:`NO_CONTROL`), never PASSes.
   that does not recover by itself keeps it on until :meth:`SimBusFault.settle` after a power cycle.
   A node at another bit rate is played as what the others meet: a short of :data:`FOREIGN_FRAME_S` (a frame at 250
   kbit/s) every :data:`FOREIGN_PERIOD_S` (the CAN model does not mix bit rates on its wires).
+- The real-time emulator (``--lane realtime``): its control channel's ``bus_fault`` request (``ckesc control bus``),
+  which answers when the fault has ended, with its end in bus time; its hub plays the ESCs' controllers through the
+  fault (:mod:`ckesc.emulator.hub_can`). :meth:`EmulatorBusFault.settle` waits for them to be back.
 - A real bench: ``--bus-fault-cmd "CMD {seconds}"`` (a relay across CANH-CANL closed for ``{seconds}``; with
   ``{kind}`` in it, the command is asked for ``other_bitrate`` too, else only ``short``), run as the
   power commands are (:mod:`.power`): a command that fails or outlives ``seconds`` plus ``--power-cmd-timeout`` is a
@@ -21,19 +24,18 @@ test SKIPs (:data:`NO_CONTROL`), never PASSes.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
+from ..emulator.hub_can import FOREIGN_FRAME_S, FOREIGN_PERIOD_S, KINDS
 from .errors import BenchError, PowerFailed
 from .power import POWER_COMMAND_TIMEOUT_S, run_command
+from .realtime_lane import RealtimeEmulatorLane
 
 #: the skip of a test whose lane cannot disturb the bus
 NO_CONTROL = "no bus-fault control: give --bus-fault-cmd"
-#: the kinds of fault a control may cause
-KINDS = ("short", "other_bitrate")
-#: ``other_bitrate`` in the simulated lane: how long each frame of the node at another bit rate holds the bus (an
-#: 8-byte extended frame at 250 kbit/s) and how often it sends one (1 kHz: a babbling node)
-FOREIGN_FRAME_S = 0.0005
-FOREIGN_PERIOD_S = 0.001
+#: how long the real-time emulator's control may take beyond the fault to answer (a loaded machine)
+CONTROL_SLACK_S = 10.0
 #: how long the simulated control waits, after a fault, for every controller to settle (recovered, queue empty)
 SETTLE_S = 0.5
 
@@ -67,7 +69,7 @@ class SimBusFault:
             world.short(seconds)
             self.lane.wait_power(seconds)
         else:
-            for _ in range(round(seconds / FOREIGN_PERIOD_S)):
+            for _ in range(math.ceil(seconds / FOREIGN_PERIOD_S)):  # (at least ``seconds``)
                 world.short(FOREIGN_FRAME_S)
                 self.lane.wait_power(FOREIGN_PERIOD_S)
         end = world.now
@@ -99,6 +101,32 @@ class SimBusFault:
         return True
 
 
+class EmulatorBusFault:
+    """The real-time emulator's bus faults, through its control channel (``host``, ``port``)."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self.host, self.port = host, port
+
+    def can(self, kind: str) -> bool:
+        return kind in KINDS
+
+    def _ask(self, req: dict, seconds: float) -> dict:
+        from ..emulator.control import ControlError, control_request
+
+        try:
+            return control_request(self.port, req, host=self.host, timeout=seconds + CONTROL_SLACK_S)
+        except ControlError as exc:
+            raise BusFaultFailed(f"the emulator's bus fault {req}: {exc}") from None
+
+    def cause(self, kind: str, seconds: float) -> float | None:
+        if kind not in KINDS:
+            raise ValueError(f"bus fault {kind!r}: one of {', '.join(KINDS)}")
+        return float(self._ask({"cmd": "bus_fault", "kind": kind, "seconds": seconds}, seconds)["ended"])
+
+    def settle(self, within: float = SETTLE_S) -> bool:
+        return bool(self._ask({"cmd": "bus_settle", "within": within}, within)["settled"])
+
+
 class CommandBusFault:
     """A real bench's fault: ``cmd`` with ``{seconds}`` replaced (a relay across CANH-CANL for that long)."""
 
@@ -125,9 +153,10 @@ class CommandBusFault:
         return True
 
 
-def bus_fault_control(lane: Any, cmd: str | None = None, timeout: float = POWER_COMMAND_TIMEOUT_S) -> SimBusFault | CommandBusFault | None:
-    """``lane``'s bus-fault control, kept on it: ``cmd`` (``--bus-fault-cmd``, run with ``timeout``:
-    ``--power-cmd-timeout``), else the simulated lane's own, else None."""
+def bus_fault_control(lane: Any, cmd: str | None = None, timeout: float = POWER_COMMAND_TIMEOUT_S) -> Any:
+    """``lane``'s bus-fault control, kept on it: the one its bench gave it (``lane.bus_fault``), else ``cmd``
+    (``--bus-fault-cmd``, run with ``timeout``: ``--power-cmd-timeout``), else the emulator's own (simulated or
+    real-time), else None."""
     given = lane.__dict__.get("bus_fault")
     if given is not None:
         return given
@@ -136,5 +165,8 @@ def bus_fault_control(lane: Any, cmd: str | None = None, timeout: float = POWER_
         return control
     if hasattr(lane, "sim") and hasattr(lane.sim, "world"):
         control = lane.__dict__["bus_fault"] = SimBusFault(lane)
+        return control
+    if isinstance(lane, RealtimeEmulatorLane):
+        control = lane.__dict__["bus_fault"] = EmulatorBusFault(*lane.control)
         return control
     return None

@@ -22,6 +22,7 @@ from typing import Any
 from ..emulator import variants
 from ..emulator.faults import FAULTS, onsets_in
 from ..protocol.ids import ESC_NODE_IDS
+from . import labgrid_relay
 from .errors import PreflightError
 from .labgrid_power import labgrid_options
 from .options import BUS_OPEN_TIMEOUT_S, BenchOptions
@@ -95,6 +96,22 @@ def command(cmd: str | None, option: str) -> None:
     elif shutil.which(program) is None:
         raise PreflightError(f"{option}: program {program!r} not found on PATH (the command is run without a shell: "
                              "wrap pipes and redirections in sh -c '...')")
+
+
+def bus_fault_command(options: BenchOptions) -> None:
+    """``--bus-fault-cmd``: a real bench's (the emulator's faults are the suite's own), ``labgrid`` with its
+    environment file, or a command that names ``{seconds}`` and can be run."""
+    cmd = options.bus_fault_cmd
+    if options.dut != "bus":
+        raise PreflightError("--bus-fault-cmd is for --dut bus; the emulator's bus is disturbed by the suite itself "
+                             "(ckesc control bus)")
+    if cmd == labgrid_relay.LABGRID:
+        labgrid_relay.check(options.labgrid_env)
+        return
+    if "{seconds}" not in cmd:
+        raise PreflightError(f"--bus-fault-cmd {cmd!r} needs {{seconds}} (how long the relay shorts the bus), or is "
+                             "labgrid")
+    command(cmd.replace("{seconds}", "0.5").replace("{kind}", "short"), "--bus-fault-cmd")
 
 
 def load_profile(options: BenchOptions) -> DutProfile:
@@ -294,6 +311,8 @@ def check(options: BenchOptions) -> DutProfile:
     prof = load_profile(options)
     power = options.power
     labgrid_options(get)
+    if options.bus_fault_cmd:
+        bus_fault_command(options)
     if dut == "emulator" and power not in (None, "emulator"):
         raise PreflightError(f"--power {power} is for --dut bus; the emulator's power is switched by the suite")
     if dut == "bus":

@@ -217,11 +217,12 @@ LABGRID_OPTIONS = (*LABGRID_TARGET_OPTIONS, "labgrid_place", "labgrid_coordinato
 def labgrid_options(get: Callable[[str], Any]) -> None:
     """--power labgrid's options: given together, the environment file there (labgrid itself is not needed yet)."""
     if get("power") != "labgrid":
-        # --flash-cmd labgrid flashes through the target of the same file (:mod:`.labgrid_flash` checks it)
-        flashes = get("flash_cmd") == "labgrid"
+        # --flash-cmd labgrid flashes and --bus-fault-cmd labgrid shorts the bus through the target of the same file
+        # (:mod:`.labgrid_flash`, :mod:`.labgrid_relay` check it)
+        flashes = get("flash_cmd") == "labgrid" or get("bus_fault_cmd") == "labgrid"
         for opt in LABGRID_OPTIONS[len(LABGRID_TARGET_OPTIONS):] if flashes else LABGRID_OPTIONS:
             if get(opt):
-                also = " or --flash-cmd labgrid" if opt in LABGRID_TARGET_OPTIONS else ""
+                also = ", --flash-cmd labgrid or --bus-fault-cmd labgrid" if opt in LABGRID_TARGET_OPTIONS else ""
                 raise PreflightError(f"--{opt.replace('_', '-')} is for --power labgrid{also}")
         return
     env_file = get("labgrid_env")

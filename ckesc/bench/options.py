@@ -101,7 +101,9 @@ BENCH_ROWS: tuple[Option, ...] = (
     Option("bus_fault_cmd", metavar="CMD",
            help="--dut bus: command that disturbs the DUT's bus for the robustness section's R20 tests and returns when it "
                 "has ended; {seconds} is replaced (how long), {kind} (if given) by short or other_bitrate: e.g. a script "
-                "closing a relay across CANH-CANL for {seconds} (docs/robustness.md). Without it those tests SKIP"),
+                "closing a relay across CANH-CANL for {seconds}; labgrid: the relay driver (DigitalOutputProtocol) of "
+                "--labgrid-env's target (docs/bench/bus-fault.md). Without it those tests SKIP; the emulator's bus is "
+                "disturbed by the suite itself"),
     Option("host_send_error", type=non_negative_float, default=DEFAULT_BUS_ERROR_S * 1000, run_default=None, metavar="MS",
            rig="host_send_error_ms",
            help="--dut bus, an adapter that does not echo the host's frames: how much later than the host clock at send a "
@@ -123,10 +125,10 @@ BENCH_ROWS: tuple[Option, ...] = (
            help="--power command: a power command still running after S seconds has failed (default "
                 f"{POWER_COMMAND_TIMEOUT_S:g})"),
     Option("labgrid_env", metavar="FILE", rig="power.labgrid.env",
-           help="--power labgrid, --flash-cmd labgrid: labgrid environment file whose target has a power driver "
-                "(PowerProtocol), a flashing driver or both"),
+           help="--power labgrid, --flash-cmd labgrid, --bus-fault-cmd labgrid: labgrid environment file whose target has "
+                "a power driver (PowerProtocol), a flashing driver, a relay driver (DigitalOutputProtocol) or several"),
     Option("labgrid_target", metavar="NAME", rig="power.labgrid.target",
-           help="--power / --flash-cmd labgrid: the target in --labgrid-env (default: its only one)"),
+           help="--power / --flash-cmd / --bus-fault-cmd labgrid: the target in --labgrid-env (default: its only one)"),
     Option("labgrid_place", metavar="NAME", rig="place",
            help="--power labgrid: acquire this labgrid place for the run, release it at the end (default: the target's "
                 "RemotePlace, if any)"),

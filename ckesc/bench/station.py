@@ -24,7 +24,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ..emulator import variants
-from . import checks, firmware, labgrid_flash, proof
+from . import checks, firmware, labgrid_flash, labgrid_relay, proof
 from .errors import PreflightError
 from .lanes import BusLane, Lane
 from .link import DutError, DutUnreachable, Link, echo_probe
@@ -59,15 +59,20 @@ def build(options: BenchOptions, *, prompt: Prompt = console_prompt,
         before_opening()
     power: PowerControl | None = None
     kwargs: dict[str, Any] | None = None
+    relay: labgrid_relay.LabgridRelay | None = None
     if options.dut == "bus":
         power = open_power(options.power or "none", options.get, prompt)
         try:
             kwargs = checks.bus_kwargs(options)
             checks.open_bus(kwargs, options.bus_open_timeout or BUS_OPEN_TIMEOUT_S)
+            if options.bus_fault_cmd == labgrid_relay.LABGRID:  # opened now: a relay left closed is opened first
+                relay = labgrid_relay.open_relay(options.labgrid_env, options.labgrid_target)
         except BaseException:
             _close_power(power)
             raise
-    return Station(options, profile, power, kwargs, image)
+    station = Station(options, profile, power, kwargs, image)
+    station.bus_fault = relay
+    return station
 
 
 def firmware_image(options: BenchOptions) -> firmware.Image | None:
@@ -129,6 +134,9 @@ class Station:
         self.lane: Lane | None = None
         #: the foreign traffic playing on the DUT's lane (``--foreign-traffic``): what it is and what it reached
         self.foreign: ForeignPlay | None = None
+        #: the bench's own bus-fault control, given to the DUT's lane (``--bus-fault-cmd labgrid``'s relay); closed
+        #: (the relay opened) with the station
+        self.bus_fault: labgrid_relay.LabgridRelay | None = None
 
     # ------------------------------------------------------------------ lanes
     def open_lane(self, on_open: Callable[[Lane], None] | None = None) -> Lane:
@@ -141,6 +149,9 @@ class Station:
                                  "command does not flash (run ckesc run --firmware first, then this without it)")
         if self.lane is None:
             self.lane = self._new_lane()
+            if self.bus_fault is not None:
+                self.bus_fault.lane = self.lane
+                self.lane.bus_fault = self.bus_fault  # (bus_fault.bus_fault_control finds it there)
             try:
                 if on_open is not None:
                     on_open(self.lane)
@@ -206,8 +217,12 @@ class Station:
         try:
             self.close_lane()
         finally:
-            power, self.power = self.power, None
-            _close_power(power)
+            try:
+                if self.bus_fault is not None:
+                    self.bus_fault.close()  # the relay opened on every way out
+            finally:
+                power, self.power = self.power, None
+                _close_power(power)
 
     # ------------------------------------------------------------------ the proof
     def prove(self, *, cycles_power: bool) -> list[str]:

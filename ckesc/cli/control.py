@@ -8,9 +8,17 @@ import os
 import sys
 from typing import Any
 
+from ..emulator.hub_can import KINDS
 from ..protocol.assignments import parse_int
 from ..reporting.exits import ExitStatus
 from .common import Parser, UsageError, int_arg, non_negative_float, port_arg, positive_float
+
+
+def _seconds_or_switch(text: str) -> float | bool:
+    """``on`` / ``off``, or seconds above 0."""
+    if text in ("on", "off"):
+        return text == "on"
+    return positive_float(text)
 
 
 def _control_port(args: argparse.Namespace) -> int:
@@ -38,6 +46,10 @@ def _control_request(args: argparse.Namespace) -> dict[str, Any]:
         return {"cmd": "fault", "name": args.name, "on": args.state == "on", "node": args.node}
     if action == "bitrate":
         return {"cmd": "bitrate", "bitrate": args.bitrate}
+    if action == "bus":
+        if isinstance(args.how, bool):
+            return {"cmd": "bus_fault", "kind": args.kind, "on": args.how}
+        return {"cmd": "bus_fault", "kind": args.kind, "seconds": args.how}
     if action == "stats":
         return {"cmd": "stats", "reset": args.reset}
     return {"cmd": action}
@@ -50,8 +62,11 @@ def _run_control(args: argparse.Namespace) -> int:
         args.off_time = 1.0
     req = _control_request(args)
     port = _control_port(args)
+    timeout = args.timeout
+    if timeout is None and isinstance(req.get("seconds"), float):  # answered when the fault has ended
+        timeout = 10.0 + req["seconds"]
     try:
-        answer = control_request(port, req, timeout=args.timeout)
+        answer = control_request(port, req, timeout=timeout)
     except ControlError as exc:
         print(f"ckesc control: error: {exc}", file=sys.stderr)
         return ExitStatus.ABORTED if exc.unreachable else ExitStatus.FAILED
@@ -69,7 +84,8 @@ def add_control_command(sub: argparse._SubParsersAction) -> None:
         "answers on that port.",
         epilog="examples: ckesc control --port 29536 status\n"
         "          ckesc control --port 29536 fault answer_late on --node 3\n"
-        "          CKESC_CONTROL_PORT=29536 ckesc control power cycle --off-time 0.5",
+        "          CKESC_CONTROL_PORT=29536 ckesc control power cycle --off-time 0.5\n"
+        "          ckesc control --port 29536 bus short 0.5",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--port", type=port_arg, metavar="P", help="the emulator's control port (default: $CKESC_CONTROL_PORT)")
@@ -84,6 +100,16 @@ def add_control_command(sub: argparse._SubParsersAction) -> None:
     fault.add_argument("state", choices=("on", "off"))
     fault.add_argument("--node", type=int_arg, metavar="N", help="only the ESC with this node id (default: every ESC)")
     actions.add_parser("faults", help="list the known faults")
+    bus = actions.add_parser("bus", help="disturb the emulated bus: a short or a node at another bit rate, for S seconds "
+                             "(answered when it has ended) or on / off (a relay)",
+                             description="A bus fault on the emulator's hub (R20): every ESC that tries to send meets "
+                             "errors and goes bus-off, and recovers 128 x 11 bits after the bus is free; the host's "
+                             "frames wait (10 behind the first) until an ESC listens again. As --bus-fault-cmd: "
+                             "'ckesc control --port P bus {kind} {seconds}'.")
+    bus.add_argument("kind", choices=KINDS, help="short (CANH-CANL: all dominant) or other_bitrate (a node "
+                     "at another bit rate sending at about 1 kHz)")
+    bus.add_argument("how", type=_seconds_or_switch, metavar="SECONDS|on|off",
+                     help="how long, in seconds; or on (until off)")
     bitrate = actions.add_parser("bitrate", help="set the emulated bus's bit rate")
     bitrate.add_argument("bitrate", type=int_arg, metavar="BIT/S")
     stats = actions.add_parser("stats", help="frame lateness (send - due) and wake-up lateness")

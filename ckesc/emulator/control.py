@@ -15,6 +15,11 @@ connection that may stay open. Every answer has ``"ok": true`` or ``"ok": false`
     ``node`` optional (default: every ESC). An unknown name is an error listing the known ones.
 ``{"cmd": "faults"}``: the known faults with their rules and descriptions.
 ``{"cmd": "bitrate", "bitrate": 250000}``: the emulated bus's bit rate from now on.
+``{"cmd": "bus_fault", "kind": "short" | "other_bitrate", "seconds": 0.5}``
+    a bus fault on the hub (:mod:`.hub_can`) for that long, answered at its end with ``started`` and ``ended`` in bus
+    time; ``"on": true`` instead of ``seconds`` starts one that lasts until ``"on": false`` (a relay).
+``{"cmd": "bus_settle", "within": 0.5}``: answered once every ESC's controller is back from a bus fault, or after
+    ``within`` seconds: ``settled``, the fault on, each ESC's controller.
 ``{"cmd": "stats", "reset": false}``: the lateness summary (and start a new one).
 ``{"cmd": "save"}``: write the flash file now.
 ``{"cmd": "stop"}``: stop the emulator (power off, flash saved), as SIGTERM does.

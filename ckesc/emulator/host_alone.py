@@ -36,11 +36,11 @@ class HostAlone:
         self.held: deque[Any] = deque()
         self.counters = {"host_held": 0, "host_lost": 0}
 
-    def take(self, item: Any, acknowledged: bool) -> list[Any]:
+    def take(self, item: Any, acknowledged: bool, hold: bool = False) -> list[Any]:
         """A host frame (``item``) as it comes, ``acknowledged``: whether some node's controller is up to acknowledge
         it. Returns what goes on the bus now, in order: the frames held before it (a queue keeps its order) and it;
-        nothing when it is held or lost."""
-        if self.mode == "deliver":
+        nothing when it is held or lost. ``hold``: as ``hold`` mode whatever the mode (a bus fault on)."""
+        if self.mode == "deliver" and not hold:
             return [item]
         if acknowledged:
             out = [*self.held, item]

@@ -57,6 +57,7 @@ from ..protocol.frame import WireFrame, frame_bits
 from .control import ControlServer, Handler, Reply, dispatch
 from .emulated_bench import EmulatedBench
 from .host_alone import HostAlone
+from .hub_can import HubCan
 from .model import EscModel
 from .realtime_control import ControlCommands
 from .realtime_timing import clock_offset, durations, set_timer_slack
@@ -127,6 +128,9 @@ class RealtimeEmulator(ControlCommands):
         self.counters = {"tx": 0, "rx": 0, "tx_other_bitrate": 0, "tx_errors": 0, "rx_malformed": 0, "clients": 0}
         self.host_alone = HostAlone(host_alone)  # the host's frames while no ESC acknowledges them (--host-alone)
         self.counters.update(self.host_alone.counters)
+        self.can = HubCan(self.bitrate)  # the ESCs' controllers while a bus fault lasts (ckesc control bus)
+        #: bus faults and settles answered later: (by when, whether a settled bus answers it sooner, the answer)
+        self._bus_waiters: list[tuple[float, bool, Callable[[], None]]] = []
         self._escs: list[EscModel] = list(bench.escs)
         self._deadlines: list[float | None] = [None] * len(self._escs)
         self._deadlines_stale = True
@@ -155,6 +159,8 @@ class RealtimeEmulator(ControlCommands):
             "fault": self._cmd_fault,
             "faults": self._cmd_faults,
             "bitrate": self._cmd_bitrate,
+            "bus_fault": self._cmd_bus_fault,
+            "bus_settle": self._cmd_bus_settle,
             "stats": self._cmd_stats,
             "save": self._cmd_save,
             "stop": self._cmd_stop,
@@ -332,7 +338,8 @@ class RealtimeEmulator(ControlCommands):
     def _next_wake(self) -> float | None:
         self._refresh_deadlines()
         times = [t for t in self._deadlines if t is not None]
-        for t in (self._power_on_at, self._stop_at, self._controller_up()):
+        for t in (self._power_on_at, self._stop_at, self._controller_up(), None if self.can.quiet else
+                  self.can.next_deadline(), min((w[0] for w in self._bus_waiters), default=None)):
             if t is not None:
                 times.append(t)
         return min(times) if times else None
@@ -397,6 +404,8 @@ class RealtimeEmulator(ControlCommands):
             self._do_power_on(self._power_on_at)
         if self._stop_at is not None and now >= self._stop_at:
             self._stopping = True
+        if not self.can.quiet or self._bus_waiters:
+            self._can_poll(now)
         if self.host_alone.held and (up := self._controller_up()) is not None and now >= up:
             self._emit_due(up)
             for item in self.host_alone.release(True):  # acknowledged at last, back to back: stamped then
@@ -405,15 +414,20 @@ class RealtimeEmulator(ControlCommands):
 
     def _controller_up(self) -> float | None:
         """While the host's frames are held: when the first powered ESC's controller is up (it hears from its
-        ``ready_at``), None when none is powered or nothing is held."""
+        ``ready_at``, and from a bus fault's end and its own bus-off recovery), None when none is or nothing is held."""
         if not self.host_alone.held:
             return None
-        return min((esc.state.ready_at for esc in self._escs if esc.powered), default=None)
+        return min((max(esc.state.ready_at, up) for esc in self._escs
+                    if esc.powered and (up := self.can.listens_from(esc)) is not None), default=None)
 
     def _acknowledged(self, t: float) -> bool:
-        """Whether some node acknowledges a host frame at ``t``: an ESC powered with its controller up, or (a bare
-        hub, no ESC of its own) the other clients."""
-        return not self._escs or any(esc.powered and t >= esc.state.ready_at for esc in self._escs)
+        """Whether some node acknowledges a host frame at ``t``: an ESC powered with its controller up (no bus fault
+        on, not bus-off), or (a bare hub, no ESC of its own) the other clients."""
+        if self.can.quiet:
+            return not self._escs or any(esc.powered and t >= esc.state.ready_at for esc in self._escs)
+        return not self.can.disturbed(t) and (not self._escs or any(
+            esc.powered and t >= esc.state.ready_at and (up := self.can.listens_from(esc)) is not None and t >= up
+            for esc in self._escs))
 
     # ------------------------------------------------------------------ ESC output
 
@@ -430,6 +444,8 @@ class RealtimeEmulator(ControlCommands):
                 esc = self._escs[i]
                 frames = esc.poll(t)
                 self._deadlines[i] = esc.next_deadline()
+                if frames and not self.can.quiet and esc.state.bitrate == self.bitrate:
+                    frames = self.can.send(esc, frames, t)  # a bus fault: through its controller
                 if frames:
                     self._transmit(esc, frames)
                     sent.extend((esc, w) for w in frames)
@@ -495,11 +511,13 @@ class RealtimeEmulator(ControlCommands):
         self._inputs.append(_Input(t, msg, wire, origin))
 
     def _host_frame(self, item: _Input, t: float) -> None:
-        """A host frame heard at ``t``, unless it is held or lost while no ESC acknowledges it (--host-alone hold)."""
-        if self.host_alone.mode == "deliver":
+        """A host frame heard at ``t``, unless it is held or lost while no ESC acknowledges it (--host-alone hold, and
+        whatever it says while a bus fault and its recovery last: :mod:`.hub_can`)."""
+        hold = not self.can.quiet or bool(self.host_alone.held)
+        if self.host_alone.mode == "deliver" and not hold:
             self._host_delivered(item, t)
             return
-        for held in self.host_alone.take(item, self._acknowledged(t)):
+        for held in self.host_alone.take(item, self._acknowledged(t), hold=hold):
             self._host_delivered(held, t)
         self.counters.update(self.host_alone.counters)
 

@@ -1,5 +1,5 @@
 """The real-time emulator's control commands (``status``, ``power``, ``fault``, ``faults``, ``bitrate``,
-``stats``, ``save``, ``stop``; the channel and its requests: :mod:`.control`): the handlers a
+``bus_fault``, ``bus_settle``, ``stats``, ``save``, ``stop``; the channel and its requests: :mod:`.control`): the handlers a
 :class:`.realtime.RealtimeEmulator` runs in its loop thread, kept here as a mixin so that the emulator's
 module holds its scheduling loop and IO."""
 
@@ -10,6 +10,7 @@ from typing import Any
 
 from . import faults as _faults
 from .control import Reply
+from .hub_can import KINDS
 from .realtime_timing import summary
 
 
@@ -21,6 +22,8 @@ class ControlCommands:
     bench: Any
     _escs: list
     _stopping: bool
+    can: Any  # the hub's bus faults (:class:`.hub_can.HubCan`)
+    _bus_waiters: list
 
     def _cmd_status(self, req: dict, reply: Reply) -> dict:
         now = time.monotonic()
@@ -40,6 +43,7 @@ class ControlCommands:
                 "faults": sorted(esc.faults),
                 "counters": dict(esc.counters),
                 "power_ups": esc.nvm.get("power_ups"),
+                "can": self.can.state(esc),
             })
         return {
             "powered": self.bench.powered,
@@ -56,6 +60,8 @@ class ControlCommands:
             "counters": dict(self.counters),
             "host_alone": self.host_alone.mode,
             "host_waiting": len(self.host_alone.held),  # held now (counters: host_held, host_lost so far)
+            "bus_fault": self.can.describe(now),
+            "bus_counters": dict(self.can.counters),
             "lateness": summary(self.lateness),
             "wakeup": summary(self.wakeup),
             "escs": escs,
@@ -87,6 +93,8 @@ class ControlCommands:
 
     def _do_power_off(self, now: float) -> str | None:
         self._deadlines_stale = True
+        for esc in self._escs:  # a controller off the bus: bus-off and what it held gone with its power
+            self.can.forget(esc)
         try:
             self.bench.power_off(now)  # writes the flash file
         except OSError as exc:
@@ -131,8 +139,68 @@ class ControlCommands:
         value = req.get("bitrate")
         if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
             raise ValueError(f"bitrate must be a positive integer (bit/s), not {value!r}")
-        self.bitrate = value
+        self.bitrate = self.can.bitrate = value
         return {"bitrate": value}
+
+    # ------------------------------------------------------------------ bus faults (:mod:`.hub_can`)
+    def _cmd_bus_fault(self, req: dict, reply: Reply) -> dict | None:
+        """``kind`` for ``seconds`` (answered at its end), or ``on``: true (until ``on``: false ends it, a relay)."""
+        kind, seconds, on = req.get("kind"), req.get("seconds"), req.get("on")
+        if kind not in KINDS:
+            raise ValueError(f"kind must be one of {', '.join(KINDS)}, not {kind!r}")
+        if (seconds is None) == (on is None):
+            raise ValueError("give seconds (a fault for that long) or on: true / false (a relay closed, opened)")
+        now = time.monotonic()
+        self._emit_due(now)  # what fell due before it went out before it
+        if on is not None:
+            if not isinstance(on, bool):
+                raise ValueError(f"'on' must be true or false, not {on!r}")
+            if not on:
+                fault = self.can.stop(now)
+                return {"kind": kind, "ended": now + self.offset, "was_on": fault is not None}
+            fault = self.can.start(kind, now)
+            return {"kind": kind, "started": fault.start + self.offset}
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)):
+            raise ValueError(f"seconds must be a number, not {seconds!r}")
+        fault = self.can.start(kind, now, float(seconds))
+        answer = {"ok": True, "kind": kind, "started": fault.start + self.offset, "ended": fault.end + self.offset}
+        self._bus_waiters.append((fault.end, False, lambda: reply(answer)))
+        return None  # answered at its end (bus time: the stamps' clock)
+
+    def _cmd_bus_settle(self, req: dict, reply: Reply) -> dict | None:
+        """Answered once every ESC's controller is back from a fault (``settled`` true) or after ``within`` s."""
+        within = req.get("within", 0.0)
+        if isinstance(within, bool) or not isinstance(within, (int, float)) or not 0 <= within <= 60:
+            raise ValueError(f"within must be a number of seconds 0..60, not {within!r}")
+        self._bus_waiters.append((time.monotonic() + within, True,
+                                  lambda: reply({"ok": True, **self._bus_state(time.monotonic())})))
+        return None
+
+    def _can_poll(self, now: float) -> None:
+        """The bus fault's work due by ``now`` (recoveries, held frames sent, reboots) and the answers due."""
+        sent, rebooted = self.can.poll(now)
+        if sent:
+            for esc, w in sent:
+                self._transmit(esc, [w])
+            for esc, w in sent:  # the other ESCs hear them too
+                self.bench.deliver(w, w.timestamp, esc.state.bitrate, sender=esc)
+        for esc, t in rebooted:  # fault busoff_recovery_resets: the firmware resets at its recovery
+            esc.power_off(t)
+            esc.power_on(t)
+        if sent or rebooted:
+            self.bench.touch()
+            self._deadlines_stale = True
+        settled = self.can.settled()
+        waiting, self._bus_waiters = self._bus_waiters, []
+        for by, settle, answer in waiting:  # a fault's end; a settle once the bus is back, or by its limit
+            if by <= now or (settle and settled):
+                answer()
+            else:
+                self._bus_waiters.append((by, settle, answer))
+
+    def _bus_state(self, now: float) -> dict:
+        return {"settled": self.can.settled(), "bus_fault": self.can.describe(now),
+                "escs": {str(esc.node_id): self.can.state(esc) for esc in self._escs}}
 
     def _cmd_stats(self, req: dict, reply: Reply) -> dict:
         out = {"lateness": summary(self.lateness), "wakeup": summary(self.wakeup), "counters": dict(self.counters)}

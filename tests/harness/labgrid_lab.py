@@ -121,3 +121,62 @@ class Lab:
     def close(self) -> None:
         for proc in reversed(self.procs):
             end(proc)
+
+
+class BusRelay:
+    """An HTTP relay for labgrid's ``HttpDigitalOutput`` (``HttpDigitalOutputDriver``) whose contacts short the
+    emulator's bus: ``PUT /relay`` with ``1`` closes it (``ckesc control bus short on`` through the control channel),
+    ``0`` opens it (``... off``); ``GET /relay`` answers ``1`` or ``0``. ``switched`` lists what it was asked, in
+    order; ``on_close`` (if set) is called each time it closes, after the bus is shorted."""
+
+    def __init__(self, control_port: int) -> None:
+        self.control_port = control_port
+        self.switched: list[int] = []
+        self.closed = False
+        self.on_close = None
+        relay = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_PUT(self) -> None:  # noqa: N802 - http.server's name
+                body = self.rfile.read(int(self.headers.get("Content-Length") or 0)).decode().strip()
+                if self.path != "/relay" or body not in ("0", "1"):
+                    self.send_error(404 if self.path != "/relay" else 400)
+                    return
+                closed = body == "1"
+                if closed != relay.closed:
+                    control_request(relay.control_port, {"cmd": "bus_fault", "kind": "short", "on": closed})
+                relay.closed = closed
+                relay.switched.append(int(closed))
+                self._answer(body)
+                if closed and relay.on_close is not None:
+                    relay.on_close()
+
+            def do_GET(self) -> None:  # noqa: N802
+                self._answer("1" if relay.closed else "0")
+
+            def _answer(self, body: str) -> None:
+                self.send_response(200)
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                self.wfile.write(body.encode())
+
+            def log_message(self, *args) -> None:
+                pass
+
+        self.server = ThreadingHTTPServer((LOCALHOST, 0), Handler)
+        self.url = f"http://{LOCALHOST}:{self.server.server_address[1]}/relay"
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+        self.thread.start()
+
+    def env_file(self, where: Path) -> Path:
+        """A labgrid environment file: target ``esc`` with this relay as an HttpDigitalOutput and labgrid's own
+        HttpDigitalOutputDriver on it."""
+        path = where / "relay.yaml"
+        path.write_text("targets:\n  esc:\n    resources:\n      HttpDigitalOutput:\n"
+                        f"        url: '{self.url}'\n        body_asserted: '1'\n        body_deasserted: '0'\n"
+                        "    drivers:\n      HttpDigitalOutputDriver: {}\n")
+        return path
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()

@@ -153,8 +153,9 @@ def test_flash_cmd_labgrid_needs_the_environment_file(tmp_path):
                           ({"labgrid_env": str(tmp_path / "none.yaml")}, "none.yaml: no such file")):
         with pytest.raises(PreflightError, match=said):
             build(BenchOptions(firmware=str(image), flash_cmd="labgrid", **options))
-    # the env file is for labgrid power or flashing; given for neither it is a mistake
-    with pytest.raises(PreflightError, match="--labgrid-env is for --power labgrid or --flash-cmd labgrid"):
+    # the env file is for labgrid power, flashing or the bus-fault relay; given for none it is a mistake
+    with pytest.raises(PreflightError, match="--labgrid-env is for --power labgrid, --flash-cmd labgrid or "
+                                             "--bus-fault-cmd labgrid"):
         build(BenchOptions(dut="bus", can_interface="virtual", labgrid_env=str(image)))
 
 

@@ -1,0 +1,274 @@
+"""The real-time emulator's bus faults (``ckesc control bus``, R20, issue #36), sans-IO: no clock, no socket.
+
+The real-time hub delivers every frame at once and models no arbitration. A bus fault is where that cannot hold:
+while the bus is shorted (CANH to CANL, every bit dominant) or a node at another bit rate garbles it, nothing gets
+through, and each ESC that tries to send meets errors and goes bus-off as its controller does
+(:class:`~ckesc.protocol.canbus.CanController`, ISO 11898-1's fault confinement). :class:`HubCan` plays that for
+the hub: from a fault's start each ESC's frames go through a controller of its own (its mailboxes:
+:data:`~.sim_can.ESC_TX_MAILBOXES`, lowest id first, what does not fit dropped, as the simulated lane's ESCs), each
+try timed in bit times at the hub's bit rate; a try that starts while the bus is held dominant is a bit error, one
+that starts while it is free is acknowledged (the host's adapter listens). A bus-off controller recovers by itself
+after 128 x 11 recessive bits, counted once the bus is free (fault ``no_busoff_recovery``: never, until a power cycle;
+``busoff_recovery_resets``: by rebooting its ESC), then sends what it held back to back. Once every controller is
+error-active again with both counters at 0 and nothing queued, the hub goes back to delivering at once.
+
+The host's frames meet the fault as its adapter would (SocketCAN's, with ``restart-ms``): held, the first and its
+transmit queue behind it, until an ESC listens again (the fault over, its controller not bus-off), the rest lost;
+the emulator keeps them in its :class:`~.host_alone.HostAlone` queue, whatever ``--host-alone`` says.
+
+Kinds (:data:`KINDS`): ``short`` holds the bus dominant from its start to its end; ``other_bitrate`` is a node at
+another bit rate sending at about 1 kHz, played as what the others meet: the bus held for :data:`FOREIGN_FRAME_S` (a frame
+at 250 kbit/s) every :data:`FOREIGN_PERIOD_S`, as the simulated lane plays it (:mod:`ckesc.bench.bus_fault`). A
+fault lasts a given time, or (a relay: ``on`` / ``off``) until it is ended.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+from ..protocol.canbus import Attempt, CanController, ErrorState, attempt_bits, recovery_seconds
+from ..protocol.frame import WireFrame, frame_bits
+from .model import EscModel
+from .sim_can import ESC_TX_MAILBOXES
+
+INF = math.inf
+#: the kinds of fault
+KINDS = ("short", "other_bitrate")
+#: ``other_bitrate``: how long each frame of the node at another bit rate holds the bus (an 8-byte extended frame at
+#: 250 kbit/s) and how often it sends one (about 1 kHz: a babbling node). On its own clock: a period that divides no
+#: whole-millisecond grid, so that an ESC's reports meet its frames at every phase as an unsynchronised node's do (at
+#: exactly 1 ms an ESC whose report grid fell in the gaps never went bus-off, so the fault missed a controller
+#: without recovery at 7 of 20 starting phases)
+FOREIGN_FRAME_S = 0.0005
+FOREIGN_PERIOD_S = 0.00103
+
+
+class Disturbance(NamedTuple):
+    """A fault on the bus from ``start`` to ``end`` (INF: until ended): the bus held dominant for ``on_s`` of every
+    ``period_s`` (a short: all of it)."""
+
+    kind: str
+    start: float
+    end: float
+    on_s: float
+    period_s: float
+
+    @classmethod
+    def of(cls, kind: str, start: float, seconds: float | None) -> Disturbance:
+        if kind not in KINDS:
+            raise ValueError(f"bus fault {kind!r}: one of {', '.join(KINDS)}")
+        end = INF if seconds is None else start + seconds
+        if kind == "short":
+            return cls(kind, start, end, INF, INF)
+        return cls(kind, start, end, FOREIGN_FRAME_S, FOREIGN_PERIOD_S)
+
+    def dominant_until(self, t: float) -> float | None:
+        """Until when the bus is held dominant at ``t`` (None: it is free at ``t``)."""
+        if not self.start <= t < self.end:
+            return None
+        phase = (t - self.start) % self.period_s
+        if phase >= self.on_s:
+            return None
+        return min(t - phase + self.on_s, self.end)
+
+    def next_dominant(self, t: float) -> float:
+        """The first instant at or after ``t`` at which the bus is held dominant (INF: none)."""
+        if t >= self.end:
+            return INF
+        if t < self.start:
+            return self.start
+        phase = (t - self.start) % self.period_s
+        if phase < self.on_s:
+            return t
+        later = t - phase + self.period_s
+        return later if later < self.end else INF
+
+    def quiet_from(self, t: float, need: float) -> float:
+        """The first instant at or after ``t`` from which the bus stays free for ``need`` (INF: not before an end
+        that is not set yet)."""
+        until = self.dominant_until(t)
+        if until is not None:
+            t = until
+        if t >= self.end:
+            return t
+        if self.period_s - self.on_s < need:  # the gaps between the foreign frames are too short: the fault's end
+            return self.end
+        nxt = self.next_dominant(t)
+        return t if nxt - t >= need else self.dominant_until(nxt) or nxt
+
+
+class HubCan:
+    """The hub's CAN controllers while a fault and its recovery last (see the module docstring). The emulator
+    calls :meth:`send` with each ESC's frames as they fall due, :meth:`poll` at :meth:`next_deadline`, and
+    :meth:`forget` at a power-off; ``bitrate`` follows the hub's."""
+
+    def __init__(self, bitrate: int) -> None:
+        self.bitrate = bitrate
+        self.fault: Disturbance | None = None
+        self.counters = {"bus_faults": 0, "esc_bus_off": 0, "esc_recovered": 0, "esc_dropped": 0}
+        self._ctl: dict[EscModel, CanController] = {}
+        self._free: dict[EscModel, float] = {}  # when each controller may start its next try
+
+    # ------------------------------------------------------------------ the fault
+    @property
+    def quiet(self) -> bool:
+        """No fault and no controller left from one: the hub delivers at once (the emulator's fast path)."""
+        return self.fault is None and not self._ctl
+
+    def start(self, kind: str, now: float, seconds: float | None = None) -> Disturbance:
+        """A fault from ``now`` for ``seconds`` (None: until :meth:`stop`). One at a time."""
+        if self.fault is not None and self.fault.end > now:
+            end = "until ended" if self.fault.end == INF else f"for {self.fault.end - now:.3f} s more"
+            raise ValueError(f"a bus fault ({self.fault.kind}) is on {end}")
+        if seconds is not None and not 0 < seconds <= 3600:
+            raise ValueError(f"seconds must be a number of seconds above 0 up to 3600, not {seconds!r}")
+        self.fault = Disturbance.of(kind, now, seconds)
+        self.counters["bus_faults"] += 1
+        return self.fault
+
+    def stop(self, now: float) -> Disturbance | None:
+        """End the fault now (a relay opened); the fault that was on, or None."""
+        fault = self.fault
+        if fault is None or fault.end <= now:
+            return None
+        self.fault = fault._replace(end=now)
+        return self.fault
+
+    def disturbed(self, t: float) -> bool:
+        """Whether a fault is on at ``t``."""
+        f = self.fault
+        return f is not None and f.start <= t < f.end
+
+    # ------------------------------------------------------------------ the ESCs' frames
+    def send(self, esc: EscModel, frames: list[WireFrame], now: float) -> list[WireFrame]:
+        """``esc``'s frames as they fell due by ``now``: those that went on the bus, each stamped with the start of
+        the try that carried it; the others wait in its controller (:meth:`poll` sends them) or were dropped."""
+        ctl = self._ctl.get(esc)
+        if ctl is None:
+            if self.fault is None:
+                return frames
+            ctl = self._ctl[esc] = CanController(self.bitrate, txqueuelen=ESC_TX_MAILBOXES, order="priority",
+                                                 auto_recovery="no_busoff_recovery" not in esc.faults)
+        for w in frames:
+            if ctl.full:
+                self.counters["esc_dropped"] += 1
+            else:
+                ctl.submit(w, w.arbitration_id)
+        return self._run(esc, ctl, now)
+
+    def _run(self, esc: EscModel, ctl: CanController, now: float) -> list[WireFrame]:
+        """The tries of ``esc``'s queued frames that start by ``now``."""
+        out: list[WireFrame] = []
+        t = self._free.get(esc, -INF)
+        bit_s = 1.0 / self.bitrate
+        fault = self.fault
+        while ctl.size and not ctl.bus_off:
+            head = ctl.head()
+            t = max(t, head.timestamp)  # (a frame is not tried before it is due)
+            if t > now:
+                break
+            passive = ctl.passive
+            ctl.begin()
+            if fault is not None and fault.dominant_until(t) is not None:
+                t += attempt_bits(len(head.data), Attempt.SHORT, passive) * bit_s
+                ctl.attempt(Attempt.SHORT, t)
+                if ctl.bus_off:
+                    self.counters["esc_bus_off"] += 1
+            else:
+                ctl.attempt(Attempt.ACKED, t + frame_bits(len(head.data)) * bit_s)
+                out.append(head._replace(timestamp=t))
+                t += frame_bits(len(head.data)) * bit_s
+        self._free[esc] = t
+        return out
+
+    def _quiet_start(self, ctl: CanController) -> float:
+        """From when a bus-off controller counts its recessive bits: when it went bus-off, or once the bus is free."""
+        assert ctl.bus_off_at is not None
+        if self.fault is None:
+            return ctl.bus_off_at
+        return self.fault.quiet_from(ctl.bus_off_at, recovery_seconds(self.bitrate))
+
+    def recovery_due(self, esc: EscModel) -> float | None:
+        """When ``esc``'s bus-off controller recovers by itself: 128 x 11 bits from when it went bus-off, counted once
+        the bus is free (None: it is not bus-off, or does not recover by itself)."""
+        ctl = self._ctl.get(esc)
+        if ctl is None or ctl.bus_off_at is None:
+            return None
+        return ctl.recovery_due(self._quiet_start(ctl))
+
+    def listens_from(self, esc: EscModel) -> float | None:
+        """From when ``esc``'s controller may acknowledge a frame as far as the fault goes: its end, and its own
+        recovery where it is bus-off (None: never by itself); -INF where nothing stands in the way."""
+        t = -INF if self.fault is None else self.fault.end
+        ctl = self._ctl.get(esc)
+        if ctl is not None and ctl.bus_off:
+            due = self.recovery_due(esc)
+            t = INF if due is None else max(t, due)
+        return None if t == INF else t
+
+    def next_deadline(self) -> float | None:
+        """The next instant :meth:`poll` has work: a try to start, a recovery, the fault's end."""
+        times = [] if self.fault is None or self.fault.end == INF else [self.fault.end]
+        for esc, ctl in self._ctl.items():
+            if ctl.bus_off:
+                due = self.recovery_due(esc)
+                if due is not None and due < INF:
+                    times.append(due)
+            elif ctl.size:
+                times.append(max(self._free.get(esc, -INF), ctl.head().timestamp))
+        return min(times) if times else None
+
+    def poll(self, now: float) -> tuple[list[tuple[EscModel, WireFrame]], list[tuple[EscModel, float]]]:
+        """Recoveries and tries due by ``now``: the frames that went on the bus (in time order) and the ESCs that
+        rebooted at their recovery (fault ``busoff_recovery_resets``: the caller powers each off and on at that
+        time; its controller is gone)."""
+        sent: list[tuple[EscModel, WireFrame]] = []
+        rebooted: list[tuple[EscModel, float]] = []
+        for esc, ctl in list(self._ctl.items()):
+            if ctl.bus_off:
+                due = self.recovery_due(esc)
+                if due is None or due > now:
+                    continue
+                if "busoff_recovery_resets" in esc.faults:
+                    self.forget(esc)
+                    rebooted.append((esc, due))
+                    continue
+                ctl.poll(now, self._quiet_start(ctl))  # (the same instant: recovery_due's own sum)
+                self.counters["esc_recovered"] += 1
+                self._free[esc] = due
+            sent += [(esc, w) for w in self._run(esc, ctl, now)]
+        if self.fault is not None and self.fault.end <= now and not any(c.bus_off for c in self._ctl.values()):
+            self.fault = None  # (kept while a controller is bus-off: its recovery counts from the fault's end)
+        if self.fault is None:  # settled controllers: the hub delivers at once again
+            for esc, ctl in list(self._ctl.items()):
+                if not ctl.size and ctl.state is ErrorState.ACTIVE and not ctl.tec and not ctl.rec:
+                    self.forget(esc)
+        sent.sort(key=lambda pair: pair[1].timestamp)
+        return sent, rebooted
+
+    def forget(self, esc: EscModel) -> None:
+        """``esc`` left the bus (powered off, rebooted): its controller and what it held go."""
+        self._ctl.pop(esc, None)
+        self._free.pop(esc, None)
+
+    # ------------------------------------------------------------------ what the status says
+    def settled(self) -> bool:
+        """No fault, and every controller back (error-active or warning, nothing held): what a test waits for."""
+        return self.fault is None and all(not ctl.bus_off and not ctl.size for ctl in self._ctl.values())
+
+    def state(self, esc: EscModel) -> dict[str, Any]:
+        """``esc``'s controller as ``ip -details link show`` would say it (error-active, counters 0 where the hub
+        keeps none)."""
+        ctl = self._ctl.get(esc)
+        if ctl is None:
+            return {"state": ErrorState.ACTIVE.value, "tec": 0, "rec": 0, "queued": 0, "bus_off": 0}
+        return {"state": ctl.state.value, "tec": ctl.tec, "rec": ctl.rec, "queued": ctl.size,
+                "bus_off": ctl.counts["bus_off"]}
+
+    def describe(self, now: float) -> dict[str, Any] | None:
+        """The fault on now (its kind, since when and for how long more, in seconds; None: none)."""
+        f = self.fault
+        if f is None or f.end <= now:
+            return None
+        return {"kind": f.kind, "since_s": round(now - f.start, 6), "left_s": None if f.end == INF else round(f.end - now, 6)}
