@@ -121,7 +121,7 @@ class EmulatedBench:
 
         Frames no ESC acts on (other ESCs' reports) are only counted, and a throttle frame goes only
         to the ESCs it can address (:meth:`EscModel.throttle_keys`): the hot path of a busy bus."""
-        plain = type(frame) is WireFrame  # a data frame (the simulated lane's; remote and error frames come as Messages)
+        plain = isinstance(frame, WireFrame)  # a data frame (the simulated lane's; remote and error frames come as Messages)
         key = (frame.arbitration_id, frame.data) if plain and frame.is_extended_id else None
         # a throttle frame heard before (a stream's: hours of them) is known by its id and bytes alone
         decoded: Frame | DecodeError | None = self._throttle_decoded.get(key) if key is not None else None

@@ -41,6 +41,7 @@ import heapq
 import itertools
 import os
 from collections import deque
+from functools import partial
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import can
@@ -81,6 +82,31 @@ class _Pending:
 
 
 INF = float("inf")
+
+
+class Heard(WireFrame):
+    """A data frame as a host's bus hears it, before any ``can.Message`` is made of it: a :class:`WireFrame`
+    stamped at its last bit, with the ``can.Message`` attributes the readers of :meth:`SimEscBus.frames_until` ask
+    for. :meth:`SimEscBus.recv` makes the ``can.Message`` (python-can's boundary); a soak's reader takes the frame
+    as it is (hours of frames, none of which leaves the simulated world)."""
+
+    __slots__ = ()
+    is_rx = True  #: another node's frame (:class:`Echo`: the bus's own, heard back)
+    is_remote_frame = False
+    is_error_frame = False
+
+
+class Echo(Heard):
+    """A host bus's own data frame as it hears it back (``receive_own_messages``): ``is_rx`` False."""
+
+    __slots__ = ()
+    is_rx = False
+
+
+#: ``_heard((arbitration_id, data, timestamp, is_extended_id))``, ``_echo(...)``: made as :func:`new_wire` makes a
+#: wire (no Python-level constructor: every frame of a simulated run)
+_heard = partial(tuple.__new__, Heard)
+_echo = partial(tuple.__new__, Echo)
 
 
 class SimWorld(CanNodes):
@@ -223,15 +249,26 @@ class SimWorld(CanNodes):
             st = self.source_stats[origin.name]
             st["frames"] += 1
             st["busy_s"] += frame_bits(len(old.data)) / bitrate
-        wire = new_wire((old.arbitration_id, old.data, end, old.is_extended_id))  # (not _replace: once per frame)
-        sender = origin if isinstance(origin, EscModel) else None
         flags = p.flags
         if not flags:
-            self.bench.deliver(wire, end, bitrate, sender)
+            # one frame for everyone (not _replace: once per frame): the ESCs' wire, and what a host's bus queues
+            # as it is (no can.Message until one is read with recv): a host bus's own frame is its Echo
+            own = isinstance(origin, SimEscBus)
+            wire = (_echo if own else _heard)((old.arbitration_id, old.data, end, old.is_extended_id))
+            self.bench.deliver(wire, end, bitrate, origin if isinstance(origin, EscModel) else None)
             for bus in self.buses:
-                if bus.bitrate == bitrate and (bus is not origin or bus.receive_own_messages):
-                    bus._deliver(wire, bus is not origin)
+                if bus.bitrate == bitrate:
+                    if bus is origin:
+                        if not bus.receive_own_messages:
+                            continue
+                        heard = wire
+                    else:
+                        heard = _heard(wire) if own else wire
+                    if bus._filters is None or bus._matches_filters(heard):
+                        bus._rx.append(heard)
             return
+        wire = new_wire((old.arbitration_id, old.data, end, old.is_extended_id))
+        sender = origin if isinstance(origin, EscModel) else None
         heard = can.Message(timestamp=end, arbitration_id=wire.arbitration_id, data=wire.data,
                             is_extended_id=wire.is_extended_id, **flags)
         self.bench.deliver(heard, end, bitrate, sender=sender)  # the ESCs' decoder rejects remote/error frames
@@ -399,7 +436,7 @@ class SimEscBus(can.BusABC):
                                    "auto_recovery": _flag(auto_recovery), "berr_reporting": _flag(berr_reporting)}
         CanController(self.bitrate, **self.controller_options)  # (checks them before the bus joins the world)
         self.error_frames = _flag(error_frames)  # SocketCAN's CAN_RAW_ERR_FILTER: hand this bus its error frames
-        self._rx: deque[can.Message] = deque()
+        self._rx: deque[Heard | can.Message] = deque()  # (a data frame as heard: recv makes its Message)
         self.channel_info = f"ckesc-sim {channel} @ {self.bitrate} bit/s ({len(world.bench.escs)} ESCs)"
         super().__init__(channel, can_filters=can_filters, **kwargs)
         self.channel = channel
@@ -492,7 +529,7 @@ class SimEscBus(can.BusABC):
         """The next frame, advancing simulated time up to ``timeout`` seconds to wait for it."""
         self._check_open()
         if self._rx:
-            return self._rx.popleft()
+            return self._message(self._rx.popleft())
         world = self.world
         return self._until(float("inf") if timeout is None else world.now + max(timeout, 0.0), timeout is None)
 
@@ -501,13 +538,15 @@ class SimEscBus(can.BusABC):
         if self._is_shutdown:
             self._check_open()
         if self._rx:
-            return self._rx.popleft()
+            return self._message(self._rx.popleft())
         now = self.world.now
         return self._until(now + max(deadline - now, 0.0), False)  # (recv's arithmetic: the same instant)
 
-    def frames_until(self, deadline: float) -> Iterator[can.Message]:
+    def frames_until(self, deadline: float) -> Iterator[Heard | can.Message]:
         """Every frame until ``deadline``: :meth:`recv_until` again and again until it gives none (the clock then at
-        ``deadline``), without a call per frame between the reader and the simulated clock."""
+        ``deadline``), without a call per frame between the reader and the simulated clock, and each data frame as
+        the bus heard it (a :class:`Heard`: ``timestamp``, ``arbitration_id``, ``data``, ``is_extended_id``,
+        ``is_rx`` and the flags, as a ``can.Message`` has them; no ``can.Message`` made: a soak reads hours of them)."""
         rx, world = self._rx, self.world
         advance = world.advance
         while True:
@@ -524,13 +563,21 @@ class SimEscBus(can.BusABC):
         rx = self._rx
         came = self.world.advance(deadline, rx)
         if came:
-            return rx.popleft()
+            return self._message(rx.popleft())
         if came is None and forever:
             raise can.CanOperationError("ckesc-sim: recv() without timeout on a bus where nothing will ever happen")
         return None
 
     def _recv_internal(self, timeout: float | None):
-        return (self._rx.popleft() if self._rx else None), True
+        return (self._message(self._rx.popleft()) if self._rx else None), True
+
+    def _message(self, heard: Heard | can.Message) -> can.Message:
+        """The ``can.Message`` of a frame this bus heard (a data frame is queued as the bus heard it, a remote or
+        error frame as its ``can.Message``)."""
+        if type(heard) is can.Message:
+            return heard
+        return can.Message(timestamp=heard.timestamp, arbitration_id=heard.arbitration_id,
+                           is_extended_id=heard.is_extended_id, data=heard.data, is_rx=heard.is_rx, channel=self.channel)
 
     def _send_periodic_internal(self, msgs: can.Message | Sequence[can.Message], period: float,
                                 duration: float | None = None, autostart: bool = True,
