@@ -42,7 +42,7 @@ import itertools
 import os
 from collections import deque
 from functools import partial
-from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, NamedTuple, Sequence
 
 import can
 from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
@@ -72,13 +72,20 @@ class SimClock:
         return self._world.now
 
 
-class _Pending:
-    __slots__ = ("ready", "seq", "wire", "origin", "bitrate", "flags")
+class _Pending(NamedTuple):
+    """A frame on its way to the bus (its node's queue, then arbitration); made with :data:`_pending`."""
 
-    def __init__(self, ready: float, seq: int, wire: WireFrame, origin: Any, bitrate: int,
-                 flags: dict[str, bool] | None = None) -> None:
-        self.ready, self.seq, self.wire, self.origin, self.bitrate = ready, seq, wire, origin, bitrate
-        self.flags = flags  # a host's remote or error frame: not a data frame, whatever its bytes
+    ready: float
+    seq: int
+    wire: WireFrame
+    origin: Any
+    bitrate: int
+    flags: dict[str, bool] | None  # a host's remote or error frame: not a data frame, whatever its bytes
+
+
+#: ``_pending((ready, seq, wire, origin, bitrate, flags))``: without namedtuple's Python-level constructor (a
+#: frame's way onto the bus: every frame of a simulated run)
+_pending = partial(tuple.__new__, _Pending)
 
 
 INF = float("inf")
@@ -175,13 +182,16 @@ class SimWorld(CanNodes):
                     t = self._waiting[0][0]
             if self._alarm < t:
                 t = self._alarm
-            for task in self._tasks:
-                if task.next_time < t:
-                    t = task.next_time
-            for source in self._sources:
-                due = source.next_due()
-                if due < t:
-                    t = due
+            tasks, sources = self._tasks, self._sources
+            if tasks:
+                for task in tasks:
+                    if task.next_time < t:
+                        t = task.next_time
+            if sources:
+                for source in sources:
+                    due = source.next_due()
+                    if due < t:
+                        t = due
             if t == INF:
                 if deadline != INF and deadline > now:
                     self.now = deadline
@@ -198,11 +208,11 @@ class SimWorld(CanNodes):
                 self._finish_transmission()
             if self._alarm <= t:
                 self._on_alarm(t)
-            if self._tasks:
+            if tasks:
                 for task in self._tasks:
                     if task.next_time <= t:
                         task.fire(t)
-            if self._sources:
+            if sources:
                 for source in self._sources:
                     if source.next_due() <= t:
                         bitrate = source.bitrate or self._host_bitrate()
@@ -221,9 +231,9 @@ class SimWorld(CanNodes):
         now = self.now
         seq = next(self._seq)
         if ready <= now:
-            self._submit(_Pending(now, seq, wire, origin, bitrate, flags))
+            self._submit(_pending((now, seq, wire, origin, bitrate, flags)))
         else:
-            heapq.heappush(self._waiting, (ready, seq, _Pending(ready, seq, wire, origin, bitrate, flags)))
+            heapq.heappush(self._waiting, (ready, seq, _pending((ready, seq, wire, origin, bitrate, flags))))
 
     # ------------------------------------------------------------------ the nodes' controllers (sim_can.CanNodes: a
     # frame joining its node's queue, arbitration and the frame's try)
@@ -298,8 +308,9 @@ class SimWorld(CanNodes):
 
     # ------------------------------------------------------------------ host side
     def send_wire(self, bus: SimEscBus, wire: WireFrame) -> None:
-        """A host's data frame as it goes on the wire (``send`` without the ``can.Message``: a soak's stream)."""
-        self._queue(wire, bus, bus.bitrate, ready=self.now)
+        """A host's data frame as it goes on the wire (``send`` without the ``can.Message``: a soak's stream):
+        :meth:`_queue`'s, ready now."""
+        self._submit(_pending((self.now, next(self._seq), wire, bus, bus.bitrate, None)))
 
     def send(self, bus: SimEscBus, msg: can.Message) -> None:
         """Queue ``msg`` on ``bus``'s controller; raises :class:`~ckesc.protocol.canbus.QueueFull`."""
@@ -556,7 +567,8 @@ class SimEscBus(can.BusABC):
                 yield rx.popleft()
                 continue
             now = world.now
-            if not advance(now + max(deadline - now, 0.0), rx):  # (recv_until's arithmetic, as :meth:`_until` reads)
+            left = deadline - now  # (recv_until's arithmetic, max(left, 0.0) as :meth:`_until` reads, without the call)
+            if not advance(now + left if left > 0.0 else now, rx):
                 return
 
     def _until(self, deadline: float, forever: bool) -> can.Message | None:
