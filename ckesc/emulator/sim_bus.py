@@ -240,7 +240,7 @@ class SimWorld(CanNodes):
     def _finish_transmission(self) -> None:
         end, p = self._in_flight  # type: ignore[misc]
         self._in_flight = None
-        origin, bitrate, old = p.origin, p.bitrate, p.wire
+        _, _, old, origin, bitrate, flags = p
         if self.ack:
             ctl = self._ctl.get(origin)
             if ctl is None or ctl.head() is not p:  # its queue went away meanwhile (a power-off, a bus shut down)
@@ -259,7 +259,6 @@ class SimWorld(CanNodes):
             st = self.source_stats[origin.name]
             st["frames"] += 1
             st["busy_s"] += frame_bits(len(old.data)) / bitrate
-        flags = p.flags
         if not flags:
             # one frame for everyone (not _replace: once per frame): the ESCs' wire, and what a host's bus queues
             # as it is (no can.Message until one is read with recv): a host bus's own frame is its Echo
