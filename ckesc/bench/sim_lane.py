@@ -76,7 +76,11 @@ class SimLane(Lane):
         return frames
 
     def send_wire(self, wire: WireFrame) -> None:
-        self.sim.send_wire(wire)  # (no can.Message built: hours of soak send here)
+        sim = self.sim  # (no can.Message built: hours of soak send here)
+        if sim.world.ack or sim._is_shutdown:
+            sim.send_wire(wire)  # (a full queue said as the bus says it, a closed bus refused)
+        else:  # without acknowledgement nothing refuses a frame: the world takes it (the bus's send_wire, one call less)
+            sim.world.send_wire(sim, wire)
 
     def wait_power(self, seconds: float) -> None:
         self.sim.advance(seconds)

@@ -162,7 +162,8 @@ class SimWorld(CanNodes):
 
         The event loop of every simulated run (hours of soak: each frame two events or three): finding the next event
         and processing it in one loop, plain comparisons, no min() of pairs, no call but the events' own work."""
-        deadlines = self.bench._deadlines
+        deadlines = self.bench._deadlines  # (one per ESC, refreshed in place)
+        one = len(deadlines) == 1
         while True:
             if rx or (stop is not None and stop()):
                 return True
@@ -170,7 +171,7 @@ class SimWorld(CanNodes):
             # now, else the first waiting one), a controller's alarm (a recovery, a retry), a periodic task, another
             # node's frame
             now = self.now
-            t = (deadlines[0] if len(deadlines) == 1 else min(deadlines)) if deadlines else INF
+            t = deadlines[0] if one else min(deadlines) if deadlines else INF
             in_flight = self._in_flight
             if in_flight is not None:
                 if in_flight[0] < t:
@@ -218,7 +219,7 @@ class SimWorld(CanNodes):
                         bitrate = source.bitrate or self._host_bitrate()
                         for wire in source.take_due(t):
                             self._queue(wire, source, bitrate, ready=wire.timestamp)
-            if deadlines and (deadlines[0] if len(deadlines) == 1 else min(deadlines)) <= t:
+            if (deadlines[0] if one else min(deadlines) if deadlines else INF) <= t:
                 for esc, wire in self.bench.poll(t):
                     self._queue(wire, esc, esc.state.bitrate, ready=wire.timestamp)
             if self._in_flight is None and (self._ready or self._waiting or self._contending):
