@@ -557,7 +557,12 @@ class SimEscBus(can.BusABC):
         """Every frame until ``deadline``: :meth:`recv_until` again and again until it gives none (the clock then at
         ``deadline``), without a call per frame between the reader and the simulated clock, and each data frame as
         the bus heard it (a :class:`Heard`: ``timestamp``, ``arbitration_id``, ``data``, ``is_extended_id``,
-        ``is_rx`` and the flags, as a ``can.Message`` has them; no ``can.Message`` made: a soak reads hours of them)."""
+        ``is_rx`` and the flags, as a ``can.Message`` has them; no ``can.Message`` made: a soak reads hours of them).
+
+        The world runs up to ``deadline`` in one go and the frames it heard meanwhile are yielded after it: the frames
+        a :meth:`recv_until` loop reads, with the same stamps, but the clock, read between two of them, is at the
+        deadline already; a reader that sends between the frames it reads reads with :meth:`recv_until` (a soak
+        sends between its reads, not during them)."""
         rx, world = self._rx, self.world
         advance = world.advance
         while True:
@@ -568,6 +573,14 @@ class SimEscBus(can.BusABC):
                 continue
             now = world.now
             left = deadline - now  # (recv_until's arithmetic, max(left, 0.0) as :meth:`_until` reads, without the call)
+            if 0.0 < left <= now:
+                # now + left is the deadline exactly, and stays so for every later now (Sterbenz: deadline - now is
+                # exact while now >= deadline / 2): recv_until's calls would each run the world to the deadline, one
+                # call does it once
+                advance(deadline, None)
+                while rx:
+                    yield rx.popleft()
+                return
             if not advance(now + left if left > 0.0 else now, rx):
                 return
 
