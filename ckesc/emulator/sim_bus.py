@@ -256,16 +256,16 @@ class SimWorld(CanNodes):
             if was is not ErrorState.ACTIVE:  # (only a controller past 95 can change its state by a success)
                 self._report(origin, ctl)
         self.stats["frames"] += 1
-        if isinstance(origin, _Shifted):
+        own = isinstance(origin, SimEscBus)  # (a host's frame: most of a soak's; asked first)
+        if not own and isinstance(origin, _Shifted):
             st = self.source_stats[origin.name]
             st["frames"] += 1
             st["busy_s"] += frame_bits(len(old.data)) / bitrate
         if not flags:
             # one frame for everyone (not _replace: once per frame): the ESCs' wire, and what a host's bus queues
             # as it is (no can.Message until one is read with recv): a host bus's own frame is its Echo
-            own = isinstance(origin, SimEscBus)
             wire = (_echo if own else _heard)((old.arbitration_id, old.data, end, old.is_extended_id))
-            self.bench.deliver(wire, end, bitrate, origin if isinstance(origin, EscModel) else None)
+            self.bench.deliver(wire, end, bitrate, None if own or not isinstance(origin, EscModel) else origin)
             for bus in self.buses:
                 if bus.bitrate == bitrate:
                     if bus is origin:
