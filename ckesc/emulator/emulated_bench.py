@@ -176,7 +176,7 @@ class EmulatedBench:
         if changed and targets is self.escs:
             self._throttle_index = None  # a service may have changed a node's throttle channel
 
-    def _throttle_targets(self, key: tuple[str, int | None]) -> list[EscModel]:
+    def _throttle_targets(self, wanted: tuple[str, int | None]) -> list[EscModel]:
         """The ESCs a throttle frame can address, by (its name, its RawCommand_12b group or None)."""
         if self._throttle_index is None:
             index: dict[tuple[str, int | None], list[EscModel]] = {}
@@ -190,7 +190,7 @@ class EmulatedBench:
                         index.setdefault(key, []).append(esc)
             self._throttle_index = {k: sorted(set(v) | set(everything), key=self.escs.index) for k, v in index.items()}
             self._throttle_index[_ANY] = everything
-        return self._throttle_index.get(key) or self._throttle_index[_ANY]
+        return self._throttle_index.get(wanted) or self._throttle_index[_ANY]
 
     def next_deadline(self) -> float | None:
         t = min(self._deadlines)
