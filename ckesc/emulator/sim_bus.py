@@ -41,8 +41,7 @@ import heapq
 import itertools
 import os
 from collections import deque
-from functools import partial
-from typing import Any, Callable, Iterable, Iterator, Mapping, NamedTuple, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import can
 from can.broadcastmanager import ModifiableCyclicTaskABC, RestartableCyclicTaskABC
@@ -53,10 +52,10 @@ from ..protocol.frame import WireFrame, frame_bits, new_wire
 from ..protocol.traffic import TrafficSource
 from .emulated_bench import EmulatedBench
 from .model import EscModel
-from .sim_can import CanNodes
+from .sim_can import CanNodes, ShiftedSource
+from .sim_frames import FrameOnItsWay, Heard, new_echo, new_heard, new_pending
 
 _WORLDS: dict[str, SimWorld] = {}
-
 
 
 class SimClock:
@@ -72,48 +71,7 @@ class SimClock:
         return self._world.now
 
 
-class _Pending(NamedTuple):
-    """A frame on its way to the bus (its node's queue, then arbitration); made with :data:`_pending`."""
-
-    ready: float
-    seq: int
-    wire: WireFrame
-    origin: Any
-    bitrate: int
-    flags: dict[str, bool] | None  # a host's remote or error frame: not a data frame, whatever its bytes
-
-
-#: ``_pending((ready, seq, wire, origin, bitrate, flags))``: without namedtuple's Python-level constructor (a
-#: frame's way onto the bus: every frame of a simulated run)
-_pending = partial(tuple.__new__, _Pending)
-
-
 INF = float("inf")
-
-
-class Heard(WireFrame):
-    """A data frame as a host's bus hears it, before any ``can.Message`` is made of it: a :class:`WireFrame`
-    stamped at its last bit, with the ``can.Message`` attributes the readers of :meth:`SimEscBus.frames_until` ask
-    for. :meth:`SimEscBus.recv` makes the ``can.Message`` (python-can's boundary); a soak's reader takes the frame
-    as it is (hours of frames, none of which leaves the simulated world)."""
-
-    __slots__ = ()
-    is_rx = True  #: another node's frame (:class:`Echo`: the bus's own, heard back)
-    is_remote_frame = False
-    is_error_frame = False
-
-
-class Echo(Heard):
-    """A host bus's own data frame as it hears it back (``receive_own_messages``): ``is_rx`` False."""
-
-    __slots__ = ()
-    is_rx = False
-
-
-#: ``_heard((arbitration_id, data, timestamp, is_extended_id))``, ``_echo(...)``: made as :func:`new_wire` makes a
-#: wire (no Python-level constructor: every frame of a simulated run)
-_heard = partial(tuple.__new__, Heard)
-_echo = partial(tuple.__new__, Echo)
 
 
 class SimWorld(CanNodes):
@@ -135,9 +93,9 @@ class SimWorld(CanNodes):
         self.now = 0.0
         self.clock = SimClock(self)
         self.buses: list[SimEscBus] = []
-        self._waiting: list[tuple[float, int, _Pending]] = []
-        self._in_flight: tuple[float, _Pending] | None = None
-        self._ready: list[tuple[int, int, _Pending]] = []  # without acknowledgement: every node's frames, by id
+        self._waiting: list[tuple[float, int, FrameOnItsWay]] = []
+        self._in_flight: tuple[float, FrameOnItsWay] | None = None
+        self._ready: list[tuple[int, int, FrameOnItsWay]] = []  # without acknowledgement: every node's frames, by id
         self._outcome = Attempt.ACKED  # what the frame in flight meets
         self._seq = itertools.count()
         self._tasks: list[SimCyclicTask] = []
@@ -232,9 +190,9 @@ class SimWorld(CanNodes):
         now = self.now
         seq = next(self._seq)
         if ready <= now:
-            self._submit(_pending((now, seq, wire, origin, bitrate, flags)))
+            self._submit(new_pending((now, seq, wire, origin, bitrate, flags)))
         else:
-            heapq.heappush(self._waiting, (ready, seq, _pending((ready, seq, wire, origin, bitrate, flags))))
+            heapq.heappush(self._waiting, (ready, seq, new_pending((ready, seq, wire, origin, bitrate, flags))))
 
     # ------------------------------------------------------------------ the nodes' controllers (sim_can.CanNodes: a
     # frame joining its node's queue, arbitration and the frame's try)
@@ -257,14 +215,14 @@ class SimWorld(CanNodes):
                 self._report(origin, ctl)
         self.stats["frames"] += 1
         own = isinstance(origin, SimEscBus)  # (a host's frame: most of a soak's; asked first)
-        if not own and isinstance(origin, _Shifted):
+        if not own and isinstance(origin, ShiftedSource):
             st = self.source_stats[origin.name]
             st["frames"] += 1
             st["busy_s"] += frame_bits(len(old.data)) / bitrate
         if not flags:
             # one frame for everyone (not _replace: once per frame): the ESCs' wire, and what a host's bus queues
             # as it is (no can.Message until one is read with recv): a host bus's own frame is its Echo
-            wire = (_echo if own else _heard)((old.arbitration_id, old.data, end, old.is_extended_id))
+            wire = (new_echo if own else new_heard)((old.arbitration_id, old.data, end, old.is_extended_id))
             self.bench.deliver(wire, end, bitrate, None if own or not isinstance(origin, EscModel) else origin)
             for bus in self.buses:
                 if bus.bitrate == bitrate:
@@ -273,7 +231,7 @@ class SimWorld(CanNodes):
                             continue
                         heard = wire
                     else:
-                        heard = _heard(wire) if own else wire
+                        heard = new_heard(wire) if own else wire
                     if bus._filters is None or bus._matches_filters(heard):
                         bus._rx.append(heard)
             return
@@ -297,7 +255,7 @@ class SimWorld(CanNodes):
             raise TypeError(f"not a traffic source: {source!r}")
         if any(s.name == source.name for s in self._sources):
             raise ValueError(f"a traffic source named {source.name!r} is already on {self.channel}")
-        self._sources.append(_Shifted(source, self.now))
+        self._sources.append(ShiftedSource(source, self.now))
         self.source_stats.setdefault(source.name, {"frames": 0, "busy_s": 0.0})
         self._wake()
 
@@ -310,7 +268,7 @@ class SimWorld(CanNodes):
     def send_wire(self, bus: SimEscBus, wire: WireFrame) -> None:
         """A host's data frame as it goes on the wire (``send`` without the ``can.Message``: a soak's stream):
         :meth:`_queue`'s, ready now."""
-        self._submit(_pending((self.now, next(self._seq), wire, bus, bus.bitrate, None)))
+        self._submit(new_pending((self.now, next(self._seq), wire, bus, bus.bitrate, None)))
 
     def send(self, bus: SimEscBus, msg: can.Message) -> None:
         """Queue ``msg`` on ``bus``'s controller; raises :class:`~ckesc.protocol.canbus.QueueFull`."""
@@ -345,24 +303,6 @@ class SimWorld(CanNodes):
         self.power_off()
         self.run_until(self.now + off_time)
         self.power_on()
-
-
-class _Shifted:
-    """A source on the world's clock: its own clock starts at ``t0``."""
-
-    def __init__(self, source: TrafficSource, t0: float) -> None:
-        self.source, self.t0 = source, t0
-        self.name, self.bitrate = source.name, source.bitrate
-
-    def next_due(self) -> float:
-        return self.source.next_due() + self.t0
-
-    def take_due(self, now: float) -> list[WireFrame]:
-        # compared on the world's clock (``now - t0`` could round below a due time and stall the world)
-        out: list[WireFrame] = []
-        while (due := self.source.next_due()) + self.t0 <= now:
-            out.extend(w._replace(timestamp=w.timestamp + self.t0) for w in self.source.take_due(due))
-        return out
 
 
 class SimCyclicTask(ModifiableCyclicTaskABC, RestartableCyclicTaskABC):
