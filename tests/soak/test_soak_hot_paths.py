@@ -67,6 +67,29 @@ def test_the_simulated_lanes_recv_until_and_frames_until_read_what_recv_did(tmp_
             lane.close()
 
 
+def test_a_soaks_reads_make_no_can_message_and_recv_makes_the_same_one():
+    """Without a listener the simulated lane's ``frames_until`` hands each data frame as the bus heard it (no
+    ``can.Message`` made: the soak's hours of frames); ``recv`` on a lane of the same seed gives python-can's
+    ``Message`` of each, the host's own frames ``is_rx`` False in both."""
+    lanes = [SimLane(seed=5), SimLane(seed=5)]
+    try:
+        got: list[list[tuple]] = [[], []]
+        for step in range(1, 40):
+            deadline = step * 0.0125
+            for i, lane in enumerate(lanes):
+                lane.send_wire(throttle(100, step % 32))
+                msgs = list(lane.frames_until(deadline)) if i == 0 else list(read(1, lane, deadline))
+                assert all(type(m) is not can.Message for m in msgs) if i == 0 else \
+                    all(type(m) is can.Message and m.channel == lane.channel for m in msgs)
+                got[i] += [(m.timestamp, m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_rx,
+                            m.is_remote_frame, m.is_error_frame) for m in msgs]
+        assert got[0] == got[1]
+        assert {f[4] for f in got[0]} == {True, False}  # the ESC's frames and the host's own, heard back
+    finally:
+        for lane in lanes:
+            lane.close()
+
+
 def read(i: int, lane: SimLane, deadline: float):
     if i == 2:
         yield from lane.frames_until(deadline)
