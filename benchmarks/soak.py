@@ -6,7 +6,7 @@ at the start and the end, the trace on disk within its budget). The stream at 50
 In process, one run after another (``runner.run``, as ``ckesc soak`` calls it); the reports go to a temporary
 directory. A script, not a timed test:
 
-    nice python benchmarks/soak.py [--hours 8] [--faults-only | --faultless-only]
+    nice python benchmarks/soak.py [--hours 8] [--faults-only | --faultless-only] [--rate 400]
     nice python benchmarks/soak.py --versus ../main-checkout [--hours 1] [--rounds 2]
 
 ``--versus DIR``: the faultless soak side by side with the code of another checkout (before a change, say): a
@@ -38,11 +38,12 @@ SPIN = {"run_time_wraps"}
 OUT = Path(__file__).parent / "results" / "soak.json"
 
 
-def one(reports: Path, faults: str, duration_s: float, spin: bool, stop: bool) -> tuple[dict, float, float]:
+def one(reports: Path, faults: str, duration_s: float, spin: bool, stop: bool,
+        rate_hz: float = RATE_HZ) -> tuple[dict, float, float]:
     """One soak: its results.json, its wall time and the process's CPU time (s; on a shared machine the wall time
     grows with the other jobs' load, the CPU time much less)."""
     bench = BenchOptions(emulator_faults=faults, allow_motor_spin=spin)
-    options = runner.SoakOptions(duration_s=duration_s, rate_hz=RATE_HZ, throttle=((0.0, 200),) if spin else (),
+    options = runner.SoakOptions(duration_s=duration_s, rate_hz=rate_hz, throttle=((0.0, 200),) if spin else (),
                                  stop_on_finding=stop, reports=str(reports), quiet=True)
     t0, c0 = time.perf_counter(), time.process_time()
     outcome = runner.run(bench, options, out=io.StringIO())
@@ -70,15 +71,16 @@ def faults(reports: Path) -> dict:
     return out
 
 
-def faultless(reports: Path, hours: float) -> dict:
+def faultless(reports: Path, hours: float, rate_hz: float = RATE_HZ) -> dict:
     load_before = load()
-    doc, wall, cpu = one(reports, "", hours * 3600, False, stop=False)
+    doc, wall, cpu = one(reports, "", hours * 3600, False, stop=False, rate_hz=rate_hz)
     mem = doc["memory"]
-    out = {"hours": hours, "status": doc["status"], "findings": len(doc["findings"]) + doc["findings_not_kept"],
+    out = {"hours": hours, "rate_hz": rate_hz, "status": doc["status"], "findings": len(doc["findings"]) + doc["findings_not_kept"],
            "exit": 1 if doc["findings"] or doc["findings_not_kept"] else 0, "ran_s": doc["ran_s"],
            "wall_s": round(wall, 1), "sim_per_wall": round(doc["ran_s"] / wall, 1), "frames": doc["frames"]["total"],
            "cpu_s": round(cpu, 1), "wall_s_per_sim_hour": round(wall / hours, 1), "cpu_s_per_sim_hour": round(cpu / hours, 1),
            "wall_us_per_frame": round(wall / doc["frames"]["total"] * 1e6, 1),
+           "cpu_us_per_frame": round(cpu / doc["frames"]["total"] * 1e6, 1),
            "load_average_5min": [load_before, load()],
            "rss_start_mb": round(mem["rss_start_kb"] / 1024, 1), "rss_end_mb": round(mem["rss_end_kb"] / 1024, 1),
            "peak_rss_mb": round(mem["peak_rss_kb"] / 1024, 1),
@@ -120,10 +122,23 @@ def main() -> None:
     ap.add_argument("--faultless-only", action="store_true")
     ap.add_argument("--versus", type=Path, help="only the faultless soak side by side with this checkout's code")
     ap.add_argument("--rounds", type=int, default=2, help="--versus: runs of each (default 2)")
+    ap.add_argument("--rate", type=float, default=RATE_HZ,
+                    help=f"the faultless soak's stream rate (Hz; default {RATE_HZ:g}, a CI soak's): another rate, with "
+                         "--faultless-only, is recorded beside it as faultless_<rate>hz with its own date (400: ckesc "
+                         "soak's default, a flight controller's)")
     args = ap.parse_args()
     result: dict = json.loads(OUT.read_text()) if OUT.exists() else {}
-    result.update(python=sys.version.split()[0], machine=platform.machine(), rate_hz=RATE_HZ,
-                  date=time.strftime("%Y-%m-%d", time.gmtime()))
+    date = time.strftime("%Y-%m-%d", time.gmtime())
+    if args.rate != RATE_HZ:  # a record of its own beside the others, with its own date (theirs stay as they were)
+        if args.versus is not None or not args.faultless_only:
+            ap.error("--rate: with --faultless-only only")
+        with tempfile.TemporaryDirectory() as tmp:
+            result[f"faultless_{args.rate:g}hz"] = {**faultless(Path(tmp), args.hours or 8.0, args.rate), "date": date,
+                                                    "python": sys.version.split()[0]}
+        OUT.write_text(json.dumps(result, indent=1) + "\n")
+        print(f"written {OUT}")
+        return
+    result.update(python=sys.version.split()[0], machine=platform.machine(), rate_hz=RATE_HZ, date=date)
     if args.versus is not None:
         result["versus"] = versus(args.versus, args.hours or 1.0, args.rounds)
         OUT.write_text(json.dumps(result, indent=1) + "\n")

@@ -63,16 +63,24 @@ class SimLane(Lane):
         return msg
 
     def frames_until(self, deadline: float) -> Iterator[can.Message]:
-        # Lane.frames_until with the calls between it and the simulated bus taken out (hours of soak read here); the
+        # Lane.frames_until with the calls between it and the simulated bus taken out (hours of soak read here: each
+        # data frame as the bus heard it, sim_bus.Heard, with a can.Message's attributes but none made); the
         # listeners are looked for once per call. A bus with acknowledgement reads frame by frame: the host's
         # controller is looked at after each (its bus-off is the bench's failure, not the DUT's)
         if self.sim.world.ack:
             return super().frames_until(deadline)
         frames = self.sim.frames_until(deadline)
-        return map(self.heard, frames) if self.__dict__.get("_listeners") else frames
+        if self.__dict__.get("_listeners"):  # (a listener is handed can.Messages)
+            message, heard = self.sim._message, self.heard
+            return (heard(message(msg)) for msg in frames)
+        return frames
 
     def send_wire(self, wire: WireFrame) -> None:
-        self.sim.send_wire(wire)  # (no can.Message built: hours of soak send here)
+        sim = self.sim  # (no can.Message built: hours of soak send here)
+        if sim.world.ack or sim._is_shutdown:
+            sim.send_wire(wire)  # (a full queue said as the bus says it, a closed bus refused)
+        else:  # without acknowledgement nothing refuses a frame: the world takes it (the bus's send_wire, one call less)
+            sim.world.send_wire(sim, wire)
 
     def wait_power(self, seconds: float) -> None:
         self.sim.advance(seconds)

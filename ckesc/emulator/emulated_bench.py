@@ -21,6 +21,8 @@ FaultSpec = Iterable[str] | Mapping[int, Iterable[str]] | None
 INF = float("inf")
 #: throttle frames kept decoded, and ids kept classified (a host sending ever new ones must not grow the memory)
 _THROTTLE_DECODED_MAX = 1024
+#: the throttle index's entry for the ESCs every throttle frame reaches (a fault that reads any channel)
+_ANY = ("*", None)
 
 
 def _stamp(pair: tuple[EscModel, WireFrame]) -> float:
@@ -58,9 +60,10 @@ class EmulatedBench:
         self._deadlines: list[float] = [INF] * len(self.escs)  # INF: nothing scheduled
         self._throttle_index: dict[tuple[str, int | None], list[EscModel]] | None = None
         self.ignored = 0  # frames on the bus that no ESC acts on (other ESCs' reports and answers)
-        #: throttle frames decoded, by (id, bytes): a stream repeats the same few (its transfer ids cycle through
-        #: 32), hours long; a throttle frame's decoding depends on nothing else and no ESC keeps or changes it
-        self._throttle_decoded: dict[tuple[int, bytes], Frame] = {}
+        #: throttle frames decoded, by (id, bytes), with their :meth:`_throttle_targets` key: a stream
+        #: repeats the same few (its transfer ids cycle through 32), hours long; a throttle frame's decoding depends on
+        #: nothing else and no ESC keeps or changes it
+        self._throttle_decoded: dict[tuple[int, bytes], tuple[Frame, tuple[str, int | None]]] = {}
         #: each extended id's (kind, catalogue name or None), as classify gives them (every frame on the bus asks)
         self._classified: dict[int, tuple[Any, str | None]] = {}
 
@@ -121,11 +124,22 @@ class EmulatedBench:
 
         Frames no ESC acts on (other ESCs' reports) are only counted, and a throttle frame goes only
         to the ESCs it can address (:meth:`EscModel.throttle_keys`): the hot path of a busy bus."""
-        plain = type(frame) is WireFrame  # a data frame (the simulated lane's; remote and error frames come as Messages)
+        plain = isinstance(frame, WireFrame)  # a data frame (the simulated lane's; remote and error frames come as Messages)
         key = (frame.arbitration_id, frame.data) if plain and frame.is_extended_id else None
-        # a throttle frame heard before (a stream's: hours of them) is known by its id and bytes alone
-        decoded: Frame | DecodeError | None = self._throttle_decoded.get(key) if key is not None else None
-        if decoded is None and (frame.is_extended_id if plain else getattr(frame, "is_extended_id", True)):
+        # a throttle frame heard before (a stream's: hours of them) is known by its id and bytes alone: its decoding
+        # and the key of the ESCs it can address
+        known_throttle = self._throttle_decoded.get(key) if key is not None else None
+        if known_throttle is not None:
+            decoded, targets_key = known_throttle
+            index = self._throttle_index  # (_throttle_targets', without its call)
+            for esc in self._throttle_targets(targets_key) if index is None else index.get(targets_key) or index[_ANY]:
+                # (never self.escs: the index keeps its own lists)
+                if esc is not sender and esc.powered and esc.state.bitrate == bitrate:
+                    if esc.receive(frame, now, decoded=decoded):
+                        self._deadlines[0 if len(self.escs) == 1 else self.escs.index(esc)] = _or_inf(esc.next_deadline())
+            return
+        decoded: Frame | DecodeError
+        if (frame.is_extended_id if plain else getattr(frame, "is_extended_id", True)):
             can_id = frame.arbitration_id
             known = self._classified.get(can_id)
             if known is None:
@@ -139,22 +153,20 @@ class EmulatedBench:
                 return
             if name is None or name not in THROTTLE_FRAMES:
                 key = None  # (only throttle frames are kept decoded)
-        if decoded is None:
-            try:
-                decoded = self._decoder.decode(frame)
-            except DecodeError as exc:
-                decoded = exc
-            else:
-                if key is not None:
-                    if len(self._throttle_decoded) >= _THROTTLE_DECODED_MAX:
-                        self._throttle_decoded.clear()
-                    self._throttle_decoded[key] = decoded
+        try:
+            decoded = self._decoder.decode(frame)
+        except DecodeError as exc:
+            decoded = exc
         targets = self.escs
         if isinstance(decoded, Frame) and decoded.spec is not None:
             name = decoded.spec.name
             if name in THROTTLE_FRAMES:
-                group = decoded.fields["group"] if name == "raw_command_12b" else None
-                targets = self._throttle_targets(name, group)
+                targets_key = (name, decoded.fields["group"] if name == "raw_command_12b" else None)
+                targets = self._throttle_targets(targets_key)
+                if key is not None:
+                    if len(self._throttle_decoded) >= _THROTTLE_DECODED_MAX:
+                        self._throttle_decoded.clear()
+                    self._throttle_decoded[key] = (decoded, targets_key)
         changed = False
         for esc in targets:
             if esc is not sender and esc.powered and esc.state.bitrate == bitrate:
@@ -164,7 +176,8 @@ class EmulatedBench:
         if changed and targets is self.escs:
             self._throttle_index = None  # a service may have changed a node's throttle channel
 
-    def _throttle_targets(self, name: str, group: int | None) -> list[EscModel]:
+    def _throttle_targets(self, wanted: tuple[str, int | None]) -> list[EscModel]:
+        """The ESCs a throttle frame can address, by (its name, its RawCommand_12b group or None)."""
         if self._throttle_index is None:
             index: dict[tuple[str, int | None], list[EscModel]] = {}
             everything: list[EscModel] = []
@@ -176,8 +189,8 @@ class EmulatedBench:
                     for key in keys:
                         index.setdefault(key, []).append(esc)
             self._throttle_index = {k: sorted(set(v) | set(everything), key=self.escs.index) for k, v in index.items()}
-            self._throttle_index[("*", None)] = everything
-        return self._throttle_index.get((name, group), self._throttle_index[("*", None)])
+            self._throttle_index[_ANY] = everything
+        return self._throttle_index.get(wanted) or self._throttle_index[_ANY]
 
     def next_deadline(self) -> float | None:
         t = min(self._deadlines)

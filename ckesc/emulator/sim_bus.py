@@ -52,10 +52,10 @@ from ..protocol.frame import WireFrame, frame_bits, new_wire
 from ..protocol.traffic import TrafficSource
 from .emulated_bench import EmulatedBench
 from .model import EscModel
-from .sim_can import CanNodes
+from .sim_can import CanNodes, ShiftedSource
+from .sim_frames import FrameOnItsWay, Heard, new_echo, new_heard, new_pending
 
 _WORLDS: dict[str, SimWorld] = {}
-
 
 
 class SimClock:
@@ -69,15 +69,6 @@ class SimClock:
 
     def __call__(self) -> float:
         return self._world.now
-
-
-class _Pending:
-    __slots__ = ("ready", "seq", "wire", "origin", "bitrate", "flags")
-
-    def __init__(self, ready: float, seq: int, wire: WireFrame, origin: Any, bitrate: int,
-                 flags: dict[str, bool] | None = None) -> None:
-        self.ready, self.seq, self.wire, self.origin, self.bitrate = ready, seq, wire, origin, bitrate
-        self.flags = flags  # a host's remote or error frame: not a data frame, whatever its bytes
 
 
 INF = float("inf")
@@ -102,9 +93,9 @@ class SimWorld(CanNodes):
         self.now = 0.0
         self.clock = SimClock(self)
         self.buses: list[SimEscBus] = []
-        self._waiting: list[tuple[float, int, _Pending]] = []
-        self._in_flight: tuple[float, _Pending] | None = None
-        self._ready: list[tuple[int, int, _Pending]] = []  # without acknowledgement: every node's frames, by id
+        self._waiting: list[tuple[float, int, FrameOnItsWay]] = []
+        self._in_flight: tuple[float, FrameOnItsWay] | None = None
+        self._ready: list[tuple[int, int, FrameOnItsWay]] = []  # without acknowledgement: every node's frames, by id
         self._outcome = Attempt.ACKED  # what the frame in flight meets
         self._seq = itertools.count()
         self._tasks: list[SimCyclicTask] = []
@@ -129,7 +120,8 @@ class SimWorld(CanNodes):
 
         The event loop of every simulated run (hours of soak: each frame two events or three): finding the next event
         and processing it in one loop, plain comparisons, no min() of pairs, no call but the events' own work."""
-        deadlines = self.bench._deadlines
+        deadlines = self.bench._deadlines  # (one per ESC, refreshed in place)
+        one = len(deadlines) == 1
         while True:
             if rx or (stop is not None and stop()):
                 return True
@@ -137,7 +129,7 @@ class SimWorld(CanNodes):
             # now, else the first waiting one), a controller's alarm (a recovery, a retry), a periodic task, another
             # node's frame
             now = self.now
-            t = (deadlines[0] if len(deadlines) == 1 else min(deadlines)) if deadlines else INF
+            t = deadlines[0] if one else min(deadlines) if deadlines else INF
             in_flight = self._in_flight
             if in_flight is not None:
                 if in_flight[0] < t:
@@ -149,13 +141,16 @@ class SimWorld(CanNodes):
                     t = self._waiting[0][0]
             if self._alarm < t:
                 t = self._alarm
-            for task in self._tasks:
-                if task.next_time < t:
-                    t = task.next_time
-            for source in self._sources:
-                due = source.next_due()
-                if due < t:
-                    t = due
+            tasks, sources = self._tasks, self._sources
+            if tasks:
+                for task in tasks:
+                    if task.next_time < t:
+                        t = task.next_time
+            if sources:
+                for source in sources:
+                    due = source.next_due()
+                    if due < t:
+                        t = due
             if t == INF:
                 if deadline != INF and deadline > now:
                     self.now = deadline
@@ -172,17 +167,17 @@ class SimWorld(CanNodes):
                 self._finish_transmission()
             if self._alarm <= t:
                 self._on_alarm(t)
-            if self._tasks:
+            if tasks:
                 for task in self._tasks:
                     if task.next_time <= t:
                         task.fire(t)
-            if self._sources:
+            if sources:
                 for source in self._sources:
                     if source.next_due() <= t:
                         bitrate = source.bitrate or self._host_bitrate()
                         for wire in source.take_due(t):
                             self._queue(wire, source, bitrate, ready=wire.timestamp)
-            if deadlines and (deadlines[0] if len(deadlines) == 1 else min(deadlines)) <= t:
+            if (deadlines[0] if one else min(deadlines) if deadlines else INF) <= t:
                 for esc, wire in self.bench.poll(t):
                     self._queue(wire, esc, esc.state.bitrate, ready=wire.timestamp)
             if self._in_flight is None and (self._ready or self._waiting or self._contending):
@@ -195,16 +190,16 @@ class SimWorld(CanNodes):
         now = self.now
         seq = next(self._seq)
         if ready <= now:
-            self._submit(_Pending(now, seq, wire, origin, bitrate, flags))
+            self._submit(new_pending((now, seq, wire, origin, bitrate, flags)))
         else:
-            heapq.heappush(self._waiting, (ready, seq, _Pending(ready, seq, wire, origin, bitrate, flags)))
+            heapq.heappush(self._waiting, (ready, seq, new_pending((ready, seq, wire, origin, bitrate, flags))))
 
     # ------------------------------------------------------------------ the nodes' controllers (sim_can.CanNodes: a
     # frame joining its node's queue, arbitration and the frame's try)
     def _finish_transmission(self) -> None:
         end, p = self._in_flight  # type: ignore[misc]
         self._in_flight = None
-        origin, bitrate, old = p.origin, p.bitrate, p.wire
+        _, _, old, origin, bitrate, flags = p
         if self.ack:
             ctl = self._ctl.get(origin)
             if ctl is None or ctl.head() is not p:  # its queue went away meanwhile (a power-off, a bus shut down)
@@ -219,19 +214,29 @@ class SimWorld(CanNodes):
             if was is not ErrorState.ACTIVE:  # (only a controller past 95 can change its state by a success)
                 self._report(origin, ctl)
         self.stats["frames"] += 1
-        if isinstance(origin, _Shifted):
+        own = isinstance(origin, SimEscBus)  # (a host's frame: most of a soak's; asked first)
+        if not own and isinstance(origin, ShiftedSource):
             st = self.source_stats[origin.name]
             st["frames"] += 1
             st["busy_s"] += frame_bits(len(old.data)) / bitrate
-        wire = new_wire((old.arbitration_id, old.data, end, old.is_extended_id))  # (not _replace: once per frame)
-        sender = origin if isinstance(origin, EscModel) else None
-        flags = p.flags
         if not flags:
-            self.bench.deliver(wire, end, bitrate, sender)
+            # one frame for everyone (not _replace: once per frame): the ESCs' wire, and what a host's bus queues
+            # as it is (no can.Message until one is read with recv): a host bus's own frame is its Echo
+            wire = (new_echo if own else new_heard)((old.arbitration_id, old.data, end, old.is_extended_id))
+            self.bench.deliver(wire, end, bitrate, None if own or not isinstance(origin, EscModel) else origin)
             for bus in self.buses:
-                if bus.bitrate == bitrate and (bus is not origin or bus.receive_own_messages):
-                    bus._deliver(wire, bus is not origin)
+                if bus.bitrate == bitrate:
+                    if bus is origin:
+                        if not bus.receive_own_messages:
+                            continue
+                        heard = wire
+                    else:
+                        heard = new_heard(wire) if own else wire
+                    if bus._filters is None or bus._matches_filters(heard):
+                        bus._rx.append(heard)
             return
+        wire = new_wire((old.arbitration_id, old.data, end, old.is_extended_id))
+        sender = origin if isinstance(origin, EscModel) else None
         heard = can.Message(timestamp=end, arbitration_id=wire.arbitration_id, data=wire.data,
                             is_extended_id=wire.is_extended_id, **flags)
         self.bench.deliver(heard, end, bitrate, sender=sender)  # the ESCs' decoder rejects remote/error frames
@@ -250,7 +255,7 @@ class SimWorld(CanNodes):
             raise TypeError(f"not a traffic source: {source!r}")
         if any(s.name == source.name for s in self._sources):
             raise ValueError(f"a traffic source named {source.name!r} is already on {self.channel}")
-        self._sources.append(_Shifted(source, self.now))
+        self._sources.append(ShiftedSource(source, self.now))
         self.source_stats.setdefault(source.name, {"frames": 0, "busy_s": 0.0})
         self._wake()
 
@@ -261,8 +266,9 @@ class SimWorld(CanNodes):
 
     # ------------------------------------------------------------------ host side
     def send_wire(self, bus: SimEscBus, wire: WireFrame) -> None:
-        """A host's data frame as it goes on the wire (``send`` without the ``can.Message``: a soak's stream)."""
-        self._queue(wire, bus, bus.bitrate, ready=self.now)
+        """A host's data frame as it goes on the wire (``send`` without the ``can.Message``: a soak's stream):
+        :meth:`_queue`'s, ready now."""
+        self._submit(new_pending((self.now, next(self._seq), wire, bus, bus.bitrate, None)))
 
     def send(self, bus: SimEscBus, msg: can.Message) -> None:
         """Queue ``msg`` on ``bus``'s controller; raises :class:`~ckesc.protocol.canbus.QueueFull`."""
@@ -297,24 +303,6 @@ class SimWorld(CanNodes):
         self.power_off()
         self.run_until(self.now + off_time)
         self.power_on()
-
-
-class _Shifted:
-    """A source on the world's clock: its own clock starts at ``t0``."""
-
-    def __init__(self, source: TrafficSource, t0: float) -> None:
-        self.source, self.t0 = source, t0
-        self.name, self.bitrate = source.name, source.bitrate
-
-    def next_due(self) -> float:
-        return self.source.next_due() + self.t0
-
-    def take_due(self, now: float) -> list[WireFrame]:
-        # compared on the world's clock (``now - t0`` could round below a due time and stall the world)
-        out: list[WireFrame] = []
-        while (due := self.source.next_due()) + self.t0 <= now:
-            out.extend(w._replace(timestamp=w.timestamp + self.t0) for w in self.source.take_due(due))
-        return out
 
 
 class SimCyclicTask(ModifiableCyclicTaskABC, RestartableCyclicTaskABC):
@@ -399,7 +387,7 @@ class SimEscBus(can.BusABC):
                                    "auto_recovery": _flag(auto_recovery), "berr_reporting": _flag(berr_reporting)}
         CanController(self.bitrate, **self.controller_options)  # (checks them before the bus joins the world)
         self.error_frames = _flag(error_frames)  # SocketCAN's CAN_RAW_ERR_FILTER: hand this bus its error frames
-        self._rx: deque[can.Message] = deque()
+        self._rx: deque[Heard | can.Message] = deque()  # (a data frame as heard: recv makes its Message)
         self.channel_info = f"ckesc-sim {channel} @ {self.bitrate} bit/s ({len(world.bench.escs)} ESCs)"
         super().__init__(channel, can_filters=can_filters, **kwargs)
         self.channel = channel
@@ -492,7 +480,7 @@ class SimEscBus(can.BusABC):
         """The next frame, advancing simulated time up to ``timeout`` seconds to wait for it."""
         self._check_open()
         if self._rx:
-            return self._rx.popleft()
+            return self._message(self._rx.popleft())
         world = self.world
         return self._until(float("inf") if timeout is None else world.now + max(timeout, 0.0), timeout is None)
 
@@ -501,13 +489,20 @@ class SimEscBus(can.BusABC):
         if self._is_shutdown:
             self._check_open()
         if self._rx:
-            return self._rx.popleft()
+            return self._message(self._rx.popleft())
         now = self.world.now
         return self._until(now + max(deadline - now, 0.0), False)  # (recv's arithmetic: the same instant)
 
-    def frames_until(self, deadline: float) -> Iterator[can.Message]:
+    def frames_until(self, deadline: float) -> Iterator[Heard | can.Message]:
         """Every frame until ``deadline``: :meth:`recv_until` again and again until it gives none (the clock then at
-        ``deadline``), without a call per frame between the reader and the simulated clock."""
+        ``deadline``), without a call per frame between the reader and the simulated clock, and each data frame as
+        the bus heard it (a :class:`Heard`: ``timestamp``, ``arbitration_id``, ``data``, ``is_extended_id``,
+        ``is_rx`` and the flags, as a ``can.Message`` has them; no ``can.Message`` made: a soak reads hours of them).
+
+        The world runs up to ``deadline`` in one go and the frames it heard meanwhile are yielded after it: the frames
+        a :meth:`recv_until` loop reads, with the same stamps, but the clock, read between two of them, is at the
+        deadline already; a reader that sends between the frames it reads reads with :meth:`recv_until` (a soak
+        sends between its reads, not during them)."""
         rx, world = self._rx, self.world
         advance = world.advance
         while True:
@@ -517,20 +512,37 @@ class SimEscBus(can.BusABC):
                 yield rx.popleft()
                 continue
             now = world.now
-            if not advance(now + max(deadline - now, 0.0), rx):  # (recv_until's arithmetic, as :meth:`_until` reads)
+            left = deadline - now  # (recv_until's arithmetic, max(left, 0.0) as :meth:`_until` reads, without the call)
+            if 0.0 < left <= now:
+                # now + left is the deadline exactly, and stays so for every later now (Sterbenz: deadline - now is
+                # exact while now >= deadline / 2): recv_until's calls would each run the world to the deadline, one
+                # call does it once
+                advance(deadline, None)
+                while rx:
+                    yield rx.popleft()
+                return
+            if not advance(now + left if left > 0.0 else now, rx):
                 return
 
     def _until(self, deadline: float, forever: bool) -> can.Message | None:
         rx = self._rx
         came = self.world.advance(deadline, rx)
         if came:
-            return rx.popleft()
+            return self._message(rx.popleft())
         if came is None and forever:
             raise can.CanOperationError("ckesc-sim: recv() without timeout on a bus where nothing will ever happen")
         return None
 
     def _recv_internal(self, timeout: float | None):
-        return (self._rx.popleft() if self._rx else None), True
+        return (self._message(self._rx.popleft()) if self._rx else None), True
+
+    def _message(self, heard: Heard | can.Message) -> can.Message:
+        """The ``can.Message`` of a frame this bus heard (a data frame is queued as the bus heard it, a remote or
+        error frame as its ``can.Message``)."""
+        if type(heard) is can.Message:
+            return heard
+        return can.Message(timestamp=heard.timestamp, arbitration_id=heard.arbitration_id,
+                           is_extended_id=heard.is_extended_id, data=heard.data, is_rx=heard.is_rx, channel=self.channel)
 
     def _send_periodic_internal(self, msgs: can.Message | Sequence[can.Message], period: float,
                                 duration: float | None = None, autostart: bool = True,

@@ -2,7 +2,7 @@
 a frame, and what the world does when nobody does: a node whose tries change nothing any more is *parked* until a
 node that can listen appears, a bus-off controller recovers when its time comes, a short ends. Mixed into
 :class:`ckesc.emulator.sim_bus.SimWorld`, whose state (``_ctl``, ``_contending``, ``_parked``, ``_alarm``, ...) it
-keeps; no IO, no wall clock."""
+keeps; and another node's traffic on the world's clock (:class:`ShiftedSource`). No IO, no wall clock."""
 
 from __future__ import annotations
 
@@ -12,6 +12,8 @@ from typing import Any
 
 from ..protocol.canbus import Attempt, CanController, ErrorState, attempt_bits
 from ..protocol.catalogue import DEFAULT_BITRATE
+from ..protocol.frame import WireFrame
+from ..protocol.traffic import TrafficSource
 from .model import EscModel
 
 INF = float("inf")
@@ -234,3 +236,21 @@ class CanNodes:
             self._contending.remove(node)
         self._parked.pop(node, None)
         self._set_alarm()
+
+
+class ShiftedSource:
+    """A source on the world's clock: its own clock starts at ``t0``."""
+
+    def __init__(self, source: TrafficSource, t0: float) -> None:
+        self.source, self.t0 = source, t0
+        self.name, self.bitrate = source.name, source.bitrate
+
+    def next_due(self) -> float:
+        return self.source.next_due() + self.t0
+
+    def take_due(self, now: float) -> list[WireFrame]:
+        # compared on the world's clock (``now - t0`` could round below a due time and stall the world)
+        out: list[WireFrame] = []
+        while (due := self.source.next_due()) + self.t0 <= now:
+            out.extend(w._replace(timestamp=w.timestamp + self.t0) for w in self.source.take_due(due))
+        return out

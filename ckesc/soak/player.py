@@ -134,9 +134,8 @@ class Player:
         self._wires: list[WireFrame] = []
         name = FORMATS[plan.format][0]
         self._key = (Kind.MESSAGE, name) if cat.spec(name).has_tail else None  # the stream's transfer id counter
-        self._duties = ((self.stream, self._stream), (self.esc_id, self._esc_id), (self.maintenance, self._maintenance),
-                        (self.settings, self._settings))
-        self._reads_due = min(duty.due for duty, _ in self._duties[1:])
+        self._duties = ((self.esc_id, self._esc_id), (self.maintenance, self._maintenance), (self.settings, self._settings))
+        self._reads_due = min(duty.due for duty, _ in self._duties)
 
     def next_deadline(self) -> float:
         return min(self.stream.due, self._reads_due)
@@ -148,12 +147,12 @@ class Player:
         while stream.due <= now:
             due, behind = stream.take(now)
             self.skipped += behind
-            out.extend(self._stream(due))
+            self._stream(due, out)
         if self._reads_due <= now:  # (the reads come once a second at most: the stream's path stays short)
-            for duty, make in self._duties[1:]:
+            for duty, make in self._duties:
                 while duty.due <= now:
                     out.extend(make(duty.take(now)[0]))
-            self._reads_due = min(duty.due for duty, _ in self._duties[1:])
+            self._reads_due = min(duty.due for duty, _ in self._duties)
             out.sort(key=lambda p: p.due)
         return out
 
@@ -171,7 +170,8 @@ class Player:
         tid = self.tids.next((Kind.REQUEST, name), node)
         return encode(name, fields, kind=Kind.REQUEST, source=self.plan.host_node, destination=node, transfer_id=tid)
 
-    def _stream(self, due: float) -> list[Planned]:
+    def _stream(self, due: float, out: list[Planned]) -> None:
+        """The stream's frames of the tick ``due`` onto ``out`` (a tick's whole work: 400 a second, hours long)."""
         plan = self.plan
         value = plan.throttle_at(due - self.start) if plan.throttle else 0
         self.sent_stream += 1
@@ -179,9 +179,12 @@ class Player:
             self._value, self._wires = value, [self._renewed(p.wire) for p in self._stream_of(value, due)]
         key = self._key
         if key is None:  # RawCommand_10b has no tail, hence no transfer id (R5)
-            return [_new_planned(("stream", w[0], due, None)) for w in self._wires]
+            for w in self._wires:
+                out.append(_new_planned(("stream", w[0], due, None)))
+            return
         nxt = self.tids.next
-        return [_new_planned(("stream", w[nxt(key)], due, None)) for w in self._wires]
+        for w in self._wires:
+            out.append(_new_planned(("stream", w[nxt(key)], due, None)))
 
     def _renewed(self, wire: WireFrame) -> tuple[WireFrame, ...]:
         """The command ``wire`` (encoded once) with each transfer id in its tail byte, by transfer id (0..31: the

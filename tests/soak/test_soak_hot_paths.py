@@ -38,7 +38,8 @@ def test_the_simulated_lanes_recv_until_and_frames_until_read_what_recv_did(tmp_
     """Three lanes of the same seed side by side, one read with ``recv(deadline - now())``, one with
     ``recv_until(deadline)``, one with ``frames_until(deadline)`` (and a listener on it), the last two sent to with
     ``send_wire`` (no ``can.Message``): the same frames at the same times, the clock at the same place after each
-    read, and the listener handed every frame."""
+    frame read one by one and after each read up to a deadline (``frames_until`` runs the world to the deadline in
+    one go: its clock is there at each frame), and the listener handed every frame as a ``can.Message``."""
     lanes = [SimLane(seed=3), SimLane(seed=3), SimLane(seed=3)]
     heard: list[can.Message] = []
     lanes[2].listeners.append(type("L", (can.Listener,), {"on_message_received": lambda self, m: heard.append(m)})())
@@ -56,8 +57,34 @@ def test_the_simulated_lanes_recv_until_and_frames_until_read_what_recv_did(tmp_
                 for msg in read(i, lane, deadline):
                     seen[i].append((msg.timestamp, msg.arbitration_id, bytes(msg.data), msg.is_rx, lane.now()))
                 seen[i].append((None, None, None, None, lane.now()))
-        assert seen[0] == seen[1] == seen[2] and sum(1 for s in seen[0] if s[0] is not None) > 100
+        assert seen[0] == seen[1] and sum(1 for s in seen[0] if s[0] is not None) > 100
+        without_the_clock_at_each_frame = [[s if s[0] is None else s[:4] for s in seen[i]] for i in (0, 2)]
+        assert without_the_clock_at_each_frame[0] == without_the_clock_at_each_frame[1]
+        assert all(type(m) is can.Message for m in heard)
         assert [(m.timestamp, m.arbitration_id) for m in heard] == [s[:2] for s in seen[2] if s[0] is not None]
+    finally:
+        for lane in lanes:
+            lane.close()
+
+
+def test_a_soaks_reads_make_no_can_message_and_recv_makes_the_same_one():
+    """Without a listener the simulated lane's ``frames_until`` hands each data frame as the bus heard it (no
+    ``can.Message`` made: the soak's hours of frames); ``recv`` on a lane of the same seed gives python-can's
+    ``Message`` of each, the host's own frames ``is_rx`` False in both."""
+    lanes = [SimLane(seed=5), SimLane(seed=5)]
+    try:
+        got: list[list[tuple]] = [[], []]
+        for step in range(1, 40):
+            deadline = step * 0.0125
+            for i, lane in enumerate(lanes):
+                lane.send_wire(throttle(100, step % 32))
+                msgs = list(lane.frames_until(deadline)) if i == 0 else list(read(1, lane, deadline))
+                assert all(type(m) is not can.Message for m in msgs) if i == 0 else \
+                    all(type(m) is can.Message and m.channel == lane.channel for m in msgs)
+                got[i] += [(m.timestamp, m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_rx,
+                            m.is_remote_frame, m.is_error_frame) for m in msgs]
+        assert got[0] == got[1]
+        assert {f[4] for f in got[0]} == {True, False}  # the ESC's frames and the host's own, heard back
     finally:
         for lane in lanes:
             lane.close()

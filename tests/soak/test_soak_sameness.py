@@ -20,6 +20,12 @@ from ckesc.soak import runner
 CASES = {
     "faultless, 400 Hz, foreign traffic": (BenchOptions(foreign_traffic="ardupilot"), {"duration_s": 12.0},
                                            0, "83c900519ba2fef775cbced542473e6d192858a18b449c75e985a94a46144ace"),
+    # the simulated world's fast path (issue #35's speed: no other node on the bus, frames read without a
+    # can.Message), faultless and with a soak fault that resets the ESC mid-stream (pinned on 0f32086)
+    "faultless, 400 Hz, the host alone with the ESC": (BenchOptions(), {"duration_s": 12.0},
+                                                       0, "033eb6bed0edb30c3e87685daad5706032037fcd760313db2014321a5ad7bc57"),
+    "reset_after_streaming at 5 s, 400 Hz": (BenchOptions(emulator_faults="reset_after_streaming=5"), {"duration_s": 12.0},
+                                             3, "215489b9e7454a50f314893669d01a1c55da686895d0b59979c3ca614fe76194"),
     "report_interval_wrong, 50 Hz 12b, throttle profile": (
         BenchOptions(emulator_faults="report_interval_wrong", allow_motor_spin=True),
         {"duration_s": 40.0, "rate_hz": 50.0, "format": "12b", "throttle": ((0.0, 0), (10.0, 200), (25.0, 0))},
