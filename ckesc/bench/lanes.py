@@ -16,6 +16,7 @@ Tests never read the wall clock or sleep: they ask the lane (through the ``dut``
 
 from __future__ import annotations
 
+import errno
 import math
 import shlex
 import socket
@@ -28,8 +29,10 @@ from typing import Any, Iterator
 
 import can
 
+from ..protocol.canbus import DEFAULT_TXQUEUELEN
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame
+from ..protocol.judgements import R18_MAX_SHARE, r18_queueing_s
 from .epochs import PowerEpoch
 from .power import PowerControl
 from .profile import DEFAULT_BUS_ERROR_S
@@ -191,6 +194,21 @@ REOPEN_TRIES = 3
 REOPEN_PAUSE_S = 0.5
 #: python-can exceptions (and the OSError of a vanished device) that mean the bus failed
 BUS_ERRORS = (OSError, can.CanError)
+
+
+def queue_full(exc: BaseException) -> bool:
+    """Whether a send failed because the host's transmit queue is full (SocketCAN's ENOBUFS: python-can's
+    ``CanOperationError`` with that error code, or the ``OSError`` itself): the frames ahead of it have not gone yet."""
+    return getattr(exc, "error_code", None) == errno.ENOBUFS or getattr(exc, "errno", None) == errno.ENOBUFS
+
+
+def room_wait_s(bitrate: int, txqueuelen: int | None = DEFAULT_TXQUEUELEN) -> float:
+    """How long a careful host waits for room in its full transmit queue before it calls the bus failed: each frame
+    of the queue waiting as long as R18's heaviest judged load can hold a lowest-priority frame back
+    (:func:`~ckesc.protocol.judgements.r18_queueing_s`; 26 ms for SocketCAN's 10 frames at 500 kbit/s). A queue that
+    stays full longer is not the host's burst: nobody acknowledges its frames (the DUT off or silent), or the bus
+    carries less than a conforming one must."""
+    return (txqueuelen or DEFAULT_TXQUEUELEN) * r18_queueing_s(R18_MAX_SHARE, bitrate)
 
 
 class _SendTap:
