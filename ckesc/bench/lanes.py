@@ -73,6 +73,9 @@ class Lane(ABC):
     bus: can.BusABC
     power: PowerControl
     bitrate: int
+    #: how many times the host's bus was reopened (:meth:`reopen`): the bus rules start again at each (a node's frames
+    #: held meanwhile come at once, as it is acknowledged again)
+    reopens: int = 0
 
     @abstractmethod
     def now(self) -> float:
@@ -146,7 +149,7 @@ class Lane(ABC):
 
     @abstractmethod
     def reopen(self, bitrate: int) -> None:
-        """Reopen the host's bus at another bit rate (after Set Baud)."""
+        """Reopen the host's bus at another bit rate (after Set Baud); counted in :attr:`reopens`."""
 
     def stop_streams(self) -> None:
         """Stop every throttle stream on this lane, whichever host (a test's :class:`.link.Link`, a helper's)
@@ -504,6 +507,7 @@ class BusLane(Lane):
         self.bus = self._open(kwargs)
         self.bus_kwargs = kwargs
         self.bitrate = bitrate
+        self.reopens += 1
 
 
 def _same_frame(msg: can.Message, other: can.Message) -> bool:

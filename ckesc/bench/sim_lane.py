@@ -87,6 +87,7 @@ class SimLane(Lane):
         self.bus = _SimSend(self.sim)
         old.shutdown()
         self.bitrate = bitrate
+        self.reopens += 1
 
     def close(self) -> None:
         self.sim.shutdown()

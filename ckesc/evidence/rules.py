@@ -174,6 +174,8 @@ class BusRules(Tracker):
         info.count += 1
         node = info.node
         side = info.side
+        if self._held is not None:
+            self.held(node, ts, busy_from, own)
         if node.first_ts is None:
             node.first_ts = ts
         if own:
