@@ -30,6 +30,7 @@ from ..protocol.transfer import tail_transfer_id
 from .events import ReaderEvents
 from .findings import KEEP, Findings, Intervals, quote
 from .pairing import QueryPairing
+from .rejoin import Rejoin
 from .taken import taken
 
 # ------------------------------------------------------------------------------------------ facts, derived
@@ -243,7 +244,7 @@ class FrameId:
 
 
 
-class Tracker(Findings):
+class Tracker(Findings, Rejoin):
     """The traffic's state, fed by :class:`.rules.BusRules` (which judges it); see the module docstring."""
 
     def __init__(self, *, tolerance: float = 0.0, bitrate: int = cat.DEFAULT_BITRATE, complete: bool = False,
@@ -280,7 +281,7 @@ class Tracker(Findings):
         self._set_id_ts = -math.inf  # the last Set ID: a node id not heard since may have been left by its ESC
         self._bus_end = -math.inf
         self._busy_from = -math.inf
-        self._held: bool | float | None = None  # (:meth:`held`) True: a new bit rate; then its stretch's start
+        self._held: bool | float | None = None  # (Rejoin.held) True: the host reopened; then the stretch's start
         self.set_bitrate(bitrate)
         #: the host's last MSG Control switch suspended reporting, and no resume nor power switch since: a parameter
         #: write then does not take effect (R12) and its answer is free (R10-R12: the current values, none, or the
@@ -306,32 +307,6 @@ class Tracker(Findings):
         # the previous one's end may have waited for it
         self._slack = [0.25 * d + self.tolerance for d in self._dur]
         self._bus_end = self._busy_from = -math.inf
-
-    def rejoined(self, bitrate: int) -> None:
-        """The host reopened its bus (at ``bitrate``, another or the same: Set Baud's tests): while it listened
-        elsewhere it saw nothing of the DUT (a power cycle meanwhile, its rate search), so a restart across it is not
-        judged a reset (R19), as across a power switch; and the first busy stretch from here is :meth:`held`."""
-        self.power_switches += 1
-        self._held = True
-        self.set_bitrate(bitrate)
-
-    def held(self, node: Node, ts: float, busy_from: float, own: bool) -> None:
-        """A frame after the host came back to the bus: the busy stretch of the first frame of another node is what the
-        nodes queued while nobody at this rate acknowledged them (R20), sent back to back as the host acknowledges
-        again. Each is taken alone (its gap and its transfer id: OBSERVE); after the stretch every node starts again
-        with R9a-gaps grace."""
-        if self._held is True:
-            if own:
-                return
-            self._held = busy_from
-        if busy_from == self._held:
-            node.unsure_until = max(node.unsure_until, ts)
-            return
-        self._held = None
-        for other in self._nodes.values():
-            other.chain += 1
-            other.grace_chain = other.chain
-            other.paused = False
 
     def _node(self, node_id: int) -> Node:
         node = self._nodes.get(node_id)
