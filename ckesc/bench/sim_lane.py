@@ -37,7 +37,7 @@ class SimLane(Lane):
         self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, nodes=list(nodes), faults=faults,
                            flash_path=flash_path, seed=seed, bitrate=bitrate, esc_config=esc_config,
                            receive_own_messages=True, ignore_config=True, **SIM_CAN)
-        self.bus = _SimSend(self.sim)
+        self.bus = _SimSend(self)
         self.power = EmulatorPower(self)
 
     @property
@@ -75,7 +75,7 @@ class SimLane(Lane):
         try:
             self.sim.send_wire(wire)  # (no can.Message built: hours of soak send here)
         except BUS_ERRORS as exc:
-            self.bus.placed(exc, self.sim.send_wire, wire)
+            placed(self.sim, exc, self.sim.send_wire, wire, boot=self.dut_boot_s)
 
     def wait_power(self, seconds: float) -> None:
         self.sim.advance(seconds)
@@ -84,7 +84,7 @@ class SimLane(Lane):
         old = self.sim
         self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, bitrate=bitrate,
                            receive_own_messages=True, ignore_config=True, **SIM_CAN)
-        self.bus = _SimSend(self.sim)
+        self.bus = _SimSend(self)
         old.shutdown()
         self.bitrate = bitrate
         self.reopens += 1
@@ -102,37 +102,41 @@ class _SimSend:
     (:class:`BusFault`: an ERROR, its one line naming the queue and the controller's state), as on a real bus;
     everything else is the bus's own."""
 
-    def __init__(self, bus: Any) -> None:
-        self._bus = bus
+    def __init__(self, lane: SimLane) -> None:
+        self._lane = lane
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        bus = self._lane.sim
         try:
-            self._bus.send(msg, timeout)
+            bus.send(msg, timeout)
         except BUS_ERRORS as exc:
-            self.placed(exc, self._bus.send, msg, timeout)
-
-    def placed(self, exc: BaseException, send: Any, *args: Any) -> None:
-        """After ``send(*args)`` raised ``exc``: wait for room in the queue and send again, or raise :class:`BusFault`."""
-        bus = self._bus
-        ctl = bus.controller
-        waited = 0.0
-        if queue_full(exc) and not ctl.tec and not ctl.bus_off:  # every frame so far acknowledged: the bus is moving
-            world, n = bus.world, ctl.txqueuelen
-            t0 = world.now
-            world.run_until(t0 + room_wait_s(bus.bitrate, n), stop=lambda: ctl.size < n or ctl.tec or ctl.bus_off)
-            waited = world.now - t0
-            if ctl.size < n:
-                try:
-                    send(*args)
-                    return
-                except BUS_ERRORS as again:
-                    exc = again
-        why = "nobody acknowledged them" if ctl.tec else "sent faster than the bus carries them"
-        raise BusFault(f"the host's CAN send failed ({type(exc).__name__}: {exc}; its controller {ctl.state.value}, "
-                       f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting after {waited * 1000:.3f} ms: {why})") from exc
+            placed(bus, exc, bus.send, msg, timeout, boot=self._lane.dut_boot_s)
 
     def __getattr__(self, name: str) -> Any:
-        return getattr(self._bus, name)
+        return getattr(self._lane.sim, name)
+
+
+def placed(bus: Any, exc: BaseException, send: Any, *args: Any, boot: float = 0.0) -> None:
+    """After ``send(*args)`` on the simulated ``bus`` raised ``exc``: wait for room in its transmit queue and send again
+    (:class:`_SimSend`), or raise :class:`BusFault` naming the queue, the controller and the wait. The wait is
+    :func:`~.lanes.room_wait_s`, and ``boot`` more (the DUT's declared boot time, :attr:`~.lanes.Lane.dut_boot_s`):
+    while nobody acknowledges, the DUT may be rebooting, and takes the frames once it is back."""
+    ctl = bus.controller
+    waited = 0.0
+    if queue_full(exc) and not ctl.bus_off:
+        world, n = bus.world, ctl.txqueuelen
+        t0 = world.now
+        world.run_until(t0 + room_wait_s(bus.bitrate, n) + boot, stop=lambda: ctl.size < n or ctl.bus_off)
+        waited = world.now - t0
+        if ctl.size < n:
+            try:
+                send(*args)
+                return
+            except BUS_ERRORS as again:
+                exc = again
+    why = "nobody acknowledged them" if ctl.tec else "sent faster than the bus carries them"
+    raise BusFault(f"the host's CAN send failed ({type(exc).__name__}: {exc}; its controller {ctl.state.value}, "
+                   f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting after {waited * 1000:.3f} ms: {why})") from exc
 
 
 def _check_controller(bus: Any) -> None:
