@@ -31,7 +31,7 @@ import can
 
 from ..protocol.canbus import DEFAULT_TXQUEUELEN
 from ..protocol.catalogue import DEFAULT_BITRATE
-from ..protocol.frame import WireFrame
+from ..protocol.frame import WireFrame, frame_bits
 from ..protocol.judgements import R18_MAX_SHARE, r18_queueing_s
 from .epochs import PowerEpoch
 from .power import PowerControl
@@ -239,9 +239,8 @@ class _SendTap:
 
     def _send(self, msg: can.Message, timeout: float | None, stream: bool) -> None:
         with self._lane._send_lock:  # one frame at a time on the one handle, whichever thread sends it
-            t = time.time()  # the kernel stamps the frame (and its echo) after this
             try:
-                self._bus.send(msg, timeout)
+                t = self._place(msg, timeout, stream)
             except BUS_ERRORS as exc:
                 failed = exc
             else:
@@ -251,6 +250,28 @@ class _SendTap:
         if not stream:  # a stream's task hands it to the lane itself (on_error); a player counts it
             self._lane._io_failed(failed)
         raise failed
+
+    def _place(self, msg: can.Message, timeout: float | None, stream: bool) -> float:
+        """``send()``; a test's frame that finds the transmit queue full (ENOBUFS) waits for room, polling one longest
+        frame's bus time apart, up to :func:`room_wait_s` and the DUT's boot time (:attr:`Lane.dut_boot_s`), as the
+        simulated lane's :func:`~.sim_lane.placed` does; a stream's or a player's frame is lost at once, as SocketCAN's
+        BCM loses it. Returns the host clock read just before the send that went."""
+        lane = self._lane
+        deadline = None
+        while True:
+            t = time.time()  # the kernel stamps the frame (and its echo) after this
+            try:
+                self._bus.send(msg, timeout)
+                return t
+            except BUS_ERRORS as exc:
+                if stream or not queue_full(exc):
+                    raise
+                now = time.monotonic()
+                if deadline is None:
+                    deadline = now + room_wait_s(lane.bitrate) + lane.dut_boot_s
+                elif now >= deadline:
+                    raise
+            time.sleep(frame_bits(8) / lane.bitrate)  # the harness waits for the bus, not a test for the DUT
 
     def send_periodic(self, msgs, period: float, duration: float | None = None, store_task: bool = True,
                       autostart: bool = True, modifier_callback=None):
