@@ -74,7 +74,7 @@ class Lane(ABC):
     power: PowerControl
     bitrate: int
     #: how long a send that finds the host's transmit queue full waits for room beyond :func:`room_wait_s` (s): the DUT's
-    #: declared boot time (the profile's ``boot_s``, set by the session): while nobody acknowledges the host's frames
+    #: declared boot time (the profile's ``boot_s``, set by :meth:`.station.Station.open_lane`): while nobody acknowledges the host's frames
     #: the DUT may be rebooting (a reset is the test's verdict to give, not a bench ERROR), and takes them once back
     dut_boot_s: float = 0.0
     #: how many times the host's bus was reopened (:meth:`reopen`): the bus rules start again at each (a node's frames

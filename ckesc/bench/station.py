@@ -141,6 +141,7 @@ class Station:
                                  "command does not flash (run ckesc run --firmware first, then this without it)")
         if self.lane is None:
             self.lane = self._new_lane()
+            self.lane.dut_boot_s = self.profile.boot_s  # (a send waits that long for an ESC that reset: Lane.dut_boot_s)
             try:
                 if on_open is not None:
                     on_open(self.lane)
@@ -181,6 +182,7 @@ class Station:
                                         firmware=str(self.image.path) if self.image else None)
         lane = SimLane(nodes=MULTI_NODES, faults=self._faults(), seed=o.emulator_seed, esc_config=self._esc_config())
         lane.timing_error = timing_error  # the profile's stated error, as on the DUT's lane
+        lane.dut_boot_s = self.profile.boot_s
         return lane
 
     def _faults(self) -> list[str]:

@@ -57,7 +57,6 @@ def ckesc_lane(request: pytest.FixtureRequest):
         watchers.append(watch_lane(config, lane))
 
     lane = station.open_lane(on_open=listen)
-    lane.dut_boot_s = profile.boot_s
     st.lane, st.profile = lane, profile
     (watcher,) = watchers
     _check_profile(config, lane, profile)
