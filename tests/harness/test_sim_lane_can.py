@@ -10,7 +10,7 @@ import can
 import pytest
 
 from ckesc.bench import sim_lane
-from ckesc.bench.lanes import BusFault
+from ckesc.bench.lanes import BusFault, room_wait_s
 from ckesc.bench.sim_lane import SimLane
 from ckesc.protocol import canbus
 from ckesc.protocol.frame import frame_bits, new_wire
@@ -42,7 +42,8 @@ def test_a_full_queue_is_a_bus_fault_naming_it(lane):
         lane.bus.send(_query(10))
     line = str(raised.value)
     assert "\n" not in line and "No buffer space available" in line and "ERROR-PASSIVE" in line
-    assert "10 frame(s) waiting after 0.000 ms: nobody acknowledged them" in line  # (no wait: nothing moves)
+    # waited for room as long as a queue of 10 may take (lane.dut_boot_s 0 here: no DUT boot time declared)
+    assert f"10 frame(s) waiting after {room_wait_s(lane.bitrate) * 1000:.3f} ms: nobody acknowledged them" in line
     assert isinstance(raised.value, BENCH_FAILED)
 
 
