@@ -6,11 +6,10 @@ bus-off), ``"other_bitrate"`` (a node at another bit rate sending: each of its f
 other node, and a frame another node tries meanwhile meets a bit error). A lane without a control gives None: the
 test SKIPs (:data:`NO_CONTROL`), never PASSes.
 
-- The simulated lane: its world's :meth:`~ckesc.emulator.sim_can.CanNodes.short`. The lane runs without
-  acknowledgement (``SIM_CAN`` in :mod:`.sim_lane`), where nothing can go bus-off; the control turns the CAN model's
-  acknowledgement and error confinement on for the fault and its recovery only (from an idle bus), and back off once
-  every controller is error-active again with an empty queue, so the rest of the suite keeps its bus. A controller
-  that does not recover by itself keeps it on until :meth:`SimBusFault.settle` after a power cycle.
+- The simulated lane: its world's :meth:`~ckesc.emulator.sim_can.CanNodes.short`, on the lane's CAN model
+  (acknowledgement and error confinement, ``SIM_CAN`` in :mod:`.sim_lane`); after the fault the control runs the bus
+  until every controller is error-active again with an empty queue (:meth:`SimBusFault.settle`). A lane opened
+  without the model (``CKESC_SIM_ACK=0``, for measuring its cost) has no control: nothing on it can go bus-off.
   A node at another bit rate is played as what the others meet: a short of :data:`FOREIGN_FRAME_S` (a frame at 250
   kbit/s) every :data:`FOREIGN_PERIOD_S` (the CAN model does not mix bit rates on its wires).
 - The real-time emulator (``--lane realtime``): its control channel's ``bus_fault`` request (``ckesc control bus``),
@@ -49,7 +48,6 @@ class SimBusFault:
 
     def __init__(self, lane: Any) -> None:
         self.lane = lane
-        self._opened = False  # whether this control turned acknowledgement on (and must turn it off again)
 
     @property
     def world(self) -> Any:
@@ -60,11 +58,6 @@ class SimBusFault:
         if kind not in KINDS:
             raise ValueError(f"bus fault {kind!r}: one of {', '.join(KINDS)}")
         world = self.world
-        if not world.ack:
-            # the bus without acknowledgement holds its frames in one heap: let it empty, then hand the nodes
-            # their controllers (every frame from now on goes through its sender's queue)
-            world.run_until(world.now + SETTLE_S, stop=lambda: not world._ready and world._in_flight is None)
-            world.ack = self._opened = True
         if kind == "short":
             world.short(seconds)
             self.lane.wait_power(seconds)
@@ -86,19 +79,10 @@ class SimBusFault:
             not ctl.size and not ctl.bus_off for ctl in world._ctl.values())
 
     def settle(self, within: float = SETTLE_S) -> bool:
-        """Run the bus until it has settled (at most ``within`` s), then give the lane its bus without
-        acknowledgement back; whether it settled (False: a controller still bus-off or holding frames: the
-        acknowledgement stays on, as the hardware would keep it silent, until a power cycle and another call)."""
-        world = self.world
-        if not self._opened:
-            return True
-        world.run_until(world.now + within, stop=self.settled)
-        if not self.settled():
-            return False
-        for node in list(world._ctl):
-            world._forget(node)
-        world.ack = self._opened = False
-        return True
+        """Run the bus until it has settled (at most ``within`` s); whether it did (False: a controller still bus-off
+        or holding frames, as the hardware keeps it until a power cycle)."""
+        self.world.run_until(self.world.now + within, stop=self.settled)
+        return self.settled()
 
 
 class EmulatorBusFault:
@@ -163,7 +147,7 @@ def bus_fault_control(lane: Any, cmd: str | None = None, timeout: float = POWER_
     if cmd:
         control = lane.__dict__["bus_fault"] = CommandBusFault(cmd, timeout)
         return control
-    if hasattr(lane, "sim") and hasattr(lane.sim, "world"):
+    if hasattr(lane, "sim") and getattr(getattr(lane.sim, "world", None), "ack", False):
         control = lane.__dict__["bus_fault"] = SimBusFault(lane)
         return control
     if isinstance(lane, RealtimeEmulatorLane):

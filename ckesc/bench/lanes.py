@@ -16,6 +16,7 @@ Tests never read the wall clock or sleep: they ask the lane (through the ``dut``
 
 from __future__ import annotations
 
+import errno
 import math
 import shlex
 import socket
@@ -28,8 +29,10 @@ from typing import Any, Iterator
 
 import can
 
+from ..protocol.canbus import DEFAULT_TXQUEUELEN
 from ..protocol.catalogue import DEFAULT_BITRATE
-from ..protocol.frame import WireFrame
+from ..protocol.frame import WireFrame, frame_bits
+from ..protocol.judgements import R18_MAX_SHARE, r18_queueing_s
 from .epochs import PowerEpoch
 from .power import PowerControl
 from .profile import DEFAULT_BUS_ERROR_S
@@ -70,6 +73,13 @@ class Lane(ABC):
     bus: can.BusABC
     power: PowerControl
     bitrate: int
+    #: how long a send that finds the host's transmit queue full waits for room beyond :func:`room_wait_s` (s): the DUT's
+    #: declared boot time (the profile's ``boot_s``, set by :meth:`.station.Station.open_lane`): while nobody acknowledges the host's frames
+    #: the DUT may be rebooting (a reset is the test's verdict to give, not a bench ERROR), and takes them once back
+    dut_boot_s: float = 0.0
+    #: how many times the host's bus was reopened (:meth:`reopen`): the bus rules start again at each (a node's frames
+    #: held meanwhile come at once, as it is acknowledged again)
+    reopens: int = 0
 
     @abstractmethod
     def now(self) -> float:
@@ -143,7 +153,7 @@ class Lane(ABC):
 
     @abstractmethod
     def reopen(self, bitrate: int) -> None:
-        """Reopen the host's bus at another bit rate (after Set Baud)."""
+        """Reopen the host's bus at another bit rate (after Set Baud); counted in :attr:`reopens`."""
 
     def stop_streams(self) -> None:
         """Stop every throttle stream on this lane, whichever host (a test's :class:`.link.Link`, a helper's)
@@ -193,6 +203,21 @@ REOPEN_PAUSE_S = 0.5
 BUS_ERRORS = (OSError, can.CanError)
 
 
+def queue_full(exc: BaseException) -> bool:
+    """Whether a send failed because the host's transmit queue is full (SocketCAN's ENOBUFS: python-can's
+    ``CanOperationError`` with that error code, or the ``OSError`` itself): the frames ahead of it have not gone yet."""
+    return getattr(exc, "error_code", None) == errno.ENOBUFS or getattr(exc, "errno", None) == errno.ENOBUFS
+
+
+def room_wait_s(bitrate: int, txqueuelen: int | None = DEFAULT_TXQUEUELEN) -> float:
+    """How long a careful host waits for room in its full transmit queue before it calls the bus failed: each frame
+    of the queue waiting as long as R18's heaviest judged load can hold a lowest-priority frame back
+    (:func:`~ckesc.protocol.judgements.r18_queueing_s`; 26 ms for SocketCAN's 10 frames at 500 kbit/s). A queue that
+    stays full longer is not the host's burst: nobody acknowledges its frames (the DUT off or silent), or the bus
+    carries less than a conforming one must."""
+    return (txqueuelen or DEFAULT_TXQUEUELEN) * r18_queueing_s(R18_MAX_SHARE, bitrate)
+
+
 class _SendTap:
     """A python-can bus whose send() tells the lane when the host sent a frame, or that the send failed
     (everything else is the bus's own). Throttle streams (send_periodic) are python-can's thread-based
@@ -214,9 +239,8 @@ class _SendTap:
 
     def _send(self, msg: can.Message, timeout: float | None, stream: bool) -> None:
         with self._lane._send_lock:  # one frame at a time on the one handle, whichever thread sends it
-            t = time.time()  # the kernel stamps the frame (and its echo) after this
             try:
-                self._bus.send(msg, timeout)
+                t = self._place(msg, timeout, stream)
             except BUS_ERRORS as exc:
                 failed = exc
             else:
@@ -226,6 +250,28 @@ class _SendTap:
         if not stream:  # a stream's task hands it to the lane itself (on_error); a player counts it
             self._lane._io_failed(failed)
         raise failed
+
+    def _place(self, msg: can.Message, timeout: float | None, stream: bool) -> float:
+        """``send()``; a test's frame that finds the transmit queue full (ENOBUFS) waits for room, polling one longest
+        frame's bus time apart, up to :func:`room_wait_s` and the DUT's boot time (:attr:`Lane.dut_boot_s`), as the
+        simulated lane's :func:`~.sim_lane.placed` does; a stream's or a player's frame is lost at once, as SocketCAN's
+        BCM loses it. Returns the host clock read just before the send that went."""
+        lane = self._lane
+        deadline = None
+        while True:
+            t = time.time()  # the kernel stamps the frame (and its echo) after this
+            try:
+                self._bus.send(msg, timeout)
+                return t
+            except BUS_ERRORS as exc:
+                if stream or not queue_full(exc):
+                    raise
+                now = time.monotonic()
+                if deadline is None:
+                    deadline = now + room_wait_s(lane.bitrate) + lane.dut_boot_s
+                elif now >= deadline:
+                    raise
+            time.sleep(frame_bits(8) / lane.bitrate)  # the harness waits for the bus, not a test for the DUT
 
     def send_periodic(self, msgs, period: float, duration: float | None = None, store_task: bool = True,
                       autostart: bool = True, modifier_callback=None):
@@ -486,6 +532,7 @@ class BusLane(Lane):
         self.bus = self._open(kwargs)
         self.bus_kwargs = kwargs
         self.bitrate = bitrate
+        self.reopens += 1
 
 
 def _same_frame(msg: can.Message, other: can.Message) -> bool:

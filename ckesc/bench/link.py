@@ -20,7 +20,7 @@ from ..protocol.judgements import timing_tolerance
 from ..protocol.transfer import TAIL_BYTES, TRANSFER_ID_MODULO, tail_transfer_id
 from .epochs import WINDOW_REQUESTS
 from .errors import RestoreFailed
-from .lanes import Lane, OwnFrame, stop_task
+from .lanes import BusFault, Lane, OwnFrame, stop_task
 from .outcomes import Inconclusive, NotClaimed, Record
 from .profile import DutProfile
 
@@ -352,8 +352,15 @@ class Link:
         answered, or the boot time has passed)."""
         give_up = self.now() + self.profile.boot_s + 1.0
         found: dict[int, None] = {}  # every ESC that answered, in the order of the answers
+        sent = None
         while True:
-            sent = self.broadcast("get_esc_id", {"option": 0}, layout="query")
+            # a query still in the host's queue (its echo not back: nobody acknowledged it) is not asked again: on CAN
+            # the next would wait behind it, and a queue of them fills (ENOBUFS); it goes as soon as an ESC listens
+            if sent is None or sent.bus_time is not None or not self.lane.echo:
+                try:
+                    sent = self.broadcast("get_esc_id", {"option": 0}, layout="query")
+                except BusFault as exc:
+                    raise DutUnreachable(f"no ESC took the host's GET_ESC_ID at {self.lane.bitrate} bit/s: {exc}") from exc
             self.wait(cat.ANSWER_DELAY_MAX_S * 2)  # every ESC answers within 64 ms (R2); read them all
             replies = [f.source for f in self.frames("get_esc_id", since=sent.host_time)
                        if f.layout is not None and f.layout.name == "reply"]

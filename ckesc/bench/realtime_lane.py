@@ -109,6 +109,7 @@ class RealtimeEmulatorLane(BusLane):
     def reopen(self, bitrate: int) -> None:
         # socketcand carries no bit rate: the emulator's bench decides who hears whom
         self.bitrate = bitrate
+        self.reopens += 1
 
     def close(self) -> None:
         try:

@@ -12,17 +12,17 @@ import can
 from ..emulator import sim_bus
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame
-from .lanes import BUS_ERRORS, BusFault, Lane
+from .lanes import BUS_ERRORS, BusFault, Lane, queue_full, room_wait_s
 from .power import EmulatorPower
 
 _SIM_CHANNELS = itertools.count()
 
 
-#: the simulated lane's CAN (ckesc/emulator/sim_bus.py): no acknowledgement needed and no limit to the host's
-#: transmit queue, until the suite's bus rules and bursts are ready for the CAN model of issue #36 (with it, a frame
-#: the host sends while the ESC boots is held for it: every later frame moves, and R9's queueing allowance FAILs a
-#: report delayed by an answer that started as it fell due; the robustness section sends bursts of more than 10)
-SIM_CAN: dict[str, Any] = {"ack": False, "txqueuelen": None}
+#: the simulated lane's CAN (ckesc/emulator/sim_bus.py): SocketCAN's defaults, as a real bench has them (a frame needs
+#: a second powered node to acknowledge it, the host's transmit queue is FIFO and holds 10 frames, a full queue is
+#: ENOBUFS). ``CKESC_SIM_ACK=0`` opens the lane without the CAN model (every frame delivered at once, no queue limit):
+#: only to measure the model's cost (benchmarks/README.md)
+SIM_CAN: dict[str, Any] = {} if os.environ.get("CKESC_SIM_ACK", "1") != "0" else {"ack": False, "txqueuelen": None}
 
 
 class SimLane(Lane):
@@ -37,7 +37,7 @@ class SimLane(Lane):
         self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, nodes=list(nodes), faults=faults,
                            flash_path=flash_path, seed=seed, bitrate=bitrate, esc_config=esc_config,
                            receive_own_messages=True, ignore_config=True, **SIM_CAN)
-        self.bus = _SimSend(self.sim)
+        self.bus = _SimSend(self)
         self.power = EmulatorPower(self)
 
     @property
@@ -78,7 +78,10 @@ class SimLane(Lane):
     def send_wire(self, wire: WireFrame) -> None:
         sim = self.sim  # (no can.Message built: hours of soak send here)
         if sim.world.ack or sim._is_shutdown:
-            sim.send_wire(wire)  # (a full queue said as the bus says it, a closed bus refused)
+            try:
+                sim.send_wire(wire)  # (a full queue said as the bus says it, a closed bus refused)
+            except BUS_ERRORS as exc:
+                placed(sim, exc, sim.send_wire, wire, boot=self.dut_boot_s)
         else:  # without acknowledgement nothing refuses a frame: the world takes it (the bus's send_wire, one call less)
             sim.world.send_wire(sim, wire)
 
@@ -89,9 +92,10 @@ class SimLane(Lane):
         old = self.sim
         self.sim = can.Bus(interface="ckesc-sim", channel=self.channel, bitrate=bitrate,
                            receive_own_messages=True, ignore_config=True, **SIM_CAN)
-        self.bus = _SimSend(self.sim)
+        self.bus = _SimSend(self)
         old.shutdown()
         self.bitrate = bitrate
+        self.reopens += 1
 
     def close(self) -> None:
         self.sim.shutdown()
@@ -99,24 +103,48 @@ class SimLane(Lane):
 
 
 class _SimSend:
-    """The simulated bus as the suite sends on it: a send that fails (a full transmit queue, ENOBUFS) is the bench's
-    failure under the test (:class:`BusFault`: an ERROR, its one line naming the queue and the controller's state),
-    as on a real bus; everything else is the bus's own."""
+    """The simulated bus as the suite sends on it, as a careful host sends on SocketCAN: a send that finds the transmit
+    queue full (ENOBUFS) waits for room while the bus carries the frames ahead of it (a burst of more than the queue,
+    up to :func:`~.lanes.room_wait_s`) and is then placed; a queue that nobody empties (no acknowledgement: the DUT
+    off or silent; the host's controller bus-off), and any other failed send, is the bench's failure under the test
+    (:class:`BusFault`: an ERROR, its one line naming the queue and the controller's state), as on a real bus;
+    everything else is the bus's own."""
 
-    def __init__(self, bus: Any) -> None:
-        self._bus = bus
+    def __init__(self, lane: SimLane) -> None:
+        self._lane = lane
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        bus = self._lane.sim
         try:
-            self._bus.send(msg, timeout)
+            bus.send(msg, timeout)
         except BUS_ERRORS as exc:
-            ctl = self._bus.controller
-            why = "nobody acknowledged them" if ctl.tec else "sent faster than the bus carries them"
-            raise BusFault(f"the host's CAN send failed ({type(exc).__name__}: {exc}; its controller {ctl.state.value}, "
-                           f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting: {why})") from exc
+            placed(bus, exc, bus.send, msg, timeout, boot=self._lane.dut_boot_s)
 
     def __getattr__(self, name: str) -> Any:
-        return getattr(self._bus, name)
+        return getattr(self._lane.sim, name)
+
+
+def placed(bus: Any, exc: BaseException, send: Any, *args: Any, boot: float = 0.0) -> None:
+    """After ``send(*args)`` on the simulated ``bus`` raised ``exc``: wait for room in its transmit queue and send again
+    (:class:`_SimSend`), or raise :class:`BusFault` naming the queue, the controller and the wait. The wait is
+    :func:`~.lanes.room_wait_s`, and ``boot`` more (the DUT's declared boot time, :attr:`~.lanes.Lane.dut_boot_s`):
+    while nobody acknowledges, the DUT may be rebooting, and takes the frames once it is back."""
+    ctl = bus.controller
+    waited = 0.0
+    if queue_full(exc) and not ctl.bus_off:
+        world, n = bus.world, ctl.txqueuelen
+        t0 = world.now
+        world.run_until(t0 + room_wait_s(bus.bitrate, n) + boot, stop=lambda: ctl.size < n or ctl.bus_off)
+        waited = world.now - t0
+        if ctl.size < n:
+            try:
+                send(*args)
+                return
+            except BUS_ERRORS as again:
+                exc = again
+    why = "nobody acknowledged them" if ctl.tec else "sent faster than the bus carries them"
+    raise BusFault(f"the host's CAN send failed ({type(exc).__name__}: {exc}; its controller {ctl.state.value}, "
+                   f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting after {waited * 1000:.3f} ms: {why})") from exc
 
 
 def _check_controller(bus: Any) -> None:

@@ -149,6 +149,7 @@ class Station:
                                  "command does not flash (run ckesc run --firmware first, then this without it)")
         if self.lane is None:
             self.lane = self._new_lane()
+            self.lane.dut_boot_s = self.profile.boot_s  # (a send waits that long for an ESC that reset: Lane.dut_boot_s)
             if self.bus_fault is not None:
                 self.bus_fault.lane = self.lane
                 self.lane.bus_fault = self.bus_fault  # (bus_fault.bus_fault_control finds it there)
@@ -192,6 +193,7 @@ class Station:
                                         firmware=str(self.image.path) if self.image else None)
         lane = SimLane(nodes=MULTI_NODES, faults=self._faults(), seed=o.emulator_seed, esc_config=self._esc_config())
         lane.timing_error = timing_error  # the profile's stated error, as on the DUT's lane
+        lane.dut_boot_s = self.profile.boot_s
         return lane
 
     def _faults(self) -> list[str]:

@@ -18,7 +18,7 @@ from .model import EscModel
 
 INF = float("inf")
 #: frames an ESC holds to send (its mailboxes and its firmware's queue behind them, sent lowest id first); what does
-#: not fit is dropped
+#: not fit is dropped: the lowest-priority frame queued, where the new one is of a higher priority
 ESC_TX_MAILBOXES = 32
 
 
@@ -52,7 +52,8 @@ class CanNodes:
         n = ctl.txqueuelen
         if n is not None and ctl.size >= n and node not in self.buses:  # (a host's bus raises QueueFull instead)
             self.stats["dropped"] += 1
-            return
+            if ctl.evict_for(p.wire.arbitration_id) is None:  # an ESC's: its lowest-priority frame goes, else this one
+                return
         ctl.submit(p, p.wire.arbitration_id)
         # a queue that was empty: its node starts to contend (a node with frames contends, is parked or is bus-off)
         if ctl.size == 1 and ctl.state is not ErrorState.BUS_OFF and node not in self._parked:

@@ -36,6 +36,7 @@ class LaneRules(can.Listener):
         # the suite's power cycles go through Dut.switch_power, which tells the rules (power_switched)
         self.rules = BusRules(tolerance=tolerance_for(lane), bitrate=lane.bitrate, complete=lane.clock == "simulated",
                               jitter=jitter, power_known=True)
+        self._reopens = lane.reopens
         self.found: list[Violation] = []
         self.count = 0
         self.between = 0  # violations while no test ran (session fixtures)
@@ -44,8 +45,9 @@ class LaneRules(can.Listener):
         self.excused_found: list[Violation] = []
 
     def on_message_received(self, msg: can.Message) -> None:
-        if self.lane.bitrate != self.rules.bitrate:  # the host reopened at another bit rate (Set Baud's tests)
-            self.rules.set_bitrate(self.lane.bitrate)
+        if self.lane.reopens != self._reopens:  # the host reopened its bus (Set Baud's tests)
+            self._reopens = self.lane.reopens
+            self.rules.rejoined(self.lane.bitrate)
         found = self.rules.feed_message(msg)
         if found and self.excused:
             self.excused_found += [v for v in found if v.rules[0] in self.excused]

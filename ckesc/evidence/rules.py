@@ -174,6 +174,8 @@ class BusRules(Tracker):
         info.count += 1
         node = info.node
         side = info.side
+        if self._held is not None:
+            self.held(node, ts, busy_from, own)
         if node.first_ts is None:
             node.first_ts = ts
         if own:
@@ -275,18 +277,18 @@ class BusRules(Tracker):
                 out = self._tail(out, info, node, data, ts, tail)
         if info.kind is Kind.RESPONSE:
             return self._response(out, info, node, data, ts, tid)
-        if info.type_id == MSG1.type_id and len(data) > COMM_BYTE:
+        if info.stream_key is not None and tid is not None:
+            st = self._streams.get(info.stream_key)
+            if st is None:
+                st = self._streams[info.stream_key] = EscStream(node, info.type_id, info.label, info.periodic)
+            out = self._stream(out, st, info, node, data, ts, start, busy_from, tid)
+        if info.type_id == MSG1.type_id and len(data) > COMM_BYTE:  # (after its report's events: a restart comes first)
             self._comm_flag(node, bool(data[COMM_BYTE] & COMM_MASK), ts)
             if self.events is not None:
                 self.events.msg1(ts, node.id, bool(data[COMM_BYTE] & COMM_MASK),
                                  None if self._last_throttle is None else self._last_throttle[0])
             if self.heard is not None and self.heard.mine(node.id):
                 self.heard.msg1.append([ts, bool(data[COMM_BYTE] & COMM_MASK)])
-        if info.stream_key is not None and tid is not None:
-            st = self._streams.get(info.stream_key)
-            if st is None:
-                st = self._streams[info.stream_key] = EscStream(node, info.type_id, info.label, info.periodic)
-            out = self._stream(out, st, info, node, data, ts, start, busy_from, tid)
         return out or _NONE
 
     def _tail(self, out, info: FrameId, node: Node, data, ts: float, tail: int):

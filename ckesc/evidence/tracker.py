@@ -30,6 +30,7 @@ from ..protocol.transfer import tail_transfer_id
 from .events import ReaderEvents
 from .findings import KEEP, Findings, Intervals, quote
 from .pairing import QueryPairing
+from .rejoin import Rejoin
 from .taken import taken
 
 # ------------------------------------------------------------------------------------------ facts, derived
@@ -243,7 +244,7 @@ class FrameId:
 
 
 
-class Tracker(Findings):
+class Tracker(Findings, Rejoin):
     """The traffic's state, fed by :class:`.rules.BusRules` (which judges it); see the module docstring."""
 
     def __init__(self, *, tolerance: float = 0.0, bitrate: int = cat.DEFAULT_BITRATE, complete: bool = False,
@@ -280,6 +281,7 @@ class Tracker(Findings):
         self._set_id_ts = -math.inf  # the last Set ID: a node id not heard since may have been left by its ESC
         self._bus_end = -math.inf
         self._busy_from = -math.inf
+        self._held: bool | float | None = None  # (Rejoin.held) True: the host reopened; then the stretch's start
         self.set_bitrate(bitrate)
         #: the host's last MSG Control switch suspended reporting, and no resume nor power switch since: a parameter
         #: write then does not take effect (R12) and its answer is free (R10-R12: the current values, none, or the
@@ -298,11 +300,7 @@ class Tracker(Findings):
 
     # ------------------------------------------------------------------------------------- setup
     def set_bitrate(self, bitrate: int) -> None:
-        """The bus's bit rate from now on (the host reopened at another rate after Set Baud)."""
-        if hasattr(self, "bitrate") and int(bitrate) != self.bitrate:
-            # while the host listened at another rate it saw nothing of the DUT (Set Baud's rate search may power-cycle
-            # it meanwhile): a restart across the change is not judged a reset (R19), as across a power switch
-            self.power_switches += 1
+        """The bus's bit rate from now on."""
         self.bitrate = int(bitrate)
         self._dur = [frame_bits(n) / self.bitrate for n in range(9)]
         # a real frame is up to ~20 % longer than its unstuffed length: a frame that starts within that of

@@ -27,7 +27,7 @@ import can
 
 from ..bench.dut import Dut, DutError, DutUnreachable
 from ..bench.errors import PreflightError
-from ..bench.lanes import Lane
+from ..bench.lanes import BusFault, Lane
 from ..bench.outcomes import Inconclusive
 from ..bench.station import BENCH_ROWS, BenchOptions, build
 from ..evidence.live import LaneRules
@@ -177,13 +177,22 @@ class Session:
         the lane is closed either way."""
         try:
             self._set_load(None)
-            self.dut.zero_throttle()
+            try:
+                self.dut.zero_throttle()
+                unsent = None
+            except BusFault as exc:  # nobody takes the host's frames: a program left the DUT off or at another rate
+                unsent = exc
             if self._dirty:
                 try:
                     self._reset()
                     self._dirty = False
                 except RestoreError as exc:
                     self.left = str(exc)
+            if unsent is not None:  # the DUT put back: zero throttle again, where it now listens
+                try:
+                    self.dut.zero_throttle()
+                except BusFault:
+                    self.left = "; ".join(filter(None, [self.left, f"zero throttle not sent: {unsent}"]))
         finally:
             self.station.close()
 

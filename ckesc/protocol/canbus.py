@@ -204,6 +204,23 @@ class CanController:
             heapq.heappush(self._heap, (can_id, next(self._seq), frame))
         self.size += 1
 
+    def evict_for(self, can_id: int) -> Any | None:
+        """Make room in a full priority queue for a frame of ``can_id``: the queue's lowest-priority frame (the
+        highest id, the latest of them), unless it is on the bus or not below ``can_id``, leaves it and is returned
+        (None: nothing left; the new frame is the one that does not fit). A firmware's priority transmit queue does
+        so (libuavcan's), so that an answer is not lost behind reports that waited for an acknowledgement."""
+        if self.order != "priority" or not self._heap:
+            return None
+        i = max(range(len(self._heap)), key=lambda k: self._heap[k][:2])
+        can_worst, _, frame = self._heap[i]
+        if can_worst <= can_id or frame is self._sending:
+            return None
+        self._heap[i] = self._heap[-1]
+        self._heap.pop()
+        heapq.heapify(self._heap)
+        self.size -= 1
+        return frame
+
     def head(self) -> Any | None:
         """The frame the controller tries next, or the one it is trying (None: nothing to send)."""
         if self._sending is not None:

@@ -26,10 +26,19 @@ class CommFlagWatch(Watch):
         self._early = jd.r8_window_s(interval, jitter=self.cfg.jitter)[0] if interval else 0.0
         self._interval = interval
         self._error = self.cfg.error + self.cfg.own_error
+        self._up = -float("inf")  # the ESC's first report after its latest restart
+
+    def restarted(self, t: float) -> None:
+        """The ESC restarted (a report's transfer id started again, the reader's ``report`` event): its comm watchdog
+        with it, so R8's window counts from no earlier than ``t``. On a bench where the host is then alone, its
+        commands wait in its queue through the ESC's boot and the bus carries none: that is no stopped stream."""
+        self._up = t
 
     def msg1(self, t: float, flag: bool, last_command: float | None) -> None:
         if last_command is None:
             return
+        if last_command < self._up:
+            last_command = self._up
         self.msg1_since_stream += 1
         if self.msg1_since_stream < 2:  # the MSG1 due as the stream began may still show the flag of before it
             return

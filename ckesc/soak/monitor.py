@@ -262,6 +262,8 @@ class Sinks(ReaderEvents):
     def report(self, ts: float, node: int, name: str, restarted: bool) -> None:
         if node == self.node and name in REPORTS:
             self.intervals.report(name, ts, restarted)
+            if restarted:
+                self.comm.restarted(ts)
 
     def reset(self, ts, node, sign, signs) -> None:
         if node == self.node:

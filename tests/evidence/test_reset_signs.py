@@ -131,7 +131,7 @@ def test_one_trace_the_same_reset_for_the_bus_rules_the_soak_and_the_r17_tests()
     with it), and the R17 tests' reading of the same MSG1 reports and counts the same words."""
     host = ScriptedHost((1,), ("reset_after_streaming=5",), keep=True)
     host.run.rules = BusRules(bitrate=BITRATE, complete=True, power_known=True)
-    try:
+    try:  # (the host alone: while the ESC reboots its stream waits in its queue, the bus carries no command)
         host.pump(0.5)
         host.request("maintenance_information", {"option": 2}, 1)
         stream_for(5.5)(host)

@@ -194,7 +194,10 @@ def test_a_reset_after_a_stream_is_found():
 
 def test_a_conformance_run_shows_the_reset_in_results_json(tmp_path):
     """End to end: R17's malformed-frame test on an ESC that resets on a multi-frame start; results.json names the live
-    rule's reset (its own check FAILs it on R17 too; the bus rules add R19, R17 and the power-up count)."""
+    rule's reset (its own check FAILs it on R17 too; the bus rules add R19 and R17). The frames the host sent while the
+    ESC rebooted wait in its queue and meet the ESC at its boot (R20), where the whole transfer's start resets it
+    again: the test's own check says it did not answer then, where a bus without acknowledgement had lost them and
+    the count was read (1 to 2)."""
     test = "conformance/test_robustness_r17_malformed.py::test_malformed_frames_are_ignored[can_test]"
     done = subprocess.run([sys.executable, "-m", "ckesc", "run", "-q", "--trace-format", "none", "--reports", str(tmp_path),
                            "--emulator-faults", "reset_on_multi_frame_start", test], capture_output=True, text=True,
@@ -202,9 +205,9 @@ def test_a_conformance_run_shows_the_reset_in_results_json(tmp_path):
     results = tmp_path / "latest" / "results.json"
     assert results.is_file(), done.stdout[-3000:] + done.stderr[-3000:]
     [r] = json.loads(results.read_text())["results"]
-    assert r["outcome"] == "FAIL" and r["bus_rules"] == ["R19", "R17"], r
+    assert r["outcome"] == "FAIL" and r["bus_rules"][:2] == ["R19", "R17"], r
+    assert "afterwards it did not answer" in done.stdout + results.read_text()  # (the test's own check, on R17)
     causes = [c["first"] for c in r["bus_causes"] if c["check"] == "reset"]
-    assert any("the power-up count (241 option 2) went from 1 to 2" in c for c in causes), causes
     # and the reports' restart across it: the malformed frame switched nothing (R17, evidence/taken.py), so the
     # reader judges the gap (before, it took the frame for CAN Test on and judged no report across it)
     assert any("stopped for" in c and "its counter started again" in c for c in causes), causes

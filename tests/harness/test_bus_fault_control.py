@@ -38,17 +38,28 @@ def test_a_lane_without_a_control_has_none():
     assert "--bus-fault-cmd" in NO_CONTROL
 
 
-def test_the_simulated_lane_gives_its_bus_back_without_acknowledgement():
+def test_the_simulated_lane_shorts_its_bus_and_returns_once_every_controller_recovered():
     lane = SimLane(esc_config={"boot_time": 0.25})
     try:
         lane.wait_power(0.5)
         control = bus_fault_control(lane)
         assert isinstance(control, SimBusFault) and bus_fault_control(lane) is control
         world = lane.sim.world
-        assert not world.ack
         end = control.cause("short", 0.2)
         assert end == pytest.approx(0.7)
-        assert not world.ack and not world._ctl  # every controller recovered, its queue sent, and forgotten
+        assert control.settled()  # every controller recovered and its queue sent
         assert world.stats["retries"] > 0  # the short did meet the ESC's tries
+        assert all(ctl.counts["recovered"] for node, ctl in world._ctl.items() if ctl.counts["bus_off"])
+    finally:
+        lane.close()
+
+
+def test_a_simulated_lane_without_the_can_model_has_no_control(monkeypatch):
+    from ckesc.bench import sim_lane
+
+    monkeypatch.setattr(sim_lane, "SIM_CAN", {"ack": False, "txqueuelen": None})  # (CKESC_SIM_ACK=0)
+    lane = SimLane()
+    try:
+        assert bus_fault_control(lane) is None  # nothing on a bus without acknowledgement goes bus-off
     finally:
         lane.close()

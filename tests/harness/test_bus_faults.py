@@ -45,12 +45,12 @@ def flaky(monkeypatch):
     flaky_bus.reset()
     made = []
 
-    def start(fail_after: int, recover: bool = True) -> Dut:
+    def start(fail_after: int, recover: bool = True, full_tries: int = 0) -> Dut:
         channel = f"ckesc-flaky-{os.getpid()}-{next(_channels)}"
         emu_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True, ignore_config=True)
         emu = RealtimeEmulator(EmulatedBench((1,)), bus=emu_bus, own_bus=True).start()
         lane = BusLane({"interface": "flaky-virtual", "channel": channel, "fail_after": fail_after, "recover": recover,
-                        "ignore_config": True}, NoPower(), timing_error=DEFAULT_BUS_ERROR_S)
+                        "full_tries": full_tries, "ignore_config": True}, NoPower(), timing_error=DEFAULT_BUS_ERROR_S)
         made.append((emu, lane))
         dut = Dut(lane, DutProfile.load("emulator"), node_id=1)
         assert dut.wait_for("msg1", 3.0) is not None  # the emulated ESC has booted
@@ -75,6 +75,24 @@ def test_a_send_that_raises_is_a_bus_fault_naming_the_state_and_the_lane_reopens
     assert len(dut.lane.recoveries) == 1 and "bus state ERROR" in dut.lane.recoveries[0]
     # the reopened bus works: the DUT answers again
     assert dut.ask("set_freq", {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0})["msg1_interval"] == 10
+
+
+def test_a_full_queue_that_drains_is_waited_for_and_the_frame_goes(flaky):
+    """SocketCAN's ENOBUFS (a burst of more than the queue): the lane tries again as the queue drains, the test's
+    frame goes and is answered; no fault, no reopening."""
+    dut = flaky(fail_after=1, full_tries=5)
+    read = {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}
+    dut.ask("set_freq", read)
+    assert dut.ask("set_freq", read)["msg1_interval"] == 10  # (its first 5 tries met a full queue)
+    assert dut.lane.recoveries == []
+
+
+def test_a_queue_that_stays_full_is_a_bus_fault_after_the_wait(flaky):
+    dut = flaky(fail_after=1, full_tries=10**9)
+    read = {"option": 0, "msg1_interval": 0, "msg2_interval": 0, "msg3_interval": 0}
+    dut.ask("set_freq", read)
+    with pytest.raises(BusFault, match=r"CanOperationError: Failed to transmit: No buffer space available"):
+        dut.ask("set_freq", read)
 
 
 def test_a_throttle_stream_whose_send_fails_ends_the_test_at_its_next_read(flaky):

@@ -1,4 +1,5 @@
-"""The host survives the simulated CAN (issue #36, R20): with acknowledgement on, a full transmit queue and the host's
+"""The host survives the simulated CAN (issue #36, R20): the lane's SocketCAN defaults (acknowledgement, a FIFO queue
+of 10); a burst of more than the queue waits for room while the bus carries it; a queue nobody empties and the host's
 own bus-off end the test as the bench's failure (:class:`~ckesc.bench.lanes.BusFault`, an ERROR whose one line names
 them), never a FAIL or a hang; a frame held while the ESC was off is timed by its echo. The verdict of a BusFault is
 told by its type (``ckesc/session/verdicts.py``: ``BENCH_FAILED``)."""
@@ -9,15 +10,17 @@ import can
 import pytest
 
 from ckesc.bench import sim_lane
-from ckesc.bench.lanes import BusFault
+from ckesc.bench.lanes import BusFault, room_wait_s
 from ckesc.bench.sim_lane import SimLane
 from ckesc.protocol import canbus
+from ckesc.protocol.frame import frame_bits, new_wire
+from ckesc.protocol.traffic import PeriodicFrames
 from ckesc.session.verdicts import BENCH_FAILED
 
 
 @pytest.fixture
-def lane(monkeypatch):
-    monkeypatch.setattr(sim_lane, "SIM_CAN", {"ack": True})  # SocketCAN's: acknowledgement, 10 frames of queue
+def lane():
+    assert sim_lane.SIM_CAN == {}  # the lane's bus as ckesc-sim opens it: SocketCAN's defaults
     lane = SimLane(nodes=(1,))
     lane.wait_power(0.5)
     while lane.recv(0) is not None:
@@ -39,13 +42,32 @@ def test_a_full_queue_is_a_bus_fault_naming_it(lane):
         lane.bus.send(_query(10))
     line = str(raised.value)
     assert "\n" not in line and "No buffer space available" in line and "ERROR-PASSIVE" in line
-    assert "10 frame(s) waiting: nobody acknowledged them" in line
+    # waited for room as long as a queue of 10 may take (lane.dut_boot_s 0 here: no DUT boot time declared)
+    assert f"10 frame(s) waiting after {room_wait_s(lane.bitrate) * 1000:.3f} ms: nobody acknowledged them" in line
     assert isinstance(raised.value, BENCH_FAILED)
 
 
-def test_a_burst_past_the_queue_is_a_bus_fault_too(lane):
-    """The ESC listens, but eleven frames at one instant do not fit (as a host faster than the bus meets SocketCAN)."""
-    with pytest.raises(BusFault, match=r"ERROR-ACTIVE, TEC 0, 10 frame\(s\) waiting: sent faster than the bus carries them"):
+def test_a_burst_past_the_queue_waits_for_room_and_goes_in_order(lane):
+    """The ESC listens: the eleventh frame at one instant waits until the first has left the queue (as a careful host
+    on SocketCAN retries ENOBUFS), then every frame is on the bus in the order sent."""
+    t0 = lane.now()
+    for n in range(canbus.DEFAULT_TXQUEUELEN + 1):
+        lane.bus.send(_query(n))
+    first_end = t0 + frame_bits(2) / lane.bitrate
+    assert lane.now() == pytest.approx(first_end)  # the eleventh went in as the first was acknowledged
+    echoes = []
+    while (msg := lane.recv(0.01)) is not None:
+        if not msg.is_rx:
+            echoes.append(msg.data[1] & 0x1F)
+    assert echoes == list(range(canbus.DEFAULT_TXQUEUELEN + 1))
+
+
+def test_a_burst_that_the_bus_does_not_carry_in_time_is_a_bus_fault(lane):
+    """A queue that stays full longer than :func:`~ckesc.bench.lanes.room_wait_s` (here a node that takes the bus with
+    frames of a higher priority than the host's) is the bench's failure, naming the wait."""
+    frame = new_wire((0x00000001, bytes(8), 0.0, True))  # priority 0: above every frame of the host's
+    lane.sim.world.add_source(PeriodicFrames("babbler", [frame], period=frame_bits(8) / lane.bitrate / 2))
+    with pytest.raises(BusFault, match=r"ERROR-ACTIVE, TEC 0, 10 frame\(s\) waiting after 26\.\d+ ms: sent faster than the bus"):
         for n in range(canbus.DEFAULT_TXQUEUELEN + 1):
             lane.bus.send(_query(n))
 

@@ -186,6 +186,20 @@ def test_a_frame_on_the_bus_is_not_overtaken_by_one_of_a_higher_priority_queued_
     assert ctl.head() == "higher"  # a failed try arbitrates again: the higher priority goes first
 
 
+def test_a_full_priority_queue_makes_room_for_a_higher_priority_by_its_lowest():
+    ctl = CanController(BITRATE, order="priority", txqueuelen=3)
+    for name, can_id in (("report1", 0x300), ("report2", 0x300), ("other", 0x200)):
+        ctl.submit(name, can_id)
+    assert ctl.evict_for(0x300) is None  # not below the lowest queued: the new frame is the one that does not fit
+    assert ctl.evict_for(0x100) == "report2" and len(ctl) == 2  # the lowest priority, the latest of them
+    ctl.submit("answer", 0x100)
+    assert list(ctl) == ["answer", "other", "report1"]
+    alone = CanController(BITRATE, order="priority", txqueuelen=1)
+    alone.submit("low", 0x300)
+    assert alone.begin() == "low" and alone.evict_for(0x100) is None  # never the frame on the bus
+    assert CanController(BITRATE, txqueuelen=3).evict_for(0) is None  # a FIFO (SocketCAN's) refuses instead
+
+
 def test_attempt_bits():
     assert canbus.attempt_bits(8, Attempt.ACKED) == 131  # frame_bits(8)
     assert canbus.attempt_bits(8, Attempt.NO_ACK) == 120 + 17

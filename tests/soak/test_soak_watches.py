@@ -31,6 +31,7 @@ class Esc:
     reset_all: bool = False  # ... and MSG2 and MSG3 with it, each on a grid from the restart
     counting_on: tuple[str, ...] = ()  # ... these but for their counters, which go on by one (one time in 32)
     back_at: float = 0.303  # when MSG2 and MSG3 come back after the reset (MSG1 at 0.301)
+    held: bool = False  # the host alone: its stream waits in its queue through the reset, 10 frames come after MSG1
     flag_at: float | None = None  # one MSG1 shows the comm-loss flag while the stream runs
     answer_delay: float = 0.0025
     no_answer_at: float | None = None
@@ -48,9 +49,17 @@ class Esc:
             tid[key] = (tid[key] + 1) % 32
             return (tid[key] - 1) % 32
 
-        t = 0.0
+        t, queued = 0.0, 0
         while t < seconds:  # the host's stream at 50 Hz
-            out.append(encode("raw_command_14b", {"channels": [0] * 4}, source=HOST, transfer_id=nxt("stream"), timestamp=t))
+            if self.held and self.reset_at is not None and self.reset_at < t < self.reset_at + 0.301:
+                queued += 1  # (no acknowledgement: the frame waits, the 11th and later are lost)
+            else:
+                for i in range(min(queued, 10)):  # the queue at the ESC's first MSG1, back to back
+                    out.append(encode("raw_command_14b", {"channels": [0] * 4}, source=HOST, transfer_id=nxt("stream"),
+                                      timestamp=self.reset_at + 0.3012 + 0.00025 * i))  # type: ignore[operator]
+                queued = 0
+                out.append(encode("raw_command_14b", {"channels": [0] * 4}, source=HOST, transfer_id=nxt("stream"),
+                                  timestamp=t))
             t = round(t + 0.02, 9)
         t, k = 0.001, 0
         while t < min(seconds, self.stops_at.get("msg1", seconds)):
@@ -228,6 +237,15 @@ def test_the_power_up_count_shows_a_reset_across_a_silence_as_the_bus_rules_read
 
 def test_the_run_time_may_stand_still_or_count_with_time():
     assert not watch(Esc(run_times=[100, 100, 110, 120]), 40.0).findings  # 10 s between two reads of option 1
+
+
+def test_a_reset_while_the_host_is_alone_is_a_reset_and_no_comm_flag_glitch():
+    """The ESC reboots and nobody acknowledges the host's stream meanwhile: the bus carries no command for 300 ms and
+    the ESC's first MSG1 after it, without the flag, comes before the commands held for it. Its comm watchdog restarted
+    with it: that MSG1 is no glitch (R8 counts from the restart), and the reset is found once."""
+    m = watch(Esc(reset_at=30.0, held=True))
+    assert [f.watch for f in m.findings] == ["resets"], [f.line() for f in m.findings]
+    assert m.rules.longest_command_gap > 0.3  # (the stream's gap is there: a watch reading it alone would flag it)
 
 
 def test_the_comm_flag_while_the_stream_runs_is_a_glitch():
