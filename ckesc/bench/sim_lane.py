@@ -65,11 +65,12 @@ class SimLane(Lane):
     def frames_until(self, deadline: float) -> Iterator[can.Message]:
         # Lane.frames_until with the calls between it and the simulated bus taken out (hours of soak read here: each
         # data frame as the bus heard it, sim_bus.Heard, with a can.Message's attributes but none made); the
-        # listeners are looked for once per call. A bus with acknowledgement reads frame by frame: the host's
-        # controller is looked at after each (its bus-off is the bench's failure, not the DUT's)
-        if self.sim.world.ack:
-            return super().frames_until(deadline)
+        # listeners are looked for once per call. On a bus with acknowledgement the host's controller is looked at
+        # before each frame is handed on and once the world reached the deadline (its bus-off is the bench's failure,
+        # not the DUT's)
         frames = self.sim.frames_until(deadline)
+        if self.sim.world.ack:
+            frames = _controller_checked(self.sim, frames)
         if self.__dict__.get("_listeners"):  # (a listener is handed can.Messages)
             message, heard = self.sim._message, self.heard
             return (heard(message(msg)) for msg in frames)
@@ -145,6 +146,13 @@ def placed(bus: Any, exc: BaseException, send: Any, *args: Any, boot: float = 0.
     why = "nobody acknowledged them" if ctl.tec else "sent faster than the bus carries them"
     raise BusFault(f"the host's CAN send failed ({type(exc).__name__}: {exc}; its controller {ctl.state.value}, "
                    f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting after {waited * 1000:.3f} ms: {why})") from exc
+
+
+def _controller_checked(bus: Any, frames: Iterator[Any]) -> Iterator[Any]:
+    for frame in frames:
+        _check_controller(bus)
+        yield frame
+    _check_controller(bus)
 
 
 def _check_controller(bus: Any) -> None:

@@ -73,9 +73,11 @@ def test_a_soaks_reads_make_no_can_message_and_recv_makes_the_same_one():
     ``Message`` of each, the host's own frames ``is_rx`` False in both."""
     lanes = [SimLane(seed=5), SimLane(seed=5)]
     try:
+        for lane in lanes:  # (the ESC's controller up: the lane's acknowledgement holds the host's frames till then)
+            lane.wait_power(0.5)
         got: list[list[tuple]] = [[], []]
         for step in range(1, 40):
-            deadline = step * 0.0125
+            deadline = 0.5 + step * 0.0125
             for i, lane in enumerate(lanes):
                 lane.send_wire(throttle(100, step % 32))
                 msgs = list(lane.frames_until(deadline)) if i == 0 else list(read(1, lane, deadline))
