@@ -157,7 +157,7 @@ class EmulatedBench:
                 targets = self._throttle_targets(name, group)
         changed = False
         for esc in targets:
-            if esc is not sender and esc.powered and esc.state.bitrate == bitrate:
+            if esc is not sender and esc.powered and (esc.state.bitrate == bitrate or "takes_other_bitrate" in esc.faults):
                 if esc.receive(frame, now, decoded=decoded):
                     self._deadlines[0 if len(self.escs) == 1 else self.escs.index(esc)] = _or_inf(esc.next_deadline())
                     changed = True
