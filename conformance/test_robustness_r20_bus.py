@@ -9,6 +9,10 @@ The fault is the bench's (:mod:`ckesc.bench.bus_fault`): in the simulated lane i
 model's acknowledgement and error confinement on for the fault and its recovery only); on a real bench
 ``--bus-fault-cmd`` closes a relay across CANH-CANL (docs/robustness.md). A lane without one SKIPs these tests.
 
+An ESC at another bit rate than its bus takes nothing (R20-bitrate): moved to another rate by Set Baud, it is sent
+from the host at the bus's rate every command that would show if taken (:mod:`.showing`), and read back at its own
+rate and after a power cycle. It needs power control and a host that changes its bit rate (:mod:`.baud`'s ``rate0``).
+
 Section ``robustness``, not one of its own: R20's bus clauses are, as R17's and R18's, what the ESC does with a bus
 the document does not describe, judged by the same signs (:mod:`.resets`, :mod:`.settings`).
 """

@@ -40,10 +40,22 @@ class Sent:
     #: (clock, error in s) of a bus time, and of the host's time (an adapter without echo, an echo not read yet)
     bus_clock: tuple[str, float] = ("bus timestamp", 0.0)
     host_clock: tuple[str, float] = ("host clock", 0.0)
+    #: why the host was alone on the bus when it sent this (None: it was not): nobody acknowledged the frame then, so a
+    #: real adapter held it until the ESC's controller came up (R20); without an echo when it went out is not known
+    alone: str | None = None
 
     @property
     def time(self) -> float:
         return self.bus_time if self.bus_time is not None else self.host_time
+
+    @property
+    def held(self) -> str | None:
+        """Why :attr:`time` is not when this frame went on the bus (None: it is): it was sent while the host was alone
+        (:attr:`alone`) and no echo says when it left (R20: a held frame is never judged as if sent on time)."""
+        if self.alone is None or self.bus_time is not None:
+            return None
+        return (f"sent while {self.alone.removeprefix('the ')} (the host alone on the bus: nobody acknowledged it, a "
+                "real adapter holds it until the ESC's controller is up) and no echo says when it went out")
 
     @property
     def clock(self) -> str:
@@ -102,6 +114,9 @@ class Link:
         self.record = Record()
         self.lane_seconds = 0.0  # lane time the test took (set by the dut fixture)
         self.throttled = False  # a non-zero throttle was sent: the dut fixture waits for the motor to stop
+        #: why the host is alone on the bus now (None: it is not, or not known): the ESC switched off or booting, set
+        #: by the supply (:mod:`.supply`), cleared by the first frame of another node heard; each send records it
+        self.alone: str | None = None
         self.sent_types: set[int] = set()  # type ids of every frame sent (restore: was the reporting mode touched?)
         self.node_id = node_id if node_id is not None else self.discover()
         # every ESC that answered discovery (multi_dut); just the DUT when its id was given
@@ -157,6 +172,8 @@ class Link:
     def _take(self, msg: can.Message) -> Frame | None:
         if msg.is_extended_id and (msg.arbitration_id & 0x7F) == self.host_node and not msg.is_error_frame:
             self._match_echo(msg)
+        elif self.alone is not None and getattr(msg, "is_rx", True) and not getattr(msg, "is_error_frame", False):
+            self.alone = None  # another node is up: it acknowledges the host's frames
         for event in self.proto.receive(msg):
             if isinstance(event, Garbled):
                 self._keep_garbled(event)  # the framing checks (4.1) report it
@@ -208,7 +225,8 @@ class Link:
     # ------------------------------------------------------------------ sending
     def send_wire(self, wire: WireFrame) -> Sent:
         msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id)
-        sent = Sent(wire, self.now(), bus_clock=(self.lane.clock, self.lane.timing_error), host_clock=self.lane.host_clock)
+        sent = Sent(wire, self.now(), bus_clock=(self.lane.clock, self.lane.timing_error), host_clock=self.lane.host_clock,
+                    alone=self.alone)
         kind, type_id = classify(wire.arbitration_id)[:2]
         self.sent_types.add(type_id)
         if kind is Kind.REQUEST and type_id in _WINDOW_IDS and self.lane.epoch is not None:
