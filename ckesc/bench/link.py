@@ -114,9 +114,6 @@ class Link:
         self.record = Record()
         self.lane_seconds = 0.0  # lane time the test took (set by the dut fixture)
         self.throttled = False  # a non-zero throttle was sent: the dut fixture waits for the motor to stop
-        #: why the host is alone on the bus now (None: it is not, or not known): the ESC switched off or booting, set
-        #: by the supply (:mod:`.supply`), cleared by the first frame of another node heard; each send records it
-        self.alone: str | None = None
         self.sent_types: set[int] = set()  # type ids of every frame sent (restore: was the reporting mode touched?)
         self.node_id = node_id if node_id is not None else self.discover()
         # every ESC that answered discovery (multi_dut); just the DUT when its id was given
@@ -172,8 +169,8 @@ class Link:
     def _take(self, msg: can.Message) -> Frame | None:
         if msg.is_extended_id and (msg.arbitration_id & 0x7F) == self.host_node and not msg.is_error_frame:
             self._match_echo(msg)
-        elif self.alone is not None and getattr(msg, "is_rx", True) and not getattr(msg, "is_error_frame", False):
-            self.alone = None  # another node is up: it acknowledges the host's frames
+        elif self.lane.alone is not None and getattr(msg, "is_rx", True) and not getattr(msg, "is_error_frame", False):
+            self.lane.alone = None  # another node is up: it acknowledges the host's frames
         for event in self.proto.receive(msg):
             if isinstance(event, Garbled):
                 self._keep_garbled(event)  # the framing checks (4.1) report it
@@ -226,7 +223,7 @@ class Link:
     def send_wire(self, wire: WireFrame) -> Sent:
         msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id)
         sent = Sent(wire, self.now(), bus_clock=(self.lane.clock, self.lane.timing_error), host_clock=self.lane.host_clock,
-                    alone=self.alone)
+                    alone=self.lane.alone)
         kind, type_id = classify(wire.arbitration_id)[:2]
         self.sent_types.add(type_id)
         if kind is Kind.REQUEST and type_id in _WINDOW_IDS and self.lane.epoch is not None:

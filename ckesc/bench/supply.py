@@ -111,7 +111,7 @@ class Supply:
 
     def power_off(self) -> set[int]:
         """The first half of :meth:`switch_power`: every stream stopped, the power off. From now on the host is
-        alone on the bus (:attr:`.link.Link.alone`: nobody acknowledges its frames, a real adapter holds them). Returns
+        alone on the bus (:attr:`.lanes.Lane.alone`: nobody acknowledges its frames, a real adapter holds them). Returns
         the other ESCs of the bench that were reporting (:meth:`power_on` waits for them too)."""
         self.link.stop_throttle()
         others = set(self.link.nodes) - {self.link.node_id} if len(self.link.nodes) > 1 else set()
@@ -119,7 +119,7 @@ class Supply:
             longest = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
             others &= {src for src, _, _ in self.link.report_starts(self.link.now() - longest, None)}
         self.link.lane.epoch = None  # no window stands until the DUT is up again
-        self.link.alone = "the ESC was switched off"
+        self.link.lane.alone = "the ESC was switched off"
         self.link.lane.power.off()
         self._power_switched()
         return others
@@ -130,12 +130,12 @@ class Supply:
         earliest = self.link.now()  # the DUT cannot have been switched on before this
         self.link.lane.power.on()
         on = self.link.now()
-        self.link.alone = "the ESC was booting"
+        self.link.lane.alone = "the ESC was booting"
         self._power_switched()
         heard = self.await_reports(on, on + self.ready_bound_s(boot_wait), others)
         first = min((t for t in heard.values()), default=None)
         if first is not None:
-            self.link.alone = None
+            self.link.lane.alone = None
         self.link.lane.epoch = PowerEpoch(earliest, first if first is not None else self.link.now(), self.link.node_id, self.link.lane.bitrate)
         self.link.record.observe("after power-up", f"first report {(first - on) * 1000:.1f} ms after power-on" if first is not None
                             else f"no report within {self.ready_bound_s(boot_wait):.2f} s of power-on")

@@ -89,7 +89,7 @@ def test_an_answer_to_a_query_held_while_the_esc_was_off_is_never_failed(bench, 
     assert sent.alone == "the ESC was switched off"
     dut.wait(0.2)  # held meanwhile (read: an echo would come when it goes out)
     on = dut.supply.power_on()
-    assert dut.alone is None  # the ESC reports again: it acknowledges the host's frames
+    assert dut.lane.alone is None  # the ESC reports again: it acknowledges the host's frames
     reply = dut.wait_for("get_esc_id", 2 * cat.ANSWER_DELAY_MAX_S, where=lambda f: f.layout.name == "reply")
     if reply is None:  # (it may have answered before its reports: read what came)
         reply = next((f for f in dut.frames("get_esc_id", since=sent.host_time, source=1) if f.layout.name == "reply"), None)
