@@ -30,6 +30,7 @@ import can
 
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame
+from .adapter import AdapterWatch
 from .epochs import PowerEpoch
 from .power import PowerControl
 from .profile import DEFAULT_BUS_ERROR_S
@@ -271,6 +272,7 @@ class BusLane(Lane):
         self.echo = True  # until find_echo() says otherwise: what python-can was asked for
         self.echo_note = "not probed"
         self.recoveries: list[str] = []  # each bus failure the lane recovered from (reopened)
+        self.adapter = AdapterWatch(self)  # the host's own adapter's state (bus-off, error-passive): adapter.py
         self.bus = self._open(self.bus_kwargs)
         self.bitrate = int(self.bus_kwargs.get("bitrate") or DEFAULT_BITRATE)
         self.power = power
@@ -450,6 +452,14 @@ class BusLane(Lane):
             msg = self._next(timeout)
         except BUS_ERRORS as exc:
             self._io_failed(exc)
+        if msg is not None and msg.is_error_frame:
+            self.adapter.heard(msg)
+        if (said := self.adapter.check()) is not None:  # the host's own adapter bus-off or error-passive
+            gone, line = said
+            if gone:
+                raise BenchGone(line)
+            self.recoveries.append(line)
+            raise BusFault(line)
         self._hold = -math.inf if msg is not None else None
         if msg is not None and msg.timestamp:
             self._last_ts = max(self._last_ts, msg.timestamp)
