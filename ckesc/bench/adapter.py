@@ -110,9 +110,15 @@ class AdapterWatch:
             return None
         if state is self._said or time.monotonic() < self._excused_until:
             return None
-        if state is ErrorState.PASSIVE and (self.lane.alone is not None
-                                            or time.monotonic() - self._passive_since < PASSIVE_HOLD_S):
-            return None  # a lone host's frames go unacknowledged (R20): error-passive is what its controller does then
+        if state is ErrorState.PASSIVE:
+            if self.lane.alone is not None:  # a lone host's frames go unacknowledged (R20): its controller's way then
+                self._passive_since = time.monotonic()  # (it counts from when another node is heard)
+                return None
+            if time.monotonic() - self._passive_since < PASSIVE_HOLD_S:
+                return None
+            self.poll(now=True)  # the state now, not the last poll's
+            if (state := self.state) in _FINE:
+                return None
         self._said = state
         told = self.told_by + (f", after {self._excuse}" if self._excuse else "")
         if state is ErrorState.PASSIVE:

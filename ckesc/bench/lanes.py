@@ -66,10 +66,10 @@ class Lane(ABC):
     can_change_bitrate: bool = True  # reopen() really moves the host to another bit rate (Set Baud's tests)
     #: the DUT's current power-up as the harness made it (None: unknown, or off); see epochs.py
     epoch: PowerEpoch | None = None
-    #: why the host is alone on this bus now (None: it is not, or not known): the ESC switched off or booting, so
-    #: nobody acknowledges the host's frames and a real adapter holds them (R20); set by the supply (:mod:`.supply`),
-    #: cleared by the first frame of another node the link reads (:mod:`.link`), recorded with each send
-    alone: str | None = None
+    #: why the host may be alone on this bus now (None: another node has been heard since the ESC's power was last
+    #: switched): nobody may acknowledge the host's frames, and a real adapter holds them (R20); set by the supply
+    #: (:mod:`.supply`), cleared by the first frame of another node the link reads (:mod:`.link`), kept with each send
+    alone: str | None = "no other node heard yet"
     #: the other nodes' traffic playing on this lane (``--foreign-traffic``: a station.ForeignPlay), None: a quiet bus
     foreign_traffic: Any = None
     bus: can.BusABC
