@@ -3,86 +3,61 @@
 echo (stamped when the frame went out at last); without one the answer's delay is INCONCLUSIVE, saying why, never a
 FAIL.
 
-With an echo: the simulated lane with acknowledgement on (the CAN model holds the frame and echoes it when the ESC's
-controller takes it). Without: the real-time emulator holding the host's frames as SocketCAN does (``--host-alone
-hold``) on python-can's virtual bus, the lane's end opened without its echo (the virtual bus's own echo would come at
-the send, not when the emulator lets the frame go), the ESC's power switched by the emulator's own switch."""
+Played by ``ckesc emulate --host-alone hold`` in its own process (it holds the host's frames as SocketCAN does, and
+echoes them when they go out), reached through python-can's socketcand client, with its echo and without
+(``--no-echo-own``), its power switched through its control channel; and with an echo by the simulated lane with
+acknowledgement on (the CAN model holds the frame and echoes it when the ESC's controller takes it)."""
 
 from __future__ import annotations
 
-import itertools
-import os
-
-import can
 import pytest
+from procs import Emulator
 
 from ckesc.bench import sim_lane
 from ckesc.bench.dut import Dut, echo_probe
 from ckesc.bench.lanes import BusLane
 from ckesc.bench.outcomes import Verdict
-from ckesc.bench.power_control import PowerControl
+from ckesc.bench.power import ControlPower
 from ckesc.bench.profile import DEFAULT_BUS_ERROR_S, DutProfile
 from ckesc.bench.sim_lane import SimLane
-from ckesc.emulator.emulated_bench import EmulatedBench
-from ckesc.emulator.realtime import RealtimeEmulator
 from ckesc.protocol import catalogue as cat
 from conformance.answers import check_answer_slot
 
-pytestmark = pytest.mark.realtime  # wall-clock timing with real threads: one at a time under xdist (tests/conftest.py)
+pytestmark = pytest.mark.realtime  # wall-clock timing with real processes: one at a time under xdist (tests/conftest.py)
 
-_channels = itertools.count()
-
-
-class EmulatorSwitch(PowerControl):
-    """The in-process real-time emulator's own power switch."""
-
-    name = "emulator switch"
-
-    def __init__(self, emu: RealtimeEmulator) -> None:
-        self.emu = emu
-
-    def off(self) -> None:
-        self.emu.power_off()
-
-    def on(self) -> None:
-        self.emu.power_on()
+BENCHES = {"simulated": True, "emulate-echo": True, "emulate-no-echo": False}  # -> whether the host's frames echo
 
 
 @pytest.fixture
-def bench(monkeypatch):
+def bench(monkeypatch, tmp_path):
     made = []
 
-    def start(echo: bool) -> Dut:
-        if echo:
+    def start(kind: str) -> Dut:
+        if kind == "simulated":
             monkeypatch.setattr(sim_lane, "SIM_CAN", {"ack": True})  # SocketCAN's: acknowledgement, 10 frames of queue
             lane = SimLane(nodes=(1,))
-            made.append((None, lane))
-            return _dut(lane)
-        channel = f"ckesc-held-{os.getpid()}-{next(_channels)}"
-        emu_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True, ignore_config=True)
-        emu = RealtimeEmulator(EmulatedBench((1,)), bus=emu_bus, own_bus=True, host_alone="hold").start()
-        lane = BusLane({"interface": "virtual", "channel": channel, "receive_own_messages": echo, "ignore_config": True},
-                       EmulatorSwitch(emu), timing_error=DEFAULT_BUS_ERROR_S)
-        made.append((emu, lane))
-        assert lane.find_echo(echo_probe()) is echo
-        return _dut(lane)
+        else:
+            emu = Emulator(tmp_path, "--host-alone", "hold", *([] if BENCHES[kind] else ["--no-echo-own"]))
+            made.append(emu)
+            lane = BusLane({"interface": "socketcand", "channel": "can0", "host": "127.0.0.1", "port": emu.port,
+                            "tcp_tune": True}, ControlPower("127.0.0.1", emu.control), timing_error=DEFAULT_BUS_ERROR_S)
+            first = lane.recv(5.0)  # the ESC's controller is up (else the hub would hold the probe itself)
+            assert first is not None and first.is_rx, first
+            assert lane.find_echo(echo_probe()) is BENCHES[kind]
+        made.append(lane)
+        dut = Dut(lane, DutProfile.load("emulator"), node_id=1)
+        assert dut.wait_for("msg1", 3.0) is not None  # the emulated ESC has booted
+        return dut
 
     yield start
-    for emu, lane in made:
-        lane.close()
-        if emu is not None:
-            emu.close()
+    for thing in reversed(made):
+        thing.close()
 
 
-def _dut(lane) -> Dut:
-    dut = Dut(lane, DutProfile.load("emulator"), node_id=1)
-    assert dut.wait_for("msg1", 3.0) is not None  # the emulated ESC has booted
-    return dut
-
-
-@pytest.mark.parametrize("echo", [True, False], ids=["echo", "no-echo"])
-def test_an_answer_to_a_query_held_while_the_esc_was_off_is_never_failed(bench, echo):
-    dut = bench(echo)
+@pytest.mark.parametrize("kind", list(BENCHES))
+def test_an_answer_to_a_query_held_while_the_esc_was_off_is_never_failed(bench, kind):
+    dut = bench(kind)
+    echo = BENCHES[kind]
     dut.supply.power_off()
     dut.lane.wait_power(0.3)
     sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
@@ -100,7 +75,7 @@ def test_an_answer_to_a_query_held_while_the_esc_was_off_is_never_failed(bench, 
     assert not failed, failed
     if echo:  # timed from the echo: when the frame went out at last, as the ESC's controller came up
         assert sent.bus_time is not None and sent.bus_time >= on and sent.held is None
-        assert not dut.record.inconclusive and dut.record.measurements
+        assert dut.record.measurements and not any("switched off" in line for line in dut.record.inconclusive)
     else:
         assert sent.bus_time is None and not dut.record.measurements
         [line] = dut.record.inconclusive
@@ -109,6 +84,6 @@ def test_an_answer_to_a_query_held_while_the_esc_was_off_is_never_failed(bench, 
 
 
 def test_a_request_sent_with_the_esc_up_is_not_held(bench):
-    dut = bench(False)
+    dut = bench("emulate-no-echo")
     sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
     assert sent.alone is None and sent.held is None
