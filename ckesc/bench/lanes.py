@@ -69,7 +69,7 @@ class Lane(ABC):
     #: why the host may be alone on this bus now (None: another node has been heard since the ESC's power was last
     #: switched): nobody may acknowledge the host's frames, and a real adapter holds them (R20); set by the supply
     #: (:mod:`.supply`), cleared by the first frame of another node the link reads (:mod:`.link`), kept with each send
-    alone: str | None = "no other node heard yet"
+    alone: str | None = "no other node was heard yet"
     #: the other nodes' traffic playing on this lane (``--foreign-traffic``: a station.ForeignPlay), None: a quiet bus
     foreign_traffic: Any = None
     bus: can.BusABC

@@ -54,7 +54,7 @@ class Sent:
         (:attr:`alone`) and no echo says when it left (R20: a held frame is never judged as if sent on time)."""
         if self.alone is None or self.bus_time is not None:
             return None
-        return (f"sent while {self.alone.removeprefix('the ')} (the host alone on the bus: nobody acknowledged it, a "
+        return (f"sent while {self.alone} (the host alone on the bus: nobody acknowledged it, a "
                 "real adapter holds it until the ESC's controller is up) and no echo says when it went out")
 
     @property

@@ -79,7 +79,7 @@ def test_an_answer_to_a_query_held_while_the_esc_was_off_is_never_failed(bench, 
     else:
         assert sent.bus_time is None and not dut.record.measurements
         [line] = dut.record.inconclusive
-        assert "not judged: the request was sent while ESC was switched off" in line and "no echo" in line, line
+        assert "not judged: the request was sent while the ESC was switched off" in line and "no echo" in line, line
         assert "\n" not in line
 
 
