@@ -68,7 +68,8 @@ class Lane(ABC):
     epoch: PowerEpoch | None = None
     #: why the host may be alone on this bus now (None: another node has been heard since the ESC's power was last
     #: switched): nobody may acknowledge the host's frames, and a real adapter holds them (R20); set by the supply
-    #: (:mod:`.supply`), cleared by the first frame of another node the link reads (:mod:`.link`), kept with each send
+    #: (:mod:`.supply`: :data:`SWITCHED_OFF`, :data:`BOOTING`, :data:`UNHEARD`), cleared by the first frame of another
+    #: node the link reads (:mod:`.link`), kept with each send
     alone: str | None = "no other node was heard yet"
     #: the other nodes' traffic playing on this lane (``--foreign-traffic``: a station.ForeignPlay), None: a quiet bus
     foreign_traffic: Any = None
@@ -190,6 +191,13 @@ class BusFault(RuntimeError):
     """The host's bus failed under a test (a send or a read raised: bus-off, a full TX queue, an adapter
     unplugged) and the lane reopened it: that test ERRORs with this message, the run goes on."""
 
+
+#: :attr:`Lane.alone` while the ESC's power is switched off, and from power-on until it reports (its controller may come
+#: up at any moment: what the host sent meanwhile goes out then)
+SWITCHED_OFF = "the ESC was switched off"
+BOOTING = "the ESC was booting"
+#: ... and once its boot time has passed without a report from it (nothing will take the host's frames soon)
+UNHEARD = "no report from the ESC since its power-on"
 
 #: How often, and how far apart, the lane tries to reopen a bus that failed before it gives up (BenchGone)
 REOPEN_TRIES = 3

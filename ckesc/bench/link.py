@@ -19,7 +19,7 @@ from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind
 from ..protocol.judgements import timing_tolerance
 from ..protocol.transfer import TAIL_BYTES, TRANSFER_ID_MODULO, tail_transfer_id
 from .epochs import WINDOW_REQUESTS
-from .lanes import Lane, OwnFrame, stop_task
+from .lanes import BOOTING, SWITCHED_OFF, Lane, OwnFrame, stop_task
 from .outcomes import Inconclusive, NotClaimed, Record
 from .profile import DutProfile
 
@@ -250,7 +250,10 @@ class Link:
         """Send a request and read until its answer or ``timeout`` (lane seconds; default 0.1 s plus the
         lane's stated timing error: an answer that late is not "no answer" on a lane that cannot tell). The
         timeout runs from when the request reached the bus where its echo shows that the host was held up between
-        reading the clock and sending (later than the stated send error and two frames on the bus), else from the send."""
+        reading the clock and sending (later than the stated send error and two frames on the bus), else from the send.
+        A request sent while the ESC was switched off or booting (:attr:`.lanes.Lane.alone`) goes out when its
+        controller is up to acknowledge it: that is waited for (at most the profile's boot time) and the timeout runs
+        again from then (R20)."""
         self._check_claimed(name, fields)
         if timeout is None:
             timeout = 0.1 + self.lane.timing_error
@@ -264,8 +267,16 @@ class Link:
             # how much later than the host's send a request may reach the bus without the host having been held up:
             # the stated send error and two frames ahead of it on the bus (within it the window runs from the send)
             held_up = self.lane.host_send_error + 2 * frame_bits(8) / self.lane.bitrate
+            alone = sent.alone in (SWITCHED_OFF, BOOTING)  # sent while the ESC was not up: held until it is (R20)
             while True:
                 self.read_until(deadline, stop=lambda f: pending.response is not None)
+                if alone and pending.response is None:
+                    alone = False  # the ESC's controller comes up within its boot time: the request goes out then
+                    self.read_until(self.now() + self.profile.boot_s,
+                                    stop=lambda f: self.lane.alone is None or pending.response is not None)
+                    if pending.response is None and self.lane.alone is None:
+                        deadline = pending.deadline = max(deadline, self.now() + timeout)
+                        continue
                 if pending.response is None and sent.bus_time is None and self.now() > deadline + held_up:
                     self.await_echo(sent)  # the host was held up past the deadline before it read the echo
                 left_at = sent.bus_time if sent.bus_time is not None else sent.host_time

@@ -7,6 +7,7 @@ from typing import Iterable
 
 from ..protocol import catalogue as cat
 from .epochs import INSIDE, WINDOW_MARGIN_S, PowerEpoch, unusable
+from .lanes import BOOTING, SWITCHED_OFF, UNHEARD
 from .link import DutError, Link
 from .outcomes import Inconclusive
 
@@ -119,7 +120,7 @@ class Supply:
             longest = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
             others &= {src for src, _, _ in self.link.report_starts(self.link.now() - longest, None)}
         self.link.lane.epoch = None  # no window stands until the DUT is up again
-        self.link.lane.alone = "the ESC was switched off"
+        self.link.lane.alone = SWITCHED_OFF
         self.link.lane.power.off()
         self._power_switched()
         return others
@@ -130,12 +131,11 @@ class Supply:
         earliest = self.link.now()  # the DUT cannot have been switched on before this
         self.link.lane.power.on()
         on = self.link.now()
-        self.link.lane.alone = "the ESC was booting"
+        self.link.lane.alone = BOOTING
         self._power_switched()
         heard = self.await_reports(on, on + self.ready_bound_s(boot_wait), others)
         first = min((t for t in heard.values()), default=None)
-        if first is not None:
-            self.link.lane.alone = None
+        self.link.lane.alone = None if first is not None else UNHEARD
         self.link.lane.epoch = PowerEpoch(earliest, first if first is not None else self.link.now(), self.link.node_id, self.link.lane.bitrate)
         self.link.record.observe("after power-up", f"first report {(first - on) * 1000:.1f} ms after power-on" if first is not None
                             else f"no report within {self.ready_bound_s(boot_wait):.2f} s of power-on")

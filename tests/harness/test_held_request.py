@@ -87,3 +87,17 @@ def test_a_request_sent_with_the_esc_up_is_not_held(bench):
     dut = bench("emulate-no-echo")
     sent = dut.broadcast("get_esc_id", {"option": 0}, layout="query")
     assert sent.alone is None and sent.held is None
+
+
+@pytest.mark.parametrize("kind", list(BENCHES))
+def test_a_request_sent_while_the_esc_boots_gets_its_answer(bench, kind):
+    """Sent at power-on (the supply's wait for the boot left out), the request is held until the ESC's controller is
+    up: the host waits for it that long, then for its answer, never calling it unanswered meanwhile."""
+    dut = bench(kind)
+    dut.supply.power_off()
+    dut.lane.wait_power(0.3)
+    dut.lane.power.on()
+    ex = dut.request("get_major_configuration", {"option": 0})
+    assert ex.sent.alone == "the ESC was switched off" and dut.lane.alone is None
+    assert ex.response is not None, "no answer to a request held until the ESC's controller was up"
+    assert ex.response.timestamp - ex.sent.host_time > 0.1  # later than request()'s own timeout from the send
