@@ -74,6 +74,19 @@ def cycle(dut, expect):
     return rate
 
 
+def move_to(dut, code):
+    """Setup: the DUT running at ``code``'s rate and the host with it, its window freshly open (raises Inconclusive
+    if Set Baud cannot get it there: whether it does is 4.4.19's verdict, not the calling test's)."""
+    if dut.lane.bitrate == RATES[code] and answers_here(dut):
+        dut.open_window()
+        return
+    dut.open_window()
+    set_baud(dut, code)
+    rate = cycle(dut, RATES[code])
+    if rate != RATES[code]:
+        raise Inconclusive(f"setup: Set Baud {code} did not bring the DUT to {RATES[code]} bit/s (it is at {rate})")
+
+
 def restore(dut, rate0):
     """Put the DUT back at ``rate0`` and the host with it; verified (RestoreFailed, the harness's, when not). Set Baud
     goes inside the window of the DUT's current power-up while enough of it is left, else (or when that did not

@@ -8,7 +8,7 @@ import pytest
 # code stood in test modules. Registered here, before any test module imports them. (throttle.py,
 # a helper module from the start, never was: its messages stay as they were.)
 pytest.register_assert_rewrite(*(f"conformance.{m}" for m in (
-    "answers", "baud", "codes", "motor", "multi_esc", "physics", "raw_command_12b", "settings", "telemetry", "wire")))
+    "answers", "baud", "codes", "motor", "multi_esc", "physics", "raw_command_12b", "settings", "showing", "telemetry", "wire")))
 
 
 # every conformance test gets a timeout: a silent DUT must fail fast, never hang the run

@@ -41,54 +41,15 @@ from ckesc.protocol.malformed import Bad
 from .answers import answers_another_node, esc_ids, original, put_back
 from .baud import RATES, cycle, rate0
 from .resets import reset_signs
-from .settings import NEIGHBOURS, changes, move_request
+from .settings import changes
+from .showing import TAKEN, WINDOW_WRITERS, command, state_bits
 from .telemetry import frame_start, interval_s, ms
-from .throttle import STREAM_PERIOD_S, can_throttle, command_for, motor_stopped
+from .throttle import STREAM_PERIOD_S, can_throttle, motor_stopped
 
 SECTION = "robustness"
 motor_stopped = motor_stopped  # autouse fixture: the motor stopped before and after each test
 original = original  # fixture: the DUT's node id and channel, put back after a malformed Set ID
 rate0 = rate0  # fixture: the DUT and the host put back at their bit rate after a malformed Set Baud
-
-#: the requests that write a setting only inside the 120 s window after power-up (R11): sent inside it, in a test of
-#: their own (module docstring)
-WINDOW_WRITERS = frozenset(s.writer for s in cat.PERSISTED_SETTINGS if s.window)
-#: taking it erases the ESC's temperature records, which nothing reads back
-DESTRUCTIVE = frozenset({"clear_rec"})
-#: a read of the temperature records (Expand Set Part): taking it shows as MSG_EXP12 frames
-READ_RECORDS = next(c for c in cat.EXPAND_COMMANDS.values() if c.name == "read_temperature_records")
-
-
-#: every frame type the ESC takes from the host, in the catalogue's order, less those not sent (module docstring)
-TAKEN = [s.name for s in cat.CATALOGUE if r17.host_layout(s) is not None and s.name not in WINDOW_WRITERS | DESTRUCTIVE]
-#: the persisted setting each writer moves
-_WRITES = {cat.PERSISTED[name].writer: name for name in NEIGHBOURS}
-
-#: a command of each frame type that shows if it is taken (the settings writers and the throttle frames have theirs
-#: from their tables): a frame type added to the catalogue without one fails here, at import
-_COMMANDS = {
-    "can_test": lambda dut, s: {"option": cat.CAN_TEST_ON},
-    "msg_control": lambda dut, s: {"option": 0, "command": cat.MSG_CONTROL_SUSPEND},
-    "get_esc_id": lambda dut, s: {"option": 0},
-    "self_test": lambda dut, s: {},
-    "expand_set_part": lambda dut, s: {"set_cmd": READ_RECORDS.code, "part": next(iter(READ_RECORDS.parts))},
-    "get_rec": lambda dut, s: {"payload": []},
-    "esc_information": lambda dut, s: {"option": 0},
-    "maintenance_information": lambda dut, s: {"option": 2},
-    "get_major_configuration": lambda dut, s: {"option": 0},
-}
-if missing := sorted(set(TAKEN) - set(_COMMANDS) - set(_WRITES) - set(cat.THROTTLE_FRAMES)):
-    raise KeyError(f"frame types {missing}: say in {__name__} which command of theirs shows when taken")
-
-
-def command(dut, name: str, s: dict, value: int = 0) -> dict | None:
-    """The fields of a valid command of ``name`` that shows if it is taken (None: the DUT's channel is not in it)."""
-    if name in _WRITES:
-        return move_request(_WRITES[name], s)
-    if name in cat.THROTTLE_FRAMES:
-        return command_for(name, s["throttle_channel"], value)
-    return _COMMANDS[name](dut, s)
-
 
 def _other_nodes(dut) -> list[int]:
     """Node ids no ESC of the bench has, each one bit away from the DUT's (:func:`ckesc.protocol.malformed.other_nodes`)."""
@@ -100,10 +61,6 @@ def malformed(dut, name: str, fields: dict, *, toggle_only: bool = False) -> lis
     each with its own transfer id; only the single frame with toggle 1 (R17-toggle) when ``toggle_only``."""
     return r17.malformed(name, fields, source=dut.host_node, node_id=dut.node_id, others=_other_nodes(dut),
                          nibble_order=dut.profile.nibble_order, toggle_only=toggle_only)
-
-
-def _status_bits(f) -> int:
-    return f.fields["status"] & (cat.STATUS_STATE_BITS & ~Status.COMM_FAULT)  # the comm flag moves with time (R8)
 
 
 @dataclass
@@ -213,8 +170,8 @@ def send_and_look(dut, bads: list[Bad], name: str) -> Effects:
     grown = reset_signs(dut, [], interval, ups=(ups, ups_after))
     resets[:0] = grown
     state = []
-    if before and msg1 and _status_bits(before[-1]) != _status_bits(msg1[-1]):
-        state.append(f"MSG1 state bits 0x{_status_bits(before[-1]):04X} -> 0x{_status_bits(msg1[-1]):04X}")
+    if before and msg1 and state_bits(before[-1]) != state_bits(msg1[-1]):
+        state.append(f"MSG1 state bits 0x{state_bits(before[-1]):04X} -> 0x{state_bits(msg1[-1]):04X}")
     return Effects(answers, ", ".join(filter(None, [changes(s, after), *state])), resets, s, restarted or bool(grown))
 
 

@@ -10,6 +10,10 @@ model's acknowledgement and error confinement on for the fault and its recovery 
 emulator's hub does (``ckesc control bus``); on a real bench ``--bus-fault-cmd`` closes a relay across CANH-CANL,
 a command's or labgrid's (docs/robustness.md). A lane without one SKIPs these tests.
 
+An ESC at another bit rate than its bus takes nothing (R20-bitrate): moved to another rate by Set Baud, it is sent
+from the host at the bus's rate every command that would show if taken (:mod:`.showing`), and read back at its own
+rate and after a power cycle. It needs power control and a host that changes its bit rate (:mod:`.baud`'s ``rate0``).
+
 Section ``robustness``, not one of its own: R20's bus clauses are, as R17's and R18's, what the ESC does with a bus
 the document does not describe, judged by the same signs (:mod:`.resets`, :mod:`.settings`).
 """
@@ -19,16 +23,21 @@ from __future__ import annotations
 import pytest
 
 from ckesc.bench.bus_fault import NO_CONTROL, bus_fault_control
-from ckesc.bench.outcomes import Inconclusive
+from ckesc.bench.lanes import BusFault
+from ckesc.bench.outcomes import Inconclusive, NotClaimed
 from ckesc.bench.power import POWER_COMMAND_TIMEOUT_S
+from ckesc.protocol import catalogue as cat
 from ckesc.protocol.canbus import recovery_seconds
 from ckesc.protocol.catalogue import REPORT_FRAMES, Status
 
+from .baud import CODES, RATES, cycle, move_to, rate0, reopen
 from .resets import afterwards, reset_signs
+from .showing import TAKEN, command, state_bits
 from .telemetry import REACT_S, interval_s, ms, timing_unjudged
 from .throttle import FORMAT_CHANNELS, STREAM_PERIOD_S, can_throttle, command_for
 
 SECTION = "robustness"
+rate0 = rate0  # fixture: the DUT and the host put back at the bit rate they were found at
 #: How long the bus is shorted: far past the ESC's way to bus-off (32 tries) and past R8's timeout with a margin, so
 #: that the commands lost meanwhile raise the comm flag
 SHORT_S = 0.5
@@ -161,3 +170,118 @@ def test_comm_flag_rises_through_a_bus_short_and_clears(dut, pytestconfig):
     assert not problems, (f"after a {ms(SHORT_S):g} ms bus short with the command stream stopped: " + "; ".join(problems)
                           + " (R20: commands lost while the bus is disturbed raise the comm flag as R8 says, the "
                           "next command clears it)")
+
+
+# ------------------------------------------------------------------------------------------ an ESC at another rate
+#: the commands that change the ESC's reporting go last: an ESC that took them would stop the reports the other
+#: signs are read from (and R12 would leave a settings write taken after a suspend unapplied)
+_LAST = ("msg_control", "can_test")
+
+
+def _at_the_old_rate(dut, s: dict, code: int) -> tuple[list[str], list[str]]:
+    """From the host at the bus's rate (the ESC at another): every command of :data:`~.showing.TAKEN` that shows
+    when taken, a Set Baud ``code`` inside the 120 s window (R11), and a zero-throttle stream through
+    :data:`RATE_STREAM_S`. What was sent, and what the bench held (a lone host's frames: nobody at the bus's rate
+    acknowledges them, so a real adapter holds them and its queue fills, R20)."""
+    sent, held = [], []
+    stream = next(n for n in FORMAT_CHANNELS if command_for(n, s["throttle_channel"]) is not None)
+    try:
+        dut.request("set_baud", {"baud": code}, expect_response=False)
+        sent.append(f"Set Baud {code} ({RATES[code]} bit/s)")
+        for name in TAKEN:
+            if name in _LAST:  # (sent after the stream)
+                continue
+            _send(dut, name, command(dut, name, s), sent)
+        dut.throttle_stream(stream, command_for(stream, s["throttle_channel"]), STREAM_PERIOD_S)
+        dut.wait(RATE_STREAM_S)
+        dut.stop_throttle()
+        sent.append(f"{stream} at zero throttle every {ms(STREAM_PERIOD_S):g} ms for {ms(RATE_STREAM_S):g} ms")
+        for name in _LAST:
+            _send(dut, name, command(dut, name, s), sent)
+        dut.wait(cat.ANSWER_DELAY_MAX_S)
+    except BusFault as exc:
+        held.append(str(exc))
+    finally:
+        dut.stop_throttle()
+    return sent, held
+
+
+def _send(dut, name: str, fields: dict | None, sent: list[str]) -> None:
+    """``name``'s command ``fields`` as the host sends it (a request not waited for), said in ``sent``; nothing for a
+    frame that cannot address the DUT's channel or a function its profile declares absent."""
+    if fields is None:
+        return
+    try:
+        if cat.spec(name).service:
+            dut.request(name, fields, expect_response=False)
+        else:
+            dut.broadcast(name, fields, layout="query" if name == "get_esc_id" else None)
+    except NotClaimed:
+        return
+    sent.append(f"{name} {fields}")
+
+
+#: how long the zero-throttle stream runs at the bus's rate: past an MSG1 interval of the longest legal (the ESC that
+#: took it has its comm flag cleared at its next MSG1, R8)
+RATE_STREAM_S = 0.25
+
+
+@pytest.mark.requirement("R20-bitrate", "R11", "R8")
+@pytest.mark.power_cycle
+def test_an_esc_at_another_bit_rate_takes_nothing(dut, rate0):
+    """The ESC moved to another bit rate (Set Baud and a proven power cycle, as 4.4.19 does); from the host back at the
+    bus's rate, every command that shows when taken (settings writes, a Set Baud to the bus's rate inside the 120 s
+    window, queries, reads, a zero-throttle stream, then MSG Control suspend and CAN Test on). Then, the host at the
+    ESC's rate: it sent nothing but its reports (no answer, no CAN Test frame), still reports with its state bits as
+    they were and its comm flag raised (no command reached it: R8), its settings unchanged, no reset. The ESC and the
+    host are put back at the bus's rate whatever happened (``rate0``). Zero throttle throughout."""
+    code = next(c for c, r in sorted(RATES.items()) if r not in (rate0, cat.DEFAULT_BITRATE))
+    move_to(dut, code)  # the ESC and the host at the other rate, the 120 s window of its power-up open
+    other = RATES[code]
+    s = can_throttle(dut)
+    ups = dut.power_up_count()
+    interval = interval_s(s, "msg1")
+    err = dut.lane.timing_error
+    raised = dut.wait_for("msg1", cat.COMM_LOSS_TIMEOUT_S + 2 * interval + err, source=dut.node_id, where=_flag)
+    if raised is None:
+        raise Inconclusive(f"setup: the comm flag did not rise at {other} bit/s with no command since the power-up "
+                           "(R8's test judges that): a command taken at the bus's rate would not show")
+    reopen(dut, rate0)  # the host at the bus's rate; the ESC at another
+    dut.lane.alone = f"the ESC was at {other} bit/s"  # nobody here acknowledges: its adapter's error-passive expected
+    sent, held = _at_the_old_rate(dut, s, CODES[rate0])
+    reopen(dut, other)
+    t1 = dut.now()
+    dut.wait(2 * interval + cat.ANSWER_DELAY_MAX_S + err)
+    problems = []
+    took = sorted({f.name for f in dut.frames(since=t1, source=dut.node_id) if f.name not in cat.REPORT_FRAMES})
+    took += [f"an undecodable frame {g.msg.arbitration_id:08X}" for g in dut.undecoded(since=t1, source=dut.node_id)]
+    if took:
+        problems.append(f"it sent {', '.join(took)} (answers to the host's frames, or what they started)")
+    msg1 = dut.frames("msg1", since=t1, source=dut.node_id)
+    if not msg1:
+        problems.append(f"no MSG1 at {other} bit/s in the {ms(2 * interval + err):g} ms after (reporting stopped: a "
+                        "suspend, CAN Test or a reset taken)")
+    elif cleared := [f for f in msg1 if not _flag(f)]:
+        problems.append(f"MSG1 without the comm flag {ms(cleared[0].timestamp - t1):g} ms after the host came back: "
+                        "a RawCommand at the bus's rate refreshed its comm watchdog")
+    if msg1 and state_bits(msg1[-1]) != state_bits(raised):
+        problems.append(f"MSG1 state bits 0x{state_bits(raised):04X} -> 0x{state_bits(msg1[-1]):04X}")
+    problems += afterwards(dut, s, ups, interval)
+    try:  # a Set Baud taken shows at the next power-up (R11), proven by 241 at whichever rate the ESC answers then
+        after = cycle(dut, other)
+    except Inconclusive:
+        if not problems:
+            raise
+        after = other  # the FAIL stands; where the rate went is then not known
+    if after != other:
+        problems.append(f"after the next power-up it answers at {after} bit/s: it took the Set Baud {CODES[rate0]} "
+                        f"sent at {rate0} bit/s")
+    dut.record.observe(f"sent at {rate0} bit/s", "; ".join(sent))
+    if held:
+        dut.record.observe(f"the host's frames at {rate0} bit/s", held[0])
+    assert not problems, (f"an ESC at {other} bit/s, after the host's commands at {rate0} bit/s (the bus's): "
+                          + "; ".join(problems) + " (R20: an ESC at another bit rate than the bus takes nothing, "
+                          "answers nothing and changes nothing)")
+    if held:
+        raise Inconclusive(f"the host could not send all its frames at {rate0} bit/s ({held[0]}): nobody there "
+                           "acknowledges them; what it sent changed nothing")

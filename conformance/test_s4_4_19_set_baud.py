@@ -14,7 +14,7 @@ from ckesc.bench.outcomes import Inconclusive
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.legality import illegal_cases
 
-from .baud import CODES, RATES, answers_here, cycle, rate0, reopen, set_baud
+from .baud import CODES, RATES, answers_here, cycle, move_to, rate0, reopen, set_baud
 from .telemetry import msg_control, resume
 
 SECTION = "4.4.19"
@@ -38,19 +38,6 @@ def _silent_at(dut, old, new, what):
     return f"{what}, and no answer at {new} bit/s either"
 
 
-def _move_to(dut, code):
-    """Setup: the DUT running at ``code``'s rate, its window freshly open (raises Inconclusive if Set
-    Baud cannot get it there: what that test checks is then another test's business)."""
-    if dut.lane.bitrate == RATES[code] and answers_here(dut):
-        dut.open_window()
-        return
-    dut.open_window()
-    set_baud(dut, code)
-    rate = cycle(dut, RATES[code])
-    if rate != RATES[code]:
-        raise Inconclusive(f"setup: Set Baud {code} did not bring the DUT to {RATES[code]} bit/s (it is at {rate})")
-
-
 def _other_code(*avoid_rates):
     return next(code for code, rate in RATES.items() if rate not in avoid_rates)
 
@@ -63,7 +50,7 @@ def test_new_rate_only_after_the_next_power_up(dut, rate0, code):
     """Set Baud is answered with the code; until the next power-up the DUT keeps answering and
     reporting at the old rate; after it, it answers at the code's rate, and only there."""
     start_code = CODES[rate0] if RATES[code] != rate0 else _other_code(rate0)
-    _move_to(dut, start_code)  # from another rate, so that the change shows
+    move_to(dut, start_code)  # from another rate, so that the change shows
     old = RATES[start_code]
     ex = set_baud(dut, code)
     assert ex.response is not None, _silent_at(dut, old, RATES[code], f"no answer to Set Baud at {old} bit/s")
@@ -101,7 +88,7 @@ def test_illegal_code_changes_nothing(dut, rate0, case):
     """A code above 6 is ignored: after the next power-up the DUT is still at its rate. Run from a
     rate that is not the default, so that a device falling back to 500 kbit/s shows."""
     base = _other_code(rate0, cat.DEFAULT_BITRATE)
-    _move_to(dut, base)
+    move_to(dut, base)
     ex = set_baud(dut, case.value)
     dut.record.observe("answer to the illegal code (R10-answer)", ex.response.fields if ex.response else "none")
     rate = cycle(dut, RATES[base])

@@ -33,6 +33,7 @@ from ..protocol.canbus import DEFAULT_TXQUEUELEN
 from ..protocol.catalogue import DEFAULT_BITRATE
 from ..protocol.frame import WireFrame, frame_bits
 from ..protocol.judgements import R18_MAX_SHARE, r18_queueing_s
+from .adapter import AdapterWatch
 from .epochs import PowerEpoch
 from .power import PowerControl
 from .profile import DEFAULT_BUS_ERROR_S
@@ -68,6 +69,11 @@ class Lane(ABC):
     can_change_bitrate: bool = True  # reopen() really moves the host to another bit rate (Set Baud's tests)
     #: the DUT's current power-up as the harness made it (None: unknown, or off); see epochs.py
     epoch: PowerEpoch | None = None
+    #: why the host may be alone on this bus now (None: another node has been heard since the ESC's power was last
+    #: switched): nobody may acknowledge the host's frames, and a real adapter holds them (R20); set by the supply
+    #: (:mod:`.supply`: :data:`SWITCHED_OFF`, :data:`BOOTING`, :data:`UNHEARD`), cleared by the first frame of another
+    #: node the link reads (:mod:`.link`), kept with each send
+    alone: str | None = "no other node was heard yet"
     #: the other nodes' traffic playing on this lane (``--foreign-traffic``: a station.ForeignPlay), None: a quiet bus
     foreign_traffic: Any = None
     bus: can.BusABC
@@ -196,6 +202,13 @@ class BusFault(RuntimeError):
     unplugged) and the lane reopened it: that test ERRORs with this message, the run goes on."""
 
 
+#: :attr:`Lane.alone` while the ESC's power is switched off, and from power-on until it reports (its controller may come
+#: up at any moment: what the host sent meanwhile goes out then)
+SWITCHED_OFF = "the ESC was switched off"
+BOOTING = "the ESC was booting"
+#: ... and once its boot time has passed without a report from it (nothing will take the host's frames soon)
+UNHEARD = "no report from the ESC since its power-on"
+
 #: How often, and how far apart, the lane tries to reopen a bus that failed before it gives up (BenchGone)
 REOPEN_TRIES = 3
 REOPEN_PAUSE_S = 0.5
@@ -313,6 +326,7 @@ class BusLane(Lane):
         self.echo = True  # until find_echo() says otherwise: what python-can was asked for
         self.echo_note = "not probed"
         self.recoveries: list[str] = []  # each bus failure the lane recovered from (reopened)
+        self.adapter = AdapterWatch(self)  # the host's own adapter's state (bus-off, error-passive): adapter.py
         self.bus = self._open(self.bus_kwargs)
         self.bitrate = int(self.bus_kwargs.get("bitrate") or DEFAULT_BITRATE)
         self.power = power
@@ -492,6 +506,14 @@ class BusLane(Lane):
             msg = self._next(timeout)
         except BUS_ERRORS as exc:
             self._io_failed(exc)
+        if msg is not None and msg.is_error_frame:
+            self.adapter.heard(msg)
+        if (said := self.adapter.check()) is not None:  # the host's own adapter bus-off or error-passive
+            gone, line = said
+            if gone:
+                raise BenchGone(line)
+            self.recoveries.append(line)
+            raise BusFault(line)
         self._hold = -math.inf if msg is not None else None
         if msg is not None and msg.timestamp:
             self._last_ts = max(self._last_ts, msg.timestamp)

@@ -20,7 +20,7 @@ from ..protocol.judgements import timing_tolerance
 from ..protocol.transfer import TAIL_BYTES, TRANSFER_ID_MODULO, tail_transfer_id
 from .epochs import WINDOW_REQUESTS
 from .errors import RestoreFailed
-from .lanes import BusFault, Lane, OwnFrame, stop_task
+from .lanes import BOOTING, SWITCHED_OFF, BusFault, Lane, OwnFrame, stop_task
 from .outcomes import Inconclusive, NotClaimed, Record
 from .profile import DutProfile
 
@@ -41,10 +41,22 @@ class Sent:
     #: (clock, error in s) of a bus time, and of the host's time (an adapter without echo, an echo not read yet)
     bus_clock: tuple[str, float] = ("bus timestamp", 0.0)
     host_clock: tuple[str, float] = ("host clock", 0.0)
+    #: why the host was alone on the bus when it sent this (None: it was not): nobody acknowledged the frame then, so a
+    #: real adapter held it until the ESC's controller came up (R20); without an echo when it went out is not known
+    alone: str | None = None
 
     @property
     def time(self) -> float:
         return self.bus_time if self.bus_time is not None else self.host_time
+
+    @property
+    def held(self) -> str | None:
+        """Why :attr:`time` is not when this frame went on the bus (None: it is): it was sent while the host was alone
+        (:attr:`alone`) and no echo says when it left (R20: a held frame is never judged as if sent on time)."""
+        if self.alone is None or self.bus_time is not None:
+            return None
+        return (f"sent while {self.alone} (the host alone on the bus: nobody acknowledged it, a "
+                "real adapter holds it until the ESC's controller is up) and no echo says when it went out")
 
     @property
     def clock(self) -> str:
@@ -158,6 +170,8 @@ class Link:
     def _take(self, msg: can.Message) -> Frame | None:
         if msg.is_extended_id and (msg.arbitration_id & 0x7F) == self.host_node and not msg.is_error_frame:
             self._match_echo(msg)
+        elif self.lane.alone is not None and getattr(msg, "is_rx", True) and not getattr(msg, "is_error_frame", False):
+            self.lane.alone = None  # another node is up: it acknowledges the host's frames
         for event in self.proto.receive(msg):
             if isinstance(event, Garbled):
                 self._keep_garbled(event)  # the framing checks (4.1) report it
@@ -209,7 +223,8 @@ class Link:
     # ------------------------------------------------------------------ sending
     def send_wire(self, wire: WireFrame) -> Sent:
         msg = can.Message(arbitration_id=wire.arbitration_id, data=wire.data, is_extended_id=wire.is_extended_id)
-        sent = Sent(wire, self.now(), bus_clock=(self.lane.clock, self.lane.timing_error), host_clock=self.lane.host_clock)
+        sent = Sent(wire, self.now(), bus_clock=(self.lane.clock, self.lane.timing_error), host_clock=self.lane.host_clock,
+                    alone=self.lane.alone)
         kind, type_id = classify(wire.arbitration_id)[:2]
         self.sent_types.add(type_id)
         if kind is Kind.REQUEST and type_id in _WINDOW_IDS and self.lane.epoch is not None:
@@ -236,7 +251,10 @@ class Link:
         """Send a request and read until its answer or ``timeout`` (lane seconds; default 0.1 s plus the
         lane's stated timing error: an answer that late is not "no answer" on a lane that cannot tell). The
         timeout runs from when the request reached the bus where its echo shows that the host was held up between
-        reading the clock and sending (later than the stated send error and two frames on the bus), else from the send."""
+        reading the clock and sending (later than the stated send error and two frames on the bus), else from the send.
+        A request sent while the ESC was switched off or booting (:attr:`.lanes.Lane.alone`) goes out when its
+        controller is up to acknowledge it: that is waited for (at most the profile's boot time) and the timeout runs
+        again from then (R20)."""
         self._check_claimed(name, fields)
         if timeout is None:
             timeout = 0.1 + self.lane.timing_error
@@ -250,8 +268,16 @@ class Link:
             # how much later than the host's send a request may reach the bus without the host having been held up:
             # the stated send error and two frames ahead of it on the bus (within it the window runs from the send)
             held_up = self.lane.host_send_error + 2 * frame_bits(8) / self.lane.bitrate
+            alone = sent.alone in (SWITCHED_OFF, BOOTING)  # sent while the ESC was not up: held until it is (R20)
             while True:
                 self.read_until(deadline, stop=lambda f: pending.response is not None)
+                if alone and pending.response is None:
+                    alone = False  # the ESC's controller comes up within its boot time: the request goes out then
+                    self.read_until(self.now() + self.profile.boot_s,
+                                    stop=lambda f: self.lane.alone is None or pending.response is not None)
+                    if pending.response is None and self.lane.alone is None:
+                        deadline = pending.deadline = max(deadline, self.now() + timeout)
+                        continue
                 if pending.response is None and sent.bus_time is None and self.now() > deadline + held_up:
                     self.await_echo(sent)  # the host was held up past the deadline before it read the echo
                 left_at = sent.bus_time if sent.bus_time is not None else sent.host_time

@@ -7,6 +7,7 @@ from typing import Iterable
 
 from ..protocol import catalogue as cat
 from .epochs import INSIDE, WINDOW_MARGIN_S, PowerEpoch, unusable
+from .lanes import BOOTING, SWITCHED_OFF, UNHEARD
 from .link import DutError, Link
 from .outcomes import Inconclusive
 
@@ -105,21 +106,36 @@ class Supply:
         back, where the state is verified afterwards. Returns the lane time of power-on. On a bench of several
         ESCs (``nodes``) it waits for each of them that was reporting before the power went off: they do not
         boot at one instant, and one still booting would miss what is asked next (a GET_ESC_ID broadcast)."""
+        others = self.power_off()
+        self.link.lane.wait_power(self.link.profile.off_s if off_time is None else off_time)
+        return self.power_on(others, boot_wait)
+
+    def power_off(self) -> set[int]:
+        """The first half of :meth:`switch_power`: every stream stopped, the power off. From now on the host is
+        alone on the bus (:attr:`.lanes.Lane.alone`: nobody acknowledges its frames, a real adapter holds them). Returns
+        the other ESCs of the bench that were reporting (:meth:`power_on` waits for them too)."""
         self.link.stop_throttle()
         others = set(self.link.nodes) - {self.link.node_id} if len(self.link.nodes) > 1 else set()
         if others:
             longest = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
             others &= {src for src, _, _ in self.link.report_starts(self.link.now() - longest, None)}
         self.link.lane.epoch = None  # no window stands until the DUT is up again
+        self.link.lane.alone = SWITCHED_OFF
         self.link.lane.power.off()
         self._power_switched()
-        self.link.lane.wait_power(self.link.profile.off_s if off_time is None else off_time)
+        return others
+
+    def power_on(self, others: Iterable[int] = (), boot_wait: float | None = None) -> float:
+        """The second half of :meth:`switch_power`: the power on, then the boot awaited (the host is alone until the
+        ESC reports: its controller is not up before); the lane time of power-on."""
         earliest = self.link.now()  # the DUT cannot have been switched on before this
         self.link.lane.power.on()
         on = self.link.now()
+        self.link.lane.alone = BOOTING
         self._power_switched()
         heard = self.await_reports(on, on + self.ready_bound_s(boot_wait), others)
         first = min((t for t in heard.values()), default=None)
+        self.link.lane.alone = None if first is not None else UNHEARD
         self.link.lane.epoch = PowerEpoch(earliest, first if first is not None else self.link.now(), self.link.node_id, self.link.lane.bitrate)
         self.link.record.observe("after power-up", f"first report {(first - on) * 1000:.1f} ms after power-on" if first is not None
                             else f"no report within {self.ready_bound_s(boot_wait):.2f} s of power-on")

@@ -120,7 +120,7 @@ class EmulatedBench:
 
     # frames -----------------------------------------------------------------------------------
     def deliver(self, frame: Any, now: float, bitrate: int, sender: EscModel | None = None) -> None:
-        """A frame on the bus reaches every powered ESC at its bit rate (decoded once for all).
+        """A frame on the bus reaches every powered ESC that listens at its bit rate (decoded once for all).
 
         Frames no ESC acts on (other ESCs' reports) are only counted, and a throttle frame goes only
         to the ESCs it can address (:meth:`EscModel.throttle_keys`): the hot path of a busy bus."""
@@ -169,7 +169,7 @@ class EmulatedBench:
                     self._throttle_decoded[key] = (decoded, targets_key)
         changed = False
         for esc in targets:
-            if esc is not sender and esc.powered and esc.state.bitrate == bitrate:
+            if esc is not sender and esc.powered and esc.listens_at(bitrate):
                 if esc.receive(frame, now, decoded=decoded):
                     self._deadlines[0 if len(self.escs) == 1 else self.escs.index(esc)] = _or_inf(esc.next_deadline())
                     changed = True

@@ -99,6 +99,9 @@ _FAULTS = (
           "automatic recovery, none by the firmware): after a bus short the ESC is silent until a power cycle"),
     Fault("busoff_recovery_resets", ("R20-recovery",), "the ESC recovers from bus-off by rebooting (its firmware resets "
           "on a bus-off): the power-up count moves and the transfer ids start again"),
+    Fault("takes_other_bitrate", ("R20-bitrate",), "the ESC's CAN controller takes frames sent at another bit rate "
+          "than its own: moved to another rate by Set Baud, it still obeys the commands, settings writes and queries of "
+          "a host at its old rate (its answers go out at its own rate)"),
     # throttle (4.4.15 - 4.4.17)
     Fault("throttle_channel_ignored", ("4.4.18-6",), "the ESC always follows channel 1, not its own throttle channel"),
     Fault("twelve_bit_nibbles_swapped", ("R4",), "RawCommand_12b is read with the nibbles of p1/p4 swapped"),

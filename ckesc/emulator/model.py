@@ -201,6 +201,11 @@ class EscModel(Output, Motor, Telemetry, Settings, Answers):
             self.receive(frame, now)
         return self.poll(now), self.next_deadline()
 
+    def listens_at(self, bitrate: int) -> bool:
+        """Whether its CAN controller takes (and acknowledges) a frame sent at ``bitrate``: at its own rate only
+        (R20), at any with the fault ``takes_other_bitrate``."""
+        return self.state.bitrate == bitrate or "takes_other_bitrate" in self.faults
+
     def receive(self, msg: Any, now: float, *, decoded: Frame | DecodeError | None = None) -> bool:
         """A frame heard on the bus at ``now`` (the adapter has checked the bitrate matches).
         ``decoded``: the frame already decoded (or its DecodeError), when a bench decodes once for all.

@@ -127,7 +127,7 @@ class CanNodes:
                     return True
         now = self.now
         for esc in self.bench.escs:
-            if esc is not sender and esc.powered and esc.state.bitrate == bitrate and now >= esc.state.ready_at:
+            if esc is not sender and esc.powered and esc.listens_at(bitrate) and now >= esc.state.ready_at:
                 ctl = ctls.get(esc)
                 if ctl is None or ctl.state is not ErrorState.BUS_OFF:
                     return True
@@ -171,7 +171,7 @@ class CanNodes:
         now = self.now
         t = INF
         for esc in self.bench.escs:
-            if esc.powered and esc.state.bitrate == bitrate and now < esc.state.ready_at < t:
+            if esc.powered and esc.listens_at(bitrate) and now < esc.state.ready_at < t:
                 t = esc.state.ready_at
         return t
 

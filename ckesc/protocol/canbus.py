@@ -140,6 +140,25 @@ class ErrorFrame(NamedTuple):
         return CAN_ERR_FLAG | self.can_id
 
 
+def reported_state(error_class: int, data: bytes) -> ErrorState | None:
+    """What one SocketCAN error frame says of the state of the controller that reads it (the host's own adapter):
+    ``error_class`` its id without :data:`CAN_ERR_FLAG` (python-can's ``arbitration_id`` of an ``is_error_frame``
+    message), ``data`` its bytes. None: it says nothing of the state (a bus error, a lost arbitration)."""
+    if error_class & CAN_ERR_BUSOFF:
+        return ErrorState.BUS_OFF
+    if error_class & CAN_ERR_RESTARTED:
+        return ErrorState.ACTIVE
+    if error_class & CAN_ERR_CRTL and len(data) > 1:
+        status = data[1]
+        if status & (CAN_ERR_CRTL_TX_PASSIVE | CAN_ERR_CRTL_RX_PASSIVE):
+            return ErrorState.PASSIVE
+        if status & (CAN_ERR_CRTL_TX_WARNING | CAN_ERR_CRTL_RX_WARNING):
+            return ErrorState.WARNING
+        if status & CAN_ERR_CRTL_ACTIVE:
+            return ErrorState.ACTIVE
+    return None
+
+
 class QueueFull(Exception):
     """The transmit queue is full (SocketCAN: ``send()`` fails with ENOBUFS)."""
 

@@ -379,6 +379,18 @@ def after_a_short(host) -> tuple[int, int]:
 case("no_busoff_recovery", lambda h: after_a_short(h)[0], lambda n: n >= 1, 0)
 case("busoff_recovery_resets", lambda h: after_a_short(h)[1], 0, lambda n: n >= 1)
 
+
+def rotation_sent_at_another_rate(host) -> int:
+    """The ESC at 250 kbit/s (its stored Set Baud code 2), the host at 500 kbit/s: a Set Rotation 1 from the host; the
+    rotation the ESC then keeps in flash."""
+    host.wait_until(0.3)
+    host.send_wire(host.wire("set_rotation", {"rotation": 1}, destination=1))
+    host.wait(0.1)
+    return host.esc(1).nvm["rotation"]
+
+
+case("takes_other_bitrate", rotation_sent_at_another_rate, 0, 1, esc_config={"baud_code": 2})
+
 # --------------------------------------------------------------------------------------------------
 # throttle (R3-R5, 4.4.18)
 
@@ -836,9 +848,9 @@ NOT_YET_CHECKED: dict[str, str] = {
     "R20": "issue #36: the bus as CAN hardware. Checked: R20-watchdog (only RawCommand refreshes the comm watchdog: "
            "4.4.4's comm-loss test with queries, reads and foreign frames going on; fault comm_watchdog_kept_alive), "
            "R20-recovery and R20-comm (the robustness section's bus-fault tests, a short and a node at another bit "
-           "rate; faults no_busoff_recovery, busoff_recovery_resets). Not yet: error frames in normal operation (no "
-           "fault, no test), R20's bit-rate clause for an ESC at another rate, the host alone on the bus judged "
-           "with acknowledgement on in the simulated lane",
+           "rate; faults no_busoff_recovery, busoff_recovery_resets), R20-bitrate (an ESC at another bit rate takes "
+           "nothing: the robustness section; fault takes_other_bitrate). Not yet: error frames in normal operation (no "
+           "fault, no test), the host alone on the bus judged with acknowledgement on in the simulated lane",
 }
 #: Rules of long runs: checked by ``ckesc soak``, not the ten-minute suite; broken by the soak faults (kind soak), which
 #: the suite must miss (tests/emulator/test_soak_faults.py, the self-test).
