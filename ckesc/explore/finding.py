@@ -65,6 +65,8 @@ ECHO_SLACK_S = 0.005
 _EXP = frozenset(cat.EXP_REPORT_FRAMES)
 #: the report streams judged: MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test
 STREAMS = (*cat.REPORT_FRAMES, "exp", "can_test")
+#: the stream each report frame (by name) belongs to
+STREAM_OF = {**{n: n for n in (*cat.REPORT_FRAMES, "can_test")}, **{n: "exp" for n in _EXP}}
 
 
 def stream_of(f: Frame) -> str | None:
