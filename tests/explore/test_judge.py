@@ -15,9 +15,10 @@ def _frames(*wires_at):
             for w, t in wires_at]
 
 
-def _paired(*frames) -> list[tuple[float, float]]:
-    """The bus reader's pairing of ``frames`` (the host's at node 0, its own): (request's time, answer's time) each."""
-    rules = BusRules(complete=True, power_known=True)
+def _paired(*frames, **bench) -> list[tuple[float, float]]:
+    """The bus reader's pairing of ``frames`` (the host's at node 0, its own): (request's time, answer's time) each.
+    ``bench``: the bench's stated errors (``tolerance``, ``own_error``)."""
+    rules = BusRules(complete=True, power_known=True, **bench)
     log = rules.events = EventLog()
     for f in frames:
         rules.feed(f.can_id, f.data, f.timestamp, own=f.source == 0)
@@ -38,6 +39,22 @@ def test_an_answer_an_earlier_request_got_is_not_this_one_s():
         (encode("set_id", second, kind="response", source=1, destination=0, transfer_id=5), 0.014))
     assert _paired(req1, ans1, req2, ans2) == [(0.0, 0.004), (0.010, 0.014)]
     assert _paired(ans1, req2, ans2) == [(0.010, 0.014)]  # (the mistake the pairing prevents: ans1 is not req2's)
+
+
+def test_an_answer_stamped_before_its_request_pairs_within_the_bench_s_stated_error_only():
+    """Issue #35: the explorer let an answer be stamped up to 5 ms of its own (ECHO_SLACK_S) before its request, a late
+    echo's stamp it assumed. That is the bench's stated error: the host frame's stamp's (``Lane.own_error``: the echo's,
+    or without one the host clock's at send) and the answer's (``timing_error``), which the reader pairs with and the
+    judge's ``Params.host_late`` is. In simulated time nothing is stamped early."""
+    from ckesc.explore.judge import Params
+
+    req, ans = _frames((encode("set_led", {"option": 0, "color": 1, "blink": 0}, source=0, destination=1, transfer_id=3), 0.010),
+                       (encode("set_led", {"option": 0, "color": 1, "blink": 0}, kind="response", source=1, destination=0,
+                               transfer_id=3), 0.008))
+    assert _paired(req, ans, own_error=0.0025) == [(0.010, 0.008)]  # (no echo: the host clock's error)
+    assert _paired(req, ans, tolerance=0.0025) == [(0.010, 0.008)]
+    assert _paired(req, ans, own_error=0.0015) == [] and _paired(req, ans) == []
+    assert Params(error=0.001, own_error=0.003).host_late == 0.004 and Params().host_late == 0.0
 
 
 def test_an_answer_answers_the_request_whose_transfer_id_it_carries_not_the_one_before():
