@@ -26,6 +26,7 @@ from ckesc.protocol.ids import Kind
 from ckesc.protocol.judgements import (
     R9_GAPS,
     R9A_UNJUDGED,
+    REACT_S,
     r9_gaps_needed,
     r9_judged,
     r9_mean,
@@ -38,10 +39,6 @@ from .codes import code
 INTERVALS = cat.INTERVAL_FIELDS
 REPORTS = cat.REPORT_FRAMES
 EXP_FRAMES = tuple(s.name for s in cat.CATALOGUE if s.name.startswith("msg_exp"))
-#: A test allowance, not a protocol fact: a frame that starts within this time of a command may
-#: have been queued before the DUT could act on the command, and is not held against it. On a lane
-#: with a stated timing error a frame may also leave that much late: see :func:`react_s`.
-REACT_S = 0.005
 #: The longest legal report interval
 LONGEST_INTERVAL_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
 #: The longest a reporting DUT can be silent: one MSG1 interval at its largest legal setting

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from ..protocol.judgements import Reset
-    from .pairing import ReplyPairing
+    from .pairing import ReplyPairing, ResponsePairing
     from .resets import ResetSigns
 
 
@@ -29,6 +29,11 @@ class ReaderEvents:
 
     def reply(self, ts: float, node: int, pairing: ReplyPairing, can_id: int, data: bytes) -> None:
         """A GET_ESC_ID reply from ESC ``node``: which query it answers (:class:`~.pairing.QueryPairing`'s word)."""
+
+    def response(self, ts: float, node: int, pairing: ResponsePairing, can_id: int, data: bytes) -> None:
+        """An answer of ESC ``node`` to a request (a service response) or to a broadcast command (MSG Control's
+        answer): which request it answers, F4's pairing (:class:`~.pairing.RequestPairing`'s word), before it is
+        judged."""
 
     def report(self, ts: float, node: int, name: str, restarted: bool) -> None:
         """A periodic report (MSG1..3, CAN Test's) of ESC ``node``; ``restarted``: its transfer id started again after
@@ -44,3 +49,55 @@ class ReaderEvents:
     def msg1(self, ts: float, node: int, flag: bool, last_command: float | None) -> None:
         """An MSG1 of ESC ``node``: its comm-loss flag (R8), and when the last throttle command was on the bus (None:
         none yet)."""
+
+
+class EventLog(ReaderEvents):
+    """A consumer that keeps what the reader told of one bounded stretch of the bus (a program of ``ckesc explore``,
+    a test's trace), for a judge that reads it after the stretch: which request each answer answers (F4), which query
+    each GET_ESC_ID reply answers, each report with its restart, each MSG1's comm flag with the last command. Its
+    memory grows with the stretch: :meth:`clear` between stretches (a long run's consumers keep sinks of their own)."""
+
+    def __init__(self) -> None:
+        self.clear()
+
+    def clear(self) -> None:
+        #: per request (its time, service, transfer id, requester): the first answer to it (can id, time), and who
+        self.answers: dict[tuple, tuple[int, float, int]] = {}
+        #: per GET_ESC_ID query (its time, its source): the reply that answers it alone (can id, time, node)
+        self.replies: dict[tuple[float, int], tuple[int, float, int]] = {}
+        #: the queries (time, source) a reply may answer with another node's: which, the bus cannot tell
+        self.ambiguous: set[tuple[float, int]] = set()
+        #: (can id, time) of every answer paired with a request or a query (the rest answer none)
+        self.paired: set[tuple[int, float]] = set()
+        #: per (node, report name): each report's time and whether its counter started again (R9a)
+        self.reports: dict[tuple[int, str], list[tuple[float, bool]]] = {}
+        #: per node: each MSG1's time, comm flag and the last command before it (None: none yet)
+        self.flags: dict[int, list[tuple[float, bool, float | None]]] = {}
+
+    @staticmethod
+    def key(t: float, service: int, transfer_id: int | None, requester: int) -> tuple:
+        """A request's key in :attr:`answers` (a host frame's timestamp, type id, transfer id, source)."""
+        return (t, service, transfer_id, requester)
+
+    def response(self, ts: float, node: int, pairing: ResponsePairing, can_id: int, data: bytes) -> None:
+        r = pairing.request
+        if r is None or pairing.again:
+            return
+        self.answers.setdefault(self.key(r.t, r.service, r.transfer_id, r.requester), (can_id, ts, node))
+        self.paired.add((can_id, ts))
+
+    def reply(self, ts: float, node: int, pairing: ReplyPairing, can_id: int, data: bytes) -> None:
+        could = pairing.could
+        if not could:
+            return
+        self.paired.add((can_id, ts))
+        if len({q.source for q in could}) == 1:  # one node's query: the earliest it may answer, as the pairing takes it
+            self.replies.setdefault((could[0].t, could[0].source), (can_id, ts, node))
+        else:
+            self.ambiguous.update((q.t, q.source) for q in could)
+
+    def report(self, ts: float, node: int, name: str, restarted: bool) -> None:
+        self.reports.setdefault((node, name), []).append((ts, restarted))
+
+    def msg1(self, ts: float, node: int, flag: bool, last_command: float | None) -> None:
+        self.flags.setdefault(node, []).append((ts, flag, last_command))

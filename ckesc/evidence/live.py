@@ -34,8 +34,9 @@ class LaneRules(can.Listener):
         self.lane = lane
         # the simulated lane hears every frame on its bus; a real bus or socketcand may drop some
         # the suite's power cycles go through Dut.switch_power, which tells the rules (power_switched)
+        # the host's own frames' stamps: their echo's, or without one the host clock's (the bench's stated errors)
         self.rules = BusRules(tolerance=tolerance_for(lane), bitrate=lane.bitrate, complete=lane.clock == "simulated",
-                              jitter=jitter, power_known=True)
+                              jitter=jitter, power_known=True, own_error=getattr(lane, "own_error", 0.0))
         self._reopens = lane.reopens
         self.found: list[Violation] = []
         self.count = 0

@@ -1,4 +1,12 @@
-"""Which GET_ESC_ID query a reply answers, sans-IO: the one owner of that decision. The suite's helpers
+"""Which request or query an ESC's answer answers, sans-IO: the one owner of that decision.
+
+:class:`RequestPairing` pairs a service response with the request it answers (F4, by
+:func:`~ckesc.protocol.judgements.f4_answers`: per requester, node asked and service, by transfer id, never by order
+alone) and a broadcast command's answer (MSG Control's, a message naming no request) with the command; the bus reader
+(:mod:`.tracker`, :mod:`.rules`) feeds it every request and every answer and tells its consumers the pairing
+(:meth:`~.events.ReaderEvents.response`: the explorer's judge takes it instead of pairing again).
+
+:class:`QueryPairing` decides which GET_ESC_ID query a reply answers. The suite's helpers
 (``conformance/answers.py``) and the bus reader (:mod:`.tracker`: the bus rules, check-log, and the soak, whose
 ``AnswerWatch`` takes the reader's word with each reply) feed it every query and every reply, with their times, and
 take its word.
@@ -33,7 +41,8 @@ from collections import Counter, deque
 from dataclasses import dataclass
 
 from ..protocol import catalogue as cat
-from ..protocol.judgements import R2_LATE_BOUNDS, r2_may_answer
+from ..protocol.ids import Kind
+from ..protocol.judgements import R2_LATE_BOUNDS, Addressed, f4_answers, f4_mismatches, r2_may_answer
 
 #: queries kept open at most (a bus flooded with queries must not grow the memory: the oldest go first)
 QUERIES_KEPT = 64
@@ -166,3 +175,129 @@ class QueryPairing:
     def statistics(self) -> dict[str, int]:
         """JSON-able: the queries heard and the replies by what they answer (seen from :attr:`host`)."""
         return {"queries": self.queries, **{k: self.tally.get(k, 0) for k in (HOST, OTHER, AMBIGUOUS, NONE)}}
+
+
+# ------------------------------------------------------------------------------------------ requests (F4)
+#: How long after a request its response may still come (the document sets no bound for services; 64 ms for
+#: broadcasts): generous, so that a slow answer is never taken for an unasked one.
+RESPONSE_WINDOW_S = 5.0
+#: requests kept per (requester, node asked, service), and such keys at most
+REQUESTS_KEPT = 32
+KEYS_KEPT = 4096
+
+
+@dataclass(frozen=True, slots=True)
+class Request:
+    """A host's frame an ESC answers, as the reader heard it: a service request, or a broadcast command whose answer
+    is a message (MSG Control). ``asked``: the node whose answer it wants (None: any, Set ID being a
+    pseudo-broadcast, R11, and a broadcast); ``taken``: False where R17 says an ESC ignores it (a malformed frame,
+    :mod:`.taken`), so that an answer to it is one too many."""
+
+    t: float
+    kind: Kind
+    service: int
+    transfer_id: int | None
+    requester: int
+    asked: int | None
+    taken: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class ResponsePairing:
+    """What one answer (from ``node`` at ``t``) answers: ``request`` (None: none), the fields F4 finds off from it
+    (``mismatches``: a response paired as its request's answer and failed with the field named,
+    :data:`~ckesc.protocol.judgements.F4_PAIRING_SLACK`), ``again``: the request had this node's answer already (a
+    repeat, judged no further); ``asked``: the transfer ids of the requests of its key in the window (what F4 says
+    it should have carried)."""
+
+    t: float
+    node: int
+    request: Request | None
+    mismatches: tuple[str, ...] = ()
+    again: bool = False
+    asked: tuple[int | None, ...] = ()
+
+    @property
+    def holds(self) -> bool:
+        """F4 holds: it answers a request the ESC acts on, with that request's transfer id."""
+        return self.request is not None and self.request.taken and not self.mismatches
+
+
+class RequestPairing:
+    """The owner of F4's pairing on one bus: :meth:`request` for every host frame an ESC answers (in time order, as
+    heard), :meth:`response` for every ESC's response, :meth:`command_answer` for every broadcast command's answer.
+    ``error``: the bench's stated timing error of the stamps (an answer stamped up to it before its request, two
+    stamps in the other order, still answers it). Memory: :data:`REQUESTS_KEPT` per key, :data:`KEYS_KEPT` keys."""
+
+    def __init__(self, *, error: float = 0.0) -> None:
+        self.error = max(float(error), 0.0)
+        #: per (requester, service): the requests, each with the nodes that answered it
+        self._requests: dict[tuple, deque[tuple[Request, set[int]]]] = {}
+
+    def request(self, t: float, kind: Kind, service: int, transfer_id: int | None, requester: int, asked: int | None,
+                *, taken: bool = True) -> Request:
+        r = Request(t, kind, service, transfer_id, requester, asked, taken)
+        key = (requester, service)
+        q = self._requests.get(key)
+        if q is None:
+            if len(self._requests) >= KEYS_KEPT:
+                self._requests.clear()
+            q = self._requests[key] = deque(maxlen=REQUESTS_KEPT)
+        q.append((r, set()))
+        return r
+
+    def response(self, t: float, node: int, service: int, transfer_id: int | None, requester: int) -> ResponsePairing:
+        """A response of ``service`` from ESC ``node`` to ``requester`` with ``transfer_id``: the request it answers
+        among ``requester``'s of that service within :data:`RESPONSE_WINDOW_S` (F4's
+        :func:`~ckesc.protocol.judgements.f4_answers`: the one it carries the transfer id of, from the node asked, Set ID
+        from any; else the one it is off from in a field, e.g. an answer from a node id that was not asked; each
+        request answered once by each node, a repeat of an answer already given being ``again``)."""
+        window = [e for e in self._requests.get((requester, service), ()) if -self.error <= t - e[0].t <= RESPONSE_WINDOW_S
+                  and e[0].kind is Kind.REQUEST]
+        asked = tuple(dict.fromkeys(r.transfer_id for r, _ in window if r.asked in (node, None)))
+        this = Addressed(Kind.RESPONSE, service, transfer_id, requester, node)
+        open_ = [e for e in window if node not in e[1]]
+        # the latest request it answers exactly (two alike are 32 transfer ids apart, or Set IDs to two node ids the
+        # ESC moved between), else the earliest it is F4's answer to, off in a field (f4_answers)
+        k = None
+        for order in (open_[::-1], open_):
+            k = f4_answers(this, [(r.service, r.transfer_id, r.requester, r.asked) for r, _ in order])
+            off: tuple[str, ...] = ()
+            if k is not None:
+                r, by = order[k]
+                off = tuple(f4_mismatches(this, service=r.service, transfer_id=r.transfer_id, requester=r.requester, asked=r.asked))
+                if not off:
+                    break
+        if k is None or off:  # not the answer to an open request as F4 says: a repeat of one given?
+            again = next((r for r, by in window if node in by and r.transfer_id == transfer_id and r.asked in (node, None)), None)
+            if again is not None:
+                return ResponsePairing(t, node, again, again=True, asked=asked)
+        if k is None:
+            return ResponsePairing(t, node, None, asked=asked)
+        by.add(node)
+        return ResponsePairing(t, node, r, off, asked=asked)
+
+    def others(self, node: int, service: int, requester: int, t: float) -> list[int]:
+        """The requesters other than ``requester`` that asked ``node`` (or any node, Set ID) for ``service`` within
+        :data:`RESPONSE_WINDOW_S` before ``t`` (for a message: whose request it may have been)."""
+        return sorted({k[0] for k, q in self._requests.items() if k[1] == service and k[0] != requester
+                       and any(0 <= t - r.t <= RESPONSE_WINDOW_S and r.asked in (node, None) for r, _ in q)})
+
+    def command_answer(self, t: float, node: int, service: int) -> ResponsePairing:
+        """A broadcast command's answer (a message, which names no command) from ``node``: the earliest command of
+        ``service`` (from any host) it has not answered yet whose answer may be this one as R2 reads it
+        (:func:`~ckesc.protocol.judgements.r2_may_answer`: within 64 ms, else as a late answer), each ESC answering
+        each command once and in order."""
+        reach = R2_LATE_BOUNDS * cat.ANSWER_DELAY_MAX_S + self.error
+        window = [e for k, q in self._requests.items() if k[1] == service for e in q
+                  if e[0].kind is Kind.MESSAGE and -self.error <= t - e[0].t <= reach]
+        window.sort(key=lambda e: e[0].t)
+        answered = max((i for i, (_, by) in enumerate(window) if node in by), default=-1)
+        rest = window[answered + 1:]
+        in_time = [e for e in rest if r2_may_answer(max(t - e[0].t, 0.0), error=self.error)]
+        pick = (in_time or rest)[:1]
+        if not pick:
+            return ResponsePairing(t, node, None)
+        r, by = pick[0]
+        by.add(node)
+        return ResponsePairing(t, node, r)

@@ -70,19 +70,10 @@ import math
 from typing import Any
 
 from ..protocol.ids import DEFAULT_ESC_NODE_ID, Kind, priority_name
-from ..protocol.judgements import (
-    Addressed,
-    F3Step,
-    Reset,
-    f3_holds,
-    f3_step,
-    f4_mismatches,
-    r9_gap,
-    r9a_first,
-    r9a_limit_s,
-)
+from ..protocol.judgements import F3Step, Reset, f3_holds, f3_step, r9_gap, r9a_first, r9a_limit_s
 from ..protocol.transfer import SINGLE_FRAME, parse_tail, tail_transfer_id
 from .findings import Intervals, Violation, ms, quote
+from .pairing import RESPONSE_WINDOW_S
 from .resets import POWER_UPS, ResetSigns
 from .tracker import (
     COMM_BYTE,
@@ -90,9 +81,9 @@ from .tracker import (
     ESC_VALUE,
     MAINTENANCE,
     MSG1,
+    MSG_CONTROL,
     PSEUDO_BROADCAST,
     RESET_FIELDS,
-    RESPONSE_WINDOW_S,
     RESTART_SILENCE_S,
     SET_FREQ,
     SHORTEST_S,
@@ -219,6 +210,8 @@ class BusRules(Tracker):
         if esc_value is not None:
             off, size, value = esc_value
             looks_esc = len(data) > off + size and int.from_bytes(data[off:off + size], "little") == value
+            if looks_esc and info.type_id == MSG_CONTROL.type_id and not node.host and info.source not in self._host_nodes:
+                self._command_answer(info, node, data, ts)  # (an ESC's answer to MSG Control: which command it answers)
         else:  # 20013: the query and the reply differ in length
             layout = spec.message_layout(len(data) - 1) if data else None
             looks_esc = layout is not None and layout.sender == "esc"
@@ -512,32 +505,41 @@ class BusRules(Tracker):
         return (("4.4.22-2",) if node.from_read else ()) + (("R13",) if node.before_silence else ())
 
     def _response(self, out, info: FrameId, node: Node, data, ts: float, tid: int | None):
-        service = info.type_id
-        requester = info.dest
-        key = (requester, None if service in PSEUDO_BROADCAST else info.source, service)
-        requests = self._asked(key, ts)  # the requests of this requester, service and node asked (F4's key) ...
-        asked = [t for t, _ in requests]
+        """F4: the request it answers (:class:`~.pairing.RequestPairing`, told to the consumer), else a violation."""
+        service, requester = info.type_id, info.dest
+        p = self.requests.response(ts, info.source, service, tid, requester)  # type: ignore[arg-type]
+        if self.events is not None:
+            self.events.response(ts, node.id, p, info.can_id, bytes(data))
         if service in PSEUDO_BROADCAST:
             self._answer(node, ts)
-        this = Addressed(info.kind, service, tid, requester, info.source)
-        if any(not f4_mismatches(this, service=service, transfer_id=t, requester=requester, asked=key[1])
-               for t in asked):  # ... one of which this response answers (F4)
+        if p.holds or (p.again and p.request.taken):  # type: ignore[union-attr]
             if self.heard is not None:
-                self._paired_answer(info, key, tid, requests, ts)  # type: ignore[arg-type]
+                self._paired_answer(info, p, ts)
             if service == SET_FREQ.type_id:
                 self._set_freq_answer(node, data, ts)
             elif service == MAINTENANCE.type_id:
-                out = self._counters(out, info, node, data, ts, max(w for t, w in requests if t == tid))
+                out = self._counters(out, info, node, data, ts, p.request.t)  # type: ignore[union-attr]
             return out or _NONE
         frames = (quote(info.can_id, data, ts, note=info.label),)
-        if asked:
+        if p.request is not None and not p.request.taken and not p.mismatches:
+            return self._violation(out, ("F4",), ts, node.id, "response-match",
+                                   f"{info.label} to node {requester} with transfer id {tid}: it answers a request the "
+                                   "ESC ignores (R17: malformed), and no other", frames,
+                                   subject=f"{info.label} to a node that sent no {info.spec.title} request",  # type: ignore[union-attr]
+                                   expected="a response goes to the requester")
+        if p.request is not None and self.complete and not any("transfer id" in m for m in p.mismatches):  # not asked
+            return self._violation(out, ("F4",), ts, node.id, "response-match",
+                                   f"{info.label} to node {requester} with transfer id {tid}: the answer to node "
+                                   f"{requester}'s request to node {p.request.asked}, but {'; '.join(p.mismatches)}", frames,
+                                   subject=f"{info.label} from a node that was not asked",
+                                   expected="a response comes from the node asked")
+        if p.asked:
             return self._violation(out, ("F4",), ts, node.id, "response-match",
                                    f"{info.label} to node {requester} with transfer id {tid}; node {requester}'s requests "
                                    f"to node {info.source} in the last {RESPONSE_WINDOW_S:g} s had transfer ids "
-                                   f"{sorted(set(asked))} (a response keeps its request's)", frames,
+                                   f"{sorted(set(p.asked))} (a response keeps its request's)", frames,  # type: ignore[type-var]
                                    subject=f"{info.label}'s transfer id", expected="a response keeps its request's")
-        others = sorted({k[0] for k, q in self._requests.items() if k[1:] == key[1:] and k[0] != requester
-                         and any(0 <= ts - when <= RESPONSE_WINDOW_S for _, when in q)})
+        others = self.requests.others(info.source, service, requester, ts)
         text = (f"{info.label} to node {requester}, but node {requester} sent no {info.spec.title} request to node "  # type: ignore[union-attr]
                 f"{info.source} in the last {RESPONSE_WINDOW_S:g} s" + (f" (node(s) {others} did)" if others else ""))
         if self.complete:  # every frame since the bus started was heard: the request was not missed

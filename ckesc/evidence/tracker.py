@@ -19,7 +19,7 @@ The rules' docstring (:mod:`.rules`) says what each of these means for a verdict
 from __future__ import annotations
 
 import math
-from collections import defaultdict, deque
+from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,7 +29,7 @@ from ..protocol.ids import ESC_NODE_IDS, HOST_NODE_ID, MESSAGE_VENDOR_RANGE, SER
 from ..protocol.transfer import tail_transfer_id
 from .events import ReaderEvents
 from .findings import KEEP, Findings, Intervals, quote
-from .pairing import QueryPairing
+from .pairing import QueryPairing, RequestPairing, ResponsePairing
 from .rejoin import Rejoin
 from .taken import taken
 
@@ -41,9 +41,6 @@ SHORTEST_S = cat.REPORT_INTERVAL_RANGE[0] * cat.INTERVAL_UNIT_S
 LONGEST_S = cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S
 #: A node silent for longer than this may have been power cycled: its frames before and after are not compared.
 RESTART_SILENCE_S = 2 * SHORTEST_S
-#: How long after a request its response may still come (the document sets no bound for services; 64 ms for
-#: broadcasts): generous, so that a slow answer is never taken for an unasked one.
-RESPONSE_WINDOW_S = 5.0
 
 SET_FREQ = cat.spec("set_freq")
 SET_FREQ_OPTION = SET_FREQ.request.field("option")  # type: ignore[union-attr]
@@ -264,7 +261,8 @@ class Tracker(Findings, Rejoin):
         self._nodes: dict[int, Node] = {}
         self._ids: dict[int, FrameId] = {}
         self._streams: dict[tuple[int, int], EscStream] = {}
-        self._requests: dict[tuple, deque] = {}
+        #: which request each answer answers (F4), every node's (the one owner of that decision)
+        self.requests = RequestPairing(error=max(self.tolerance, own_error))
         super().__init__()
         self._last_throttle: tuple[float, str, int] | None = None
         #: answers per node to the last Set ID (more than one: a shared id)
@@ -287,7 +285,6 @@ class Tracker(Findings, Rejoin):
         #: write then does not take effect (R12) and its answer is free (R10-R12: the current values, none, or the
         #: request's echoed), so a Set Freq write's answer does not say the intervals in force
         self._suspended = False
-        self._paired: set[tuple] = set()  # requests whose answer was recorded (each answer once)
         #: how many times the host switched the DUT's power (:meth:`power_switched`): a reset across one is the host's
         self.power_switches = 0
         self.last_switch_ts = -math.inf  #: the lane time of the latest power switch the host reported
@@ -428,8 +425,9 @@ class Tracker(Findings, Rejoin):
             switch = REPORTING_SWITCHES.get(type_id)
             if switch is not None and len(data) > switch[0].offset + switch[0].size and field_value(data, switch[0]) in switch[1]:
                 value = field_value(data, switch[0])
-                if type_id == MSG_CONTROL.type_id:
+                if type_id == MSG_CONTROL.type_id:  # a command every ESC answers (its answer: command_answer)
                     self._suspended = value == cat.MSG_CONTROL_SUSPEND
+                    self.requests.request(ts, Kind.MESSAGE, type_id, tail_transfer_id(data[-1]), info.source, None)
                 if RESTARTS.get(type_id) == value:  # reporting comes back on every ESC (R9a)
                     what = f"{info.label} {value:#x}"
                     for node in self._nodes.values():
@@ -437,11 +435,14 @@ class Tracker(Findings, Rejoin):
                 else:
                     self._reset_all()  # reporting stops or switches on every ESC: cadence restarts
             return
-        if info.kind is not Kind.REQUEST or not data or not taken(info.can_id, data):
-            return  # (R17: a malformed request is ignored, and asks nothing an answer could answer)
+        if info.kind is not Kind.REQUEST or not data:
+            return
         tid = tail_transfer_id(data[-1])
+        asked = None if type_id in PSEUDO_BROADCAST else info.dest
+        if not taken(info.can_id, data):  # R17: a malformed request is ignored: an answer to it is one too many
+            self.requests.request(ts, Kind.REQUEST, type_id, tid, info.source, asked, taken=False)
+            return
         if type_id in PSEUDO_BROADCAST:
-            key = (info.source, None, type_id)
             self._answered.clear()
             for node in self._nodes.values():  # may re-address any ESC: nobody's intervals are known now
                 node.periods = [None] * len(INTERVAL_FIELDS)
@@ -450,7 +451,6 @@ class Tracker(Findings, Rejoin):
                 node.shared = False  # ... nor whether two of them share an id
             self._set_id_shared(data, ts)
         else:
-            key = (info.source, info.dest, type_id)
             if type_id == MAINTENANCE.type_id and len(data) > MAINTENANCE_OPTION.offset + MAINTENANCE_OPTION.size:
                 if len(self._maintenance) > 4096:
                     self._maintenance.clear()
@@ -460,12 +460,7 @@ class Tracker(Findings, Rejoin):
                 # the new intervals count from the write (its answer tells them), the old ones as the node last said
                 self._event(dest, ts, "a Set Freq write", list(dest.periods))
                 dest.periods = [None] * len(INTERVAL_FIELDS)  # unknown until that answer: it may come after reports
-        q = self._requests.get(key)
-        if q is None:
-            if len(self._requests) > 4096:
-                self._requests.clear()
-            q = self._requests[key] = deque(maxlen=32)
-        q.append((tid, ts))
+        self.requests.request(ts, Kind.REQUEST, type_id, tid, info.source, asked)
 
     def _set_id_shared(self, data, ts: float) -> None:
         """Set ID while more than one ESC reports: any of them may take the id (R11: it ignores the destination), and
@@ -499,21 +494,17 @@ class Tracker(Findings, Rejoin):
             self._observe(("4.4.18-2",), ts, node.id, "shared-node-id",
                           f"two ESCs answer from node id {node.id}: its reports are not compared with one another")
 
-    def _asked(self, key: tuple, ts: float) -> list[tuple[int, float]]:
-        """(transfer id, timestamp) of the requests ``key`` (requester, node asked or None for Set ID, service)
-        made within :data:`RESPONSE_WINDOW_S` before ``ts``: what an answer at ``ts`` may answer."""
-        return [(tid, when) for tid, when in self._requests.get(key, ()) if 0 <= ts - when <= RESPONSE_WINDOW_S]
+    def _paired_answer(self, info: FrameId, p: ResponsePairing, ts: float) -> None:
+        """The answer ``info`` at ``ts`` to ``p``'s request: its delay, once (a repeat is not recorded)."""
+        if not p.again and p.request is not None:
+            self.heard.answer(info.source, info.spec.name, ts - p.request.t)  # type: ignore[union-attr]
 
-    def _paired_answer(self, info: FrameId, key: tuple, tid: int, asked: list[tuple[int, float]], ts: float) -> None:
-        """The answer ``info`` at ``ts`` answers the latest of ``asked`` with transfer id ``tid``: its delay, once."""
-        when = max(w for t, w in asked if t == tid)
-        pair = (key, info.source, tid, when)
-        if pair in self._paired:
-            return
-        if len(self._paired) > 4096:
-            self._paired.clear()
-        self._paired.add(pair)
-        self.heard.answer(info.source, info.spec.name, ts - when)  # type: ignore[union-attr]
+    def _command_answer(self, info: FrameId, node: Node, data, ts: float) -> None:
+        """An ESC's answer to a broadcast command (MSG Control's): the command it answers (:class:`.pairing.RequestPairing`),
+        told to the consumer."""
+        p = self.requests.command_answer(ts, node.id, info.type_id)
+        if self.events is not None:
+            self.events.response(ts, node.id, p, info.can_id, bytes(data))
 
     def _query_reply(self, info: FrameId, node: Node, data, ts: float) -> None:
         """An ESC's GET_ESC_ID reply: the query it answers (:class:`.pairing.QueryPairing`). None while queries it

@@ -1,13 +1,15 @@
 """The explorer's judge on what the DUT answered (sans-IO), against what the oracle model answers.
 
-Which frame answers which request is F4's (:func:`~ckesc.protocol.judgements.f4_answers`): a response answers the
-open request whose service id, transfer id and requester it carries (Set ID: from any node, R11), never the one
-before it because it came first; a broadcast's answer (MSG Control, GET_ESC_ID: a message, which names no request)
-is the first message of its type within the query's answer time. Where another node queries GET_ESC_ID too (a
-flight controller, F6, with ``--foreign-traffic``), which query a reply answers is the one owner's
-(:class:`~ckesc.evidence.pairing.QueryPairing`, as the suite, the bus rules and the soak take it): a reply that answers
-another node's query is not the host's, and a host query whose reply may answer either is not judged. Paired so, for
-the DUT's frames and the model's:
+Which frame answers which request is the bus reader's (:class:`~ckesc.evidence.pairing.RequestPairing`, told as
+:meth:`~ckesc.evidence.events.ReaderEvents.response`): a response answers the open request whose service id,
+transfer id and requester it carries (Set ID: from any node, R11), never the one before it because it came first
+(F4, :func:`~ckesc.protocol.judgements.f4_answers`); a MSG Control answer (a message, which names no request) answers
+the earliest command it has not answered within R2's reach. Which GET_ESC_ID query a reply answers, the host's or
+another node's (a flight controller's, F6, with ``--foreign-traffic``), is the reader's too
+(:class:`~ckesc.evidence.pairing.QueryPairing`): a host query whose reply may answer either is not judged. The judge
+reads both pairings from the reader's :class:`~ckesc.evidence.events.EventLog` of the DUT's trace and of the model's
+(one reader, two traces), and keeps only what the model alone knows: what the ESC should have answered, with what,
+and by when (within :data:`ANSWER_WAIT_S` and the bench's error of its request). Paired so:
 
 - every request the model answers must be answered (4.1.1-2; R2 for MSG Control, R1 for GET_ESC_ID), with the
   model's payload: read-backs (214 read, 242, 241 option 2's counters, GET_ESC_ID) and the answers to accepted
@@ -17,24 +19,22 @@ the DUT's frames and the model's:
   (R19's sign, and R17's after a malformed frame).
 - **answer slots** (R2, 4.4.2-4 / 4.4.3-4 "related to the current ESC ID"): a MSG Control or GET_ESC_ID answer
   starts no earlier than the slot of the node id the model has now (after a Set ID, the new one's).
-- **malformed and foreign frames** (R17): no answer to one: a response F4 pairs with it, or a frame of its type, not
-  a report, within the answer time of it, that answers no host frame.
+- **malformed and foreign frames** (R17): no answer to one: a response the reader pairs with it (it hears a malformed
+  request as one the ESC ignores), or a frame of its type, not a report, within the answer time of it, that answers no
+  host frame.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Iterable, Sequence
-
-from ..evidence.pairing import HOST, NONE, QueryPairing
+from ..evidence.events import EventLog
 from ..protocol import catalogue as cat
 from ..protocol.frame import Frame, frame_bits
 from ..protocol.ids import Kind
-from ..protocol.judgements import asked_node, f4_answers, r2_slot_start, r13_read_back, r19_power_ups
+from ..protocol.judgements import r2_slot_start, r13_read_back, r19_power_ups
 from ..protocol.requirements import requirement
 from .actions import asks_only
 from .finding import ExploreFinding, Params, stream_of
-from .oracle import Malformed, Oracle
+from .oracle import Oracle
 
 #: the requirement an answer's payload comes from, per request
 ANSWER_REQ = {
@@ -71,104 +71,47 @@ def check_tables() -> None:
 check_tables()
 
 
-# ------------------------------------------------------------------------------------------ pairing (F4)
-@dataclass(frozen=True)
-class Ask:
-    """A frame the DUT may answer (a request, a broadcast query, one sent malformed): when it was heard and what F4
-    pairs its answer by (a broadcast's: its type only)."""
-
-    t: float
-    kind: Kind
-    type_id: int
-    transfer_id: int | None
-    requester: int
-    asked: int | None
-
-    @classmethod
-    def of(cls, req: Frame) -> Ask:
-        asked = asked_node(req.name, req.destination) if req.kind is Kind.REQUEST else None  # type: ignore[arg-type]
-        return cls(req.timestamp, req.kind, req.type_id, req.transfer_id, req.source, asked)  # type: ignore[arg-type]
-
-    @classmethod
-    def malformed(cls, m: Malformed, host: int) -> Ask:
-        return cls(m.t, m.kind, m.type_id, m.transfer_id, host, asked_node(m.name, m.destination))  # type: ignore[arg-type]
-
-
-def pair(asks: Sequence[Ask], frames: Iterable[Frame], *, before: float, after: float) -> list[Frame | None]:
-    """The answer to each of ``asks`` among ``frames`` (the ESC's, in time order), from ``before`` ahead of the ask (a
-    late echo's stamp) to ``after`` it. A response (or a request-kind frame, F1's mistake) of a requested service goes
-    to the open request F4 pairs it with (:func:`~ckesc.protocol.judgements.f4_answers`, the requests in the order
-    sent), each request's answer one frame; a message of a broadcast's type answers every query whose window holds it
-    and has none yet."""
-    got: list[Frame | None] = [None] * len(asks)
-    order = sorted(range(len(asks)), key=lambda i: asks[i].t)
-    requests = [i for i in order if asks[i].kind is Kind.REQUEST]
-    services = {asks[i].type_id for i in requests}
-    broadcasts = {asks[i].type_id for i in order if asks[i].kind is Kind.MESSAGE}
-    for f in frames:
-        if f.kind is not Kind.MESSAGE and f.type_id in services:
-            open_ = [i for i in requests if got[i] is None and asks[i].t - before <= f.timestamp <= asks[i].t + after]
-            k = f4_answers(f, [(asks[i].type_id, asks[i].transfer_id, asks[i].requester, asks[i].asked) for i in open_])
-            if k is not None:
-                got[open_[k]] = f
-        elif f.kind is Kind.MESSAGE and f.type_id in broadcasts:
-            for i in order:
-                a = asks[i]
-                if a.kind is Kind.MESSAGE and a.type_id == f.type_id and got[i] is None and a.t - before <= f.timestamp <= a.t + after:
-                    got[i] = f
-    return got
-
-
+# ------------------------------------------------------------------------------------------ the reader's pairing
 def _asks(req: Frame) -> bool:
     """Whether a host frame may be answered: a service request, or a broadcast query (a throttle frame is not)."""
     return req.kind is Kind.REQUEST or (req.kind is Kind.MESSAGE and req.name in _BROADCASTS)
 
 
+def _query(req: Frame) -> bool:
+    return req.kind is Kind.MESSAGE and req.name == "get_esc_id"
+
+
+def answer_to(log: EventLog, req: Frame, frames: dict[tuple[int, float], Frame], within: float) -> Frame | None:
+    """The answer the reader paired with host frame ``req`` (its :class:`~ckesc.evidence.events.EventLog`), among
+    ``frames`` (by CAN id and time), if it came within ``within`` of it (later: not the answer the model wants)."""
+    if _query(req):
+        hit = log.replies.get((req.timestamp, req.source))  # type: ignore[arg-type]
+    else:
+        hit = log.answers.get(log.key(req.timestamp, req.type_id, req.transfer_id, req.source))  # type: ignore[arg-type]
+    if hit is None or hit[1] - req.timestamp > within:  # type: ignore[operator]
+        return None
+    return frames.get(hit[:2])  # type: ignore[arg-type]
+
+
 # ------------------------------------------------------------------------------------------ answers
-def answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, slack: float,
-            queries: Sequence[Frame] = ()) -> list[ExploreFinding]:
-    """The findings on what the DUT answered (the module's list). ``dut``: the ESC's frames in time order; ``slack``:
-    how much earlier than its request an answer may be stamped (a real bench's late echo); ``queries``: other nodes'
-    GET_ESC_ID queries heard meanwhile (a flight controller's)."""
+def answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, heard: EventLog, model: EventLog) -> list[ExploreFinding]:
+    """The findings on what the DUT answered (the module's list). ``dut``: the ESC's frames in time order; ``heard``
+    and ``model``: the reader's log of the DUT's trace and of the model's."""
     host = [(req, step) for req, step in oracle.host if _asks(req)]
-    malformed = [m for m in oracle.malformed if m.kind is Kind.REQUEST]
-    unjudged: set[int] = set()
-    if queries:
-        dut, unjudged = _the_hosts_replies([req for req, _ in host if req.name == "get_esc_id"], queries, dut, p)
-    asks = [Ask.of(req) for req, _ in host]
-    got = pair(asks + [Ask.malformed(m, p.host_node) for m in malformed], dut, before=slack, after=ANSWER_WAIT_S + 2 * p.error)
-    want = pair(asks, [f for f in oracle.out if f.source != p.host_node], before=0.0, after=ANSWER_WAIT_S)
-    for i, (req, _) in enumerate(host):
-        if id(req) in unjudged:  # its reply may answer another node's query as well: which, cannot be told
-            got[i] = want[i] = None
+    mine = {(f.can_id, f.timestamp): f for f in dut}
+    models = {(f.can_id, f.timestamp): f for f in oracle.out}
+    late = ANSWER_WAIT_S + 2 * p.error
+    got: list[Frame | None] = []
+    want: list[Frame | None] = []
+    for req, _ in host:
+        if _query(req) and (req.timestamp, req.source) in heard.ambiguous:
+            got.append(None)  # its reply may answer another node's query as well: which, cannot be told
+            want.append(None)
+            continue
+        got.append(answer_to(heard, req, mine, late))
+        want.append(answer_to(model, req, models, ANSWER_WAIT_S))
     out = _answered_as_modelled(oracle, host, got, want, t0, p)
-    paired = {id(f) for f in got[:len(host)] if f is not None}
-    return out + _r17_answers(oracle, dut, t0, p, slack, paired, dict(zip(map(id, malformed), got[len(host):])))
-
-
-def _the_hosts_replies(asked: Sequence[Frame], queries: Sequence[Frame], dut: list[Frame],
-                       p: Params) -> tuple[list[Frame], set[int]]:
-    """``dut`` less the GET_ESC_ID replies that answer another node's query than the host's (``asked``), or may
-    (:class:`~ckesc.evidence.pairing.QueryPairing`: the decision every mode takes), and the ids of the host's
-    queries such an ambiguous reply may answer: they are not judged."""
-    pairing = QueryPairing(error=max(p.error, p.own_error), host=p.host_node)
-    events = sorted([(q.timestamp, 0, q) for q in (*asked, *queries)]
-                    + [(f.timestamp, 1, f) for f in dut if f.name == "get_esc_id" and f.layout is not None
-                       and f.layout.name == "reply"], key=lambda e: (e[0], e[1]))
-    of_query: dict[int, int] = {}
-    others: set[int] = set()
-    unjudged: set[int] = set()
-    for t, is_reply, f in events:
-        if not is_reply:
-            of_query[pairing.query(t, f.source).seq] = id(f)
-            continue
-        paired = pairing.reply(t, f.source)
-        outcome = paired.outcome(p.host_node)
-        if outcome in (HOST, NONE):
-            continue
-        others.add(id(f))
-        unjudged.update(of_query[q.seq] for q in paired.could if q.source == p.host_node)
-    return [f for f in dut if id(f) not in others], unjudged
+    return out + _r17_answers(oracle, dut, t0, p, heard, mine)
 
 
 def _answered(req: Frame) -> bool:
@@ -270,23 +213,25 @@ def fields(f: Frame) -> str:
 
 
 # ------------------------------------------------------------------------------------------ malformed frames (R17)
-def _r17_answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, slack: float, paired: set[int],
-                 to_request: dict[int, Frame | None]) -> list[ExploreFinding]:
-    """R17: no answer to a malformed or foreign frame. To a request sent malformed, the response F4 pairs with it
-    (``to_request``, by the id of its :class:`Malformed`); to another, a frame of the DUT of its type, not a report,
-    within the answer time of it, that answers no host frame (``paired``: the valid command's answer, judged or free),
-    a response only with its transfer id."""
+def _r17_answers(oracle: Oracle, dut: list[Frame], t0: float, p: Params, heard: EventLog,
+                 mine: dict[tuple[int, float], Frame]) -> list[ExploreFinding]:
+    """R17: no answer to a malformed or foreign frame. To a request sent malformed, the response the reader pairs with
+    it (it hears it as a request the ESC ignores); to another, a frame of the DUT of its type, not a report, within the
+    answer time of it (and the stamps' errors before it), that the reader pairs with no host frame, a response only with
+    its transfer id."""
     out = []
     seen: set[int] = set()
+    slack = p.host_late
     for m in oracle.malformed:
         if m.kind is Kind.REQUEST:
-            answer = to_request.get(id(m))
+            hit = heard.answers.get(heard.key(m.t, m.type_id, m.transfer_id, p.host_node))
+            answer = mine.get(hit[:2]) if hit is not None else None  # type: ignore[arg-type]
             near = [answer] if answer is not None else []
         else:
-            near = [f for f in dut if m.t - slack <= f.timestamp <= m.t + ANSWER_WAIT_S + 2 * p.error
+            near = [f for f in dut if m.t - slack <= f.timestamp <= m.t + ANSWER_WAIT_S + 2 * p.error  # type: ignore[operator]
                     and f.type_id == m.type_id and stream_of(f) is None and f.kind is not Kind.REQUEST
-                    and id(f) not in paired and (f.kind is not Kind.RESPONSE or m.transfer_id is None
-                                                 or f.transfer_id == m.transfer_id)]
+                    and (f.can_id, f.timestamp) not in heard.paired and (f.kind is not Kind.RESPONSE or m.transfer_id is None
+                                                                        or f.transfer_id == m.transfer_id)]
         for f in near:
             if id(f) in seen:
                 continue

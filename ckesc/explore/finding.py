@@ -54,17 +54,18 @@ class Params:
 
     @property
     def host_late(self) -> float:
-        """How much later than the DUT heard it a host frame may be stamped (:data:`ECHO_SLACK_S`), both stamps off by
-        the bench's error: the oracle hears it at that stamp, so what the DUT did on it may show that much early."""
-        return ECHO_SLACK_S + 2 * self.error
+        """How much later than the DUT heard it a host frame may be stamped, as the bench states it: its stamp's error
+        (:attr:`own_error`: its echo's, or without an echo the host clock's at send, ``Lane.own_error``) and the
+        error of the DUT's frame it is compared with (:attr:`error`). The oracle hears the host frame at its stamp, so
+        what the DUT did on it may show that much early."""
+        return self.own_error + self.error
 
 
-#: how much later than the DUT heard it a host frame's echo may be stamped on a real bench (socketcand, a USB
-#: adapter): the oracle hears it at its echo's time, so what the DUT did on it may show that much "early"
-ECHO_SLACK_S = 0.005
 _EXP = frozenset(cat.EXP_REPORT_FRAMES)
 #: the report streams judged: MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test
 STREAMS = (*cat.REPORT_FRAMES, "exp", "can_test")
+#: the stream each report frame (by name) belongs to
+STREAM_OF = {**{n: n for n in (*cat.REPORT_FRAMES, "can_test")}, **{n: "exp" for n in _EXP}}
 
 
 def stream_of(f: Frame) -> str | None:

@@ -1,19 +1,22 @@
 """Comparing what the DUT sent with what the oracle model predicts, only where the document is specific (sans-IO).
 
 Observations compared (each a :class:`ExploreFinding` when they differ):
-- **answers** (:mod:`.answers`): each request's answer, paired with it as F4 says, against the model's: answered at
-  all, with the model's payload, in its node's slot (R2); no answer to a malformed or foreign frame (R17).
+- **answers** (:mod:`.answers`): each request's answer, paired with it by the bus reader (F4; a GET_ESC_ID reply with
+  its query), against the model's (paired by the same reader over the model's frames): answered at all and in time,
+  with the model's payload, in its node's slot (R2); no answer to a malformed or foreign frame (R17).
 - **streams**: per stretch between two events (a host frame other than throttle, a power switch) and per
   report (MSG1, MSG2, MSG3, the MSG_EXP frames as one, CAN Test), whether it flows, judged only after the
   stretch has settled (R9a's restart allowance of the longer interval, answer delay and the bench's error; a
   power-up's boot time); which MSG_EXP frames come is OBSERVE (R9-exp), only that some do.
 - **intervals** (R9): from the gap to the third report after the event on (R9a: the gaps before are OBSERVE), the
-  mean gap of MSG1/2/3 against the model's interval, held to R9's tolerance as the suite holds it (1 ms plus twice
+  mean gap of MSG1/2/3 (the reports as the reader told them, a stretch cut where one's counter started again: a
+  reset's gap is the reader's R19, never in a mean) against the model's interval, held to R9's tolerance as the suite holds it (1 ms plus twice
   the bench's error and the DUT's declared jitter, over the gaps; a mean whose bound exceeds a quarter of the interval
   is not judged).
 - **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only), 13 and 8 against the model's MSG1s within
   one interval and a report stamp's error (:func:`~ckesc.protocol.judgements.report_stamp_error_s`; R8's window for
-  bit 13: the flag may come up to one MSG1 interval after the model's).
+  bit 13 from the model's last command, a RawCommand carrying its ESC's channel: the reader's last command is any
+  channel's, R8's clock only where every command carries the ESC's).
 - **malformed and foreign frames** (R17): the model ignores them, so whatever the DUT does on one differs: an
   answer to one (:mod:`.answers`), and any other finding after the first of them in the program, which
   :func:`cite_r17` makes cite R17 too (a setting, mode, suspension, LED or comm-loss flag the DUT changed on one
@@ -33,11 +36,15 @@ resets, pairing) are the reader's: the runner hears every frame through them and
 from __future__ import annotations
 
 import bisect
+from typing import Iterable
 
+from ..evidence.events import EventLog
+from ..evidence.rules import BusRules
 from ..protocol import catalogue as cat
 from ..protocol.frame import Frame
 from ..protocol.ids import Kind
 from ..protocol.judgements import (
+    REACT_S,
     r8_flag_due,
     r9_judged,
     r9_mean,
@@ -48,7 +55,8 @@ from ..protocol.judgements import (
     report_stamp_error_s,
 )
 from .answers import KEPT, answers
-from .finding import ECHO_SLACK_S, STREAMS, ExploreFinding, Params, stream_of
+from .finding import STREAM_OF as _STREAM_OF
+from .finding import STREAMS, ExploreFinding, Params, stream_of
 from .oracle import Malformed, Oracle, State
 
 __all__ = ["ExploreFinding", "Params", "cite_r17", "cite_r18", "judge"]
@@ -67,26 +75,46 @@ _RESTARTS = frozenset({"start", "power on", "ready", "msg_control", "can_test", 
 _MIN_GAPS = 3
 
 
-def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[ExploreFinding]:
-    """Every disagreement between the DUT's frames (decoded, from the ESC, bus timestamps) and the model's."""
+def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params,
+          heard: EventLog | None = None) -> list[ExploreFinding]:
+    """Every disagreement between the DUT's frames (decoded, from the ESC, bus timestamps) and the model's.
+    ``heard``: what the bus reader told of the program's trace (the runner's live reader); None: the reader is fed
+    the host's frames the oracle took and ``dut`` here (:func:`hear`)."""
     dut = sorted((f for f in dut if f.source != p.host_node and f.timestamp is not None), key=lambda f: f.timestamp)
+    if heard is None:
+        heard = hear(oracle, dut, p)
     # other nodes' GET_ESC_ID queries (a flight controller's, F6): the ESC answers them too, they are none of its frames
-    queries = [f for f in dut if f.name == "get_esc_id" and f.layout is not None and f.layout.name == "query"]
-    if queries:
-        dut = [f for f in dut if f.name != "get_esc_id" or f.layout is None or f.layout.name != "query"]
-    out = answers(oracle, dut, t0, p, p.host_late if p.error else 0.0, queries)
-    out += _streams(oracle, dut, t0, t_end, p)
+    dut = [f for f in dut if f.name != "get_esc_id" or f.layout is None or f.layout.name != "query"]
+    out = answers(oracle, dut, t0, p, heard, hear(oracle, oracle.out, Params(host_node=p.host_node, bitrate=p.bitrate)))
+    out += _streams(oracle, heard, t0, t_end, p)
     out += _status(oracle, dut, t0, p)
     return [f for f in out if f.strength != "OBSERVE" and r18_judged(oracle.max_load(t0 + f.at, t0 + f.at))]
 
 
-def cite_r17(findings: list[ExploreFinding], oracle: Oracle, t0: float) -> list[ExploreFinding]:
+def hear(oracle: Oracle, frames: Iterable[Frame], p: Params) -> EventLog:
+    """The bus reader (:class:`~ckesc.evidence.rules.BusRules`, with the bench's stated errors) fed the host's frames
+    the oracle took, its power switches and ``frames`` (the DUT's, or the model's own), in time order: what it tells
+    (:class:`~ckesc.evidence.events.EventLog`): the one pairing, reports and restarts, each MSG1's flag."""
+    rules = BusRules(tolerance=p.error, own_error=p.own_error, bitrate=p.bitrate, complete=True, power_known=True,
+                     jitter=p.jitter, host_nodes=(p.host_node,))
+    log = rules.events = EventLog()
+    power = [s.t for s in oracle.states if s.label in ("power on", "power off")]
+    host = [f for f, _ in oracle.host]
+    for f in sorted([*host, *frames], key=lambda f: (f.timestamp, f.source != p.host_node)):
+        while power and power[0] <= f.timestamp:  # type: ignore[operator]
+            rules.power_switched(power.pop(0))
+        rules.feed(f.can_id, f.data, f.timestamp, own=f.source == p.host_node)  # type: ignore[arg-type]
+    return log
+
+
+def cite_r17(findings: list[ExploreFinding], oracle: Oracle, t0: float, late: float = 0.0) -> list[ExploreFinding]:
     """Every finding after a malformed or foreign frame of the program also cites R17 (the model ignored the
-    frame; a DUT that took it differs from then on), and says which came last before it."""
+    frame; a DUT that took it differs from then on), and says which came last before it. ``late``: how much later
+    than the DUT heard it a host frame may be stamped (:attr:`Params.host_late`)."""
     if not oracle.malformed:
         return findings
     for f in findings:
-        before = [m for m in oracle.malformed if m.t - t0 <= f.at + ECHO_SLACK_S]
+        before = [m for m in oracle.malformed if m.t - t0 <= f.at + late]
         if before and "R17" not in f.requirements:
             f.requirements.append("R17")
             f.model += f" (R17: the model ignored {_step_of(before[-1])})"
@@ -123,14 +151,22 @@ def _interval(state: State, stream: str) -> float:
     return max(state.intervals.values())  # MSG_EXP frames, CAN Test: at most the longest (R9-exp: OBSERVE)
 
 
-def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params) -> list[ExploreFinding]:
+def _streams(oracle: Oracle, heard: EventLog, t0: float, t_end: float, p: Params) -> list[ExploreFinding]:
     out = []
-    by = {k: ([], []) for k in STREAMS}
-    for i, frames in enumerate((dut, oracle.out)):
-        for f in frames:
-            s = stream_of(f)
-            if s is not None and f.source != p.host_node:
-                by[s][i].append(f.timestamp)
+    by: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in STREAMS}
+    restarts: dict[str, list[float]] = {k: [] for k in STREAMS}  # the DUT's reports whose counter started again
+    for (node, name), reports in heard.reports.items():  # the DUT's reports as the reader read them
+        s = _STREAM_OF.get(name)
+        if s is not None and node != p.host_node:
+            by[s][0].extend(t for t, _ in reports)
+            restarts[s].extend(t for t, again in reports if again)
+    for f in oracle.out:
+        s = stream_of(f)
+        if s is not None and f.source != p.host_node:
+            by[s][1].append(f.timestamp)
+    for s in STREAMS:
+        by[s][0].sort()
+        restarts[s].sort()
     stamp = report_stamp_error_s(error=p.error, bitrate=p.bitrate)  # how far a report's stamp strays from its schedule
     restart: State | None = None  # the latest event after which a report restarts (R9a), and the state before it
     restart_before: State | None = None
@@ -167,20 +203,32 @@ def _streams(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Param
                                    f"{len(d)} frames, the first at t={d[0] - t0:.3f} s", "none", d[0] - t0, state.step,
                                    subject=f"{stream} sent, {state.mode}"))
             elif stream in cat.REPORT_FRAMES and len(m) >= 2:
-                out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, share)
+                out += _interval_finding(state, stream, by[stream][0], end, iv, t0, p, share, restarts[stream])
     return out
 
 
 def _interval_finding(state: State, stream: str, stamps: list[float], end: float, iv: float, t0: float, p: Params,
-                      share: float = 0.0) -> list[ExploreFinding]:
+                      share: float = 0.0, restarts: list[float] = ()) -> list[ExploreFinding]:  # type: ignore[assignment]
     """R9 on the DUT's reports of one stretch against the model's interval (what the model alone knows: across a
     Set ID, a refused write or a power cycle, where the node stated none since), the gap to its third report and on
     (R9a: the gaps before are OBSERVE), on the mean of their gaps as the suite judges it
     (:func:`~ckesc.protocol.judgements.r9_mean`, the bench's error and the DUT's declared jitter, nothing of the
     judge's own). Under a foreign load of ``share`` (R18, up to half), widened by the queueing it can cause
     (:func:`~ckesc.protocol.judgements.r18_mean`). Each single gap against the interval the node stated is the
-    reader's (the bus rules' R9)."""
-    seen = r9_judged(_between(stamps, state.t, end - report_stamp_error_s(error=p.error, bitrate=p.bitrate)))
+    reader's (the bus rules' R9). A report whose counter started again (the reader's ``restarted``: a reset,
+    R19's) starts a stretch of its own (R9a), as the soak's trend is cut."""
+    lo, hi = state.t, end - report_stamp_error_s(error=p.error, bitrate=p.bitrate)
+    seen = _between(stamps, lo, hi)
+    cuts = [0, *(bisect.bisect_left(seen, t) for t in _between(restarts, lo, hi)), len(seen)]
+    for a, b in zip(cuts, cuts[1:]):  # (each restarted report starts the next piece)
+        if found := _mean_finding(state, stream, seen[a:b], iv, t0, p, share):
+            return found
+    return []
+
+
+def _mean_finding(state: State, stream: str, stamps: list[float], iv: float, t0: float, p: Params,
+                  share: float) -> list[ExploreFinding]:
+    seen = r9_judged(stamps)
     if len(seen) <= _MIN_GAPS:
         return []
     if share:
@@ -284,7 +332,10 @@ def _comm_fault_expected(t: float, commands: list[float], ups: list[float], stat
                          queueing: float = 0.0) -> bool | None:
     """What MSG1's comm-loss bit must be at ``t`` (R8), or None where it is free: before any command since the
     power-up (when its boot ends is the DUT's own), inside R8's window, near a command, or not under CAN throttle.
-    ``queueing``: how long a foreign load may have held the MSG1 back (R18)."""
+    ``commands``: the model's, the RawCommands that carry its ESC's channel (what the model alone knows; the reader's
+    last command is any channel's, :meth:`~ckesc.evidence.events.ReaderEvents.msg1`, which is R8's clock only where
+    every command carries the ESC's channel, as the soak's stream does). ``queueing``: how long a foreign load may
+    have held the MSG1 back (R18)."""
     if state.source != 0 or state.mode == "off":
         return None
     up = ups[max(0, bisect.bisect_right(ups, t) - 1)] if ups else float("-inf")
@@ -293,8 +344,9 @@ def _comm_fault_expected(t: float, commands: list[float], ups: list[float], stat
         return None
     since = t - last
     error = report_stamp_error_s(error=p.error, bitrate=p.bitrate, queueing=queueing)  # MSG1's stamp is its end
-    if since < -(error + p.jitter) or abs(since) <= p.host_late:
-        return None  # a command as the MSG1 went out: which came first is within the bench's error
+    if since < -(error + p.jitter) or abs(since) <= REACT_S + p.host_late:
+        return None  # a command as the MSG1 went out: queued before the DUT could act on it, or which came first is
+        # within the bench's stated errors
     return r8_flag_due(since, state.intervals["msg1"], jitter=p.jitter, error=error)
 
 

@@ -30,6 +30,7 @@ from ..bench.errors import PreflightError
 from ..bench.lanes import BusFault, Lane
 from ..bench.outcomes import Inconclusive
 from ..bench.station import BENCH_ROWS, BenchOptions, build
+from ..evidence.events import EventLog
 from ..evidence.live import LaneRules
 from ..protocol import catalogue as cat
 from ..protocol import malformed as r17
@@ -128,6 +129,8 @@ class Session:
         """The explorer's readers of the lane, before anything is sent on it (the echo probe's answers included)."""
         self.recorder = Recorder(lane)
         self.rules = LaneRules(lane, jitter=self.profile.jitter_s)
+        #: what the reader tells of each program (its pairing, reports, MSG1 flags): the judge's, cleared per program
+        self.heard = self.rules.rules.events = EventLog()
         lane.listeners.extend([self.recorder, self.rules])
 
     def _open(self) -> None:
@@ -309,6 +312,7 @@ class Session:
         rec.messages.clear()
         rec.power.clear()
         self.rules.begin()
+        self.heard.clear()
         self.rules.excuse(frozenset())  # (a program cut short under a load above half left it excusing)
         t0 = self.lane.now()
         fed = 0
@@ -373,14 +377,15 @@ class Session:
         oracle.finish(t_end)
         frames = _decode([m for m in rec.messages if id(m) not in foreign
                           and not (self._load_nodes and m.is_extended_id and m.arbitration_id & 0x7F in self._load_nodes)])
-        findings = judge(oracle, frames, t0, t_end, self.params)
+        findings = judge(oracle, frames, t0, t_end, self.params, heard=self.heard)
         found, _count = self.rules.take()
         for v in found:
             at = v.timestamp - t0
             findings.append(ExploreFinding("bus_rule", list(v.rules) or ["4.1.1-1"], f"bus rule {v.check}: {v.message}",
                                     str(v), "the rule holds", at, None, strength=v.strength,
                                     subject=f"{' '.join(v.rules)} {v.check}"))
-        findings = [f for f in cite_r18(cite_r17(findings, oracle, t0), oracle, t0) if f.strength != "OBSERVE"]
+        findings = [f for f in cite_r18(cite_r17(findings, oracle, t0, self.params.host_late), oracle, t0)
+                    if f.strength != "OBSERVE"]
         return ExploreOutcome(list(program), findings, t0, t_end, list(rec.messages), frames, list(oracle.out), steps,
                        {a.feature for a in program}, list(self._skipped))
 

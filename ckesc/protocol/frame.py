@@ -170,6 +170,44 @@ def classify(can_id: int) -> tuple[Kind, int, int, int | None, FrameSpec | None]
     return Kind.MESSAGE, type_id, can_id & 0x7F, None, cat.MESSAGES.get(type_id)
 
 
+def read_form(kind: Kind, spec: FrameSpec, data: bytes) -> tuple[Layout | None, int | None, bytes]:
+    """A frame's form, as the decoder reads it before any field (F2, the table's length: R17's classes): its layout (a
+    message's by its length, a request's; None for a response, whose layout is its request's), its transfer id and its
+    payload. Raises :class:`TailError` (not a single-frame transfer) or :class:`LengthError` (not the table's length).
+    One reading for the decoder and for what the bus reader takes the host's frames to be (``evidence/taken.py``),
+    which reads no field."""
+    name = spec.name
+    if spec.has_tail:
+        if not data:
+            raise LengthError("no data: every frame ends with a tail byte (F2)", frame=name)
+        tail = data[-1]
+        if tail & 0xE0 != SINGLE_FRAME:
+            raise TailError(
+                f"tail byte 0x{tail:02X} has start={tail >> 7 & 1} end={tail >> 6 & 1} toggle={tail >> 5 & 1}; "
+                "a single-frame transfer has start=1 end=1 toggle=0 (F2)",
+                frame=name,
+            )
+        tid: int | None = tail_transfer_id(tail)
+        payload = data[:-1]
+    else:
+        tid = None
+        payload = data
+    n = len(payload)
+    if kind is Kind.MESSAGE:
+        layout = spec.message_layout(n)
+        if layout is None:
+            expected = " or ".join(str(lay.size + spec.has_tail) for lay in spec.layouts)  # type: ignore[operator]
+            raise LengthError(f"{len(data)} data bytes, expected {expected}", frame=name)
+        return layout, tid, payload
+    if kind is Kind.REQUEST:
+        layout = spec.request
+        assert layout is not None
+        if layout.size is not None and n != layout.size:
+            raise LengthError(f"{kind.label}: {len(data)} data bytes, expected {layout.size + 1}", frame=name)
+        return layout, tid, payload
+    return None, tid, payload
+
+
 class Decoder:
     """Decodes frames with options that a DUT profile may set, and remembers outstanding
     requests so that responses whose layout depends on the request (241) decode fully."""
@@ -221,40 +259,15 @@ class Decoder:
             tid = tail_transfer_id(data[-1]) if data else None
             return Frame(None, None, kind, type_id, priority, source, destination, tid, {"payload": list(data)}, data, timestamp, anonymous)
 
-        if spec.has_tail:
-            if not data:
-                raise LengthError("no data: every frame ends with a tail byte (F2)", frame=name)
-            tail = data[-1]
-            if tail & 0xE0 != SINGLE_FRAME:
-                raise TailError(
-                    f"tail byte 0x{tail:02X} has start={tail >> 7 & 1} end={tail >> 6 & 1} toggle={tail >> 5 & 1}; "
-                    "a single-frame transfer has start=1 end=1 toggle=0 (F2)",
-                    frame=name,
-                )
-            tid: int | None = tail_transfer_id(tail)
-            payload = data[:-1]
-        else:
-            tid = None
-            payload = data
-
-        n = len(payload)
-        if kind is Kind.MESSAGE:
-            layout = spec.message_layout(n)
+        layout, tid, payload = read_form(kind, spec, data)
+        if layout is None:  # a response: its layout is its request's
+            if request is None:
+                request = self._pending.pop((type_id, destination, source, tid), None)
+            req_fields = request.fields if isinstance(request, Frame) else request
+            layout = spec.response_for(req_fields)
             if layout is None:
-                expected = " or ".join(str(lay.size + spec.has_tail) for lay in spec.layouts)  # type: ignore[operator]
-                raise LengthError(f"{len(data)} data bytes, expected {expected}", frame=name)
-        else:
-            if kind is Kind.REQUEST:
-                layout = spec.request
-            else:
-                if request is None:
-                    request = self._pending.pop((type_id, destination, source, tid), None)
-                req_fields = request.fields if isinstance(request, Frame) else request
-                layout = spec.response_for(req_fields)
-                if layout is None:
-                    raise DecodeError(f"{spec.title} is never answered (R14), yet a response came", frame=name)
-            assert layout is not None
-            if layout.size is not None and n != layout.size:
+                raise DecodeError(f"{spec.title} is never answered (R14), yet a response came", frame=name)
+            if layout.size is not None and len(payload) != layout.size:
                 raise LengthError(f"{kind.label}: {len(data)} data bytes, expected {layout.size + 1}", frame=name)
 
         fields = codec_for(layout, self.nibble_order).decode(payload)

@@ -50,6 +50,10 @@ from .transfer import TRANSFER_ID_MODULO, next_transfer_id
 #: R9: how far a report interval's mean may stray from its target besides the bench's error (the ESC's
 #: report scheduling); also the tick a real-time bench's single report may stray by on top of its stated error
 SCHEDULING_TOLERANCE_S = 0.001
+#: A test allowance, not a protocol fact: a frame that starts within this time of a command may have been queued
+#: before the DUT could act on the command, and is not held against it (the suite's, ``conformance.telemetry``; the
+#: explorer's R8 near a command). On a lane with a stated timing error a frame may also leave that much late.
+REACT_S = 0.005
 #: R9a: the gaps up to and including this report after a restart are OBSERVE; from the next one on, R9
 R9A_UNJUDGED = 2
 #: R9: a test whose purpose is a report's interval judges the mean of at least this many gaps

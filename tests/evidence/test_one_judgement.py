@@ -14,6 +14,10 @@ queries interleaved with the host's, each reply answers the same query to the su
 (``conformance.answers.esc_id_pairings``), the bus rules, check-log and the soak's AnswerWatch, with the host's own
 frames timed by their echo or without one, the ESC answering the flight controller or not (F6).
 
+The explorer's judge takes the reader's pairing (``_explorer_pairing``): it judges the reply the reader gives each host
+query, none where the reply may be the flight controller's, and finds nothing on the faultless ESC. Service responses
+and their requests (F4, by transfer id): ``test_one_judgement_answers``.
+
 The other stateful rules have modules of their own, on the trace player and the consumers' runners here (:func:`play`,
 :func:`request`, :func:`bus_rules`, :func:`check_log`): report restarts (R9a, ``test_one_judgement_restarts``), resets
 (R19, ``test_one_judgement_resets``), the comm flag (R8, ``test_one_judgement_comm``) and a loaded bus (R18,
@@ -325,6 +329,29 @@ def _check_log_pairing(heard, tmp_path, capsys) -> dict:
     return json.loads(out.read_text())["get_esc_id"]
 
 
+def _explorer_pairing(heard) -> tuple[list[str], list[str]]:
+    """``ckesc explore``'s judge (against its faultless oracle, fed the host's queries), hearing the trace through the
+    one reader as its runner does: what it takes each host query's reply to be ("host": the reply it judges;
+    "ambiguous": it judges none, the reply may be the flight controller's), and what it finds."""
+    from ckesc.evidence.events import EventLog
+    from ckesc.explore.answers import ANSWER_WAIT_S, answer_to
+
+    oracle = Oracle({"node_id": NODE, "throttle_channel": NODE, **cat.DEFAULT_REPORT_INTERVALS}, powered_at=0.0, start=BOOT_S)
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    log = rules.events = EventLog()
+    for m in heard:
+        rules.feed_message(m)
+        if not m.is_rx:
+            oracle.host_frame(m, 0)
+    oracle.finish(END_S)
+    dut = decoded(m for m in heard if m.is_rx)
+    found = judge(oracle, dut, BOOT_S, END_S, Params(boot_s=BOOT_S), heard=log)
+    frames = {(f.can_id, f.timestamp): f for f in dut}
+    taken = ["ambiguous" if (q.timestamp, 0) in log.ambiguous else
+             "host" if answer_to(log, q, frames, ANSWER_WAIT_S) is not None else "none" for q, _ in oracle.host]
+    return taken, [f.text() for f in found]
+
+
 @pytest.mark.parametrize("echo", [True, False], ids=["echo", "no echo"])
 @pytest.mark.parametrize("foreign_host", ["accept", "ignore"], ids=["answers the FC", "ignores the FC"])
 def test_one_trace_the_same_get_esc_id_pairing_from_the_suite_the_bus_rules_check_log_and_the_soak(
@@ -339,3 +366,14 @@ def test_one_trace_the_same_get_esc_id_pairing_from_the_suite_the_bus_rules_chec
     assert got == dict.fromkeys(got, expected)
     counts = {k: expected.count(k) for k in ("host", "another node", "ambiguous", "none")}
     assert tally == _check_log_pairing(heard, tmp_path, capsys) == {"queries": len(QUERIES), **counts}
+    # the explorer's judge: each host query's reply as the reader paired it (the host's, or either), and no finding
+    hosts = [k for k, (_, source) in enumerate(QUERIES) if source == 0]
+    ambiguous = {q.seq for p in rules_pairings(heard) if p.outcome(0) == "ambiguous" for q in p.could if q.source == 0}
+    assert _explorer_pairing(heard) == (["ambiguous" if k in ambiguous else "host" for k in hosts], [])
+
+
+def rules_pairings(heard) -> list:
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    for m in heard:
+        rules.feed_message(m)
+    return rules.queries.kept

@@ -21,6 +21,7 @@ from __future__ import annotations
 import can
 import pytest
 
+from ckesc.evidence.events import EventLog
 from ckesc.evidence.rules import BusRules
 from ckesc.explore.judge import Params, judge
 from ckesc.explore.oracle import Oracle
@@ -144,3 +145,31 @@ def test_the_bus_rules_record_the_comm_loss_episode_and_no_command_in_the_flight
     assert (set_, cleared) == ("set", "cleared")
     assert 200 <= since_set <= 200 + MSG1_S * 1000 + frame_bits(8) / cat.DEFAULT_BITRATE * 1000
     assert since_cleared <= MSG1_S * 1000 + 1
+
+
+def test_r8_counts_from_the_commands_that_carry_the_esc_s_channel_the_explorer_s_reading():
+    """Where the readings disagreed (issue #35): the reader's last command (:meth:`ReaderEvents.msg1`) is the last
+    RawCommand of any channel; the explorer's model counts R8 from the commands that carry its ESC's channel (a
+    RawCommand for other channels is no command for it: 4.4.4-3 "does not receive any command", R8 "no RawCommand has
+    arrived", as the emulator's ESC reads it). Found taking R8's clock from the reader: 'MSG1 comm-loss bit set' on the
+    faultless emulator after Set ID to throttle channel 20 and a RawCommand 14b stream (channels 1..4). The explorer's
+    reading won: the ESC at channel 20 under that stream raises the flag and the judge finds nothing, where the
+    reader's clock says a command came 10 ms before each MSG1."""
+    events = [(t / 1000, request("raw_command_14b", {"channels": [0] * 4}, t / 1000, destination=None,
+                                 transfer_id=(t // 10) % 32)) for t in range(300, 1601, 10)]
+    frames = play(events, END_S, throttle_channel=20)
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    log = rules.events = EventLog()
+    for m in frames:
+        rules.feed_message(m)
+    late = [(t, flag) for t, flag, last in log.flags[NODE] if t > 0.5 and last is not None and t - last < MSG1_S]
+    assert late and all(flag for _, flag in late)  # the reader's clock: a command just before, the flag set
+    baseline = {"node_id": NODE, "throttle_channel": 20, **cat.DEFAULT_REPORT_INTERVALS}
+    oracle = Oracle(baseline, powered_at=0.0, start=BOOT_S)
+    for m in frames:
+        if not m.is_rx:
+            oracle.host_frame(m)
+    oracle.finish(END_S)
+    found = judge(oracle, decoded(m for m in frames if m.is_rx and m.timestamp >= BOOT_S), BOOT_S, END_S,
+                  Params(boot_s=BOOT_S), heard=log)
+    assert not oracle.commands and [f.text() for f in found] == []

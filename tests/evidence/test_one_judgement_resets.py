@@ -154,3 +154,34 @@ def test_a_transfer_id_that_skips_without_a_gap_is_f3s_and_no_reset_to_any_consu
            "soak": soak}
     assert got == dict.fromkeys(got, set()) and resets == 0
     assert {r for v in bus_rules(frames) for r in v.rules} >= {"F3"}
+
+
+def test_a_reset_s_gap_is_no_part_of_the_explorer_s_r9_mean_the_reader_s_reading():
+    """Where the readings disagreed (issue #35): the explorer's judge held the mean of a stretch's report gaps to R9
+    across a reset inside it (the 270 ms restart gap in the mean: MSG1 every ~24 ms, R9), finding one reset twice, as
+    the soak's minute did; the reader cuts a report stream where its counter starts again (``restarted``, R9a), and
+    its reading won: the judge takes the reports and their restarts from the reader's events and judges each piece
+    on its own. The reset itself stays a finding, the reader's (R19), which the explorer's runner reports."""
+    from ckesc.evidence.events import EventLog
+    from ckesc.evidence.rules import BusRules
+    from ckesc.explore.judge import Params, judge
+    from ckesc.explore.oracle import Oracle
+    from ckesc.protocol import catalogue as cat
+    from ckesc.protocol.judgements import r9_judged, r9_mean
+
+    from .test_one_judgement import BOOT_S, decoded
+
+    frames = _trace(True)
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    log = rules.events = EventLog()
+    resets = [v.check for m in frames for v in rules.feed_message(m) if v.check == "reset"]
+    oracle = Oracle({"node_id": NODE, "throttle_channel": NODE, **cat.DEFAULT_REPORT_INTERVALS}, powered_at=0.0, start=BOOT_S)
+    for m in frames:
+        if not m.is_rx:
+            oracle.host_frame(m, 0)
+    oracle.finish(END_S)
+    found = judge(oracle, decoded(m for m in frames if m.is_rx and m.timestamp >= BOOT_S), BOOT_S, END_S,
+                  Params(boot_s=BOOT_S), heard=log)
+    assert resets and [f.text() for f in found if f.kind == "interval"] == []  # the reset: the reader's R19, once
+    stamps = [t for t, _ in log.reports[(NODE, "msg1")] if t > BOOT_S]
+    assert [t for t, again in log.reports[(NODE, "msg1")] if again] and not r9_mean(r9_judged(stamps), 0.020).ok  # (uncut)

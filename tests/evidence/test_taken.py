@@ -123,3 +123,37 @@ def test_check_log_reads_the_malformed_suspend_as_the_live_rules_do(tmp_path, ca
     assert main(["check-log", "--complete", "--power-on", str(log)]) == 1
     out = capsys.readouterr().out
     assert "a reset the host did not make: msg1 stopped for" in out, out
+
+
+def test_the_reader_decodes_no_frame_and_reads_r17_as_the_decoder_does(monkeypatch):
+    """Issue #35 ("each frame decoded once"): the suite's link decodes every frame; the reader beside it decoded the
+    host's frames once more to tell a malformed one (``taken``). It now reads R17's classes from the CAN id and the
+    bytes with the decoder's own form checks (``frame.read_form``), and decodes nothing: with the decoder's field
+    reading broken, the reader reads a bus of every R17 class of a command as before, and ``taken`` says of each
+    frame what the decoder's verdict on it says."""
+    from ckesc.protocol.errors import DecodeError, LengthError, TailError
+    from ckesc.protocol.frame import Decoder, WireFrame
+
+    frames = [w for f in (*r17.FORMS, r17.TOGGLE) for name, fields in (("msg_control", SUSPEND), ("set_rotation", {"rotation": 1}))
+              if r17.applies(cat.spec(name), f) for w in r17.build(name, fields, f, source=0, node_id=NODE, others=[2],
+                                                                   transfer_id=lambda _: 3)[0].frames]
+    decoder = Decoder(track_requests=False)
+    for w in frames:
+        try:
+            decoder.decode(WireFrame(w.arbitration_id, bytes(w.data)))
+            want = True
+        except TailError:
+            want = w.data[-1] & 0xC0 == 0xC0  # a single frame with toggle 1: R17-toggle, may be taken
+        except LengthError:
+            want = False
+        except DecodeError:
+            want = True
+        assert taken(w.arbitration_id, bytes(w.data)) == want, w
+    traces = [_heard(_host(w)) for w in frames]  # (the emulated ESC decodes what it hears: played before)
+    before = [[v.check for v in _read(t)] for t in traces]
+
+    def broken(*_a, **_k):
+        raise AssertionError("the reader decoded a frame")
+
+    monkeypatch.setattr(Decoder, "decode", broken)
+    assert [[v.check for v in _read(t)] for t in traces] == before  # (a decode would raise here)

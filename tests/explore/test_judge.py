@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import can
 
-from ckesc.explore.answers import Ask, pair
+from ckesc.evidence.events import EventLog
+from ckesc.evidence.rules import BusRules
 from ckesc.protocol.frame import Decoder, encode
 
 
@@ -14,19 +15,46 @@ def _frames(*wires_at):
             for w, t in wires_at]
 
 
+def _paired(*frames, **bench) -> list[tuple[float, float]]:
+    """The bus reader's pairing of ``frames`` (the host's at node 0, its own): (request's time, answer's time) each.
+    ``bench``: the bench's stated errors (``tolerance``, ``own_error``)."""
+    rules = BusRules(complete=True, power_known=True, **bench)
+    log = rules.events = EventLog()
+    for f in frames:
+        rules.feed(f.can_id, f.data, f.timestamp, own=f.source == 0)
+    return sorted((key[0], ts) for key, (_, ts, _) in log.answers.items())
+
+
 def test_an_answer_an_earlier_request_got_is_not_this_one_s():
     """Two Set IDs 10 ms apart, to node 1 then (it moved) to node 2, each transfer id 5 (F3 counts per destination).
     With the look-back for a late echo, the first answer would pass for the second's (found against the clean-room
-    ESC: 'set_id {node_id=1} answered node_id=2'); the answer the first request took is not the second's."""
+    ESC: 'set_id {node_id=1} answered node_id=2'); the answer the first request took is not the second's, and one
+    stamped before the second request answers it only within the bench's stated error (the reader's pairing, which
+    the judge takes)."""
     first, second = ({"node_id": 2, "throttle_channel": 20}, {"node_id": 1, "throttle_channel": 20})
     req1, ans1, req2, ans2 = _frames(
         (encode("set_id", first, source=0, destination=1, transfer_id=5), 0.000),
         (encode("set_id", first, kind="response", source=2, destination=0, transfer_id=5), 0.004),
         (encode("set_id", second, source=0, destination=2, transfer_id=5), 0.010),
         (encode("set_id", second, kind="response", source=1, destination=0, transfer_id=5), 0.014))
-    asks = [Ask.of(req1), Ask.of(req2)]
-    assert pair(asks, [ans1, ans2], before=0.009, after=0.1) == [ans1, ans2]
-    assert pair(asks[1:], [ans1, ans2], before=0.009, after=0.1) == [ans1]  # (the mistake the pairing prevents)
+    assert _paired(req1, ans1, req2, ans2) == [(0.0, 0.004), (0.010, 0.014)]
+    assert _paired(ans1, req2, ans2) == [(0.010, 0.014)]  # (the mistake the pairing prevents: ans1 is not req2's)
+
+
+def test_an_answer_stamped_before_its_request_pairs_within_the_bench_s_stated_error_only():
+    """Issue #35: the explorer let an answer be stamped up to 5 ms of its own (ECHO_SLACK_S) before its request, a late
+    echo's stamp it assumed. That is the bench's stated error: the host frame's stamp's (``Lane.own_error``: the echo's,
+    or without one the host clock's at send) and the answer's (``timing_error``), which the reader pairs with and the
+    judge's ``Params.host_late`` is. In simulated time nothing is stamped early."""
+    from ckesc.explore.judge import Params
+
+    req, ans = _frames((encode("set_led", {"option": 0, "color": 1, "blink": 0}, source=0, destination=1, transfer_id=3), 0.010),
+                       (encode("set_led", {"option": 0, "color": 1, "blink": 0}, kind="response", source=1, destination=0,
+                               transfer_id=3), 0.008))
+    assert _paired(req, ans, own_error=0.0025) == [(0.010, 0.008)]  # (no echo: the host clock's error)
+    assert _paired(req, ans, tolerance=0.0025) == [(0.010, 0.008)]
+    assert _paired(req, ans, own_error=0.0015) == [] and _paired(req, ans) == []
+    assert Params(error=0.001, own_error=0.003).host_late == 0.004 and Params().host_late == 0.0
 
 
 def test_an_answer_answers_the_request_whose_transfer_id_it_carries_not_the_one_before():

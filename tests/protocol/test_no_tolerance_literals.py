@@ -53,7 +53,6 @@ ALLOWED: dict[tuple[str, str], tuple[int, str]] = {
     ("ckesc/evidence/findings.py", "1e-06"): (1, _NOISE),
     ("ckesc/evidence/rules.py", "1e-09"): (1, _NOISE),
     ("ckesc/evidence/tracker.py", "1e-09"): (1, _NOISE),
-    ("ckesc/explore/finding.py", "0.005"): (1, "ECHO_SLACK_S: how late a real bench stamps the host's own echo (a bench's error)"),
     ("ckesc/explore/runner.py", "0.006"): (1, "how long the explorer reads past the 64 ms bound for an answer (a read window)"),
     ("ckesc/reporting/compare.py", "1e-06"): (1, _NOISE),
     ("ckesc/soak/batch.py", "0.2"): (1, "POLL_S: how often a soak batch reads its benches' status files, not R8's 200 ms"),
@@ -61,7 +60,6 @@ ALLOWED: dict[tuple[str, str], tuple[int, str]] = {
     ("ckesc/soak/runner.py", "0.0001"): (1, "LATENESS_BIN_S: a histogram bin's width for the host's send lateness, not a limit"),
     ("ckesc/rigs/rig.py", "[2:]"): (2, "a rig file's key path without its first two parts, not report gaps"),
     ("conformance/answers.py", "1e-12"): (1, _NOISE),
-    ("conformance/telemetry.py", "0.005"): (1, "REACT_S: the test allowance for a frame queued before the DUT could act"),
     ("conformance/test_s4_4_3_get_esc_id.py", "0.007"): (1, "PHASE_STEP_S: how a test moves its request across the slots"),
     ("conformance/throttle.py", "0.0025"): (1, "STREAM_PERIOD_S: the harness's command rate"),
 }
