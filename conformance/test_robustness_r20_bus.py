@@ -277,11 +277,8 @@ def test_an_esc_at_another_bit_rate_takes_nothing(dut, rate0):
         problems.append(f"after the next power-up it answers at {after} bit/s: it took the Set Baud {CODES[rate0]} "
                         f"sent at {rate0} bit/s")
     dut.record.observe(f"sent at {rate0} bit/s", "; ".join(sent))
-    if held:
-        dut.record.observe(f"the host's frames at {rate0} bit/s", held[0])
+    if held:  # (nobody acknowledged: a controller that takes a frame acknowledges it, ISO 11898-1, so none was taken)
+        dut.record.observe(f"the host's frames at {rate0} bit/s, not acknowledged: no node took them", held[0])
     assert not problems, (f"an ESC at {other} bit/s, after the host's commands at {rate0} bit/s (the bus's): "
                           + "; ".join(problems) + " (R20: an ESC at another bit rate than the bus takes nothing, "
                           "answers nothing and changes nothing)")
-    if held:
-        raise Inconclusive(f"the host could not send all its frames at {rate0} bit/s ({held[0]}): nobody there "
-                           "acknowledges them; what it sent changed nothing")
