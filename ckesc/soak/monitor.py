@@ -72,6 +72,7 @@ class Monitor:
         self.t0 = t0
         self.decoder = Decoder(nibble_order=cfg.nibble_order)
         self.ring: deque[tuple[float, int, bytes]] = deque(maxlen=RING_FRAMES)
+        self._ring_append = self.ring.append  # (looked up once: every frame goes to the ring)
         self.findings: list[SoakFinding] = []
         self.dropped = 0  # findings counted but not kept
         self._kept: dict[str, int] = {}  # findings kept per watch
@@ -149,7 +150,9 @@ class Monitor:
         (whose, which kind) is the reader's (:meth:`~ckesc.evidence.tracker.Tracker.frame_id`): classified once."""
         t = msg.timestamp
         can_id = msg.arbitration_id
-        data = bytes(msg.data)
+        data = msg.data
+        if data.__class__ is not bytes:  # (a Heard's data is bytes already: no copy per frame)
+            data = bytes(data)
         self.frames += 1
         self.last_t = t
         answers = self.answers
@@ -157,7 +160,7 @@ class Monitor:
             answers.tick(t)
         if self._open:
             self._after(t, can_id, data)
-        self.ring.append((t, can_id, data))
+        self._ring_append((t, can_id, data))
         extended = getattr(msg, "is_extended_id", True)
         error = getattr(msg, "is_error_frame", False)
         rules = self.rules
