@@ -18,9 +18,11 @@ from typing import Any
 import pytest
 
 from ckesc.bench.dut import Dut, DutError
+from ckesc.evidence.pairing import RequestPairing
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import FALLBACK_PRIORITY, Frame, WireFrame, classify
 from ckesc.protocol.ids import ESC_NODE_IDS, Kind, parse_can_id, service_id
+from ckesc.protocol.judgements import asked_node
 from ckesc.protocol.transfer import parse_tail, tail_byte
 
 from .answers import BROADCAST_WINDOW_S
@@ -243,9 +245,7 @@ def provoke(d: RecordingDut) -> Traffic:
     d.send_wire(WireFrame(probe_id, bytes((tail_byte(0),))))  # GetNodeInfo has no payload: the tail byte only
     d.wait(BROADCAST_WINDOW_S + 2 * LONGEST_S)  # then normal reporting: every report at least once, MSG1 over 32 times
     heard = d.heard()
-    for a in asked.values():
-        sid = cat.spec(a.name).type_id
-        a.answers = [h for h in heard if h.cid.kind is not Kind.MESSAGE and h.cid.type_id == sid and a.sent_at <= h.timestamp <= a.until]
+    answers_of(asked, heard, d.host_node, d.node_id, d.lane.timing_error)
 
     def during(label: str) -> list[HeardFrame]:
         start, end = windows[label]
@@ -254,6 +254,34 @@ def provoke(d: RecordingDut) -> Traffic:
     broadcasts = {name: [h for h in during(name) if h.cid.kind is Kind.MESSAGE and h.spec is not None and h.spec.name == name]
                   for name in ("get_esc_id", "msg_control")}
     return Traffic(d.node_id, d.host_node, heard, asked, broadcasts)
+
+
+def answers_of(asked: dict[str, Asked], heard: list[HeardFrame], host: int, node: int, error: float) -> None:
+    """Each request's answers (``Asked.answers``): the service frames heard within its wait that F4's one pairing
+    (:class:`~ckesc.evidence.pairing.RequestPairing`, the bus reader's: by transfer id, never by order alone) gives
+    it. A late answer to an earlier request, heard while the host waited for a later one, is the earlier's (late:
+    outside its wait, so no answer of either), not the later's answer with a wrong transfer id; an answer the
+    pairing gives no request (sent to another node, of no service asked meanwhile) is the answer of the request
+    whose wait it came in, as F4's test judges it."""
+    pairing, owner = RequestPairing(error=error), {}
+    sids = {cat.spec(a.name).type_id for a in asked.values()}
+    events = [(a.sent_at, 0, a) for a in asked.values()]
+    events += [(h.timestamp, 1, h) for h in heard if h.cid.kind is not Kind.MESSAGE and h.cid.type_id in sids]
+    for a in asked.values():
+        a.answers = []
+    for _, is_answer, x in sorted(events, key=lambda e: (e[0], e[1])):
+        if not is_answer:
+            r = pairing.request(x.sent_at, Kind.REQUEST, cat.spec(x.name).type_id, x.transfer_id, host,
+                                asked_node(x.name, node))
+            owner[id(r)] = x
+            continue
+        cid = x.cid
+        p = pairing.response(x.timestamp, cid.source, cid.type_id, x.transfer_id, cid.destination)
+        a = owner.get(id(p.request)) if p.request is not None else None
+        if a is None:
+            a = next((a for a in asked.values() if cat.spec(a.name).type_id == cid.type_id and a.sent_at <= x.timestamp <= a.until), None)
+        if a is not None and a.sent_at <= x.timestamp <= a.until:
+            a.answers.append(x)
 
 
 def provoked_traffic(run, lane) -> Iterator[Traffic]:

@@ -19,8 +19,11 @@ import pytest
 from ckesc.evidence.pairing import AMBIGUOUS, HOST, NONE, OTHER, QueryPairing
 from ckesc.evidence.rules import BusRules
 from ckesc.protocol import catalogue as cat
-from ckesc.protocol.frame import Decoder, encode
+from ckesc.protocol.frame import FALLBACK_PRIORITY, Decoder, encode
+from ckesc.protocol.ids import service_id
+from ckesc.protocol.transfer import tail_byte
 from conformance import answers
+from conformance.wire import Asked, HeardFrame, answers_of
 
 FC = 10
 BOUND = cat.ANSWER_DELAY_MAX_S
@@ -171,3 +174,22 @@ def test_a_second_reply_to_a_flight_controllers_query_is_not_its_answer():
     dut.wait(0.1)
     replies = [f for f in dut.trace if f.layout.name == "reply"]
     assert [answers.answers_another_node(dut, f) for f in replies] == [True, False]
+
+
+def _maintenance_answer(tid: int, t: float, *, to: int = 0) -> HeardFrame:
+    sid = cat.spec("maintenance_information").type_id
+    return HeardFrame(service_id(FALLBACK_PRIORITY, sid, False, to, 1), bytes(7) + bytes([tail_byte(tid)]), t)
+
+
+def test_the_framing_tests_take_a_late_answer_as_the_earlier_requests_not_a_wrong_transfer_id():
+    """4.1's provoked traffic (``conformance/wire.answers_of``) pairs through the reader's one F4 pairing: an ESC
+    that stalls answers maintenance-0 while the host already waits for maintenance-1 (transfer id 0 heard in 1's
+    wait). It is 0's answer, late (so neither has an answer in its wait: 4.1.1-2 fails that, not F4); the old window
+    scan gave it to 1 and FAILed F4 on a conforming, late ESC. An answer off in its transfer id is still its own."""
+    asked = {"m0": Asked("m0", "maintenance_information", 0, 0.0, 0.1),
+             "m1": Asked("m1", "maintenance_information", 1, 0.1, 0.2)}
+    answers_of(asked, [_maintenance_answer(0, 0.15), _maintenance_answer(1, 0.25)], host=0, node=1, error=0.0)
+    assert asked["m0"].answers == [] and asked["m1"].answers == []
+    answers_of(asked, [_maintenance_answer(0, 0.05), _maintenance_answer(2, 0.15)], host=0, node=1, error=0.0)
+    assert [a.transfer_id for a in asked["m0"].answers] == [0]
+    assert [a.transfer_id for a in asked["m1"].answers] == [2]  # (F4's test FAILs it: transfer id 2 != 1)
