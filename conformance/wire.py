@@ -214,6 +214,10 @@ def provoke(d: RecordingDut) -> Traffic:
     function the profile declares absent (MSG_EXP mode, CAN Test, Get Rec) are not provoked: the
     framing and frame-table checks judge the rest (R9b), never skipped whole."""
     claims = d.profile.claims
+    # what the DUT held while the host was away (a reopen at another rate before this: R20, its transfer ids and gaps
+    # OBSERVE) comes back to back as the host acknowledges again: the capture starts after it
+    d.wait(BROADCAST_WINDOW_S)
+    since = d.now()
     asked: dict[str, Asked] = {}
     for label, name, fields in QUERIES:
         ex = d.request(name, fields)
@@ -244,7 +248,7 @@ def provoke(d: RecordingDut) -> Traffic:
     probe_id = service_id(FALLBACK_PRIORITY, DRONECAN_GET_NODE_INFO, True, d.node_id, d.host_node)
     d.send_wire(WireFrame(probe_id, bytes((tail_byte(0),))))  # GetNodeInfo has no payload: the tail byte only
     d.wait(BROADCAST_WINDOW_S + 2 * LONGEST_S)  # then normal reporting: every report at least once, MSG1 over 32 times
-    heard = d.heard()
+    heard = [h for h in d.heard() if h.timestamp >= since]
     answers_of(asked, heard, d.host_node, d.node_id, d.lane.timing_error)
 
     def during(label: str) -> list[HeardFrame]:

@@ -43,8 +43,8 @@ def test_lane_listeners_hear_both_directions_and_frames_that_do_not_decode():
         lane.close()
     assert heard.msgs == got, "the listeners see exactly what the lane hands out, in order"
     own = [m for m in got if not m.is_rx]
-    # both queued at once: the lower id wins arbitration and goes first
-    assert [m.arbitration_id for m in own] == [0x123, wire.arbitration_id], "the host's sends, as their echoes"
+    # both queued at once: the host's queue is SocketCAN's (first in, first out), so they go in the order sent
+    assert [m.arbitration_id for m in own] == [wire.arbitration_id, 0x123], "the host's sends, as their echoes"
     decoded = [Decoder().decode(m) for m in got if m.is_extended_id]
     assert [(f.source, f.layout.name) for f in decoded if f.name == "get_esc_id"] == [(0, "query"), (1, "reply")]
     assert any(f.name == "msg1" and f.source == 1 for f in decoded), "the ESC's reports"
