@@ -266,8 +266,13 @@ def answers_of(asked: dict[str, Asked], heard: list[HeardFrame], host: int, node
     it. A late answer to an earlier request, heard while the host waited for a later one, is the earlier's (late:
     outside its wait, so no answer of either), not the later's answer with a wrong transfer id; an answer the
     pairing gives no request (sent to another node, of no service asked meanwhile) is the answer of the request
-    whose wait it came in, as F4's test judges it."""
+    whose wait it came in, as F4's test judges it. ``error``: the bench's stated error between the host's clock (a
+    request's send and wait without echo) and the bus's stamps."""
     pairing, owner = RequestPairing(error=error), {}
+
+    def waited(a: Asked, x: HeardFrame) -> bool:  # heard while the host waited for ``a`` (host clock against bus stamps)
+        return a.sent_at - error <= x.timestamp <= a.until + error
+
     sids = {cat.spec(a.name).type_id for a in asked.values()}
     events = [(a.sent_at, 0, a) for a in asked.values()]
     events += [(h.timestamp, 1, h) for h in heard if h.cid.kind is not Kind.MESSAGE and h.cid.type_id in sids]
@@ -283,8 +288,8 @@ def answers_of(asked: dict[str, Asked], heard: list[HeardFrame], host: int, node
         p = pairing.response(x.timestamp, cid.source, cid.type_id, x.transfer_id, cid.destination)
         a = owner.get(id(p.request)) if p.request is not None else None
         if a is None:
-            a = next((a for a in asked.values() if cat.spec(a.name).type_id == cid.type_id and a.sent_at <= x.timestamp <= a.until), None)
-        if a is not None and a.sent_at <= x.timestamp <= a.until:
+            a = next((a for a in asked.values() if cat.spec(a.name).type_id == cid.type_id and waited(a, x)), None)
+        if a is not None and waited(a, x):
             a.answers.append(x)
 
 
