@@ -105,16 +105,22 @@ def _soak(frames) -> set[str]:
     return {r for f in monitor.findings if f.watch == monitor.comm.name for r in f.rules}
 
 
-def _explorer(frames) -> set[str]:
-    baseline = {"node_id": NODE, "throttle_channel": 1, **cat.DEFAULT_REPORT_INTERVALS}
+def _judged(frames, *, channel: int = 1, heard=None) -> tuple[Oracle, list]:
+    """The explorer's oracle fed the host's frames of ``frames`` (the ESC at throttle ``channel``), and its judge's
+    findings on the ESC's frames (``heard``: the reader's log, when the test gives it)."""
+    baseline = {"node_id": NODE, "throttle_channel": channel, **cat.DEFAULT_REPORT_INTERVALS}
     oracle = Oracle(baseline, powered_at=0.0, start=BOOT_S)
     for m in frames:
         if not m.is_rx:
             oracle.host_frame(m)
     oracle.finish(END_S)
     found = judge(oracle, decoded(m for m in frames if m.is_rx and m.timestamp >= BOOT_S), BOOT_S, END_S,
-                  Params(boot_s=BOOT_S))
-    return {r for f in found for r in f.requirements}
+                  Params(boot_s=BOOT_S), **({} if heard is None else {"heard": heard}))
+    return oracle, found
+
+
+def _explorer(frames) -> set[str]:
+    return {r for f in _judged(frames)[1] for r in f.requirements}
 
 
 def _recorded(frames) -> list[tuple[str, float]]:
@@ -164,12 +170,5 @@ def test_r8_counts_from_the_commands_that_carry_the_esc_s_channel_the_explorer_s
         rules.feed_message(m)
     late = [(t, flag) for t, flag, last in log.flags[NODE] if t > 0.5 and last is not None and t - last < MSG1_S]
     assert late and all(flag for _, flag in late)  # the reader's clock: a command just before, the flag set
-    baseline = {"node_id": NODE, "throttle_channel": 20, **cat.DEFAULT_REPORT_INTERVALS}
-    oracle = Oracle(baseline, powered_at=0.0, start=BOOT_S)
-    for m in frames:
-        if not m.is_rx:
-            oracle.host_frame(m)
-    oracle.finish(END_S)
-    found = judge(oracle, decoded(m for m in frames if m.is_rx and m.timestamp >= BOOT_S), BOOT_S, END_S,
-                  Params(boot_s=BOOT_S), heard=log)
+    oracle, found = _judged(frames, channel=20, heard=log)
     assert not oracle.commands and [f.text() for f in found] == []
