@@ -128,9 +128,11 @@ class QueryPairing:
         self.kept: list[ReplyPairing] = []
 
     def _time(self, t: float) -> None:
-        if t < self._last_t:  # time went back (a capture's jump): nothing before is paired with what follows
-            self._queries.clear()
+        if t < self._last_t - self.error:  # back by more than the stamps' stated error (a capture's jump):
+            self._queries.clear()        # nothing before is paired with what follows
             self._taken.clear()
+        elif t < self._last_t:  # back by less: two stamps of different sources in the other order within their
+            return              # error (a host's frame timed by its send, without echo, and the ESC's by the bus)
         self._last_t = t
         while self._queries and t - self._queries[0].t > self.reach:
             self._queries.popleft()

@@ -75,6 +75,25 @@ def test_time_going_back_forgets_the_queries():
     assert p.reply(5.005, 5).outcome(0) == NONE
 
 
+def test_stamps_in_the_other_order_within_the_error_are_no_time_jump():
+    """A one-handle bench without echo, its frames stamped at their start (the bench matrix, on a loaded machine):
+    the host's GET_ESC_ID at 34.000181, a flight controller's played on the host's handle and timed by its send at
+    34.005632, the ESC's reply to the host's stamped by the bus at 34.005609, 23 us earlier, then its reply to the
+    flight controller's. The pairing took the 23 us for a capture's time jump, forgot both queries, and the soak
+    found both replies answering no query (R1) and the host's query unanswered (4.4.3-4): on a conforming ESC."""
+    p = QueryPairing(error=0.002)
+    p.query(34.000181, 0)
+    p.query(34.005632, FC)
+    first = p.reply(34.005609, 1)
+    second = p.reply(34.009587, 1)
+    assert first.outcome(0) == HOST and first.query.t == 34.000181
+    assert second.outcome(0) == OTHER
+    jump = QueryPairing(error=0.002)
+    jump.query(5.0, 0)
+    jump.query(1.0, 0)  # back by more than the error: still a capture's jump
+    assert jump.reply(5.005, 5).outcome(0) == NONE
+
+
 def test_memory_is_bounded():
     p = QueryPairing()
     for k in range(10_000):
