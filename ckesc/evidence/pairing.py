@@ -4,7 +4,10 @@
 :func:`~ckesc.protocol.judgements.f4_answers`: per requester, node asked and service, by transfer id, never by order
 alone) and a broadcast command's answer (MSG Control's, a message naming no request) with the command; the bus reader
 (:mod:`.tracker`, :mod:`.rules`) feeds it every request and every answer and tells its consumers the pairing
-(:meth:`~.events.ReaderEvents.response`: the explorer's judge takes it instead of pairing again).
+(:meth:`~.events.ReaderEvents.response`: the explorer's judge takes it instead of pairing again). An answer addressed
+to a node that asked nothing it answers pairs with no request, and says which other node's request it answers but for
+its destination (:class:`Misaddressed`): the framing section (``conformance/wire.answers_of``) fails it under F4 as
+that request's answer.
 
 :class:`QueryPairing` decides which GET_ESC_ID query a reply answers. The suite's helpers
 (``conformance/answers.py``) and the bus reader (:mod:`.tracker`: the bus rules, check-log, and the soak, whose
