@@ -331,7 +331,7 @@ class Link:
         ex = self.request(name, fields, **kw)
         if ex.response is None:
             node = kw.get("destination", self.node_id)
-            raise DutError(f"{name}: no answer from node {node}" + self._why_no_answer(name, node, ex.sent.host_time))
+            raise DutError(f"{name}: no answer from node {node}" + self._why_no_answer(name, node, ex.sent.time))
         return ex.response.fields
 
     # ------------------------------------------------------------------ looking at what came
@@ -409,15 +409,15 @@ class Link:
                 except BusFault as exc:
                     raise DutUnreachable(f"no ESC took the host's GET_ESC_ID at {self.lane.bitrate} bit/s: {exc}") from exc
             self.wait(cat.ANSWER_DELAY_MAX_S * 2)  # every ESC answers within 64 ms (R2); read them all
-            replies = [f.source for f in self.frames("get_esc_id", since=sent.host_time)
+            replies = [f.source for f in self.frames("get_esc_id", since=sent.time)
                        if f.layout is not None and f.layout.name == "reply"]
             # a reply whose payload does not decode still names its sender in its CAN id: what the
             # payload should be is section 4.4.3's verdict (R1), not a reason to stop every test
-            replies += [g.msg.arbitration_id & 0x7F for g in self.undecoded("get_esc_id", since=sent.host_time, kind=Kind.MESSAGE)
+            replies += [g.msg.arbitration_id & 0x7F for g in self.undecoded("get_esc_id", since=sent.time, kind=Kind.MESSAGE)
                         if g.msg.arbitration_id & 0x7F != self.host_node]
             found.update(dict.fromkeys(replies))
             # reporting from an id that answers GET_ESC_ID (not the host's, 0x7D or the reserved ones), not answered
-            booting = {src for src, _, _ in self.report_starts(sent.host_time, None)
+            booting = {src for src, _, _ in self.report_starts(sent.time, None)
                        if src != self.host_node and 0 < src < DEFAULT_ESC_NODE_ID} - set(found)
             if found and (not booting or self.now() >= give_up):
                 self.discovered = sorted(found)
