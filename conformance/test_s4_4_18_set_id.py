@@ -249,7 +249,7 @@ def test_observe_requests_from_a_non_zero_host(dut, original):
         wire, _ = other.request(name, fields, destination=node, now=dut.now(), timeout=0.1)
         sent = dut.send_wire(wire)
         dut.wait(0.1)
-        answers = [f for f in dut.frames(name, since=sent.host_time) if f.kind is Kind.RESPONSE]
+        answers = [f for f in dut.frames(name, since=sent.time) if f.kind is Kind.RESPONSE]
         dut.record.observe(f"{name} from node {host}: answered to", [f.destination for f in answers] or "none")
     found = esc_ids(dut)
     dut.record.observe(f"Set ID from node {host} obeyed", found == [(node, _other_channel(channel))])

@@ -18,6 +18,8 @@ from typing import Any
 import pytest
 
 from ckesc.bench.dut import Dut, DutError
+from ckesc.bench.link import Sent
+from ckesc.evidence.live import LaneRules
 from ckesc.evidence.pairing import RequestPairing
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import FALLBACK_PRIORITY, Frame, WireFrame, classify
@@ -153,7 +155,9 @@ class RecordingDut(Dut):
 
 @dataclass
 class Asked:
-    """One request of the provoked traffic and the DUT's service frames with its service id."""
+    """One request of the provoked traffic and its answers, in the bus's clock: ``sent_at`` when it was on the bus
+    (:attr:`~ckesc.bench.link.Sent.time`, stated to ``error``), ``until`` when the host stopped waiting for its answer
+    (:attr:`~ckesc.bench.link.Exchange.until`)."""
 
     label: str
     name: str
@@ -161,6 +165,7 @@ class Asked:
     sent_at: float
     until: float
     answers: list[HeardFrame] = field(default_factory=list)
+    error: float = 0.0
 
 
 @dataclass
@@ -170,6 +175,13 @@ class Traffic:
     heard: list[HeardFrame]  # the DUT's frames in the order they came, one unbroken stretch
     asked: dict[str, Asked]  # the read-only requests, by label
     broadcasts: dict[str, list[HeardFrame]]  # the DUT's messages after each broadcast command, by label
+    #: the stretches (first, last stamp) of frames the nodes held while the host was away, as the bus reader tells
+    #: (:meth:`~ckesc.evidence.rejoin.Rejoin.held_stretches`, R20: their transfer ids and gaps OBSERVE)
+    held: tuple[tuple[float, float], ...] = ()
+
+    def adjacent(self, a: HeardFrame, b: HeardFrame) -> bool:
+        """No held stretch lies between frames ``a`` and ``b`` nor holds either: F3 may pair them."""
+        return not any(a.timestamp <= last and b.timestamp >= first for first, last in self.held)
 
 
 def find_node(d: RecordingDut) -> int:
@@ -203,10 +215,16 @@ def bare_dut(run, lane) -> RecordingDut:
     return d
 
 
-def _window(d: RecordingDut, seconds: float) -> tuple[float, float]:
-    start = d.now()
+def _window(d: RecordingDut, sent: Sent, seconds: float) -> tuple[float, float]:
+    """Wait ``seconds`` after the broadcast ``sent``: the window from it to the wait's end, in the bus's clock."""
     d.wait(seconds)
-    return start, d.now()
+    return sent.time, d.bus_now()
+
+
+def held_stretches(lane) -> tuple[tuple[float, float], ...]:
+    """What the bus reader on ``lane`` (the plugin's live rules) says the nodes held while the host was away (none
+    where no reader watches the lane: then nothing is excused)."""
+    return tuple(s for w in lane.listeners if isinstance(w, LaneRules) for s in w.rules.held_stretches())
 
 
 def provoke(d: RecordingDut) -> Traffic:
@@ -214,20 +232,15 @@ def provoke(d: RecordingDut) -> Traffic:
     function the profile declares absent (MSG_EXP mode, CAN Test, Get Rec) are not provoked: the
     framing and frame-table checks judge the rest (R9b), never skipped whole."""
     claims = d.profile.claims
-    # what the DUT held while the host was away (a reopen at another rate before this: R20, its transfer ids and gaps
-    # OBSERVE) comes back to back as the host acknowledges again: the capture starts after it
-    d.wait(BROADCAST_WINDOW_S)
-    since = d.now()
     asked: dict[str, Asked] = {}
     for label, name, fields in QUERIES:
         ex = d.request(name, fields)
-        asked[label] = Asked(label, name, ex.pending.transfer_id, ex.sent.time, d.now())
+        asked[label] = Asked(label, name, ex.pending.transfer_id, ex.sent.time, ex.until, error=ex.sent.error)  # type: ignore[arg-type]
     windows: dict[str, tuple[float, float]] = {}
     answer_window = BROADCAST_WINDOW_S + d.lane.timing_error  # an answer late by the lane's error is still one
-    d.broadcast("get_esc_id", {"option": 0}, layout="query")
-    windows["get_esc_id"] = _window(d, answer_window)
-    d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME})
-    windows["msg_control"] = _window(d, answer_window)
+    windows["get_esc_id"] = _window(d, d.broadcast("get_esc_id", {"option": 0}, layout="query"), answer_window)
+    windows["msg_control"] = _window(d, d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME}),
+                                     answer_window)
     if claims("msg_exp_mode"):
         try:  # MSG_EXP mode: the MSG_EXP frames (which ones come is OBSERVE, R9-exp)
             d.broadcast("msg_control", {"option": 0, "command": cat.MSG_CONTROL_RESUME_EXP})
@@ -248,8 +261,8 @@ def provoke(d: RecordingDut) -> Traffic:
     probe_id = service_id(FALLBACK_PRIORITY, DRONECAN_GET_NODE_INFO, True, d.node_id, d.host_node)
     d.send_wire(WireFrame(probe_id, bytes((tail_byte(0),))))  # GetNodeInfo has no payload: the tail byte only
     d.wait(BROADCAST_WINDOW_S + 2 * LONGEST_S)  # then normal reporting: every report at least once, MSG1 over 32 times
-    heard = [h for h in d.heard() if h.timestamp >= since]
-    answers_of(asked, heard, d.host_node, d.node_id, d.lane.timing_error)
+    heard = d.heard()
+    answers_of(asked, heard, d.host_node, d.node_id)
 
     def during(label: str) -> list[HeardFrame]:
         start, end = windows[label]
@@ -257,22 +270,19 @@ def provoke(d: RecordingDut) -> Traffic:
 
     broadcasts = {name: [h for h in during(name) if h.cid.kind is Kind.MESSAGE and h.spec is not None and h.spec.name == name]
                   for name in ("get_esc_id", "msg_control")}
-    return Traffic(d.node_id, d.host_node, heard, asked, broadcasts)
+    return Traffic(d.node_id, d.host_node, heard, asked, broadcasts, held_stretches(d.lane))
 
 
-def answers_of(asked: dict[str, Asked], heard: list[HeardFrame], host: int, node: int, error: float) -> None:
-    """Each request's answers (``Asked.answers``): the service frames heard within its wait that F4's one pairing
+def answers_of(asked: dict[str, Asked], heard: list[HeardFrame], host: int, node: int) -> None:
+    """Each request's answers (``Asked.answers``): the service frames F4's one pairing
     (:class:`~ckesc.evidence.pairing.RequestPairing`, the bus reader's: by transfer id, never by order alone) gives
-    it. A late answer to an earlier request, heard while the host waited for a later one, is the earlier's (late:
-    outside its wait, so no answer of either), not the later's answer with a wrong transfer id; an answer the
-    pairing gives no request (sent to another node, of no service asked meanwhile) is the answer of the request
-    whose wait it came in, as F4's test judges it. ``error``: the bench's stated error between the host's clock (a
-    request's send and wait without echo) and the bus's stamps."""
-    pairing, owner = RequestPairing(error=error), {}
-
-    def waited(a: Asked, x: HeardFrame) -> bool:  # heard while the host waited for ``a`` (host clock against bus stamps)
-        return a.sent_at - error <= x.timestamp <= a.until + error
-
+    it, heard before the host stopped waiting for it. A late answer to an earlier request, heard while the host waited
+    for a later one, is the earlier's (late: after its wait, so no answer of either), not the later's answer with a
+    wrong transfer id; an answer addressed to another node than the requester is the answer of the request it answers
+    in every other field (:class:`~ckesc.evidence.pairing.Misaddressed`), failed by F4's test; one the pairing gives
+    no request answers none. Every time is the bus's: the requests' (:attr:`Asked.sent_at`, stated to
+    :attr:`Asked.error`, the pairing's error) and the waits' ends are the stamps' clock."""
+    pairing, owner = RequestPairing(error=max((a.error for a in asked.values()), default=0.0)), {}
     sids = {cat.spec(a.name).type_id for a in asked.values()}
     events = [(a.sent_at, 0, a) for a in asked.values()]
     events += [(h.timestamp, 1, h) for h in heard if h.cid.kind is not Kind.MESSAGE and h.cid.type_id in sids]
@@ -286,10 +296,9 @@ def answers_of(asked: dict[str, Asked], heard: list[HeardFrame], host: int, node
             continue
         cid = x.cid
         p = pairing.response(x.timestamp, cid.source, cid.type_id, x.transfer_id, cid.destination)
-        a = owner.get(id(p.request)) if p.request is not None else None
-        if a is None:
-            a = next((a for a in asked.values() if cat.spec(a.name).type_id == cid.type_id and waited(a, x)), None)
-        if a is not None and waited(a, x):
+        r = p.request if p.misaddressed is None else p.misaddressed.request
+        a = owner.get(id(r)) if r is not None else None
+        if a is not None and x.timestamp <= a.until:
             a.answers.append(x)
 
 

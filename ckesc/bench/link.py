@@ -3,6 +3,7 @@ their answers, discovery, and the throttle safety every send goes through."""
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -35,6 +36,11 @@ _WINDOW_IDS = {cat.spec(name).type_id: name for name in WINDOW_REQUESTS}
 
 @dataclass
 class Sent:
+    """A frame the host sent, in the bus's clock: :attr:`time` is when it was on the bus (its echo's stamp; without an
+    echo the host's send time, mapped into the bus's clock: every lane stamps on the host's time base) and
+    :attr:`error` that time's stated error, so that a consumer compares it with bus stamps and nothing else.
+    ``host_time`` is the host's own clock at the send, for the host's own deadlines only."""
+
     wire: WireFrame
     host_time: float
     bus_time: float | None = None  # from the echo of our own frame (SocketCAN loopback / socketcand / sim)
@@ -71,12 +77,14 @@ class Sent:
 
 @dataclass
 class Exchange:
-    """A request and what answered it."""
+    """A request and what answered it. ``until``: when the host stopped waiting for the answer, in the bus's clock
+    (:meth:`Link.bus_now`; None: it did not wait): every frame it read meanwhile is stamped no later."""
 
     sent: Sent
     pending: Pending
     response: Frame | None = None
     mismatch: list[str] = field(default_factory=list)
+    until: float | None = None
 
     @property
     def delay(self) -> float | None:
@@ -111,6 +119,7 @@ class Link:
         self.garbled: deque[Garbled] = deque(maxlen=MAX_GARBLED)
         self.garbled_dropped = 0
         self._sent: list[Sent] = []
+        self._heard_to = -math.inf  # the latest stamp of a frame read (bus_now)
         self._tasks: list[Any] = []
         self.record = Record()
         self.lane_seconds = 0.0  # lane time the test took (set by the dut fixture)
@@ -123,6 +132,14 @@ class Link:
     # ------------------------------------------------------------------ clock
     def now(self) -> float:
         return self.lane.now()
+
+    def bus_now(self, now: float | None = None) -> float:
+        """Now in the bus's clock, for the end of a window of frames heard: the lane's time, or the latest stamp read
+        where that is later (a frame stamped at its end, or by a bench whose stamps run ahead of the host's clock within
+        its stated error, is read before the host's clock reaches its stamp). A window ending here holds every frame
+        read until now, whichever clock ran ahead. ``now``: the lane's time just read (each reading of a real-time
+        lane's clock counts: :meth:`.lanes.BusLane.now`)."""
+        return max(self.now() if now is None else now, self._heard_to)
 
     @property
     def clock(self) -> str:
@@ -168,6 +185,8 @@ class Link:
                 self._take(msg)
 
     def _take(self, msg: can.Message) -> Frame | None:
+        if msg.timestamp and msg.timestamp > self._heard_to:
+            self._heard_to = msg.timestamp
         if msg.is_extended_id and (msg.arbitration_id & 0x7F) == self.host_node and not msg.is_error_frame:
             self._match_echo(msg)
         elif self.lane.alone is not None and getattr(msg, "is_rx", True) and not getattr(msg, "is_error_frame", False):
@@ -284,7 +303,9 @@ class Link:
                 if pending.response is not None or left_at - sent.host_time <= held_up or left_at + timeout <= deadline:
                     break
                 deadline = pending.deadline = left_at + timeout  # the echo came late: the window is the bus's
-            self.proto.expire(self.now())
+            now = self.now()
+            self.proto.expire(now)
+            ex.until = self.bus_now(now)
         ex.response = pending.response
         ex.mismatch = pending.mismatch
         return ex
@@ -310,7 +331,7 @@ class Link:
         ex = self.request(name, fields, **kw)
         if ex.response is None:
             node = kw.get("destination", self.node_id)
-            raise DutError(f"{name}: no answer from node {node}" + self._why_no_answer(name, node, ex.sent.host_time))
+            raise DutError(f"{name}: no answer from node {node}" + self._why_no_answer(name, node, ex.sent.time))
         return ex.response.fields
 
     # ------------------------------------------------------------------ looking at what came
@@ -388,15 +409,15 @@ class Link:
                 except BusFault as exc:
                     raise DutUnreachable(f"no ESC took the host's GET_ESC_ID at {self.lane.bitrate} bit/s: {exc}") from exc
             self.wait(cat.ANSWER_DELAY_MAX_S * 2)  # every ESC answers within 64 ms (R2); read them all
-            replies = [f.source for f in self.frames("get_esc_id", since=sent.host_time)
+            replies = [f.source for f in self.frames("get_esc_id", since=sent.time)
                        if f.layout is not None and f.layout.name == "reply"]
             # a reply whose payload does not decode still names its sender in its CAN id: what the
             # payload should be is section 4.4.3's verdict (R1), not a reason to stop every test
-            replies += [g.msg.arbitration_id & 0x7F for g in self.undecoded("get_esc_id", since=sent.host_time, kind=Kind.MESSAGE)
+            replies += [g.msg.arbitration_id & 0x7F for g in self.undecoded("get_esc_id", since=sent.time, kind=Kind.MESSAGE)
                         if g.msg.arbitration_id & 0x7F != self.host_node]
             found.update(dict.fromkeys(replies))
             # reporting from an id that answers GET_ESC_ID (not the host's, 0x7D or the reserved ones), not answered
-            booting = {src for src, _, _ in self.report_starts(sent.host_time, None)
+            booting = {src for src, _, _ in self.report_starts(sent.time, None)
                        if src != self.host_node and 0 < src < DEFAULT_ESC_NODE_ID} - set(found)
             if found and (not booting or self.now() >= give_up):
                 self.discovered = sorted(found)

@@ -102,7 +102,7 @@ def observe(link: Link, *, modes: bool = False, full: bool = True) -> Observed:
 def _answering(link: Link) -> list[int]:
     sent = link.broadcast("get_esc_id", {"option": 0}, layout="query")
     link.wait(2 * cat.ANSWER_DELAY_MAX_S + 2 * link.lane.timing_error)
-    return sorted({f.source for f in link.frames("get_esc_id", since=sent.host_time)
+    return sorted({f.source for f in link.frames("get_esc_id", since=sent.time)
                    if f.layout is not None and f.layout.name == "reply"})
 
 

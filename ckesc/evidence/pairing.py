@@ -4,7 +4,10 @@
 :func:`~ckesc.protocol.judgements.f4_answers`: per requester, node asked and service, by transfer id, never by order
 alone) and a broadcast command's answer (MSG Control's, a message naming no request) with the command; the bus reader
 (:mod:`.tracker`, :mod:`.rules`) feeds it every request and every answer and tells its consumers the pairing
-(:meth:`~.events.ReaderEvents.response`: the explorer's judge takes it instead of pairing again).
+(:meth:`~.events.ReaderEvents.response`: the explorer's judge takes it instead of pairing again). An answer addressed
+to a node that asked nothing it answers pairs with no request, and says which other node's request it answers but for
+its destination (:class:`Misaddressed`): the framing section (``conformance/wire.answers_of``) fails it under F4 as
+that request's answer.
 
 :class:`QueryPairing` decides which GET_ESC_ID query a reply answers. The suite's helpers
 (``conformance/answers.py``) and the bus reader (:mod:`.tracker`: the bus rules, check-log, and the soak, whose
@@ -205,12 +208,27 @@ class Request:
 
 
 @dataclass(frozen=True, slots=True)
+class Misaddressed:
+    """An answer addressed to node ``to``, which sent no request it answers, that answers ``request`` (another node's)
+    in every other field: F4's answer to ``request``, failed for its destination."""
+
+    request: Request
+    to: int
+
+    def __str__(self) -> str:
+        r = self.request
+        return (f"answers node {r.requester}'s request (service {r.service}, transfer id {r.transfer_id}) but is "
+                f"addressed to node {self.to}")
+
+
+@dataclass(frozen=True, slots=True)
 class ResponsePairing:
     """What one answer (from ``node`` at ``t``) answers: ``request`` (None: none), the fields F4 finds off from it
     (``mismatches``: a response paired as its request's answer and failed with the field named,
     :data:`~ckesc.protocol.judgements.F4_PAIRING_SLACK`), ``again``: the request had this node's answer already (a
     repeat, judged no further); ``asked``: the transfer ids of the requests of its key in the window (what F4 says
-    it should have carried)."""
+    it should have carried); ``misaddressed`` (``request`` None): the request of another node it answers but for
+    its destination (:class:`Misaddressed`)."""
 
     t: float
     node: int
@@ -218,6 +236,7 @@ class ResponsePairing:
     mismatches: tuple[str, ...] = ()
     again: bool = False
     asked: tuple[int | None, ...] = ()
+    misaddressed: Misaddressed | None = None
 
     @property
     def holds(self) -> bool:
@@ -275,9 +294,20 @@ class RequestPairing:
             if again is not None:
                 return ResponsePairing(t, node, again, again=True, asked=asked)
         if k is None:
-            return ResponsePairing(t, node, None, asked=asked)
+            return ResponsePairing(t, node, None, asked=asked, misaddressed=self._misaddressed(t, node, service, transfer_id,
+                                                                                                requester))
         by.add(node)
         return ResponsePairing(t, node, r, off, asked=asked)
+
+    def _misaddressed(self, t: float, node: int, service: int, transfer_id: int | None, to: int) -> Misaddressed | None:
+        """The latest open request of another requester than ``to`` that this answer carries exactly but for its
+        destination (F4: one field off, the one it is failed with), None: none. Nothing is marked answered: the reading
+        is told, not taken."""
+        fits = [r for (requester, sid), q in self._requests.items() if sid == service and requester != to for r, by in q
+                if r.kind is Kind.REQUEST and node not in by and -self.error <= t - r.t <= RESPONSE_WINDOW_S
+                and not f4_mismatches(Addressed(Kind.RESPONSE, service, transfer_id, requester, node), service=r.service,
+                                      transfer_id=r.transfer_id, requester=r.requester, asked=r.asked)]
+        return Misaddressed(max(fits, key=lambda r: r.t), to) if fits else None
 
     def others(self, node: int, service: int, requester: int, t: float) -> list[int]:
         """The requesters other than ``requester`` that asked ``node`` (or any node, Set ID) for ``service`` within

@@ -10,7 +10,11 @@ after them with R9a-gaps grace.
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
+
+#: held stretches remembered (the latest), for :meth:`Rejoin.held_stretches`
+STRETCHES_KEPT = 16
 
 
 class Rejoin:
@@ -20,6 +24,7 @@ class Rejoin:
     _nodes: dict[int, Any]
     power_switches: int
     set_bitrate: Any  # (Tracker's)
+    _stretches: deque[list[float]]  # made at the first stretch: (its first frame's start, its last frame's stamp)
 
     def rejoined(self, bitrate: int) -> None:
         """The host reopened its bus (at ``bitrate``, another or the same: Set Baud's tests): while it listened
@@ -38,11 +43,19 @@ class Rejoin:
             if own:
                 return
             self._held = busy_from
+            self.__dict__.setdefault("_stretches", deque(maxlen=STRETCHES_KEPT)).append([busy_from, ts])
         if busy_from == self._held:
             node.unsure_until = max(node.unsure_until, ts)
+            self._stretches[-1][1] = ts
             return
         self._held = None
         for other in self._nodes.values():
             other.chain += 1
             other.grace_chain = other.chain
             other.paused = False
+
+    def held_stretches(self) -> list[tuple[float, float]]:
+        """The held stretches (:meth:`held`) read so far, the latest :data:`STRETCHES_KEPT`: each (the start of its
+        first frame on the bus, the stamp of its last), in the stamps' clock. A consumer that judges those frames
+        itself (the framing section's F3) asks here which were held, as the reader took them."""
+        return [(a, b) for a, b in self.__dict__.get("_stretches", ())]

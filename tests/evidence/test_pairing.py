@@ -16,11 +16,11 @@ from types import SimpleNamespace
 
 import pytest
 
-from ckesc.evidence.pairing import AMBIGUOUS, HOST, NONE, OTHER, QueryPairing
+from ckesc.evidence.pairing import AMBIGUOUS, HOST, NONE, OTHER, QueryPairing, RequestPairing
 from ckesc.evidence.rules import BusRules
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.frame import FALLBACK_PRIORITY, Decoder, encode
-from ckesc.protocol.ids import service_id
+from ckesc.protocol.ids import Kind, service_id
 from ckesc.protocol.transfer import tail_byte
 from conformance import answers
 from conformance.wire import Asked, HeardFrame, answers_of
@@ -207,8 +207,62 @@ def test_the_framing_tests_take_a_late_answer_as_the_earlier_requests_not_a_wron
     scan gave it to 1 and FAILed F4 on a conforming, late ESC. An answer off in its transfer id is still its own."""
     asked = {"m0": Asked("m0", "maintenance_information", 0, 0.0, 0.1),
              "m1": Asked("m1", "maintenance_information", 1, 0.1, 0.2)}
-    answers_of(asked, [_maintenance_answer(0, 0.15), _maintenance_answer(1, 0.25)], host=0, node=1, error=0.0)
+    answers_of(asked, [_maintenance_answer(0, 0.15), _maintenance_answer(1, 0.25)], host=0, node=1)
     assert asked["m0"].answers == [] and asked["m1"].answers == []
-    answers_of(asked, [_maintenance_answer(0, 0.05), _maintenance_answer(2, 0.15)], host=0, node=1, error=0.0)
+    answers_of(asked, [_maintenance_answer(0, 0.05), _maintenance_answer(2, 0.15)], host=0, node=1)
     assert [a.transfer_id for a in asked["m0"].answers] == [0]
     assert [a.transfer_id for a in asked["m1"].answers] == [2]  # (F4's test FAILs it: transfer id 2 != 1)
+
+
+def _pairing_with_a_request(tid: int = 3) -> tuple[RequestPairing, int]:
+    p, sid = RequestPairing(), cat.spec("maintenance_information").type_id
+    p.request(1.0, Kind.REQUEST, sid, tid, 0, 1)
+    return p, sid
+
+
+def test_an_answer_addressed_to_another_node_names_the_request_it_answers():
+    """F4 (the fault ``response_to_broadcast``): an answer to node 127, which asked nothing, carries the host's
+    request's service and transfer id: the reader says which request it answers but for its destination, as a typed
+    field, and takes nothing (the request is still open: a right answer after it holds)."""
+    p, sid = _pairing_with_a_request()
+    got = p.response(1.001, 1, sid, 3, 127)
+    assert got.request is None and not got.holds
+    assert got.misaddressed is not None and got.misaddressed.to == 127
+    r = got.misaddressed.request
+    assert (r.requester, r.service, r.transfer_id, r.asked) == (0, sid, 3, 1)
+    assert "addressed to node 127" in str(got.misaddressed)
+    assert p.response(1.002, 1, sid, 3, 0).holds
+
+
+def test_an_answer_off_in_more_than_its_destination_answers_no_request():
+    p, sid = _pairing_with_a_request()
+    assert p.response(1.001, 1, sid, 4, 127).misaddressed is None  # and its transfer id: F4's slack is one field
+    assert p.response(1.001, 2, sid, 3, 127).misaddressed is None  # and from a node that was not asked
+    assert p.response(7.0, 1, sid, 3, 127).misaddressed is None  # long after: no request open
+    assert p.response(1.001, 1, sid, 3, 0).misaddressed is None  # the requester's: its own answer
+    later, _ = _pairing_with_a_request()
+    later.request(1.01, Kind.REQUEST, sid, 3, 10, 1)  # a flight controller asked the same, later
+    assert later.response(1.02, 1, sid, 3, 127).misaddressed.request.requester == 10  # the latest it answers
+
+
+def test_the_framing_tests_take_a_misaddressed_answer_as_its_requests_and_no_other_by_time():
+    """4.1's provoked traffic: an answer addressed to node 127 is its request's (the reader's typed reading), so F4's
+    test FAILs it on its destination and 4.1.1-2 holds; an answer that answers no request (off in two fields) is no
+    request's, though it came while the host waited (the old time-window fallback gave it to that request)."""
+    asked = {"m0": Asked("m0", "maintenance_information", 0, 0.0, 0.1)}
+    answers_of(asked, [_maintenance_answer(0, 0.05, to=127)], host=0, node=1)
+    assert [h.cid.destination for h in asked["m0"].answers] == [127]
+    answers_of(asked, [_maintenance_answer(5, 0.05, to=127)], host=0, node=1)
+    assert asked["m0"].answers == []
+
+
+def test_the_framing_tests_count_an_answer_up_to_the_waits_end_in_the_bus_clock():
+    """The wait's end is the bus's (``Exchange.until``, every frame read before it stamped no later): an answer stamped
+    at it is the request's, one stamped after it (read once the host had stopped waiting) is late, no request's: no
+    error is added on either side (the old window added the bench's error to both ends, comparing the host's clock
+    with the stamps)."""
+    asked = {"m0": Asked("m0", "maintenance_information", 0, 0.0, 0.1, error=0.004)}
+    answers_of(asked, [_maintenance_answer(0, 0.1)], host=0, node=1)
+    assert len(asked["m0"].answers) == 1
+    answers_of(asked, [_maintenance_answer(0, 0.1001)], host=0, node=1)
+    assert asked["m0"].answers == []

@@ -107,6 +107,23 @@ def test_without_echo_the_host_frames_are_handed_out_in_time_order_and_rules_lea
     dut.ask("set_freq", {"option": 1, "msg1_interval": 10, "msg2_interval": 50, "msg3_interval": 250})
 
 
+@pytest.mark.parametrize("echo", [True, False], ids=["echo", "no-echo"])
+def test_a_requests_wait_ends_in_the_bus_clock(bench, echo):
+    """The emulator stamps a frame at its end (its start plus its time on the bus), as an adapter does, so the host
+    reads an answer before its own clock reaches the answer's stamp. A request's wait ends in the bus's clock
+    (``Exchange.until``, ``Link.bus_now``): every frame read by then is stamped no later, so the framing section's
+    "answered while the host waited" compares stamps with stamps (the host's clock there FAILed 4.1.1-2 without echo)."""
+    lane, rules = bench(echo)
+    lane.find_echo(echo_probe())
+    dut = Dut(lane, DutProfile.load("emulator"), node_id=1)
+    assert dut.wait_for("msg1", 3.0) is not None
+    for option in (0, 1, 2) * 3:
+        ex = dut.request("maintenance_information", {"option": option})
+        assert ex.response is not None and ex.until is not None
+        assert max(f.timestamp for f in dut.trace) <= ex.until
+        assert ex.sent.time <= ex.response.timestamp <= ex.until
+
+
 # ------------------------------------------------------------------------------------------ ckesc run
 #: the sections that time the host's own frames: comm loss (4.4.4), answer delays (4.4.2, 4.4.3) and report
 #: intervals (4.4.22)

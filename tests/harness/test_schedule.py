@@ -233,3 +233,17 @@ def test_a_persistence_test_alone_makes_its_own_power_cycle(tmp_path):
     assert r["outcome"] == "PASS" and "write" not in r["traces"]
     assert not any(k == "power cycle" for k, _ in r["observations"])
     assert any(k == "power-up counter" for k, _ in r["observations"])  # its own proven cycle
+
+
+def test_the_framing_capture_right_after_a_reopen_counts_no_held_report(tmp_path):
+    """In collection order the framing section runs right after the R20 bus tests, whose reopen leaves the ESC's held
+    reports to come back to back as the framing capture starts (R20: their transfer ids OBSERVE). Its F3 count takes
+    them alone because the bus reader says they were held (``Rejoin.held_stretches``), not because it waits before its
+    capture: without the reader's word this run FAILs F3 on the faultless emulator."""
+    doc = _ckesc_run(tmp_path, "--order", "collection", "conformance/test_robustness_r20_bus.py", "4.1")
+    order = [r["nodeid"] for r in doc["results"]]
+    assert "r20_bus" in order[0] and "s4_1_framing" in order[-1]
+    assert set(_verdicts(doc).values()) <= {"PASS", "OBSERVED"}, [(r["nodeid"], r["message"][:200]) for r in doc["results"]
+                                                                  if r["outcome"] not in ("PASS", "OBSERVED")]
+    f3 = [r for r in doc["results"] if "transfer_ids_count" in r["nodeid"]]
+    assert len(f3) == 2 and all(r["outcome"] == "PASS" for r in f3)
