@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import PreflightError
-from .labgrid_power import one_line, environment, open_driver
+from .labgrid_power import environment, one_line, open_driver
 
 #: ``--bus-fault-cmd``'s value that shorts the bus through labgrid
 LABGRID = "labgrid"
