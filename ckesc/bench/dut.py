@@ -9,6 +9,7 @@ cycles and the 120 s window), and the operations the suites share.
 
 from __future__ import annotations
 
+import itertools
 from typing import Any, Iterable, Mapping
 
 from ..protocol import catalogue as cat
@@ -26,6 +27,8 @@ __all__ = ["MAX_GARBLED", "Dut", "DutError", "DutUnreachable", "Exchange", "Link
 
 #: type ids of the frames that change how the DUT reports (MSG Control, CAN Test): restore resumes after them
 _MODE_IDS = frozenset(cat.spec(name).type_id for name in ("msg_control", "can_test"))
+#: the settings 242 gives as one bit each, side by side in its first byte (4.4.28-1), by their names in 242's answer
+_MAJOR_BITS = {"rotation": "direction", "throttle_source": "throttle_source"}
 
 
 class Dut(Link):
@@ -71,7 +74,27 @@ class Dut(Link):
         if self.profile.has("led") and (now["led_color"], now["led_blink"]) != (snapshot["led_color"], snapshot["led_blink"]):
             self.ask("set_led", {"option": 1, "color": snapshot["led_color"], "blink": snapshot["led_blink"]})
         after = self.settings()
+        if any(after[k] != snapshot[k] for k in _MAJOR_BITS) and all(after[k] == snapshot[k] for k in snapshot
+                                                                    if k not in _MAJOR_BITS):
+            after = self._restore_major_bits(snapshot)
         return [f"{k}: {after[k]} (was {snapshot[k]})" for k in snapshot if after[k] != snapshot[k]]
+
+    def _restore_major_bits(self, snapshot: Mapping[str, int]) -> dict[str, int]:
+        """Rotation and throttle source put back by what 242 reads, whatever its bits are said to mean: each pair of
+        their values is set in turn until 242 reads as the test found it. A DUT whose 242 places the two bits
+        otherwise than 4.4.28-1 says (which 4.4.28's own tests judge) is then put back as it was, where setting the
+        values 242 seemed to show wrote the wrong setting (and left the run's later tests a DUT changed under them);
+        it holds as long as different settings read differently. Returns the settings read last."""
+        layout = cat.spec("get_major_configuration").response_for({"option": 0})
+        codes = [sorted(layout.field(_MAJOR_BITS[k]).codes or ()) for k in ("rotation", "throttle_source")]
+        after = dict(snapshot)
+        for rotation, source in itertools.product(*codes):
+            self.ask("set_rotation", {"rotation": rotation})
+            self.ask("throttle_select", {"source": source})
+            after = self.settings()
+            if after == dict(snapshot):
+                break
+        return after
 
     # ------------------------------------------------------------------ power (the supply's)
     def power_up_count(self) -> int | None:

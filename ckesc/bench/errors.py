@@ -22,7 +22,8 @@ class RestoreFailed(HarnessError):
     settings), or could not verify it had: the test ERRORs with this message whatever the requirement's strength, an
     OBSERVE test's too. It is told apart from the DUT not answering what a test asked
     (:class:`~ckesc.bench.link.DutError`), which in an OBSERVE test is what the DUT did: a restore that meets a DUT
-    not answering raises this (:func:`~ckesc.bench.link.restoring`)."""
+    not answering raises this (:func:`~ckesc.bench.link.restoring`). The explorer's reset between programs raises it
+    too (:meth:`~ckesc.explore.runner.Session.run`): the exploration stops, with no finding."""
 
 
 class BenchError(HarnessError):

@@ -53,7 +53,7 @@ def _import_labgrid():
     return labgrid
 
 
-def _one_line(exc: BaseException) -> str:
+def one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
@@ -79,7 +79,7 @@ class PlaceLock:
             self.session = start_session(self.address, extra={"args": args})
         except Exception as exc:  # noqa: BLE001 - grpc and labgrid raise many kinds; all mean "no coordinator"
             raise PreflightError(f"--labgrid-place {self.name}: cannot reach the labgrid coordinator at {self.address}: "
-                                 f"{_one_line(exc)} (give --labgrid-coordinator HOST:PORT or LG_COORDINATOR)") from None
+                                 f"{one_line(exc)} (give --labgrid-coordinator HOST:PORT or LG_COORDINATOR)") from None
         try:
             place = self.session.places.get(self.name)
             if place is None:
@@ -100,7 +100,7 @@ class PlaceLock:
                 if holder is not None and holder.acquired and holder.acquired != self.me:
                     raise PreflightError(self.held_by(holder.acquired)) from None
                 raise PreflightError(f"--labgrid-place {self.name}: the coordinator {self.address} refused to lock "
-                                     f"it: {_one_line(exc)}") from None
+                                     f"it: {one_line(exc)}") from None
         except BaseException:
             self.release()
             raise
@@ -141,7 +141,7 @@ class PlaceLock:
                 if place is not None and place.acquired == self.me:
                     self._run(session.release())
         except Exception as exc:  # noqa: BLE001 - the coordinator may be gone by now
-            print(f"ckesc: could not release labgrid place {self.name} ({self.address}): {_one_line(exc)}; release it "
+            print(f"ckesc: could not release labgrid place {self.name} ({self.address}): {one_line(exc)}; release it "
                   f"with `labgrid-client -p {self.name} release`", file=sys.stderr)
         finally:
             self.session = None
@@ -171,7 +171,7 @@ class LabgridPower(PowerControl):
         try:
             getattr(self.driver, how)()
         except Exception as exc:  # noqa: BLE001 - a driver may raise anything (HTTP, SNMP, a USB hub ...)
-            raise RuntimeError(f"labgrid power {how} failed ({self.where}): {_one_line(exc)}") from exc
+            raise RuntimeError(f"labgrid power {how} failed ({self.where}): {one_line(exc)}") from exc
 
     def off(self) -> None:
         self._switch("off")
@@ -209,6 +209,48 @@ def _remote_places(config: dict) -> list[str]:
     return [name for name in resources.get("RemotePlace", {}) if name]
 
 
+def environment(env_file: str, name: str | None) -> tuple[Any, str]:
+    """labgrid's ``Environment`` of ``env_file`` (labgrid importable: the caller checked) and the name of its target
+    ``name`` (default: the file's only one), as ``--power``, ``--bus-fault-cmd labgrid`` take them: a file labgrid
+    cannot read, several targets and none named, or a target it does not have is a one-line :class:`PreflightError`."""
+    from labgrid import Environment
+
+    try:
+        env = Environment(str(env_file))
+        targets = env.config.get_targets() or {}
+    except Exception as exc:  # noqa: BLE001 - YAML, templating, imports of the file: all "cannot read it"
+        raise PreflightError(f"--labgrid-env {env_file}: not a labgrid environment file: {one_line(exc)}") from None
+    if not name:
+        if len(targets) != 1:
+            raise PreflightError(f"--labgrid-env {env_file} has targets {', '.join(targets) or '(none)'}: name one "
+                                 "with --labgrid-target")
+        name = next(iter(targets))
+    if name not in targets:
+        raise PreflightError(f"--labgrid-env {env_file}: no target {name!r} (targets: {', '.join(targets) or 'none'})")
+    return env, name
+
+
+def open_driver(env: Any, name: str, protocol: str, where: str, *, missing: str, unusable: str) -> Any:
+    """Target ``name``'s driver for ``protocol`` (a labgrid protocol or driver class), found without activating it,
+    then activated; every problem a one-line :class:`PreflightError`: ``missing`` is the whole error where the target
+    has no such driver, ``unusable`` names what the driver is for where it cannot be activated ("``unusable`` of
+    ``where`` cannot be used: why"), and labgrid's own configuration and binding errors name the file and ``where``."""
+    from labgrid.exceptions import NoDriverFoundError
+
+    try:
+        target = env.get_target(name)
+        driver = target.get_driver(protocol, activate=False)
+    except NoDriverFoundError:
+        raise PreflightError(missing) from None
+    except Exception as exc:  # noqa: BLE001 - labgrid's config and binding errors
+        raise PreflightError(f"--labgrid-env {env.config_file}: {where}: {one_line(exc)}") from None
+    try:
+        target.activate(driver)
+    except Exception as exc:  # noqa: BLE001 - an unavailable resource, a driver that cannot start
+        raise PreflightError(f"{unusable} of {where} cannot be used: {one_line(exc)}") from None
+    return driver
+
+
 #: the labgrid options: those of the env file and its target (which --flash-cmd labgrid uses too), then the power's own
 LABGRID_TARGET_OPTIONS = ("labgrid_env", "labgrid_target")
 LABGRID_OPTIONS = (*LABGRID_TARGET_OPTIONS, "labgrid_place", "labgrid_coordinator")
@@ -239,29 +281,15 @@ def open_power(get: Option) -> LabgridPower:
     acquired here is released again when a later step fails."""
     labgrid_options(get)
     _import_labgrid()
-    from labgrid import Environment
-    from labgrid.exceptions import NoDriverFoundError
     from labgrid.resource.remote import RemotePlaceManager
 
     env_file = get("labgrid_env")
-    try:
-        env = Environment(str(env_file))
-        targets = env.config.get_targets() or {}
-    except Exception as exc:  # noqa: BLE001 - YAML, templating, imports of the file: all "cannot read it"
-        raise PreflightError(f"--labgrid-env {env_file}: not a labgrid environment file: {_one_line(exc)}") from None
-    name = get("labgrid_target")
-    if not name:
-        if len(targets) != 1:
-            raise PreflightError(f"--labgrid-env {env_file} has targets {', '.join(targets) or '(none)'}: name one "
-                                 "with --labgrid-target")
-        name = next(iter(targets))
-    if name not in targets:
-        raise PreflightError(f"--labgrid-env {env_file}: no target {name!r} (targets: {', '.join(targets) or 'none'})")
+    env, name = environment(env_file, get("labgrid_target"))
     where = f"target {name} of {env_file}"
     try:
-        in_file = _remote_places(targets[name])
+        in_file = _remote_places(env.config.get_targets()[name])
     except Exception as exc:  # noqa: BLE001
-        raise PreflightError(f"--labgrid-env {env_file}: {where}: {_one_line(exc)}") from None
+        raise PreflightError(f"--labgrid-env {env_file}: {where}: {one_line(exc)}") from None
     place = get("labgrid_place")
     if place and in_file and in_file != [place]:
         raise PreflightError(f"--labgrid-place {place}, but {where} is on place {', '.join(in_file)} (RemotePlace)")
@@ -278,18 +306,9 @@ def open_power(get: Option) -> LabgridPower:
         where += f" on place {place} ({lock.address})"
     power = LabgridPower(None, where=where, lock=lock, env=env)
     try:
-        try:
-            target = env.get_target(name)
-            driver = target.get_driver("PowerProtocol", activate=False)
-        except NoDriverFoundError:
-            raise PreflightError(f"--labgrid-env {env_file}: {where} has no power driver (PowerProtocol: e.g. "
-                                 "NetworkPowerDriver on a NetworkPowerPort)") from None
-        except Exception as exc:  # noqa: BLE001 - labgrid's config and binding errors
-            raise PreflightError(f"--labgrid-env {env_file}: {where}: {_one_line(exc)}") from None
-        try:
-            target.activate(driver)
-        except Exception as exc:  # noqa: BLE001 - an unavailable resource, a driver that cannot start
-            raise PreflightError(f"labgrid power of {where} cannot be used: {_one_line(exc)}") from None
+        driver = open_driver(env, name, "PowerProtocol", where, unusable="labgrid power",
+                             missing=f"--labgrid-env {env_file}: {where} has no power driver (PowerProtocol: e.g. "
+                                     "NetworkPowerDriver on a NetworkPowerPort)")
     except BaseException:
         power.close()
         raise

@@ -23,16 +23,12 @@ from pathlib import Path
 from typing import Any
 
 from .errors import PreflightError
+from .labgrid_power import environment, one_line, open_driver
 
 #: ``--bus-fault-cmd``'s value that shorts the bus through labgrid
 LABGRID = "labgrid"
 #: the labgrid protocol whose driver switches the relay
 PROTOCOL = "DigitalOutputProtocol"
-
-
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def check(env_file: str | None) -> None:
@@ -63,7 +59,7 @@ class LabgridRelay:
             self.driver.set(closed)
         except Exception as exc:  # noqa: BLE001 - a driver may raise anything (USB, HTTP, Modbus ...)
             how = "close" if closed else "open"
-            raise BusFaultFailed(f"the bus-fault relay did not {how} ({self.where}): {_one_line(exc)}") from exc
+            raise BusFaultFailed(f"the bus-fault relay did not {how} ({self.where}): {one_line(exc)}") from exc
 
     def can(self, kind: str) -> bool:
         return kind == "short"
@@ -104,36 +100,13 @@ def open_relay(env_file: str, name: str | None) -> LabgridRelay:
     """The relay driver of target ``name`` (default: the only one) of ``env_file``, activated and opened; every
     set-up problem a :class:`PreflightError` naming the file and the target."""
     check(env_file)
-    from labgrid import Environment
-    from labgrid.exceptions import NoDriverFoundError
-
-    try:
-        env = Environment(str(env_file))
-        targets = env.config.get_targets() or {}
-    except Exception as exc:  # noqa: BLE001 - YAML, templating, imports of the file: all "cannot read it"
-        raise PreflightError(f"--labgrid-env {env_file}: not a labgrid environment file: {_one_line(exc)}") from None
-    if not name:
-        if len(targets) != 1:
-            raise PreflightError(f"--labgrid-env {env_file} has targets {', '.join(targets) or '(none)'}: name one "
-                                 "with --labgrid-target")
-        name = next(iter(targets))
-    if name not in targets:
-        raise PreflightError(f"--labgrid-env {env_file}: no target {name!r} (targets: {', '.join(targets) or 'none'})")
+    env, name = environment(env_file, name)
     where = f"target {name} of {env_file}"
     relay = LabgridRelay(None, where, env)
     try:
-        try:
-            target = env.get_target(name)
-            driver = target.get_driver(PROTOCOL, activate=False)
-        except NoDriverFoundError:
-            raise PreflightError(f"--bus-fault-cmd labgrid: {where} has no relay driver ({PROTOCOL}: e.g. "
-                                 "HIDRelayDriver on a HIDRelay, GpioDigitalOutputDriver on a SysfsGPIO)") from None
-        except Exception as exc:  # noqa: BLE001 - labgrid's config and binding errors
-            raise PreflightError(f"--labgrid-env {env_file}: {where}: {_one_line(exc)}") from None
-        try:
-            target.activate(driver)
-        except Exception as exc:  # noqa: BLE001 - an unavailable resource, a driver that cannot start
-            raise PreflightError(f"the bus-fault relay of {where} cannot be used: {_one_line(exc)}") from None
+        driver = open_driver(env, name, PROTOCOL, where, unusable="the bus-fault relay",
+                             missing=f"--bus-fault-cmd labgrid: {where} has no relay driver ({PROTOCOL}: e.g. "
+                                     "HIDRelayDriver on a HIDRelay, GpioDigitalOutputDriver on a SysfsGPIO)")
         relay.driver, relay.where = driver, f"{type(driver).__name__} of {where}"
         try:
             relay._set(False)  # one left closed (a run killed mid-fault) is opened before anything is judged

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from ..bench.dut import DutError
-from ..bench.errors import PreflightError
+from ..bench.errors import PreflightError, RestoreFailed
 from ..bench.lanes import BenchGone
 from ..bench.station import BenchOptions
 from ..reporting.durations import duration_text
@@ -18,7 +18,7 @@ from ..reporting.exits import ExitStatus
 from ..reporting.report import run_dir
 from .engine import Stats, explore
 from .report import load_replay, summary_text, write_reports
-from .runner import OPTION_NAMES, RestoreError, Session
+from .runner import OPTION_NAMES, Session
 
 BENCH_OPTIONS = OPTION_NAMES
 
@@ -62,7 +62,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         session = open_session(options)
         try:
             outcome = session.run(program)
-        except (RestoreError, DutError, BenchGone) as exc:
+        except (RestoreFailed, DutError, BenchGone) as exc:
             raise BenchProblem(str(exc)) from None
         finally:
             _close(session, out)
@@ -94,7 +94,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         found, stats = explore(session, budget_s=args.budget, seed=args.seed, database=database,
                                max_size=args.max_steps, stop_at_first=args.first, progress=progress,
                                max_programs=getattr(args, "max_programs", None), say=say)
-    except (RestoreError, DutError, BenchGone) as exc:
+    except (RestoreFailed, DutError, BenchGone) as exc:
         raise BenchProblem(str(exc)) from None
     finally:
         _close(session, out)

@@ -19,8 +19,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from ..bench.errors import RestoreFailed
 from .actions import Action, program_from_json, program_json, programs
-from .runner import ExploreOutcome, RestoreError, Session
+from .runner import ExploreOutcome, Session
 
 ROUND = 25  # programs per Hypothesis run (a round); shrinking comes on top
 PAST = "past-findings.json"  # in the database directory: every finding's program, run first next time
@@ -104,7 +105,7 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
         return bool(broken) or now - start >= budget_s or (
             shrink_s is not None and bool(shrinking_since) and now - shrinking_since[0] >= shrink_s)
 
-    broken: list[RestoreError] = []
+    broken: list[RestoreFailed] = []
     for program in _past(database):  # the findings of earlier explorations first, as they were shrunk
         if over():
             break
@@ -125,7 +126,7 @@ def explore(session: Session, *, budget_s: float, seed: int = 0, database: str |
                 return  # the budget is spent: what is being shrunk stays as found so far
             try:
                 outcome = session.run(program)
-            except RestoreError as exc:  # the explorer's problem, not a finding: stop
+            except RestoreFailed as exc:  # the explorer's problem, not a finding: stop
                 broken.append(exc)
                 return
             stats.wall = clock() - start
@@ -195,7 +196,7 @@ def _one_minimal(session: Session, f: Found, stats: Stats, spent: Callable[[], b
             candidate = f.program[:i] + f.program[i + 1:]
             try:
                 outcome = session.run(candidate)
-            except RestoreError:
+            except RestoreFailed:
                 return False
             stats.add(outcome)
             f.shrink_runs += 1

@@ -6,7 +6,9 @@ checks, lanes and profile), finds the DUT and notes its settings: the *baseline*
 the settings restored and verified, as the suite's ``dut`` fixture does), runs the program step by step, feeds
 every host frame and power switch to a fresh :class:`~ckesc.explore.oracle.Oracle` after each step (so that a
 request goes to the node id the model says the DUT has), reads the settings back at the end, and returns an
-:class:`ExploreOutcome`.
+:class:`ExploreOutcome`. A DUT that cannot be put back is the suite's own
+:class:`~ckesc.bench.errors.RestoreFailed` (the harness's failure, as in a conformance test): the exploration
+stops with it, and it is never a finding.
 
 A load step (R18) puts a :class:`~ckesc.protocol.load.LoadSource` on the simulated lane's bus (its frames contend
 by arbitration, as the conformance module's do) and tells the oracle the share, which the judge widens R9 by
@@ -26,7 +28,7 @@ from typing import Any, Mapping, Sequence
 import can
 
 from ..bench.dut import Dut, DutError, DutUnreachable
-from ..bench.errors import PreflightError
+from ..bench.errors import PreflightError, RestoreFailed
 from ..bench.lanes import BusFault, Lane
 from ..bench.outcomes import Inconclusive
 from ..bench.station import BENCH_ROWS, BenchOptions, build
@@ -99,10 +101,6 @@ class ExploreOutcome:
     @property
     def seconds(self) -> float:
         return self.t_end - self.t0
-
-
-class RestoreError(RuntimeError):
-    """The DUT could not be put back into the baseline state: not a finding, the explorer's problem."""
 
 
 class Session:
@@ -189,7 +187,7 @@ class Session:
                 try:
                     self._reset()
                     self._dirty = False
-                except RestoreError as exc:
+                except RestoreFailed as exc:
                     self.left = str(exc)
             if unsent is not None:  # the DUT put back: zero throttle again, where it now listens
                 try:
@@ -226,7 +224,7 @@ class Session:
             if node != self.baseline_node or dut.settings()["throttle_channel"] != self.baseline["throttle_channel"]:
                 # a program moved it (Set ID): back, inside this power-up's window
                 if self.lane.now() - powered_at > cat.CONFIG_WINDOW_S - 5:
-                    raise RestoreError(f"the DUT is at node {node}, not {self.baseline_node}, and no power control "
+                    raise RestoreFailed(f"the DUT is at node {node}, not {self.baseline_node}, and no power control "
                                        "opens a Set ID window to move it back")
                 dut.ask("set_id", {"node_id": self.baseline_node, "throttle_channel": self.baseline["throttle_channel"]})
                 dut.node_id = self.baseline_node
@@ -237,11 +235,11 @@ class Session:
                 if (now := dut.settings()) == self.baseline:
                     break
                 if attempt == RESTORE_TRIES:
-                    raise RestoreError(f"the DUT's settings restored did not hold across {RESTORE_TRIES} power cycles "
+                    raise RestoreFailed(f"the DUT's settings restored did not hold across {RESTORE_TRIES} power cycles "
                                        f"(R13): {now} against {self.baseline}")
                 left = dut.restore(self.baseline)
                 if left:
-                    raise RestoreError(f"could not restore the DUT's settings: {'; '.join(left)}")
+                    raise RestoreFailed(f"could not restore the DUT's settings: {'; '.join(left)}")
                 if not self.lane.power.available:  # a Set Freq write restarts the report timers (R9a): let that pass
                     dut.wait(RESTORE_SETTLE_S)
                     break
@@ -250,7 +248,7 @@ class Session:
                 # finding its own steps cannot reproduce
                 powered_at = dut.switch_power(self.profile.off_s, self.profile.boot_s)
         except (DutError, Inconclusive, AssertionError) as exc:
-            raise RestoreError(f"could not put the DUT back into its starting state: {exc}") from None
+            raise RestoreFailed(f"could not put the DUT back into its starting state: {exc}") from None
         return powered_at
 
     def _leave_modes(self) -> None:
@@ -303,7 +301,7 @@ class Session:
     def run(self, program: Sequence[Action]) -> ExploreOutcome:
         try:
             powered_at = self._reset()
-        except RestoreError:  # once more (a real-time bench may lose a frame under load, issue #21); then it stands
+        except RestoreFailed:  # once more (a real-time bench may lose a frame under load, issue #21); then it stands
             powered_at = self._reset()
         self._baud_sent = any(a.op == "send" and a.name == "set_baud" for a in program)
         self._dirty = True

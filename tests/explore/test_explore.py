@@ -22,6 +22,7 @@ import time
 
 import pytest
 
+from ckesc.bench.errors import HarnessError, RestoreFailed
 from ckesc.emulator import variants
 from ckesc.emulator.faults import FAULTS
 from ckesc.explore import command
@@ -241,11 +242,28 @@ def test_a_dut_that_boots_suspended_at_another_bit_rate_is_put_back():
                              Action("send", "msg_control", {"option": 0, "command": 0x55555555}), Action("power")])
         assert any(f.key == "stream|msg1 stopped, normal" for f in first.findings)
         assert session.lane.bitrate == 1_000_000
-        session.run([Action("wait", seconds=0.05)])  # its reset: no RestoreError
+        session.run([Action("wait", seconds=0.05)])  # its reset: no RestoreFailed
         assert session.lane.bitrate == 500_000 and session.dut.discover() == 1
     finally:
         session.close()
     assert session.left is None
+
+
+def test_a_dut_that_cannot_be_put_back_stops_the_exploration_as_the_harness_failure():
+    """The explorer's reset that cannot put the DUT's settings back raises the suite's own RestoreFailed (a
+    HarnessError: a conformance test ERRORs on it), never a finding: the exploration stops with it and close()
+    says what is left. Here a program turned the motor's direction, then the DUT stopped obeying Set Rotation
+    (its fault switched on as ``ckesc control fault on`` does): no reset can turn it back."""
+    session = Session({})
+    try:
+        assert not session.run([Action("send", "set_rotation", {"rotation": 1})]).findings
+        session.lane.sim.world.bench.set_fault("rotation_ignored")
+        with pytest.raises(RestoreFailed, match=r"rotation: 1 \(was 0\)") as caught:
+            explore(session, seed=SEED, database=None, budget_s=60)
+        assert isinstance(caught.value, HarnessError)
+    finally:
+        session.close()
+    assert "rotation: 1 (was 0)" in session.left
 
 
 def test_the_budget_bounds_shrinking_too():

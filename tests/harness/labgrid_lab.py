@@ -19,7 +19,35 @@ from ckesc.emulator.control import control_request
 LOCALHOST = "127.0.0.1"
 
 
-class PowerSwitch:
+class _Answering(BaseHTTPRequestHandler):
+    """A request handler that answers with a short text body and logs nothing."""
+
+    def answer(self, body: str) -> None:
+        self.send_response(200)
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body.encode())
+
+    def log_message(self, *args) -> None:
+        pass
+
+
+class _Served:
+    """An HTTP server of ``handler`` on a free port of 127.0.0.1, served by a thread of its own until :meth:`close`;
+    ``url`` is its address with ``path``."""
+
+    def _serve(self, handler: type[BaseHTTPRequestHandler], path: str) -> None:
+        self.server = ThreadingHTTPServer((LOCALHOST, 0), handler)
+        self.url = f"http://{LOCALHOST}:{self.server.server_address[1]}{path}"
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+        self.thread.start()
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+class PowerSwitch(_Served):
     """An HTTP relay for labgrid's NetworkPowerPort ``model: simplerest``: ``GET /power/<index>/<1|0>`` switches the
     emulator's power through its control channel (as ``ckesc control --port P power on|off`` does), ``GET
     /power/<index>`` answers ``1`` or ``0``. ``switched`` lists what it was asked to do, in order."""
@@ -29,7 +57,7 @@ class PowerSwitch:
         self.switched: list[str] = []
         switch = self
 
-        class Handler(BaseHTTPRequestHandler):
+        class Handler(_Answering):
             def do_GET(self) -> None:  # noqa: N802 - http.server's name
                 m = re.fullmatch(r"/power/(\d+)(?:/([01]))?", self.path)
                 if m is None:
@@ -42,22 +70,9 @@ class PowerSwitch:
                     body = m.group(2)
                 else:
                     body = "1" if control_request(switch.control_port, {"cmd": "status"})["powered"] else "0"
-                self.send_response(200)
-                self.send_header("Content-Length", str(len(body)))
-                self.end_headers()
-                self.wfile.write(body.encode())
+                self.answer(body)
 
-            def log_message(self, *args) -> None:
-                pass
-
-        self.server = ThreadingHTTPServer((LOCALHOST, 0), Handler)
-        self.url = f"http://{LOCALHOST}:{self.server.server_address[1]}/power/{{index}}/{{value}}"
-        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
-        self.thread.start()
-
-    def close(self) -> None:
-        self.server.shutdown()
-        self.server.server_close()
+        self._serve(Handler, "/power/{index}/{value}")
 
 
 def free_port() -> int:
@@ -123,7 +138,7 @@ class Lab:
             end(proc)
 
 
-class BusRelay:
+class BusRelay(_Served):
     """An HTTP relay for labgrid's ``HttpDigitalOutput`` (``HttpDigitalOutputDriver``) whose contacts short the
     emulator's bus: ``PUT /relay`` with ``1`` closes it (``ckesc control bus short on`` through the control channel),
     ``0`` opens it (``... off``); ``GET /relay`` answers ``1`` or ``0``. ``switched`` lists what it was asked, in
@@ -136,7 +151,7 @@ class BusRelay:
         self.on_close = None
         relay = self
 
-        class Handler(BaseHTTPRequestHandler):
+        class Handler(_Answering):
             def do_PUT(self) -> None:  # noqa: N802 - http.server's name
                 body = self.rfile.read(int(self.headers.get("Content-Length") or 0)).decode().strip()
                 if self.path != "/relay" or body not in ("0", "1"):
@@ -147,26 +162,14 @@ class BusRelay:
                     control_request(relay.control_port, {"cmd": "bus_fault", "kind": "short", "on": closed})
                 relay.closed = closed
                 relay.switched.append(int(closed))
-                self._answer(body)
+                self.answer(body)
                 if closed and relay.on_close is not None:
                     relay.on_close()
 
             def do_GET(self) -> None:  # noqa: N802
-                self._answer("1" if relay.closed else "0")
+                self.answer("1" if relay.closed else "0")
 
-            def _answer(self, body: str) -> None:
-                self.send_response(200)
-                self.send_header("Content-Length", str(len(body)))
-                self.end_headers()
-                self.wfile.write(body.encode())
-
-            def log_message(self, *args) -> None:
-                pass
-
-        self.server = ThreadingHTTPServer((LOCALHOST, 0), Handler)
-        self.url = f"http://{LOCALHOST}:{self.server.server_address[1]}/relay"
-        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
-        self.thread.start()
+        self._serve(Handler, "/relay")
 
     def env_file(self, where: Path) -> Path:
         """A labgrid environment file: target ``esc`` with this relay as an HttpDigitalOutput and labgrid's own
@@ -176,7 +179,3 @@ class BusRelay:
                         f"        url: '{self.url}'\n        body_asserted: '1'\n        body_deasserted: '0'\n"
                         "    drivers:\n      HttpDigitalOutputDriver: {}\n")
         return path
-
-    def close(self) -> None:
-        self.server.shutdown()
-        self.server.server_close()

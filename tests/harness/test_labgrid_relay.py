@@ -124,3 +124,36 @@ def test_a_bus_fault_command_is_checked_before_anything_is_opened(given, said):
 def test_the_emulators_bus_faults_are_the_suites_own():
     with pytest.raises(PreflightError, match="--bus-fault-cmd is for --dut bus"):
         build(BenchOptions(bus_fault_cmd="relay {seconds}"))
+
+
+RELAY = "    drivers:\n      HttpDigitalOutputDriver: {}\n"
+#: a labgrid set-up mistake, the environment file that makes it, the target named (None: the file's only one) and
+#: the one-line error ``--power labgrid`` and ``--bus-fault-cmd labgrid`` both give (what names the driver aside)
+SETUP_MISTAKES = [
+    pytest.param("targets: [esc\n", None, "--labgrid-env {env}: not a labgrid environment file: ", id="not-yaml"),
+    pytest.param(f"targets:\n  a:\n{RELAY}  b:\n{RELAY}", None, "--labgrid-env {env} has targets a, b: name one with "
+                 "--labgrid-target", id="several-targets"),
+    pytest.param(f"targets:\n  esc:\n{RELAY}", "other", "--labgrid-env {env}: no target 'other' (targets: esc)",
+                 id="no-such-target"),
+    pytest.param("targets:\n  esc:\n    drivers:\n      NetworkPowerDriver: {}\n      HttpDigitalOutputDriver: {}\n",
+                 None, "--labgrid-env {env}: target esc of {env}: NoResourceFoundError: binding ", id="unbound-driver"),
+]
+
+
+@pytest.mark.parametrize(("text", "target", "said"), SETUP_MISTAKES)
+def test_the_relay_and_the_power_take_their_labgrid_target_alike(tmp_path, text, target, said):
+    """The relay and the power open their target's driver through one helper (labgrid_power.environment and
+    open_driver): each set-up mistake is the same one-line PreflightError for both, naming the file and the target."""
+    from ckesc.bench.labgrid_power import open_power
+    from ckesc.bench.labgrid_relay import open_relay
+
+    env = tmp_path / "env.yaml"
+    env.write_text(text)
+    options = {"power": "labgrid", "labgrid_env": str(env), "labgrid_target": target}
+    errors = []
+    for opening in (lambda: open_relay(str(env), target), lambda: open_power(options.get)):
+        with pytest.raises(PreflightError) as caught:
+            opening()
+        errors.append(str(caught.value))
+    said = said.format(env=env)
+    assert all(e.startswith(said) and "\n" not in e for e in errors), errors

@@ -36,12 +36,7 @@ from ckesc.selftest import (
 
 #: Faults whose self-test result is known to be off, with why; each must still be off (so that a fix
 #: is noticed and the entry removed). Empty is the goal.
-KNOWN: dict[str, str] = {
-    # 242 is the only read of the throttle source, so a DUT whose 242 misplaces its bits cannot have
-    # rotation and source restored and verified: tests that change them ERROR in teardown with "settings
-    # could not be restored", which is what an operator must be told; 4.4.28's tests FAIL on 4.4.28-1.
-    "major_config_bits_swapped": "tests that change rotation or source error in teardown: 242 is the read-back",
-}
+KNOWN: dict[str, str] = {}
 
 
 #: The soak fault CI proves the suite misses (the modules citing R8 stream commands and judge the comm flag: about
