@@ -11,7 +11,8 @@
   the comm flag the short raised (R20). A lane without a control plays no short, and says so.
 - **A power cycle with the host alone** (:func:`play_alone`): the power off, the step's frames sent (nobody
   acknowledges them: a real adapter, and the simulated lane's CAN model, hold them until the ESC's controller is up),
-  the power on; the ESC meets them at its power-up and may take them or not (R20: OBSERVE). Which it took, its answers
+  the power on; the ESC meets them at its power-up and may take them or not (R20: OBSERVE; the live reader's report
+  timing unjudged until each report came once more after it, :data:`~ckesc.protocol.judgements.R20_UNJUDGED`). Which it took, its answers
   tell (a read or a settings write is answered when taken): the oracle is given those only (:attr:`Session.unheld`
   keeps the others from it), and their answers are not judged (:attr:`~.oracle.Oracle.held`).
 """
@@ -44,6 +45,10 @@ def play_short(session: Any, action: Action, oracle: Oracle, step: int, feed: Ca
     dut.wait(STOP_S)  # (the last command of the stream on the bus before the short)
     feed(step)
     session.rules.excuse(R20_UNJUDGED)
+    # the reader takes the ESC's first busy stretch after the short as what it held (evidence/rejoin.py: each frame
+    # alone, its gap and transfer id OBSERVE, then every report again with R9a-gaps grace), as after the host's bus was
+    # away; a reset across it is left to 241's counters and R20's bound (the judge's)
+    session.rules.rules.rejoined(lane.bitrate)
     start = lane.now()
     oracle.mark(start, SHORT_MARKS[0], step)
     end = control.cause("short", action.seconds)
@@ -79,6 +84,7 @@ def play_alone(session: Any, action: Action, oracle: Oracle, step: int, feed: Ca
         session._skipped.append(f"step {step + 1}, {action.describe()}: skipped, no power control")
         return
     session.streaming = None
+    session.rules.excuse(R20_UNJUDGED)
     others = dut.supply.power_off()
     feed(step)
     off = lane.now()
@@ -96,6 +102,10 @@ def play_alone(session: Any, action: Action, oracle: Oracle, step: int, feed: Ca
     heard = len(dut.trace)
     dut.supply.power_on(others, profile.boot_s)
     dut.wait(HELD_ANSWER_S)
+    # what the ESC did with them (a write taken at its boot restarts its reports from there, not from its send), until
+    # each report came once more: the reader's report timing unjudged meanwhile (R20: OBSERVE)
+    dut.wait(2 * cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S)
+    session.rules.excuse(frozenset())
     for name, fields, kind, wire in sent:
         tid = wire.data[-1] & 0x1F if wire.data and cat.spec(name).has_tail else 0
         if kind is Kind.RESPONSE or name == "get_esc_id":
