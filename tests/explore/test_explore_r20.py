@@ -173,3 +173,23 @@ def test_explore_with_bus_steps_finds_nothing_on_a_conforming_emulator(variant):
     drawn = sorted(f for f in stats.features if f.startswith(("short", "alone")))
     assert len(drawn) >= 3 and "alone" in drawn, drawn  # (shorts of two lengths at least, and a lone-host power cycle)
     assert not found, "\n".join(f.finding.text() + f"\n  program: {[a.describe() for a in f.program]}" for f in found)
+
+
+@pytest.mark.realtime
+def test_the_bus_steps_in_real_time_against_ckesc_emulate():
+    """In real time against ``ckesc emulate`` (its own process, its hub playing the ESC's controller through the short,
+    ``ckesc control bus``): a short of a streamed ESC and a lone-host power cycle give nothing on the faultless
+    emulator; with ``no_busoff_recovery`` the short shows R20-recovery's finding."""
+    for faults, expect in (("", False), ("no_busoff_recovery", True)):
+        session = Session({"lane": "realtime", "emulator_faults": faults}, bus=True)
+        try:
+            assert session.bench.shorts and session.bench.alone, session.bus_note
+            outcome = session.run([*STREAMED_SHORT[:2], SHORT, STREAMED_SHORT[-1]])
+            held = session.run([Action("alone", fields={"frames": [{"name": "get_esc_id", "fields": {"option": 0}}]})])
+        finally:
+            session.close()
+        assert not outcome.skipped and not held.findings, _texts(held.findings)
+        keys = {f.key for f in outcome.findings}
+        assert ("recovery|no MSG1 after a bus short" in keys) is expect, _texts(outcome.findings)
+        if not expect:
+            assert not outcome.findings, _texts(outcome.findings)
