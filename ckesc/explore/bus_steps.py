@@ -6,7 +6,9 @@
   seconds, then the bus is read until each report is back on its grid (R20's bound and the longest report interval
   twice, as the robustness section's test reads), the live reader leaving the reports' timing and transfer ids
   unjudged meanwhile (:data:`~ckesc.protocol.judgements.R20_UNJUDGED`); the oracle is told the short's start, its end
-  and that moment (:data:`~.oracle.SHORT_MARKS`). A DUT still bus-off then (no recovery of its own) is power-cycled
+  and that moment (:data:`~.oracle.SHORT_MARKS`). A foreign load playing (R18) is taken off the bus for the short and
+  put back once the reports settled: a load generator's backlog after the short would hold the ESC's reports back
+  longer than R20's bound, which says nothing of a loaded bus. A DUT still bus-off then (no recovery of its own) is power-cycled
   back, as on a real bench, and the program goes on. A stream that ran before goes on after it: its next command clears
   the comm flag the short raised (R20). A lane without a control plays no short, and says so.
 - **A power cycle with the host alone** (:func:`play_alone`): the power off, the step's frames sent (nobody
@@ -44,6 +46,10 @@ def play_short(session: Any, action: Action, oracle: Oracle, step: int, feed: Ca
     dut.stop_throttle()
     dut.wait(STOP_S)  # (the last command of the stream on the bus before the short)
     feed(step)
+    load = dict(session._current_load) if session._load is not None else {}
+    if load:  # the foreign load off while the bus is shorted (its backlog would hold the reports back after it)
+        session._set_load(None)
+        oracle.load(lane.now(), 0.0, step)
     session.rules.excuse(R20_UNJUDGED)
     # the reader takes the ESC's first busy stretch after the short as what it held (evidence/rejoin.py: each frame
     # alone, its gap and transfer id OBSERVE, then every report again with R9a-gaps grace), as after the host's bus was
@@ -67,6 +73,9 @@ def play_short(session: Any, action: Action, oracle: Oracle, step: int, feed: Ca
         control.settle()
         feed(step)
         stream = None
+    if load:
+        session._set_load(load, step)
+        oracle.load(lane.now(), load.get("share", 0.0), step)
     if stream is not None:
         dut.throttle_stream(stream, stream_fields(stream), period=session.stream_period)
         session.streaming = stream

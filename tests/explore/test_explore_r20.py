@@ -103,6 +103,22 @@ def test_a_short_on_the_faultless_emulator_is_recovered_without_a_finding():
     assert wait and not any(wait), "the stream going on after the short did not clear the comm flag"
 
 
+def test_a_short_under_a_foreign_load_takes_the_load_off_for_it():
+    """A load of half the bus (R18) is off while the bus is shorted and back once the reports settled: its backlog
+    would hold the ESC's reports back past R20's bound (which says nothing of a loaded bus). Nothing found."""
+    program = [Action("load", fields={"share": 0.5, "priority": "high"}), *STREAMED_SHORT]
+    session = Session({}, bus=True, load=True)
+    try:
+        outcome = session.run(program)
+    finally:
+        session.close()
+    assert not outcome.findings, _texts(outcome.findings)
+    short = next(i for i, a in enumerate(program) if a.op == "short")
+    wait = outcome.t0 + outcome.steps[short + 1][0], outcome.t0 + outcome.steps[short + 1][1]
+    foreign = [m for m in outcome.messages if m.is_extended_id and (m.arbitration_id & 0x7F) not in (0, 1)]
+    assert [m for m in foreign if wait[0] <= m.timestamp <= wait[1]], "the load was not put back after the short"
+
+
 @pytest.mark.parametrize("fault", FAULTS_R20)
 def test_each_bus_off_fault_shows_on_one_short_citing_r20(fault):
     session = Session({"emulator_faults": fault}, bus=True)
