@@ -29,6 +29,7 @@ from ckesc.bench.power import POWER_COMMAND_TIMEOUT_S
 from ckesc.protocol import catalogue as cat
 from ckesc.protocol.canbus import recovery_seconds
 from ckesc.protocol.catalogue import REPORT_FRAMES, Status
+from ckesc.protocol.judgements import R20_UNJUDGED, r20_bound_s
 
 from .baud import CODES, RATES, cycle, move_to, rate0, reopen
 from .resets import afterwards, reset_signs
@@ -56,7 +57,7 @@ def _control(dut, config, kind: str = "short"):
 
 def _bound(dut, interval: float) -> float:
     """R20: the recovery time plus two MSG1 intervals plus the bench's error."""
-    return recovery_seconds(dut.lane.bitrate) + 2 * interval + dut.lane.timing_error
+    return r20_bound_s(interval, bitrate=dut.lane.bitrate) + dut.lane.timing_error
 
 
 def _fault(dut, control, kind: str = "short") -> float:
@@ -79,10 +80,9 @@ def _restore(dut, control) -> None:
         control.settle()
 
 
-#: the bus rules left unjudged from a fault until each report type is back on its grid: the reports' timing, and
-#: their transfer-id sequence (R20: whether a recovered ESC's first reports keep it is OBSERVE; an ESC whose mailboxes
-#: were full in bus-off dropped some, and the first report after those it held skips their transfer ids)
-REPORT_TIMING = frozenset({"R9", "R9a", "F3"})
+#: the bus rules left unjudged from a fault until each report type is back on its grid (R20's reading: an ESC whose
+#: mailboxes were full in bus-off dropped some, and the first report after those it held skips their transfer ids)
+REPORT_TIMING = R20_UNJUDGED
 #: the faults, as the messages name them
 FAULTS = {"short": "bus short (CANH-CANL)", "other_bitrate": "node at another bit rate sending"}
 

@@ -37,6 +37,10 @@ def add_explore_command(sub: argparse._SubParsersAction) -> None:
     x.add_argument("--load", action="store_true", help="also draw foreign-load steps (R18: the suite's load generator at "
                    "10, 30 or 50 %% of the bus from then on, or 70 %% for a while, OBSERVE); the simulated lane only "
                    "(--selftest: for a fault that breaks R18 always)")
+    x.add_argument("--bus", action="store_true", help="also draw R20's steps: a bus short (CANH-CANL) for 20 ms to 0.8 s "
+                   "where the bench can cause one (the simulated lane, ckesc emulate, --bus-fault-cmd), and a power cycle "
+                   "with the host alone on the bus sending while the ESC is off (--selftest: for a fault that breaks R20 "
+                   "always)")
     x.add_argument("--first", action="store_true", help="stop at the first finding (once shrunk)")
     x.add_argument("--selftest", metavar="FAULTS", help="the self-test: for each emulator fault (comma-separated, or "
                    "'all'), explore a fresh emulated bench from --seed until it is found or --budget is spent, and "

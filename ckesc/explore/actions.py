@@ -6,7 +6,11 @@ fragment or transfer, a wrong length, a request to another node, a response fram
 with toggle 1), start or stop a zero-throttle RawCommand stream, cycle the power, wait, wait out the 120 s Set
 ID / Set Baud window (R11), or set the foreign load on the bus (R18: :class:`ckesc.protocol.load.LoadSource` at a
 share of the bus's capacity up to half, which holds from then on; above half only for the step's seconds, what the
-DUT does then being OBSERVE), when asked for (``ckesc explore --load``) and where the lane can play it. :func:`programs` is the Hypothesis strategy of whole programs; the values of every
+DUT does then being OBSERVE), when asked for (``ckesc explore --load``) and where the lane can play it; and, when
+asked for (``ckesc explore --bus``), the bus as CAN hardware makes it (R20): a bus short (CANH to CANL) for one of
+:data:`BUS_SHORTS` where the lane can cause one, and a power cycle with the host alone on the bus (a few reads or
+settings writes sent while the ESC is off: a real adapter holds them, and the ESC meets them at its power-up,
+taking them or not: OBSERVE) where it has power control. :func:`programs` is the Hypothesis strategy of whole programs; the values of every
 request field come from the catalogue (:func:`ckesc.protocol.legality.field_cases`: each legal code, the
 boundaries and their illegal neighbours) plus a random legal value, never written here by hand.
 
@@ -63,13 +67,24 @@ LOAD_SHARES = (0.1, 0.3, 0.5)
 ABOVE_HALF_SHARE = 0.7
 #: how long an above-half load step plays
 ABOVE_HALF_SECONDS = (0.3, 0.6)
+#: R20: how long a bus short lasts (s): about one MSG1 interval at the catalogue's default (the ESC may meet it with
+#: one report), about R20's recovery bound there (:func:`~ckesc.protocol.judgements.r20_bound_s`: 2.8 ms of bus-off
+#: recovery and two 20 ms intervals), past R8's 200 ms (the commands lost raise the comm flag), and past what an ESC's
+#: mailboxes hold of its reports at the default intervals (its first reports after recovery then skip transfer ids:
+#: OBSERVE)
+BUS_SHORTS = (0.02, 0.05, 0.3, 0.8)
+#: a power cycle with the host alone sends at most this many frames while the ESC is off (SocketCAN's queue holds 11:
+#: none is lost)
+ALONE_FRAMES = 3
 #: Codes a field must keep inside (what the document leaves free elsewhere; see the module docstring)
 _ONLY = {("set_led", "blink"): tuple(cat.LED_BLINK)}
 
 
 @dataclass(frozen=True)
 class Action:
-    """One step of a program. ``op``: send | malformed | stream | stop | power | wait | window | load. ``malformed``:
+    """One step of a program. ``op``: send | malformed | stream | stop | power | wait | window | load | short | alone.
+    ``short``: the bus shorted for ``seconds`` (R20). ``alone``: a power cycle during which the host sends
+    ``fields["frames"]`` (each ``{"name", "fields"}``) while the ESC is off (R20). ``malformed``:
     the command ``name`` ``fields`` sent in R17's class ``form`` (:mod:`ckesc.protocol.malformed`). ``load``: foreign
     traffic at ``fields["share"]`` of the bus (0: none) and ``fields["priority"]`` (:data:`ckesc.protocol.load.PRIORITIES`)
     from now on; with ``seconds``, only for that long (then the load before it again)."""
@@ -95,6 +110,8 @@ class Action:
             return f"malformed:{self.form}"
         if self.op == "load":
             return f"load:{self.fields.get('share', 0):g}"
+        if self.op == "short":
+            return f"short:{self.seconds:g}"
         if self.op != "send":
             return self.op
         for key in ("command", "option", "source", "rotation"):
@@ -120,6 +137,11 @@ class Action:
             said = f"foreign load {share:.0%} of the bus, {self.fields.get('priority', 'mixed')} priority"
             return said + (f", for {self.seconds:g} s" if self.seconds else "") + (
                 " (above half: OBSERVE, R18)" if not r18_judged(share) else "")
+        if self.op == "short":
+            return f"bus short (CANH-CANL) for {self.seconds:g} s"
+        if self.op == "alone":
+            held = "; ".join(Action("send", f["name"], f.get("fields", {})).describe() for f in self.fields.get("frames", ()))
+            return f"power cycle, the host alone on the bus sending while the ESC is off: {held}"
         return {"stop": "stop the throttle streams", "power": "power cycle",
                 "window": "wait until the 120 s Set ID / Set Baud window has closed"}.get(self.op, self.op)
 
@@ -168,6 +190,10 @@ class ProgramBench:
     waits: tuple[float, ...] = (0.05, 0.25, 0.6, 1.5, 3.0)
     #: whether the lane can play a foreign load as R18 judges it (the simulated lane: its bus queues it by arbitration)
     load: bool = False
+    #: R20 steps asked for (``--bus``): bus shorts where the lane can cause one, a power cycle with the host alone where
+    #: it has power control
+    shorts: bool = False
+    alone: bool = False
 
 
 def _request_fields(name: str, bench: ProgramBench):
@@ -327,7 +353,32 @@ def families(bench: ProgramBench) -> dict[str, Any]:
             st.just(Action("load", fields={"share": 0})),
             st.builds(lambda t, p: Action("load", fields={"share": ABOVE_HALF_SHARE, "priority": p}, seconds=t),
                       st.sampled_from(ABOVE_HALF_SECONDS), priority))
+    if bench.shorts or (bench.alone and bench.power):
+        out["bus"] = bus_steps(bench).map(lambda a: [a])
     return out
+
+
+def bus_steps(bench: ProgramBench):
+    """A Hypothesis strategy of one R20 step: a bus short for one of :data:`BUS_SHORTS` (where the lane can cause
+    one), or a power cycle with the host alone sending one to :data:`ALONE_FRAMES` frames while the ESC is off (where
+    it has power control): reads (answered or not, nothing changes) and legal settings writes (the runner tells the
+    model which the ESC took: those it answered). Left out of them: a RawCommand (taken or not, nothing answers it,
+    and R8's clock would hold the ESC to one choice), Set ID and Set Baud (where the ESC then is, the runner finds by
+    asking), a suspend (a DUT left suspended refuses what the reset writes)."""
+    from hypothesis import strategies as st
+
+    def send(name: str):
+        return _request_fields(name, bench).map(lambda fields: Action("send", name, fields))
+
+    held = st.one_of(send("maintenance_information"), st.sampled_from(asking()), send("get_esc_id"),
+                     *[legal_write(n, bench) for n in ("set_freq", "set_rotation", "set_led", "throttle_select")])
+    steps = []
+    if bench.shorts:
+        steps.append(st.sampled_from(BUS_SHORTS).map(lambda t: Action("short", seconds=t)))
+    if bench.alone and bench.power:
+        steps.append(st.lists(held, min_size=1, max_size=ALONE_FRAMES).map(
+            lambda sends: Action("alone", fields={"frames": [{"name": a.name, "fields": a.fields} for a in sends]})))
+    return st.one_of(*steps)
 
 
 def episodes(bench: ProgramBench) -> list[Any]:
@@ -429,11 +480,17 @@ def programs(bench: ProgramBench, max_size: int = 12):
 
     strategies = families(bench)
     # (R17's, then R18's last: the order seed 1 was counted in; a bench that cannot play a load draws as before)
-    names = sorted(n for n in strategies if n not in ("malformed", "load")) + ["malformed"] + (["load"] if "load" in strategies else [])
+    # (R20's bus steps after them, where asked for)
+    last = [n for n in ("load", "bus") if n in strategies]
+    names = sorted(n for n in strategies if n not in ("malformed", *last)) + ["malformed"] + last
 
     def from_subset(chosen: frozenset[str]):
-        # an episode is a whole round trip where a single step is one action: drawn twice as often as one family
-        weighted = [strategies[n] for n in names if n in chosen] + ([strategies["episodes"]] if "episodes" in chosen else [])
+        # an episode is a whole round trip where a single step is one action: drawn twice as often as one family; a
+        # bus step (a short costs a second of lane time and more, a lone-host power cycle a power cycle) half as often
+        others = [strategies[n] for n in names if n in chosen and n != "bus"]
+        weighted = others + ([strategies["episodes"]] if "episodes" in chosen else [])
+        if "bus" in chosen:
+            weighted = weighted * 2 + [strategies["bus"]]
         return st.lists(st.one_of(*weighted), min_size=1, max_size=max_size)
 
     swarm = st.frozensets(st.sampled_from(names), min_size=1)

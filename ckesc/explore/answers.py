@@ -157,8 +157,9 @@ def _answered_as_modelled(oracle: Oracle, host: list[tuple[Frame, int | None]], 
     for (req, step), mine, model in zip(host, got, want):
         if any(s.label == "power on" and s.t <= req.timestamp and s.t > t0 for s in oracle.states):
             powered = True
-        if model is None or not _answered(req) or (req.name, req.transfer_id or 0) in oracle.free:
-            continue  # the model's ESC does not answer it (not addressed to it, off, booting; refused): nothing to compare
+        if model is None or not _answered(req) or (req.name, req.transfer_id or 0) in oracle.free | oracle.held:
+            continue  # the model's ESC does not answer it (not addressed to it, off, booting; refused), or the host sent
+            # it alone on the bus (R20: the ESC met it at its power-up, its answer OBSERVE): nothing to compare
         reqs = [ANSWER_REQ[req.name]]
         if req.kind is Kind.REQUEST and req.name not in _BROADCASTS:
             reqs.append("4.1.1-2")

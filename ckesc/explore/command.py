@@ -33,11 +33,12 @@ def bench_options(args: argparse.Namespace) -> dict[str, Any]:
     return {k: getattr(args, k) for k in BENCH_OPTIONS if getattr(args, k, None) is not None}
 
 
-def open_session(options: BenchOptions | dict[str, Any], *, load: bool = False) -> Session:
-    """The bench of ``options``, built and its DUT found (:class:`Session`; ``load``: draw foreign-load steps); a
+def open_session(options: BenchOptions | dict[str, Any], *, load: bool = False, bus: bool = False) -> Session:
+    """The bench of ``options``, built and its DUT found (:class:`Session`; ``load``: draw foreign-load steps, ``bus``:
+    R20's bus steps); a
     set-up mistake is a ``ValueError`` (exit 2), a bench that cannot be used a :class:`BenchProblem` (exit 3)."""
     try:
-        return Session(options, load=load)
+        return Session(options, load=load, bus=bus)
     except PreflightError as exc:  # a set-up mistake (options, fault names, profile): a usage error
         raise ValueError(str(exc)) from None
     except (DutError, BenchGone, OSError) as exc:
@@ -77,7 +78,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
                   f"{'reproduced' if same else 'NOT reproduced'}", file=out)
         return ExitStatus.FAILED if outcome.findings else ExitStatus.OK
     options = bench_options(args)
-    session = open_session(options, load=bool(getattr(args, "load", False)))
+    session = open_session(options, load=bool(getattr(args, "load", False)), bus=bool(getattr(args, "bus", False)))
     database = None if args.database == "none" else (args.database or os.path.join(args.reports, "explore-db"))
 
     def progress(stats: Stats) -> None:
@@ -88,8 +89,9 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
         print(line, file=out, flush=True)
 
     say(f"explore: a budget of {duration_text(args.budget)} wall time, shrinking what it finds included")
-    if session.load_note:
-        say(session.load_note)
+    for note in (session.load_note, session.bus_note):
+        if note:
+            say(note)
     try:
         found, stats = explore(session, budget_s=args.budget, seed=args.seed, database=database,
                                max_size=args.max_steps, stop_at_first=args.first, progress=progress,
@@ -102,7 +104,7 @@ def main(args: argparse.Namespace, given: set[str], out: TextIO) -> int:
     info = {"bench": options, "seed": args.seed, "budget_s": args.budget, "lane": session.lane.name,
             "clock": session.lane.clock, "profile": session.profile.name, "faults": options.get("emulator_faults") or "",
             "emulator_variants": options.get("emulator_variants"), "emulator_option": options.get("emulator_option"),
-            "load": session.bench.load}
+            "load": session.bench.load, "bus": session.draw_bus}
     write_reports(where, found, stats, info)
     print(summary_text(found, stats, where), file=out)
     return ExitStatus.FAILED if found else ExitStatus.OK
@@ -128,7 +130,8 @@ def selftest_command(args: argparse.Namespace, out: TextIO) -> int:
                 print(f"{row.fault:<34} NOT found within the budget: {row.explored}", file=out, flush=True)
 
     rows = find_faults(names, budget_s=args.budget, seed=args.seed, max_programs=getattr(args, "max_programs", None),
-                       options=options, progress=progress, load=True if getattr(args, "load", False) else None)
+                       options=options, progress=progress, load=True if getattr(args, "load", False) else None,
+                       bus=True if getattr(args, "bus", False) else None)
     text = table(rows)
     print(text, file=out)
     if args.out:

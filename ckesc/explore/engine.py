@@ -252,7 +252,8 @@ def current_key(current: dict[str, Found], new: list) -> str:
 
 def _cost(program: list[Action]) -> float:
     """Lane seconds a program costs, roughly (a tie-break between two equally long ones)."""
-    return sum(a.seconds if a.op == "wait" else 120.0 if a.op == "window" else 1.0 if a.op == "power" else 0.1
+    return sum(a.seconds if a.op == "wait" else 120.0 if a.op == "window" else 1.0 if a.op == "power"
+               else 2.0 if a.op == "alone" else a.seconds + 1.0 if a.op == "short" else 0.1  # (a short: its settling too)
                for a in program)
 
 

@@ -14,7 +14,7 @@ from ..protocol.requirements import requirement
 
 @dataclass
 class ExploreFinding:
-    kind: str  # answer | stream | interval | status | bus_rule (the reader's: F1..F7, R9 per gap, R9a, resets)
+    kind: str  # answer | stream | interval | status | recovery (R20) | bus_rule (the reader's: F1..F7, R9 per gap, R9a, resets)
     requirements: list[str]
     what: str
     dut: str

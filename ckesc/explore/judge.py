@@ -29,6 +29,9 @@ Observations compared (each a :class:`ExploreFinding` when they differ):
   report's reach (MSG1 status, R8's clock) by that queueing
   (:func:`~ckesc.protocol.judgements.r18_queueing_s`); R2's slot and the answers are not widened (R18 widens R9
   only). Under a load above half, and in the stretch after one, nothing is judged (R18: OBSERVE).
+- **a bus short** (R20, :mod:`.recovery`): the ESC's MSG1 again within R20's bound after the bus was freed; from the
+  short's start until its reports are back on their grid nothing else of the reports is judged (their timing, what it
+  held, their status: OBSERVE), and every finding after a short also cites R20-recovery.
 The bus's own rules (``evidence/live.py``: F1..F7, R9 between two reports against the interval the node stated, R9a,
 resets, pairing) are the reader's: the runner hears every frame through them and adds what they find.
 """
@@ -58,6 +61,7 @@ from .answers import KEPT, answers
 from .finding import STREAM_OF as _STREAM_OF
 from .finding import STREAMS, ExploreFinding, Params, stream_of
 from .oracle import Malformed, Oracle, State
+from .recovery import UNJUDGED_STRETCHES, in_short, recovery
 
 __all__ = ["ExploreFinding", "Params", "cite_r17", "cite_r18", "judge"]
 
@@ -88,6 +92,7 @@ def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params,
     out = answers(oracle, dut, t0, p, heard, hear(oracle, oracle.out, Params(host_node=p.host_node, bitrate=p.bitrate)))
     out += _streams(oracle, heard, t0, t_end, p)
     out += _status(oracle, dut, t0, p)
+    out += recovery(oracle, dut, t0, p)
     return [f for f in out if f.strength != "OBSERVE" and r18_judged(oracle.max_load(t0 + f.at, t0 + f.at))]
 
 
@@ -176,6 +181,8 @@ def _streams(oracle: Oracle, heard: EventLog, t0: float, t_end: float, p: Params
         share = max(state.load, before.load if before is not None else 0.0)  # (a load's queue outlasts it a little)
         if not r18_judged(share):
             continue  # R18: above half load (and the stretch after one) what the DUT does is OBSERVE
+        if state.label in UNJUDGED_STRETCHES:
+            continue  # R20: a short, and after it until the reports settle: only its recovery is judged (.recovery)
         for stream in STREAMS:
             iv = _interval(state, stream)
             old = _interval(before, stream) if before is not None else iv
@@ -280,6 +287,8 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Expl
         if f.name != "msg1" or f.kind is not Kind.MESSAGE or "status" not in f.fields:
             continue
         t = f.timestamp
+        if in_short(oracle, t):
+            continue  # R20: a short, what the DUT held through it and sent late, until its reports settle: OBSERVE
         if _between(host_times, t - cat.ANSWER_DELAY_MAX_S - 2 * p.error, t + p.host_late):
             continue  # a setting just sent (its echo may be stamped late): when within its answer time it shows is not written
         state = oracle.state_at(t)

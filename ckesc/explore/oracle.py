@@ -14,6 +14,12 @@ which MSG_EXP frames come). A rejected request (R10-R12: whether and how it is a
 A foreign load (R18) is told to it by share (:meth:`Oracle.load`): its ESC does on a loaded bus what it does on a quiet
 one, and the judge widens R9 by the queueing the load can cause.
 
+A bus short (R20) is told to it by its start, its end and when the ESC's reports are back on their grid
+(:meth:`Oracle.mark`: ``bus short``, ``bus free``, ``bus settled``; :attr:`Oracle.shorts`): its ESC goes on as if the
+bus carried its frames, and the judge judges nothing of the reports in between but R20's recovery. The frames the
+host sent while it was alone on the bus (a power cycle's, R20) reach it when they went out (their echo), those the
+DUT took only (:attr:`Oracle.held`: their answers are OBSERVE).
+
 A frame the runner sent malformed or foreign (R17) is given to the model too, which ignores it (that is R17's
 oracle: whatever the DUT does on it is a finding), and kept in :attr:`Oracle.malformed` for the judge; a single frame
 with toggle 1 (R17-toggle, OBSERVE) is given to it as the DUT took it: as a single frame where the DUT answered it,
@@ -34,6 +40,8 @@ from ..protocol.ids import Kind, parse_can_id
 
 #: DUT settings (Dut.settings() keys, 242 / 214) -> the model's flash keys: the same names
 SETTING_KEYS = ("rotation", "throttle_source", "throttle_channel", "led_color", "led_blink", *cat.INTERVAL_FIELDS)
+#: the marks of a bus short (R20), in order: its start, its end, the reports back on their grid
+SHORT_MARKS = ("bus short", "bus free", "bus settled")
 
 
 @dataclass
@@ -84,6 +92,8 @@ class Oracle:
     commands: list[float] = field(default_factory=list)  # when the model's ESC took a RawCommand as its own (R8's clock)
     malformed: list[Malformed] = field(default_factory=list)  # the frames sent malformed or foreign (R17), in order
     load_share: float = 0.0  # the foreign load on the bus now (R18): the model's ESC does what it does on a quiet one
+    #: the requests the host sent alone on the bus (R20), as (name, transfer id): their answers are OBSERVE
+    held: set[tuple[str, int]] = field(default_factory=set)
 
     def __post_init__(self) -> None:
         b = self.baseline
@@ -170,6 +180,12 @@ class Oracle:
         """A moment the runner knows of (the DUT ready after a power-up): a stretch of its own for the judge."""
         self.advance(t)
         self._note(t, label, step)
+
+    @property
+    def shorts(self) -> list[tuple[float, float, float, int | None]]:
+        """Each bus short (R20): (its start, its end, when the reports were back on their grid, its step)."""
+        marks = [s for s in self.states if s.label in SHORT_MARKS]
+        return [(a.t, b.t, c.t, a.step) for a, b, c in zip(marks[::3], marks[1::3], marks[2::3])]
 
     def finish(self, t: float) -> None:
         self.advance(t)

@@ -17,6 +17,11 @@ bus rules' report timing excused meanwhile, as ``test_above_half_load_is_recorde
 a load (real time) draws no load step; one replayed there is skipped, and said so (:attr:`ExploreOutcome.skipped`). Load
 steps are drawn only when asked for (``Session(..., load=True)``, ``ckesc explore --load``); a replayed one is
 played wherever the lane can.
+
+R20's steps (:mod:`.bus_steps`), drawn when asked for (``Session(..., bus=True)``, ``ckesc explore --bus``): a bus
+short through the bench's bus-fault control, where the lane has one (else skipped, and said so), and a power cycle
+with the host alone on the bus sending while the ESC is off. A program with a short ends with 241's counters read too
+(a recovery that reset the ESC shows there).
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from typing import Any, Mapping, Sequence
 
 import can
 
+from ..bench.bus_fault import bus_fault_control
 from ..bench.dut import Dut, DutError, DutUnreachable
 from ..bench.errors import PreflightError, RestoreFailed
 from ..bench.lanes import BusFault, Lane
@@ -42,8 +48,10 @@ from ..protocol.ids import Kind
 from ..protocol.judgements import r18_judged
 from ..protocol.load import LoadSource
 from .actions import Action, ProgramBench, stream_fields
+from .bus_steps import play_alone, play_short
 from .judge import ExploreFinding, Params, cite_r17, cite_r18, judge
 from .oracle import SETTING_KEYS, Oracle
+from .recovery import cite_r20
 
 #: The bench options by name (:class:`~ckesc.bench.station.BenchOptions`' fields, ``ckesc run``'s bench options)
 OPTION_NAMES: tuple[str, ...] = tuple(o.dest for o in BENCH_ROWS)
@@ -51,7 +59,8 @@ OPTION_NAMES: tuple[str, ...] = tuple(o.dest for o in BENCH_ROWS)
 PROBE = (Action("send", "get_major_configuration", {"option": 0}),
          Action("send", "set_freq", dict(cat.FREQ_READ)),
          Action("send", "get_esc_id", {"option": 0}))
-#: and after a program that sent malformed frames: the counters of 241, whose power-up count shows a reset (R17)
+#: and after a program that sent malformed frames or shorted the bus: the counters of 241, whose power-up count shows a
+#: reset (R17, R20)
 PROBE_COUNTERS = Action("send", "maintenance_information", {"option": 2})
 STREAM_PERIOD_S = 0.01
 POWER_SETTLE_S = 0.3  # read after a power-up: the reports that should flow (or not) show before the next step
@@ -106,12 +115,15 @@ class ExploreOutcome:
 class Session:
     """One bench, open for a whole exploration (many programs)."""
 
-    def __init__(self, options: BenchOptions | Mapping[str, Any], *, load: bool = False) -> None:
+    def __init__(self, options: BenchOptions | Mapping[str, Any], *, load: bool = False, bus: bool = False) -> None:
         """Build the bench of ``options`` (:func:`~ckesc.bench.station.build`, as ``ckesc run`` does: a set-up
         mistake is a :class:`PreflightError`) and open its lane; a bench option left out (or None) takes its
         default. ``load``: programs draw foreign-load steps (R18, ``ckesc explore --load``) where the lane can play
-        them (off by default: the programs a seed gives stay those the self-test's counts were made with)."""
+        them (off by default: the programs a seed gives stay those the self-test's counts were made with). ``bus``:
+        programs draw R20's steps (``ckesc explore --bus``: bus shorts where the lane can cause one, power cycles with
+        the host alone where it has power control; off by default for the same reason)."""
         self.draw_load = load
+        self.draw_bus = bus
         opts = options if isinstance(options, BenchOptions) else BenchOptions.of(dict(options).get)
         if opts.power == "labgrid":
             raise PreflightError("ckesc explore: --power labgrid is not supported yet (use command)")
@@ -161,6 +173,14 @@ class Session:
         #: said once where load steps were asked for and the lane cannot play them (none is drawn)
         self.load_note = (f"explore: no load step drawn: the {self.lane.name} lane cannot play a foreign load as R18 "
                           "judges it (only the simulated lane's bus queues it)") if self.draw_load and self._world is None else ""
+        #: R20: the bus-fault control (looked for at the first short), the stream running (a short stops it, and it
+        #: goes on after), the settings writes sent alone on the bus the DUT did not take (kept from the oracle)
+        self._bus_control: Any = False
+        self.streaming: str | None = None
+        self.stream_period = STREAM_PERIOD_S
+        self.unheld: list[tuple[int, bytes]] = []
+        self.bus_note = (f"explore: no bus short drawn: the {self.lane.name} lane has no bus-fault control (give "
+                         "--bus-fault-cmd)") if self.draw_bus and self.bus_control() is None else ""
         self.params = Params(error=self.lane.timing_error, own_error=self.lane.own_error, jitter=profile.jitter_s, boot_s=profile.boot_s,
                              bitrate=self.lane.bitrate, host_node=self.dut.host_node)
 
@@ -169,7 +189,17 @@ class Session:
         return ProgramBench(power=self.lane.power.available, node_id=self.baseline_node, baud_code=self.baud_code,
                      window_waits=self.lane.clock == "simulated", bitrates=self.bitrates,
                      settings=tuple(sorted(self.baseline.items())),
-                     absent=frozenset(self.profile.absent), load=self.draw_load and self._world is not None)
+                     absent=frozenset(self.profile.absent), load=self.draw_load and self._world is not None,
+                     shorts=self.draw_bus and self.bus_control() is not None, alone=self.draw_bus)
+
+    def bus_control(self) -> Any:
+        """The lane's bus-fault control that causes a short (R20; :func:`~ckesc.bench.bus_fault.bus_fault_control`),
+        or None."""
+        if self._bus_control is False:
+            opts = self.options
+            control = bus_fault_control(self.lane, opts.bus_fault_cmd, opts.power_cmd_timeout)
+            self._bus_control = control if control is not None and control.can("short") else None
+        return self._bus_control
 
     def close(self) -> None:
         """Zero throttle, then, after any program, the DUT back into the state the exploration found it in (its
@@ -320,6 +350,8 @@ class Session:
         self._skipped = []
         self._current_load = {}
         self._load_nodes = set()  # the load's foreign nodes: their frames are neither the DUT's nor the host's
+        self.streaming = None
+        self.unheld = []
         foreign: set[int] = set()  # the echoes of the malformed frames: the host's, never the DUT's (for the judge)
 
         def feed(step: int | None) -> None:
@@ -338,6 +370,9 @@ class Session:
                     else:
                         events.append((msg.timestamp, 1, (msg, name, form, what)))
                     continue
+                if self.unheld and (msg.arbitration_id, bytes(msg.data)) in self.unheld and not msg.is_error_frame:
+                    self.unheld.remove((msg.arbitration_id, bytes(msg.data)))  # sent alone, not taken by the DUT (R20)
+                    continue
                 # the host's own frames, by their source node (an echo is is_rx False in the simulated lane and on
                 # SocketCAN, True through socketcand)
                 if msg.is_extended_id and (msg.arbitration_id & 0x7F) == dut.host_node \
@@ -355,12 +390,13 @@ class Session:
                     oracle.power(what, when, step)
             dut.node_id = oracle.node_id  # where the model says the DUT is now (Set ID)
 
-        full = list(program) + list(PROBE) + ([PROBE_COUNTERS] if any(a.op == "malformed" for a in program) else [])
+        full = list(program) + list(PROBE) + ([PROBE_COUNTERS] if any(a.op in ("malformed", "short") for a in program) else [])
         for i, action in enumerate(full):
             start = self.lane.now()
+            switches = len(rec.power)
             self._do(action, oracle, powered_at, i, feed)
             feed(i)
-            if action.op == "power" and rec.power:
+            if len(rec.power) > switches:  # a power step (or a short's power cycle: a DUT that did not recover)
                 powered_at = rec.power[-1][0]
                 oracle.mark(self.lane.now(), "ready", i)  # the DUT reported again (or its boot bound passed)
                 dut.wait(POWER_SETTLE_S)  # what it does after a power-up shows before the next step
@@ -382,7 +418,7 @@ class Session:
             findings.append(ExploreFinding("bus_rule", list(v.rules) or ["4.1.1-1"], f"bus rule {v.check}: {v.message}",
                                     str(v), "the rule holds", at, None, strength=v.strength,
                                     subject=f"{' '.join(v.rules)} {v.check}"))
-        findings = [f for f in cite_r18(cite_r17(findings, oracle, t0, self.params.host_late), oracle, t0)
+        findings = [f for f in cite_r20(cite_r18(cite_r17(findings, oracle, t0, self.params.host_late), oracle, t0), oracle, t0)
                     if f.strength != "OBSERVE"]
         return ExploreOutcome(list(program), findings, t0, t_end, list(rec.messages), frames, list(oracle.out), steps,
                        {a.feature for a in program}, list(self._skipped))
@@ -444,11 +480,13 @@ class Session:
         elif action.op == "stream":
             dut.stop_throttle()
             dut.throttle_stream(action.name, stream_fields(action.name), period=STREAM_PERIOD_S)
+            self.streaming = action.name
             dut.wait(0.05)
         elif action.op == "stop":
             dut.stop_throttle()
+            self.streaming = None
             dut.wait(0.01)
-        elif action.op == "power":
+        elif action.op in ("power", "alone"):
             if self.lane.power.available:
                 # a Set Baud write comes into force at this power-up (4.4.19): the host moves with the DUT as it
                 # goes off, so that it hears the DUT from its boot on (the model's stored code: the document's)
@@ -457,7 +495,13 @@ class Session:
                     self.lane.reopen(rate)
                     if self._load is not None:  # the load's share is of the bus's capacity at its new bit rate
                         self._set_load(self._current_load, step)
+            if action.op == "alone":
+                play_alone(self, action, oracle, step, feed or (lambda _step: None))
+            elif self.lane.power.available:
+                self.streaming = None
                 dut.switch_power(self.profile.off_s, self.profile.boot_s)
+        elif action.op == "short":
+            play_short(self, action, oracle, step, feed or (lambda _step: None))
         elif action.op == "wait":
             dut.wait(action.seconds)
         elif action.op == "load":

@@ -40,13 +40,14 @@ class FaultRow:
 def find_faults(faults: Iterable[str], *, budget_s: float = 120.0, seed: int = 1, max_programs: int | None = None,
                 options: Mapping[str, Any] | None = None,
                 progress: Callable[[FaultRow], None] | None = None, load: bool | None = None,
-                shrink_s: float | None = None) -> list[FaultRow]:
+                shrink_s: float | None = None, bus: bool | None = None) -> list[FaultRow]:
     """``load``: whether programs draw foreign-load steps (R18; None: for a fault that breaks R18, which shows only
-    on a loaded bus). ``shrink_s``: how long each finding is shrunk at most (None: what is left of the budget)."""
+    on a loaded bus); ``bus``: R20's bus steps likewise (None: for a fault that breaks one of R20's clauses). ``shrink_s``: how long each finding is shrunk at most (None: what is left of the budget)."""
     rows = []
     for fault in faults:
         session = Session({**dict(options or {}), "emulator_faults": fault},
-                          load="R18" in FAULTS[fault].rules if load is None else load)
+                          load="R18" in FAULTS[fault].rules if load is None else load,
+                          bus=any(r.startswith("R20") for r in FAULTS[fault].rules) if bus is None else bus)
         try:
             found, stats = explore(session, budget_s=budget_s, seed=seed, database=None, stop_at_first=True,
                                    max_programs=max_programs, shrink_s=shrink_s)

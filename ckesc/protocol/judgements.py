@@ -27,6 +27,9 @@ violation, an explorer finding) from it; it never writes a tolerance of its own.
 * R18 (:func:`r18_queueing_s`, :func:`r18_mean`, :func:`r18_gap`, :func:`r18_judged`): under foreign load of up to
   half the bus, R9 with each gap widened by the queueing the load can put ahead of a lowest-priority frame; above
   half load, OBSERVE.
+* R20 (:func:`r20_back`, :func:`r20_bound_s`, :data:`R20_UNJUDGED`): after a bus fault ends the ESC's reports go on
+  within its controller's bus-off recovery (128 x 11 recessive bits) plus two MSG1 intervals plus the bench's error;
+  its reports' timing and transfer-id sequence from the fault until each is back on its grid are OBSERVE.
 * R19 (R17: never reset) resets (:func:`r19_power_ups`, :func:`r19_run_time`, :func:`r19_report_restart`,
   :func:`r19_counter_restarted`): the
   power-up count of 241 does not grow, its run time does not go back or jump, no report gap with a transfer id
@@ -43,6 +46,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Sequence
 
 from . import catalogue as cat
+from .canbus import recovery_seconds
 from .frame import Frame, frame_bits
 from .ids import Kind
 from .transfer import TRANSFER_ID_MODULO, next_transfer_id
@@ -538,3 +542,23 @@ def r19_report_restart(gap: float, interval: float, step: F3Step, *, error: floa
         return None
     return Reset(what, f"{what} stopped for {gap * 1000:.1f} ms (interval {interval * 1000:g} ms) and came back with "
                  f"{step}: its counter started again")
+
+
+# ------------------------------------------------------------------------------------------ R20: a bus fault freed
+#: R20: the bus rules left unjudged from a bus fault until each report type is back on its grid: the reports' timing
+#: (held through bus-off and sent back to back at recovery) and their transfer-id sequence (whether a recovered ESC's
+#: first reports keep it is OBSERVE: one whose mailboxes were full dropped some)
+R20_UNJUDGED = frozenset({"R9", "R9a", "F3"})
+
+
+def r20_bound_s(msg1_interval: float, *, bitrate: int) -> float:
+    """R20: how long after a bus fault ends the ESC's reports may take to go on, before the bench's error: its
+    controller's bus-off recovery at ``bitrate`` and two MSG1 intervals."""
+    return recovery_seconds(bitrate) + 2 * msg1_interval
+
+
+def r20_back(delay: float, msg1_interval: float, *, bitrate: int, error: float = 0.0) -> Judgement:
+    """R20: the first MSG1 ``delay`` after the bus was freed (``math.inf``: none came) within :func:`r20_bound_s`
+    and the bench's ``error``."""
+    return Judgement("R20-recovery", delay, r20_bound_s(msg1_interval, bitrate=bitrate), "<=", error,
+                     "the first MSG1 after the bus was freed")

@@ -63,3 +63,14 @@ def test_the_console_counts_the_findings_in_the_order_found_and_announces_shrink
     heads = [ln for ln in lines if ln.startswith("finding ")]
     assert [h.split(" (")[0] for h in heads] == ["finding 1", "finding 2", "finding 3"]
     assert "  its program also shows the problem of finding 1, 2 (perhaps its cause)" in lines
+
+
+def test_bus_steps_are_asked_for_on_the_command_line(tmp_path, capsys):
+    """``--bus`` (R20): a bus-off fault is found from seed 1 in a few programs, its finding citing R20; the report says
+    the bus steps were drawn."""
+    code = main(["explore", "--bus", "--emulator-faults", "no_busoff_recovery", "--budget", "60s", "--max-programs", "10",
+                 "--seed", "1", "--first", "--reports", str(tmp_path), "--database", "none", "-q"])
+    assert code == 1, capsys.readouterr().out[-3000:]
+    (run,) = [p for p in tmp_path.iterdir() if p.name.endswith("-explore")]
+    results = json.loads((run / "results.json").read_text())
+    assert "R20-recovery" in results["findings"][0]["requirements"] and results["info"]["bus"] is True

@@ -262,3 +262,16 @@ def test_judgement_is_a_frozen_record_with_its_text():
     with pytest.raises(AttributeError):
         j.limit = 1.0  # type: ignore[misc]
     assert not j.ok and j.margin == pytest.approx(-0.005) and "R9a" in str(j) and "broken" in str(j)
+
+
+# ------------------------------------------------------------------------------------------ R20
+def test_r20_reports_go_on_within_bus_off_recovery_and_two_msg1_intervals_plus_the_error():
+    """128 x 11 recessive bits at 500 kbit/s (2.816 ms) and two 20 ms intervals; the bench's error given on top; no
+    report at all is outside any bound."""
+    bound = J.r20_bound_s(0.020, bitrate=500_000)
+    assert bound == pytest.approx(0.002816 + 0.040)
+    error = 2 * MS
+    for delay, ok in ((bound, True), (bound + error - EPS, True), (bound + error + EPS, False), (float("inf"), False)):
+        j = J.r20_back(delay, 0.020, bitrate=500_000, error=error)
+        assert j.rule == "R20-recovery" and j.ok is ok, (delay, j)
+    assert J.R20_UNJUDGED == {"R9", "R9a", "F3"}
