@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import os
+from functools import partial
 from typing import Any, Iterator
 
 import can
@@ -69,9 +70,8 @@ class SimLane(Lane):
         # listeners are looked for once per call. On a bus with acknowledgement the host's controller is looked at
         # before each frame is handed on and once the world reached the deadline (its bus-off is the bench's failure,
         # not the DUT's)
-        frames = self.sim.frames_until(deadline)
-        if self.sim.world.ack:
-            frames = _controller_checked(self.sim, frames)
+        sim = self.sim
+        frames = sim.frames_until(deadline, partial(_check_controller, sim) if sim.world.ack else None)
         if self.__dict__.get("_listeners"):  # (a listener is handed can.Messages)
             message, heard = self.sim._message, self.heard
             return (heard(message(msg)) for msg in frames)
@@ -81,7 +81,12 @@ class SimLane(Lane):
         sim = self.sim  # (no can.Message built: hours of soak send here)
         if sim.world.ack or sim._is_shutdown:
             try:
-                sim.send_wire(wire)  # (a full queue said as the bus says it, a closed bus refused)
+                if sim._is_shutdown:
+                    sim.send_wire(wire)  # (a closed bus refused, as the bus says it)
+                else:
+                    sim.world.send_wire(sim, wire)  # (the bus's send_wire, one call less)
+            except canbus.QueueFull as full:  # (a full queue said as the bus says it)
+                placed(sim, sim._enobufs(full), sim.send_wire, wire, boot=self.dut_boot_s)
             except BUS_ERRORS as exc:
                 placed(sim, exc, sim.send_wire, wire, boot=self.dut_boot_s)
         else:  # without acknowledgement nothing refuses a frame: the world takes it (the bus's send_wire, one call less)
@@ -147,15 +152,6 @@ def placed(bus: Any, exc: BaseException, send: Any, *args: Any, boot: float = 0.
     why = "nobody acknowledged them" if ctl.tec else "sent faster than the bus carries them"
     raise BusFault(f"the host's CAN send failed ({type(exc).__name__}: {exc}; its controller {ctl.state.value}, "
                    f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting after {waited * 1000:.3f} ms: {why})") from exc
-
-
-def _controller_checked(bus: Any, frames: Iterator[Any]) -> Iterator[Any]:
-    ctl, off = bus.controller, canbus.ErrorState.BUS_OFF  # (one controller a call: hours of soak frames pass here)
-    for frame in frames:
-        if ctl.state is off:
-            _check_controller(bus)
-        yield frame
-    _check_controller(bus)
 
 
 def _check_controller(bus: Any) -> None:

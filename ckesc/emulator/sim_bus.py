@@ -105,11 +105,19 @@ class SimWorld(CanNodes):
         self._parked: dict[Any, tuple[float, float, float]] = {}  # node -> (since, retry period, resume at)
         self._short_until = -INF
         self._alarm = INF
-        self.stats = {"frames": 0, "busy_s": 0.0, "retries": 0, "dropped": 0}
+        self._frames = 0  # (the counts a frame moves, as attributes: once per frame)
+        self._busy_s = 0.0
+        self._counts = {"retries": 0, "dropped": 0}
         #: per traffic source (by name): frames it put on the bus and the bus time they took
         self.source_stats: dict[str, dict[str, float]] = {}
         if power_on:
             self.power_on()
+
+    @property
+    def stats(self) -> dict[str, float]:
+        """The frames the bus carried, the bus time its tries took (s), the tries not acknowledged and the frames
+        dropped (a full ESC queue, a periodic task's send into a full queue)."""
+        return {"frames": self._frames, "busy_s": self._busy_s, **self._counts}
 
     # ------------------------------------------------------------------ event loop
     def advance(self, deadline: float, rx: deque | None = None, stop: Callable[[], bool] | None = None) -> bool | None:
@@ -202,7 +210,7 @@ class SimWorld(CanNodes):
         _, _, old, origin, bitrate, flags = p
         if self.ack:
             ctl = self._ctl.get(origin)
-            if ctl is None or ctl.head() is not p:  # its queue went away meanwhile (a power-off, a bus shut down)
+            if ctl is None or ctl.sending is not p:  # its queue went away meanwhile (a power-off, a bus shut down)
                 return
             if self._outcome is not Attempt.ACKED:
                 self._failed(origin, ctl, end)
@@ -213,7 +221,7 @@ class SimWorld(CanNodes):
                 self._contending.remove(origin)
             if was is not ErrorState.ACTIVE:  # (only a controller past 95 can change its state by a success)
                 self._report(origin, ctl)
-        self.stats["frames"] += 1
+        self._frames += 1
         own = isinstance(origin, SimEscBus)  # (a host's frame: most of a soak's; asked first)
         if not own and isinstance(origin, ShiftedSource):
             st = self.source_stats[origin.name]
@@ -342,7 +350,7 @@ class SimCyclicTask(ModifiableCyclicTaskABC, RestartableCyclicTaskABC):
         try:
             self.bus.world.send(self.bus, msg)
         except QueueFull:  # SocketCAN's BCM: the frame is lost, the task goes on
-            self.bus.world.stats["dropped"] += 1
+            self.bus.world._counts["dropped"] += 1
         self.next_time = round(self.next_time + self.period, 9)
 
 
@@ -493,7 +501,7 @@ class SimEscBus(can.BusABC):
         now = self.world.now
         return self._until(now + max(deadline - now, 0.0), False)  # (recv's arithmetic: the same instant)
 
-    def frames_until(self, deadline: float) -> Iterator[Heard | can.Message]:
+    def frames_until(self, deadline: float, bus_off: Callable[[], None] | None = None) -> Iterator[Heard | can.Message]:
         """Every frame until ``deadline``: :meth:`recv_until` again and again until it gives none (the clock then at
         ``deadline``), without a call per frame between the reader and the simulated clock, and each data frame as
         the bus heard it (a :class:`Heard`: ``timestamp``, ``arbitration_id``, ``data``, ``is_extended_id``,
@@ -502,9 +510,17 @@ class SimEscBus(can.BusABC):
         The world runs up to ``deadline`` in one go and the frames it heard meanwhile are yielded after it: the frames
         a :meth:`recv_until` loop reads, with the same stamps, but the clock, read between two of them, is at the
         deadline already; a reader that sends between the frames it reads reads with :meth:`recv_until` (a soak
-        sends between its reads, not during them)."""
+        sends between its reads, not during them).
+
+        ``bus_off``: called where this bus's controller is bus-off before a frame is handed on, and once the world
+        reached the deadline (the lane raises its bench failure there); looked at after each run of the world only,
+        as nothing else moves the controller between two frames handed on."""
         rx, world = self._rx, self.world
         advance = world.advance
+        ctl = world.controller(self) if bus_off is not None else None
+        off = ErrorState.BUS_OFF
+        if ctl is not None and ctl.state is off and rx:
+            bus_off()
         while True:
             if self._is_shutdown:
                 self._check_open()
@@ -518,10 +534,15 @@ class SimEscBus(can.BusABC):
                 # exact while now >= deadline / 2): recv_until's calls would each run the world to the deadline, one
                 # call does it once
                 advance(deadline, None)
+                if ctl is not None and ctl.state is off:
+                    bus_off()
                 while rx:
                     yield rx.popleft()
                 return
-            if not advance(now + left if left > 0.0 else now, rx):
+            more = advance(now + left if left > 0.0 else now, rx)
+            if ctl is not None and ctl.state is off:
+                bus_off()
+            if not more:
                 return
 
     def _until(self, deadline: float, forever: bool) -> can.Message | None:
