@@ -77,6 +77,35 @@ class SimLane(Lane):
             return (heard(message(msg)) for msg in frames)
         return frames
 
+    def frames_into(self, deadline: float, out: list[Any]) -> None:
+        """:meth:`frames_until`'s frames onto ``out`` as plain values, four a frame: a data frame's ``arbitration_id``,
+        ``data``, ``timestamp`` and ``is_extended_id``; a remote or error frame's first three and, for the fourth, the
+        tuple (``is_extended_id``, ``is_remote_frame``, ``is_error_frame``, ``dlc``). What a soak's world hands to its
+        reader in another process (:mod:`ckesc.soak.split`): the bus's queue taken whole where the world runs to the
+        deadline in one go (no call per frame)."""
+        sim = self.sim
+        world, rx = sim.world, sim._rx
+        now = world.now
+        left = deadline - now
+        if not rx and 0.0 < left <= now and not sim._is_shutdown and not self.__dict__.get("_listeners"):
+            world.advance(deadline, None)  # (frames_until's one run of the world to the deadline)
+            if world.ack:
+                _check_controller(sim)
+            n = len(out)
+            try:
+                out += itertools.chain.from_iterable(rx)  # (a data frame is the bus's tuple of those four)
+                rx.clear()
+                return
+            except TypeError:  # a can.Message among them (a remote or error frame): one by one
+                del out[n:]
+        message = can.Message
+        for heard in self.frames_until(deadline):
+            if heard.__class__ is message:
+                out += (heard.arbitration_id, bytes(heard.data), heard.timestamp,
+                        (heard.is_extended_id, heard.is_remote_frame, heard.is_error_frame, heard.dlc))
+            else:
+                out += heard
+
     def send_wire(self, wire: WireFrame) -> None:
         sim = self.sim  # (no can.Message built: hours of soak send here)
         if sim.world.ack or sim._is_shutdown:

@@ -72,6 +72,7 @@ class SimClock:
 
 
 INF = float("inf")
+_ACKED, _ACTIVE = Attempt.ACKED, ErrorState.ACTIVE  # (module constants: read once per frame)
 
 
 class SimWorld(CanNodes):
@@ -212,14 +213,14 @@ class SimWorld(CanNodes):
             ctl = self._ctl.get(origin)
             if ctl is None or ctl.sending is not p:  # its queue went away meanwhile (a power-off, a bus shut down)
                 return
-            if self._outcome is not Attempt.ACKED:
+            if self._outcome is not _ACKED:
                 self._failed(origin, ctl, end)
                 return
             was = ctl.state
-            ctl.attempt(Attempt.ACKED, end)
+            ctl.attempt(_ACKED, end)
             if not ctl.size:
                 self._contending.remove(origin)
-            if was is not ErrorState.ACTIVE:  # (only a controller past 95 can change its state by a success)
+            if was is not _ACTIVE:  # (only a controller past 95 can change its state by a success)
                 self._report(origin, ctl)
         self._frames += 1
         own = isinstance(origin, SimEscBus)  # (a host's frame: most of a soak's; asked first)

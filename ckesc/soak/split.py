@@ -103,23 +103,26 @@ def run_world(out: Connection, control: Connection, lane: Any, player: Any, end:
     stop: list[str] = []
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, lambda signum, frame: stop.append(INTERRUPTED))
-    send, now_of, peek, frames_until = lane.send_wire, lane.now, lane.peek_now, lane.frames_until
+    # (bound once: the loop runs once per stream tick, hours of them; the world's clock read as its attribute: the
+    # lane's now and peek_now are it)
+    world = lane.sim.world
+    send, frames_into = lane.send_wire, lane.frames_into
     due_by, next_deadline = player.due, player.next_deadline
     ticks: list[tuple[Any, ...]] = []
     frames: list[Any] = []
-    tick, extend, limit, message = ticks.append, frames.extend, 4 * BATCH_FRAMES, can.Message
+    tick, limit = ticks.append, 4 * BATCH_FRAMES
     status, problem = COMPLETED, ""
     n = 0
     sends: list[tuple[int, bytes, float, float | None]] = []
     try:
         while True:
-            now = now_of()
+            now = world.now
             if now >= end:
                 break
             n, sends = len(frames), []
             for planned in due_by(now):
                 wire = planned.wire
-                t = peek()
+                t = world.now
                 try:
                     send(wire)
                 except BaseException:
@@ -134,13 +137,8 @@ def run_world(out: Connection, control: Connection, lane: Any, player: Any, end:
             deadline = next_deadline()
             if deadline > end:
                 deadline = end
-            for heard in frames_until(deadline):
-                if heard.__class__ is message:  # a remote or error frame (a data frame is the bus's tuple)
-                    extend((heard.arbitration_id, bytes(heard.data), heard.timestamp,
-                            (heard.is_extended_id, heard.is_remote_frame, heard.is_error_frame, heard.dlc)))
-                else:
-                    extend(heard)
-            tick((peek(), (len(frames) - n) >> 2, sends, player.sent_stream, player.skipped))
+            frames_into(deadline, frames)
+            tick((world.now, (len(frames) - n) >> 2, sends, player.sent_stream, player.skipped))
             if len(frames) >= limit:
                 out.send_bytes(_BATCH + marshal.dumps((ticks, frames)))
                 ticks.clear()
@@ -152,8 +150,8 @@ def run_world(out: Connection, control: Connection, lane: Any, player: Any, end:
                 break
     except (BenchGone, BusFault) as exc:  # the bench failed under the run: the reader reads the tick's frames so far
         status, problem = ABORTED, str(exc)
-        tick((peek(), (len(frames) - n) >> 2, sends, player.sent_stream, player.skipped))
-    stopped_at = peek()
+        tick((world.now, (len(frames) - n) >> 2, sends, player.sent_stream, player.skipped))
+    stopped_at = world.now
     figures = finish()
     out.send_bytes(_END + pickle.dumps({**figures, "status": status, "problem": problem, "stopped_at": stopped_at,
                                         "ticks": ticks, "frames": frames}))
