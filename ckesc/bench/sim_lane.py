@@ -18,6 +18,7 @@ from .lanes import BUS_ERRORS, BusFault, Lane, queue_full, room_wait_s
 from .power import EmulatorPower
 
 _SIM_CHANNELS = itertools.count()
+_BUS_OFF = canbus.ErrorState.BUS_OFF
 
 
 #: the simulated lane's CAN (ckesc/emulator/sim_bus.py): SocketCAN's defaults, as a real bench has them (a frame needs
@@ -89,8 +90,8 @@ class SimLane(Lane):
         left = deadline - now
         if not rx and 0.0 < left <= now and not sim._is_shutdown and not self.__dict__.get("_listeners"):
             world.advance(deadline, None)  # (frames_until's one run of the world to the deadline)
-            if world.ack:
-                _check_controller(sim)
+            if world.ack and (ctl := world._ctl.get(sim)) is not None and ctl.state is _BUS_OFF:  # (no controller
+                _check_controller(sim)  # yet: error-active)
             n = len(out)
             try:
                 out += itertools.chain.from_iterable(rx)  # (a data frame is the bus's tuple of those four)
