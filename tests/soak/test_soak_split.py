@@ -13,11 +13,10 @@ import subprocess
 import sys
 
 import pytest
+from test_soak_sameness import soak_digest  # (this folder is on the path: pytest puts it there)
 
 from ckesc.bench.station import BenchOptions
 from ckesc.soak import runner, split
-
-from test_soak_sameness import soak_digest  # (this folder is on the path: pytest puts it there)
 
 
 def test_the_world_runs_in_two_processes_only_for_a_simulated_soak_on_two_cores(monkeypatch):
