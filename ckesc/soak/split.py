@@ -173,15 +173,20 @@ def read_world(body: Callable[[Connection, Connection], None], feed: Callable[[A
     tick's sends (``sent``, ``lateness``) and frames (``feed``, ``keep``) in order, then
     ``tick_done(now, sent_stream, skipped)``, which says whether the soak stops there (its first finding). Returns
     how it ended: ``status``, ``problem``, ``stopped_at`` (the lane's time where the reading stopped) and the figures
-    of :func:`run_world`'s ``finish``. ``signals``: SIGINT and SIGTERM taken as "stop" (in the main thread only)."""
+    of :func:`run_world`'s ``finish``. ``signals``: SIGINT and SIGTERM taken as "stop" (in the main thread only); a
+    second one while the world has not stopped ends the world's process at once (a world that no longer answers)."""
     stopping: list[str] = []
+    pid: list[int] = []
 
     def handler(signum: int, frame: Any) -> None:
+        if stopping and pid:
+            os.kill(pid[0], signal.SIGKILL)  # (its pipe closes: the read below ends)
         stopping.append(INTERRUPTED)
 
     old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)} if signals else {}
     try:
         world = start(body)  # (after the handlers: a Ctrl-C from here on stops both processes the same way)
+        pid.append(world.pid)
     except BaseException:
         for s, h in old.items():
             signal.signal(s, h)
@@ -211,8 +216,10 @@ def read_world(body: Callable[[Connection, Connection], None], feed: Callable[[A
                 if status is None and stopping:
                     status = stopping[0]
                 if status is not None and not last:
-                    world.control.send(status)  # (the world stops at its next batch; what it sends until then is
-                    # drained unread)
+                    try:
+                        world.control.send(status)  # (the world stops at its next batch; what it sends until then
+                    except OSError:  # is drained unread)
+                        pass  # (it ended meanwhile: the read below says how)
             if last:
                 break
     finally:
@@ -222,6 +229,8 @@ def read_world(body: Callable[[Connection, Connection], None], feed: Callable[[A
         world.control.close()
         _, code = os.waitpid(world.pid, 0)
     if end is None:
+        if stopping:  # (stopped twice: the world's process ended by the second)
+            return {"status": INTERRUPTED, "stopped_at": stopped_at, "problem": ""}
         return {"status": ABORTED, "stopped_at": stopped_at,
                 "problem": f"the simulated world's process ended without its last message (wait status {code})"}
     out = dict(end)

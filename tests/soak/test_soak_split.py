@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+import marshal
 import os
 import signal
 import subprocess
@@ -65,6 +66,23 @@ def test_a_world_that_fails_is_the_soaks_abort_not_a_hang(tmp_path, monkeypatch)
     assert outcome.status == "ABORTED" and outcome.where is not None
     doc = json.loads((outcome.where / "results.json").read_text())
     assert doc["problem"].startswith("the simulated world's process ended without its last message")
+
+
+def test_a_second_ctrl_c_ends_a_world_that_no_longer_answers():
+    """The first SIGINT asks the world to stop; a world that does not (here: it asks for the signals itself, reads
+    the reader's stop and then waits for ever) is ended by the second: the soak is INTERRUPTED, not hung."""
+    def stuck(out, control):
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        os.kill(os.getppid(), signal.SIGINT)
+        out.send_bytes(b"B" + marshal.dumps(([(1.0, 0, [], 1, 0)], [])))  # one tick: the reader then sees its stop
+        assert control.recv() == "INTERRUPTED"
+        os.kill(os.getppid(), signal.SIGINT)
+        while True:
+            signal.pause()
+    ticks: list[float] = []
+    end = split.read_world(stuck, lambda m: None, None, lambda *a: None, lambda late: None,
+                           lambda now, sent, skipped: ticks.append(now) is not None)
+    assert end["status"] == "INTERRUPTED" and end["stopped_at"] == 1.0 and ticks == [1.0]
 
 
 @pytest.mark.parametrize("to_group", [False, True], ids=["the soak's process", "its process group (a terminal)"])
