@@ -106,18 +106,14 @@ class SimWorld(CanNodes):
         self._parked: dict[Any, tuple[float, float, float]] = {}  # node -> (since, retry period, resume at)
         self._short_until = -INF
         self._alarm = INF
-        self._frames = 0  # (the counts a frame moves, as attributes: once per frame)
-        self._busy_s = 0.0
-        self._counts = {"retries": 0, "dropped": 0}
+        self._frames, self._busy_s, self._counts = 0, 0.0, {"retries": 0, "dropped": 0}  # (:attr:`stats`, kept apart)
         #: per traffic source (by name): frames it put on the bus and the bus time they took
         self.source_stats: dict[str, dict[str, float]] = {}
         if power_on:
             self.power_on()
 
     @property
-    def stats(self) -> dict[str, float]:
-        """The frames the bus carried, the bus time its tries took (s), the tries not acknowledged and the frames
-        dropped (a full ESC queue, a periodic task's send into a full queue)."""
+    def stats(self) -> dict[str, float]:  # frames carried, bus time of the tries (s), tries not acknowledged, dropped
         return {"frames": self._frames, "busy_s": self._busy_s, **self._counts}
 
     # ------------------------------------------------------------------ event loop
@@ -507,19 +503,13 @@ class SimEscBus(can.BusABC):
         ``deadline``), without a call per frame between the reader and the simulated clock, and each data frame as
         the bus heard it (a :class:`Heard`: ``timestamp``, ``arbitration_id``, ``data``, ``is_extended_id``,
         ``is_rx`` and the flags, as a ``can.Message`` has them; no ``can.Message`` made: a soak reads hours of them).
-
         The world runs up to ``deadline`` in one go and the frames it heard meanwhile are yielded after it: the frames
         a :meth:`recv_until` loop reads, with the same stamps, but the clock, read between two of them, is at the
         deadline already; a reader that sends between the frames it reads reads with :meth:`recv_until` (a soak
-        sends between its reads, not during them).
-
-        ``bus_off``: called where this bus's controller is bus-off before a frame is handed on, and once the world
-        reached the deadline (the lane raises its bench failure there); looked at after each run of the world only,
-        as nothing else moves the controller between two frames handed on."""
-        rx, world = self._rx, self.world
+        sends between its reads, not during them). ``bus_off``: called where this bus's controller is bus-off, looked at
+        after each run of the world (nothing else moves it between two frames handed on) and before the first frame."""
+        rx, world, off, ctl = self._rx, self.world, ErrorState.BUS_OFF, self.controller if bus_off is not None else None
         advance = world.advance
-        ctl = world.controller(self) if bus_off is not None else None
-        off = ErrorState.BUS_OFF
         if ctl is not None and ctl.state is off and rx:
             bus_off()
         while True:
@@ -530,19 +520,17 @@ class SimEscBus(can.BusABC):
                 continue
             now = world.now
             left = deadline - now  # (recv_until's arithmetic, max(left, 0.0) as :meth:`_until` reads, without the call)
-            if 0.0 < left <= now:
-                # now + left is the deadline exactly, and stays so for every later now (Sterbenz: deadline - now is
-                # exact while now >= deadline / 2): recv_until's calls would each run the world to the deadline, one
-                # call does it once
-                advance(deadline, None)
-                if ctl is not None and ctl.state is off:
-                    bus_off()
+            # where 0 < left <= now, now + left is the deadline exactly, and stays so for every later now (Sterbenz:
+            # deadline - now is exact while now >= deadline / 2): recv_until's calls would each run the world to the
+            # deadline, one call does it once
+            whole = 0.0 < left <= now
+            more = advance(deadline, None) if whole else advance(now + left if left > 0.0 else now, rx)
+            if ctl is not None and ctl.state is off:
+                bus_off()
+            if whole:
                 while rx:
                     yield rx.popleft()
                 return
-            more = advance(now + left if left > 0.0 else now, rx)
-            if ctl is not None and ctl.state is off:
-                bus_off()
             if not more:
                 return
 
