@@ -39,17 +39,18 @@ OUT = Path(__file__).parent / "results" / "soak.json"
 
 
 def one(reports: Path, faults: str, duration_s: float, spin: bool, stop: bool,
-        rate_hz: float = RATE_HZ) -> tuple[dict, float, float]:
-    """One soak: its results.json, its wall time and the process's CPU time (s; on a shared machine the wall time
-    grows with the other jobs' load, the CPU time much less)."""
+        rate_hz: float = RATE_HZ, processes: str = "auto") -> tuple[dict, float, float]:
+    """One soak: its results.json, its wall time and its CPU time (s; this process's and, in two processes, the
+    world's; on a shared machine the wall time grows with the other jobs' load, the CPU time much less)."""
     bench = BenchOptions(emulator_faults=faults, allow_motor_spin=spin)
     options = runner.SoakOptions(duration_s=duration_s, rate_hz=rate_hz, throttle=((0.0, 200),) if spin else (),
-                                 stop_on_finding=stop, reports=str(reports), quiet=True)
+                                 stop_on_finding=stop, reports=str(reports), quiet=True, processes=processes)
     t0, c0 = time.perf_counter(), time.process_time()
     outcome = runner.run(bench, options, out=io.StringIO())
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     assert outcome.where is not None
-    return json.loads((outcome.where / "results.json").read_text()), wall, cpu
+    doc = json.loads((outcome.where / "results.json").read_text())
+    return doc, wall, cpu + (doc["host"]["world_cpu_s"] or 0.0)
 
 
 def load() -> float:
@@ -71,11 +72,14 @@ def faults(reports: Path) -> dict:
     return out
 
 
-def faultless(reports: Path, hours: float, rate_hz: float = RATE_HZ) -> dict:
+def faultless(reports: Path, hours: float, rate_hz: float = RATE_HZ, processes: str = "auto") -> dict:
     load_before = load()
-    doc, wall, cpu = one(reports, "", hours * 3600, False, stop=False, rate_hz=rate_hz)
+    doc, wall, cpu = one(reports, "", hours * 3600, False, stop=False, rate_hz=rate_hz, processes=processes)
     mem = doc["memory"]
-    out = {"hours": hours, "rate_hz": rate_hz, "status": doc["status"], "findings": len(doc["findings"]) + doc["findings_not_kept"],
+    world = doc["host"]["world_cpu_s"]
+    out = {"hours": hours, "rate_hz": rate_hz, "processes": doc["host"]["processes"],
+           "world_cpu_s": world and round(world, 1), "world_cpu_us_per_frame": world and round(world / doc["frames"]["total"] * 1e6, 1),
+           "status": doc["status"], "findings": len(doc["findings"]) + doc["findings_not_kept"],
            "exit": 1 if doc["findings"] or doc["findings_not_kept"] else 0, "ran_s": doc["ran_s"],
            "wall_s": round(wall, 1), "sim_per_wall": round(doc["ran_s"] / wall, 1), "frames": doc["frames"]["total"],
            "cpu_s": round(cpu, 1), "wall_s_per_sim_hour": round(wall / hours, 1), "cpu_s_per_sim_hour": round(cpu / hours, 1),
@@ -94,13 +98,14 @@ def faultless(reports: Path, hours: float, rate_hz: float = RATE_HZ) -> dict:
 def versus(other: Path, hours: float, rounds: int) -> dict:
     """The faultless soak of ``hours``, in turn with this checkout's code and ``other``'s (``rounds`` times each)."""
     here = Path(__file__).resolve().parents[1]
-    probe = ("import io, json, sys, tempfile, time; import ckesc; from ckesc.bench.station import BenchOptions; "
+    probe = ("import io, json, os, sys, tempfile, time; import ckesc; from ckesc.bench.station import BenchOptions; "
              "from ckesc.soak import runner\n"
              "with tempfile.TemporaryDirectory() as tmp:\n"
              f"    o = runner.SoakOptions(duration_s={hours * 3600!r}, rate_hz={RATE_HZ!r}, reports=tmp, quiet=True)\n"
-             "    w, c = time.perf_counter(), time.process_time()\n"
+             "    cpu = lambda: sum(os.times()[:4])  # (the world's process too, where a soak forks one)\n"
+             "    w, c = time.perf_counter(), cpu()\n"
              "    runner.run(BenchOptions(), o, out=io.StringIO())\n"
-             "    print(json.dumps([time.perf_counter() - w, time.process_time() - c, ckesc.__file__]))\n")
+             "    print(json.dumps([time.perf_counter() - w, cpu() - c, ckesc.__file__]))\n")
     runs: dict[str, list] = {"this": [], "versus": []}
     for _ in range(rounds):
         for name, code in (("versus", other.resolve()), ("this", here)):
@@ -126,15 +131,18 @@ def main() -> None:
                     help=f"the faultless soak's stream rate (Hz; default {RATE_HZ:g}, a CI soak's): another rate, with "
                          "--faultless-only, is recorded beside it as faultless_<rate>hz with its own date (400: ckesc "
                          "soak's default, a flight controller's)")
+    ap.add_argument("--processes", choices=("auto", "1", "2"), default="auto",
+                    help="ckesc soak's --processes (default auto); with --rate, 1 is recorded as faultless_<rate>hz_1process")
     args = ap.parse_args()
     result: dict = json.loads(OUT.read_text()) if OUT.exists() else {}
     date = time.strftime("%Y-%m-%d", time.gmtime())
     if args.rate != RATE_HZ:  # a record of its own beside the others, with its own date (theirs stay as they were)
         if args.versus is not None or not args.faultless_only:
             ap.error("--rate: with --faultless-only only")
+        key = f"faultless_{args.rate:g}hz" + ("_1process" if args.processes == "1" else "")
         with tempfile.TemporaryDirectory() as tmp:
-            result[f"faultless_{args.rate:g}hz"] = {**faultless(Path(tmp), args.hours or 8.0, args.rate), "date": date,
-                                                    "python": sys.version.split()[0]}
+            result[key] = {**faultless(Path(tmp), args.hours or 8.0, args.rate, args.processes), "date": date,
+                           "python": sys.version.split()[0], "cores": len(os.sched_getaffinity(0))}
         OUT.write_text(json.dumps(result, indent=1) + "\n")
         print(f"written {OUT}")
         return

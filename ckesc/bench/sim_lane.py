@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import os
+from functools import partial
 from typing import Any, Iterator
 
 import can
@@ -17,6 +18,7 @@ from .lanes import BUS_ERRORS, BusFault, Lane, queue_full, room_wait_s
 from .power import EmulatorPower
 
 _SIM_CHANNELS = itertools.count()
+_BUS_OFF = canbus.ErrorState.BUS_OFF
 
 
 #: the simulated lane's CAN (ckesc/emulator/sim_bus.py): SocketCAN's defaults, as a real bench has them (a frame needs
@@ -69,19 +71,52 @@ class SimLane(Lane):
         # listeners are looked for once per call. On a bus with acknowledgement the host's controller is looked at
         # before each frame is handed on and once the world reached the deadline (its bus-off is the bench's failure,
         # not the DUT's)
-        frames = self.sim.frames_until(deadline)
-        if self.sim.world.ack:
-            frames = _controller_checked(self.sim, frames)
+        sim = self.sim
+        frames = sim.frames_until(deadline, partial(_check_controller, sim) if sim.world.ack else None)
         if self.__dict__.get("_listeners"):  # (a listener is handed can.Messages)
             message, heard = self.sim._message, self.heard
             return (heard(message(msg)) for msg in frames)
         return frames
 
+    def frames_into(self, deadline: float, out: list[Any]) -> None:
+        """:meth:`frames_until`'s frames onto ``out`` as plain values, four a frame: a data frame's ``arbitration_id``,
+        ``data``, ``timestamp`` and ``is_extended_id``; a remote or error frame's first three and, for the fourth, the
+        tuple (``is_extended_id``, ``is_remote_frame``, ``is_error_frame``, ``dlc``). What a soak's world hands to its
+        reader in another process (:mod:`ckesc.soak.split`): the bus's queue taken whole where the world runs to the
+        deadline in one go (no call per frame)."""
+        sim = self.sim
+        world, rx = sim.world, sim._rx
+        now = world.now
+        left = deadline - now
+        if not rx and 0.0 < left <= now and not sim._is_shutdown and not self.__dict__.get("_listeners"):
+            world.advance(deadline, None)  # (frames_until's one run of the world to the deadline)
+            if world.ack and (ctl := world._ctl.get(sim)) is not None and ctl.state is _BUS_OFF:  # (no controller
+                _check_controller(sim)  # yet: error-active)
+            n = len(out)
+            try:
+                out += itertools.chain.from_iterable(rx)  # (a data frame is the bus's tuple of those four)
+                rx.clear()
+                return
+            except TypeError:  # a can.Message among them (a remote or error frame): one by one
+                del out[n:]
+        message = can.Message
+        for heard in self.frames_until(deadline):
+            if heard.__class__ is message:
+                out += (heard.arbitration_id, bytes(heard.data), heard.timestamp,
+                        (heard.is_extended_id, heard.is_remote_frame, heard.is_error_frame, heard.dlc))
+            else:
+                out += heard
+
     def send_wire(self, wire: WireFrame) -> None:
         sim = self.sim  # (no can.Message built: hours of soak send here)
         if sim.world.ack or sim._is_shutdown:
             try:
-                sim.send_wire(wire)  # (a full queue said as the bus says it, a closed bus refused)
+                if sim._is_shutdown:
+                    sim.send_wire(wire)  # (a closed bus refused, as the bus says it)
+                else:
+                    sim.world.send_wire(sim, wire)  # (the bus's send_wire, one call less)
+            except canbus.QueueFull as full:  # (a full queue said as the bus says it)
+                placed(sim, sim._enobufs(full), sim.send_wire, wire, boot=self.dut_boot_s)
             except BUS_ERRORS as exc:
                 placed(sim, exc, sim.send_wire, wire, boot=self.dut_boot_s)
         else:  # without acknowledgement nothing refuses a frame: the world takes it (the bus's send_wire, one call less)
@@ -147,15 +182,6 @@ def placed(bus: Any, exc: BaseException, send: Any, *args: Any, boot: float = 0.
     why = "nobody acknowledged them" if ctl.tec else "sent faster than the bus carries them"
     raise BusFault(f"the host's CAN send failed ({type(exc).__name__}: {exc}; its controller {ctl.state.value}, "
                    f"TEC {ctl.tec}, {len(ctl)} frame(s) waiting after {waited * 1000:.3f} ms: {why})") from exc
-
-
-def _controller_checked(bus: Any, frames: Iterator[Any]) -> Iterator[Any]:
-    ctl, off = bus.controller, canbus.ErrorState.BUS_OFF  # (one controller a call: hours of soak frames pass here)
-    for frame in frames:
-        if ctl.state is off:
-            _check_controller(bus)
-        yield frame
-    _check_controller(bus)
 
 
 def _check_controller(bus: Any) -> None:

@@ -11,7 +11,7 @@ import re
 import sys
 
 from ..reporting.exits import ExitStatus
-from ..soak import trace
+from ..soak import split, trace
 from .common import UsageError, check_dir, check_file, duration_arg, positive_float, seconds_of
 from .run import add_bench_options
 
@@ -82,6 +82,9 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
                         "(the oldest file deleted as a new one starts) and each finding's frames in a file of its own, "
                         f"never deleted (200MB, 1GB, 500kB; at least {trace.MIN_BUDGET // 1000}kB; 0: no trace; default "
                         f"{trace.DEFAULT_BUDGET // 10**6}MB)")
+    s.add_argument("--processes", choices=split.CHOICES, default="auto",
+                   help="a simulated soak's world in a process of its own beside the reader's (2: two cores busy), "
+                        "or not (1); auto: 2 where the machine has two cores or more (default)")
     s.add_argument("--stop-on-finding", action="store_true", help="stop at the first finding (the report written)")
     s.add_argument("--reports", default="reports", metavar="DIR", help="where reports go (default: reports/)")
     s.add_argument("-q", "--quiet", action="store_true", help="no console lines")
@@ -121,7 +124,8 @@ def add_soak_command(sub: argparse._SubParsersAction) -> None:
         soak = runner.SoakOptions(duration_s=args.duration, rate_hz=args.rate, format=args.format,
                                   channels=args.channels, throttle=args.throttle_profile,
                                   stop_on_finding=args.stop_on_finding, reports=args.reports, quiet=args.quiet,
-                                  trace_budget=args.trace_budget, status_file=args.status_file)
+                                  trace_budget=args.trace_budget, status_file=args.status_file,
+                                  processes=args.processes)
         try:
             outcome = runner.run(BenchOptions.of(vars(args).get), soak, out=sys.stdout, given=given)
         except (PreflightError, BenchError, ValueError) as exc:

@@ -72,6 +72,7 @@ class SimClock:
 
 
 INF = float("inf")
+_ACKED, _ACTIVE = Attempt.ACKED, ErrorState.ACTIVE  # (module constants: read once per frame)
 
 
 class SimWorld(CanNodes):
@@ -105,11 +106,15 @@ class SimWorld(CanNodes):
         self._parked: dict[Any, tuple[float, float, float]] = {}  # node -> (since, retry period, resume at)
         self._short_until = -INF
         self._alarm = INF
-        self.stats = {"frames": 0, "busy_s": 0.0, "retries": 0, "dropped": 0}
+        self._frames, self._busy_s, self._counts = 0, 0.0, {"retries": 0, "dropped": 0}  # (:attr:`stats`, kept apart)
         #: per traffic source (by name): frames it put on the bus and the bus time they took
         self.source_stats: dict[str, dict[str, float]] = {}
         if power_on:
             self.power_on()
+
+    @property
+    def stats(self) -> dict[str, float]:  # frames carried, bus time of the tries (s), tries not acknowledged, dropped
+        return {"frames": self._frames, "busy_s": self._busy_s, **self._counts}
 
     # ------------------------------------------------------------------ event loop
     def advance(self, deadline: float, rx: deque | None = None, stop: Callable[[], bool] | None = None) -> bool | None:
@@ -202,18 +207,18 @@ class SimWorld(CanNodes):
         _, _, old, origin, bitrate, flags = p
         if self.ack:
             ctl = self._ctl.get(origin)
-            if ctl is None or ctl.head() is not p:  # its queue went away meanwhile (a power-off, a bus shut down)
+            if ctl is None or ctl.sending is not p:  # its queue went away meanwhile (a power-off, a bus shut down)
                 return
-            if self._outcome is not Attempt.ACKED:
+            if self._outcome is not _ACKED:
                 self._failed(origin, ctl, end)
                 return
             was = ctl.state
-            ctl.attempt(Attempt.ACKED, end)
+            ctl.attempt(_ACKED, end)
             if not ctl.size:
                 self._contending.remove(origin)
-            if was is not ErrorState.ACTIVE:  # (only a controller past 95 can change its state by a success)
+            if was is not _ACTIVE:  # (only a controller past 95 can change its state by a success)
                 self._report(origin, ctl)
-        self.stats["frames"] += 1
+        self._frames += 1
         own = isinstance(origin, SimEscBus)  # (a host's frame: most of a soak's; asked first)
         if not own and isinstance(origin, ShiftedSource):
             st = self.source_stats[origin.name]
@@ -342,7 +347,7 @@ class SimCyclicTask(ModifiableCyclicTaskABC, RestartableCyclicTaskABC):
         try:
             self.bus.world.send(self.bus, msg)
         except QueueFull:  # SocketCAN's BCM: the frame is lost, the task goes on
-            self.bus.world.stats["dropped"] += 1
+            self.bus.world._counts["dropped"] += 1
         self.next_time = round(self.next_time + self.period, 9)
 
 
@@ -493,18 +498,20 @@ class SimEscBus(can.BusABC):
         now = self.world.now
         return self._until(now + max(deadline - now, 0.0), False)  # (recv's arithmetic: the same instant)
 
-    def frames_until(self, deadline: float) -> Iterator[Heard | can.Message]:
+    def frames_until(self, deadline: float, bus_off: Callable[[], None] | None = None) -> Iterator[Heard | can.Message]:
         """Every frame until ``deadline``: :meth:`recv_until` again and again until it gives none (the clock then at
         ``deadline``), without a call per frame between the reader and the simulated clock, and each data frame as
         the bus heard it (a :class:`Heard`: ``timestamp``, ``arbitration_id``, ``data``, ``is_extended_id``,
         ``is_rx`` and the flags, as a ``can.Message`` has them; no ``can.Message`` made: a soak reads hours of them).
-
         The world runs up to ``deadline`` in one go and the frames it heard meanwhile are yielded after it: the frames
         a :meth:`recv_until` loop reads, with the same stamps, but the clock, read between two of them, is at the
         deadline already; a reader that sends between the frames it reads reads with :meth:`recv_until` (a soak
-        sends between its reads, not during them)."""
-        rx, world = self._rx, self.world
+        sends between its reads, not during them). ``bus_off``: called where this bus's controller is bus-off, looked at
+        after each run of the world (nothing else moves it between two frames handed on) and before the first frame."""
+        rx, world, off, ctl = self._rx, self.world, ErrorState.BUS_OFF, self.controller if bus_off is not None else None
         advance = world.advance
+        if ctl is not None and ctl.state is off and rx:
+            bus_off()
         while True:
             if self._is_shutdown:
                 self._check_open()
@@ -513,15 +520,18 @@ class SimEscBus(can.BusABC):
                 continue
             now = world.now
             left = deadline - now  # (recv_until's arithmetic, max(left, 0.0) as :meth:`_until` reads, without the call)
-            if 0.0 < left <= now:
-                # now + left is the deadline exactly, and stays so for every later now (Sterbenz: deadline - now is
-                # exact while now >= deadline / 2): recv_until's calls would each run the world to the deadline, one
-                # call does it once
-                advance(deadline, None)
+            # where 0 < left <= now, now + left is the deadline exactly, and stays so for every later now (Sterbenz:
+            # deadline - now is exact while now >= deadline / 2): recv_until's calls would each run the world to the
+            # deadline, one call does it once
+            whole = 0.0 < left <= now
+            more = advance(deadline, None) if whole else advance(now + left if left > 0.0 else now, rx)
+            if ctl is not None and ctl.state is off:
+                bus_off()
+            if whole:
                 while rx:
                     yield rx.popleft()
                 return
-            if not advance(now + left if left > 0.0 else now, rx):
+            if not more:
                 return
 
     def _until(self, deadline: float, forever: bool) -> can.Message | None:

@@ -29,7 +29,8 @@ class CanNodes:
     ack: bool
     buses: list[Any]
     bench: Any
-    stats: dict[str, float]
+    _busy_s: float
+    _counts: dict[str, int]
     _ctl: dict[Any, CanController]
     _contending: list[Any]
     _parked: dict[Any, tuple[float, float, float]]
@@ -48,10 +49,12 @@ class CanNodes:
             heapq.heappush(self._ready, (p.wire.arbitration_id, p.seq, p))
             return
         node = p.origin
-        ctl = self._ctl.get(node) or self.controller(node)
+        ctl = self._ctl.get(node)
+        if ctl is None:  # (not ``or``: an empty controller is falsy, and would be looked up twice)
+            ctl = self.controller(node)
         n = ctl.txqueuelen
         if n is not None and ctl.size >= n and node not in self.buses:  # (a host's bus raises QueueFull instead)
-            self.stats["dropped"] += 1
+            self._counts["dropped"] += 1
             if ctl.evict_for(p.wire.arbitration_id) is None:  # an ESC's: its lowest-priority frame goes, else this one
                 return
         ctl.submit(p, p.wire.arbitration_id)
@@ -67,7 +70,7 @@ class CanNodes:
             winner = heapq.heappop(self._ready)[2]
             duration = (67 + 8 * len(winner.wire.data)) / winner.bitrate  # frame_bits, inline: once per frame
             self._in_flight = (round(self.now + duration, 12), winner)
-            self.stats["busy_s"] += duration
+            self._busy_s += duration
             return
         contending = self._contending
         if not contending:
@@ -75,29 +78,34 @@ class CanNodes:
         ctls = self._ctl
         # arbitration: the lowest head id wins (a frame at another bit rate than its listeners' is garbage to
         # them; a mixed-rate bus is broken anyway, so rates do not interact here)
-        winner = ctls[contending[0]].head()
-        if len(contending) > 1:
+        if len(contending) == 1:  # (one node with frames: a soak's host most of the time)
+            ctl = ctls[contending[0]]
+            winner = ctl.begin()  # on the bus: a frame its node queues meanwhile waits, whatever its priority
+        else:
+            winner = ctls[contending[0]].head()
             best = winner.wire.arbitration_id
             for node in contending:
                 p = ctls[node].head()
                 can_id = p.wire.arbitration_id
                 if can_id < best or (can_id == best and p.seq < winner.seq):
                     winner, best = p, can_id
-        ctls[winner.origin].begin()  # on the bus: a frame its node queues meanwhile waits, whatever its priority
+            ctl = ctls[winner.origin]
+            ctl.begin()
         bitrate, n = winner.bitrate, len(winner.wire.data)
-        if self.now < self._short_until:
+        now = self.now
+        if now < self._short_until:
             self._outcome = Attempt.SHORT
         elif self._acknowledged(winner.origin, bitrate):
             self._outcome = Attempt.ACKED
             duration = (67 + 8 * n) / bitrate  # frame_bits, inline: once per frame
-            self._in_flight = (round(self.now + duration, 12), winner)
-            self.stats["busy_s"] += duration
+            self._in_flight = (round(now + duration, 12), winner)
+            self._busy_s += duration
             return
         else:
             self._outcome = Attempt.NO_ACK
-        duration = attempt_bits(n, self._outcome, ctls[winner.origin].passive) / bitrate
-        self._in_flight = (round(self.now + duration, 12), winner)
-        self.stats["busy_s"] += duration
+        duration = attempt_bits(n, self._outcome, ctl.passive) / bitrate
+        self._in_flight = (round(now + duration, 12), winner)
+        self._busy_s += duration
 
     def _host_bitrate(self) -> int:
         return self.buses[-1].bitrate if self.buses else DEFAULT_BITRATE
@@ -139,7 +147,7 @@ class CanNodes:
     def _failed(self, node: Any, ctl: CanController, end: float) -> None:
         """A try that was not acknowledged (or met a short): the frame stays at the head; the node goes on trying,
         is parked (the ACK exception: nothing changes until someone listens) or is bus-off."""
-        self.stats["retries"] += 1
+        self._counts["retries"] += 1
         ctl.attempt(self._outcome, end)
         self._report(node, ctl)
         if ctl.bus_off:

@@ -195,7 +195,8 @@ class CanController:
         self._fifo: deque[Any] = deque()
         self._heap: list[tuple[int, int, Any]] = []
         self._seq = itertools.count()
-        self._sending: Any | None = None  # the frame on the bus now (:meth:`begin`), until its try ends
+        #: the frame on the bus now (:meth:`begin`), until its try ends (None: none); read, never set, by its owner
+        self.sending: Any | None = None
         self._reports: list[ErrorFrame] = []
 
     # ------------------------------------------------------------------ the transmit queue
@@ -215,7 +216,8 @@ class CanController:
 
     def submit(self, frame: Any, can_id: int) -> None:
         """Queue ``frame`` (any object; ``can_id`` orders a priority queue). Raises :class:`QueueFull`."""
-        if self.full:
+        n = self.txqueuelen  # (:attr:`full`, without its call: every frame of a simulated run is queued here)
+        if n is not None and self.size >= n:
             raise QueueFull(f"the transmit queue is full ({self.txqueuelen} frames)")
         if self.order == "fifo":
             self._fifo.append(frame)
@@ -232,7 +234,7 @@ class CanController:
             return None
         i = max(range(len(self._heap)), key=lambda k: self._heap[k][:2])
         can_worst, _, frame = self._heap[i]
-        if can_worst <= can_id or frame is self._sending:
+        if can_worst <= can_id or frame is self.sending:
             return None
         self._heap[i] = self._heap[-1]
         self._heap.pop()
@@ -242,8 +244,8 @@ class CanController:
 
     def head(self) -> Any | None:
         """The frame the controller tries next, or the one it is trying (None: nothing to send)."""
-        if self._sending is not None:
-            return self._sending
+        if self.sending is not None:
+            return self.sending
         if self._fifo:
             return self._fifo[0]
         return self._heap[0][2] if self._heap else None
@@ -252,18 +254,23 @@ class CanController:
         """The head frame goes on the bus: it stays the head until its try ends (:meth:`attempt`), so that a frame of
         a higher priority queued meanwhile waits for the next arbitration, as a controller's mailbox in transmission
         is not overtaken."""
-        self._sending = self.head()
-        return self._sending
+        sending = self.sending  # (:meth:`head`, without its call: once per frame)
+        if sending is None:
+            if self._fifo:
+                sending = self.sending = self._fifo[0]
+            elif self._heap:
+                sending = self.sending = self._heap[0][2]
+        return sending
 
     def clear(self) -> None:
         """Drop every queued frame (a power cycle, an interface taken down)."""
         self._fifo.clear()
         self._heap.clear()
-        self._sending = None
+        self.sending = None
         self.size = 0
 
     def _pop(self) -> Any:
-        sending, self._sending = self._sending, None
+        sending, self.sending = self.sending, None
         if self._fifo:
             return self._fifo.popleft()
         if sending is None or self._heap[0][2] is sending:
@@ -294,11 +301,16 @@ class CanController:
     def attempt(self, outcome: Attempt, now: float) -> Any | None:
         """One try of the head frame ended at ``now`` with ``outcome``: the counters move; an acknowledged frame leaves
         the queue and is returned, any other stays at the head (None). A bus-off controller does not try."""
-        if self.state is ErrorState.BUS_OFF or not self:
+        if self.state is ErrorState.BUS_OFF or not self.size:
             raise RuntimeError(f"no try possible: the controller is {self.state.value} with {len(self)} frame(s)")
         if outcome is Attempt.ACKED:  # (the hot path of a simulated run: every frame on the bus)
             self.counts["sent"] += 1
-            frame = self._pop()
+            fifo = self._fifo
+            if fifo:  # (:meth:`_pop`'s FIFO case, without its call)
+                self.sending = None
+                frame = fifo.popleft()
+            else:
+                frame = self._pop()
             self.size -= 1
             if self.tec:
                 self.tec -= 1
@@ -314,7 +326,7 @@ class CanController:
             self.tec += TX_ERROR
             self._bus_error(now, 0, CAN_ERR_PROT_BIT0 if outcome is Attempt.SHORT else 0,
                             CAN_ERR_PROT_LOC_SOF if outcome is Attempt.SHORT else 0)
-        self._sending = None  # the next try arbitrates again: a frame of a higher priority queued meanwhile goes first
+        self.sending = None  # the next try arbitrates again: a frame of a higher priority queued meanwhile goes first
         self._settle(now)
         return None
 

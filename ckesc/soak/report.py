@@ -78,7 +78,10 @@ def summary_text(record: dict[str, Any], where: Path | None = None) -> str:
              f"host stream: {host['stream_frames']} RawCommand_{record['plan']['format']} at {record['plan']['rate_hz']:g} Hz, "
              f"{host['stream_skipped']} skipped; sent late by p50 {late['p50_ms']} ms, p99 {late['p99_ms']} ms, "
              f"max {late['max_ms']} ms (the host's jitter)"
-             + (f"; the host process used {host['cpu_percent']:g} % of a CPU" if host.get("cpu_percent") is not None else ""),
+             + (f"; the host process used {host['cpu_percent']:g} % of a CPU" if host.get("cpu_percent") is not None
+                and host.get("processes", 1) == 1 else "")
+             + (f"; the host's two processes (the simulated world's and the reader's) used {host['cpu_percent']:g} % of "
+                "a CPU" if host.get("cpu_percent") is not None and host.get("processes", 1) == 2 else ""),
              "statement:"]
     if foreign := record.get("foreign_traffic"):
         lines.insert(2, f"foreign traffic: {foreign['profile']}, {foreign['frames']} frames of other nodes "

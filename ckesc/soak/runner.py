@@ -29,9 +29,10 @@ from ..protocol import catalogue as cat
 from ..protocol.frame import WireFrame
 from ..protocol.histogram import Histogram
 from ..reporting.durations import duration_text
-from . import report
+from . import report, split
 from .monitor import Monitor
 from .player import FORMATS, FlightPlan, Player
+from .split import ABORTED, COMPLETED, INTERRUPTED, STOPPED
 from .statement import Statement
 from .trace import DEFAULT_BUDGET, Trace
 from .watch import WatchConfig
@@ -45,7 +46,6 @@ LIVE_LOG_S = 60.0
 LATENESS_BIN_S = 0.0001
 LATENESS_BINS = 200
 
-COMPLETED, INTERRUPTED, STOPPED, ABORTED = "COMPLETED", "INTERRUPTED", "STOPPED", "ABORTED"
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,8 @@ class SoakOptions:
     trace_budget: int = DEFAULT_BUDGET  # bytes of trace files on disk (0: no trace)
     #: a file the live line's figures go to as JSON once a second of wall time (a rig batch's console reads it)
     status_file: str | None = None
+    #: ``--processes``: "1", "2" (a simulated soak's world in a process of its own, :mod:`.split`) or "auto"
+    processes: str = "auto"
 
 
 @dataclass
@@ -199,8 +201,12 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     problem = ""
     say = (lambda text: None) if soak.quiet else (lambda text: print(text, file=out, flush=True))
 
+    procs = split.processes(soak.processes, lane.clock == "simulated")
+    at = [t0]  # (two processes: the lane's time of the last tick read)
+    lane_now = lane.peek_now if procs == 1 else (lambda: at[0])
+
     def figures(state: str = "running") -> dict[str, Any]:
-        now = lane.peek_now()
+        now = lane_now()
         return {"state": state, "elapsed_s": round(max(now - t0, 0), 3), "left_s": round(max(end - now, 0), 3),
                 "frames": monitor.frames, "findings": monitor.count}
 
@@ -213,39 +219,62 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     due_by, next_deadline = player.due, player.next_deadline
     show = not soak.quiet or soak.status_file is not None
     stopped_at = t0
+    world: dict[str, Any] = {}
+
+    def after_tick() -> bool:
+        """A tick's frames read: its findings written, the live line; whether the soak stops here."""
+        if written < len(monitor.findings):
+            write_findings()
+        if soak.stop_on_finding and monitor.count and monitor.settled:  # (the frames after it read)
+            return True
+        if show:
+            live.maybe(line)
+            status_file.maybe(figures)
+        return False
+
+    def tick_done(now: float, sent_stream: int, skipped: int) -> bool:
+        """Two processes: a tick read (:func:`.split.read_world`), with the lane's time and the player's counts after it."""
+        at[0] = now
+        player.sent_stream, player.skipped = sent_stream, skipped
+        return after_tick()
+
     try:
         say(f"soak: {duration_text(soak.duration_s)} of flight-like running on {lane.name} ({lane.clock} clock), node "
             f"{dut.node_id}: RawCommand_{plan.format} at {plan.rate_hz:g} Hz on channels "
             f"{','.join(map(str, plan.channels))} ({'throttle profile' if plan.throttle and plan.allow_motor_spin else 'zero throttle'}), "
             "GET_ESC_ID every second, 241 and 242 read"
             + (f"; foreign traffic: {station.foreign.name} (other nodes' frames, not judged as the ESC's)"
-               if station.foreign is not None else ""))
-        while True:
-            now = now_of()
-            if now >= end:
-                break
-            for planned in due_by(now):
-                wire = planned.wire
-                sent(wire.arbitration_id, wire.data, peek())  # its echo's stamp: how late the bench stamped it
-                send(wire)
-                if planned.what == "stream":
-                    late = now - planned.due
-                    add_lateness(late if late > 0.0 else 0.0)
-            deadline = next_deadline()
-            if deadline > end:
-                deadline = end
-            for msg in frames_until(deadline):
-                watch(msg)
-                if keep is not None:
-                    keep(msg.timestamp, msg.arbitration_id, msg.data)
-            if written < len(monitor.findings):
-                write_findings()
-            if soak.stop_on_finding and monitor.count and monitor.settled:  # (the frames after it read)
-                status = STOPPED
-                break
-            if show:
-                live.maybe(line)
-                status_file.maybe(figures)
+               if station.foreign is not None else "")
+            + ("; the simulated world in a process of its own" if procs == 2 else ""))
+        if procs == 2:
+            world = split.read_world(lambda frames, control: split.run_world(
+                frames, control, lane, player, end, lambda: _finish_world(station, lane, player, dut)),
+                watch, keep, sent, add_lateness, tick_done, signals=_in_main_thread())
+            lane.sim.world.bench.flash = None  # (the world's process closed the bench: this copy writes no flash)
+            status, problem = world["status"], world["problem"]
+            stopped_at = world["stopped_at"] if world["stopped_at"] is not None else at[0]  # (None: no tick read)
+        else:
+            while True:
+                now = now_of()
+                if now >= end:
+                    break
+                for planned in due_by(now):
+                    wire = planned.wire
+                    sent(wire.arbitration_id, wire.data, peek())  # its echo's stamp: how late the bench stamped it
+                    send(wire)
+                    if planned.what == "stream":
+                        late = now - planned.due
+                        add_lateness(late if late > 0.0 else 0.0)
+                deadline = next_deadline()
+                if deadline > end:
+                    deadline = end
+                for msg in frames_until(deadline):
+                    watch(msg)
+                    if keep is not None:
+                        keep(msg.timestamp, msg.arbitration_id, msg.data)
+                if after_tick():
+                    status = STOPPED
+                    break
     except KeyboardInterrupt:
         status = INTERRUPTED
     except (BenchGone, BusFault) as exc:  # the bench failed, not the DUT: the run stops, its report says why
@@ -253,10 +282,11 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
     finally:
         ignore = _ignore_interrupts()
         try:
-            stopped_at = lane.peek_now()
-            _zero(lane, player, dut)
-            if station.foreign is not None:
-                station.foreign.stop()  # its figures final for the report (the lane closes after it)
+            if procs == 1:
+                stopped_at = lane.peek_now()
+                _zero(lane, player, dut)
+                if station.foreign is not None:
+                    station.foreign.stop()  # its figures final for the report (the lane closes after it)
             live.done()
         finally:
             ignore()
@@ -267,7 +297,7 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
         if trace is not None:
             trace.close()
         ran = stopped_at - t0
-        cpu_s, cpu_wall = _cpu_s() - cpu0, wall() - cpu_wall0
+        cpu_s, cpu_wall = _cpu_s() - cpu0 + world.get("cpu_s", 0.0), wall() - cpu_wall0
         statements = [Statement(w.name, w.rules, w.what, w.one, w.events, ran, w.statement_unit, w.trials)
                       for w in monitor.watches]
         record = {
@@ -275,7 +305,8 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
             "bench": {k: _plain(v) for k, v in (given or {}).items()},
             "lane": lane.name, "clock": lane.clock, "timing_error_s": lane.timing_error, "profile": profile.name,
             "faults": bench.emulator_faults or "",
-            "foreign_traffic": station.foreign.report() if station.foreign is not None else None, "node_id": dut.node_id, "host_node": dut.host_node,
+            "foreign_traffic": world.get("foreign") if procs == 2 else station.foreign.report() if station.foreign is not None else None,
+            "node_id": dut.node_id, "host_node": dut.host_node,
             "plan": {"format": plan.format, "rate_hz": plan.rate_hz, "channels": list(plan.channels),
                      "throttle": [list(s) for s in plan.throttle] if plan.allow_motor_spin else [],
                      "allow_motor_spin": plan.allow_motor_spin},
@@ -285,8 +316,10 @@ def _run(station, bench: BenchOptions, soak: SoakOptions, out: TextIO, given: di
                        "other": monitor.other_frames},
             "host": {"stream_frames": player.sent_stream, "stream_skipped": player.skipped,
                      "send_lateness": lateness.to_json(), "bench_stamp_lag": monitor.bench_lag.to_json(), "cpu_s": round(cpu_s, 3),
-                     "cpu_percent": round(100 * cpu_s / cpu_wall, 1) if cpu_wall > 0 else None},
-            "memory": {"rss_start_kb": rss_start, "rss_end_kb": _rss_kb(), "peak_rss_kb": _peak_rss_kb()},
+                     "cpu_percent": round(100 * cpu_s / cpu_wall, 1) if cpu_wall > 0 else None, "processes": procs,
+                     "world_cpu_s": round(world["cpu_s"], 3) if "cpu_s" in world else None},
+            "memory": {"rss_start_kb": rss_start, "rss_end_kb": _rss_kb(), "peak_rss_kb": _peak_rss_kb(),
+                       "world_peak_rss_kb": world.get("peak_rss_kb")},
             "watches": {w.name: {"rules": list(w.rules), "events": w.events, "trials": w.trials,
                                  "statistics": w.statistics()} for w in monitor.watches},
             "r9_per_minute_ms": monitor.intervals.series,
@@ -330,6 +363,21 @@ def _zero(lane, player: Player, dut: Dut) -> None:
             lane.recv(left)
     except Exception:  # noqa: BLE001 - best effort on the way out (the bench may be gone)
         pass
+
+
+def _finish_world(station: Any, lane: Any, player: Player, dut: Dut) -> dict[str, Any]:
+    """The world's process on its way out (:func:`.split.run_world`): zero throttle, the foreign traffic stopped, the
+    lane closed (the emulator's flash written, as the one-process soak's close does); its figures for the report."""
+    foreign = None
+    try:
+        _zero(lane, player, dut)
+        if station.foreign is not None:
+            station.foreign.stop()
+            foreign = station.foreign.report()
+        station.close()
+    except Exception:  # noqa: BLE001 - best effort on the way out, as the one-process soak's
+        pass
+    return {"foreign": foreign, "cpu_s": _cpu_s(), "peak_rss_kb": _peak_rss_kb()}
 
 
 def _ignore_interrupts() -> Callable[[], None]:

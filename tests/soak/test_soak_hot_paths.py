@@ -92,6 +92,39 @@ def test_a_soaks_reads_make_no_can_message_and_recv_makes_the_same_one():
             lane.close()
 
 
+def test_the_soak_worlds_frames_into_hands_over_what_frames_until_reads(tmp_path):
+    """The simulated lane's ``frames_into`` (the soak's world in a process of its own, :mod:`ckesc.soak.split`)
+    gives, four plain values a frame, the frames ``frames_until`` gives on a lane of the same seed, the clock at the
+    same place after each read: the bus's queue taken whole, and one by one where a remote frame is among them (its
+    flags in the fourth value)."""
+    lanes = [SimLane(seed=7), SimLane(seed=7)]
+    try:
+        for lane in lanes:
+            lane.wait_power(0.5)
+        got: list[list[tuple]] = [[], []]
+        for step in range(1, 60):
+            deadline = 0.5 + step * 0.0125
+            for i, lane in enumerate(lanes):
+                lane.send_wire(throttle(100, step % 32))
+                if step % 20 == 0:  # a remote frame (it is no data frame: the ESC ignores it, the bus carries it)
+                    lane.bus.send(can.Message(arbitration_id=0x1234, is_remote_frame=True, dlc=2))
+                if i == 0:
+                    got[0] += [(m.arbitration_id, bytes(m.data), m.timestamp,
+                                m.is_extended_id if type(m) is not can.Message else
+                                (m.is_extended_id, m.is_remote_frame, m.is_error_frame, m.dlc))
+                               for m in lane.frames_until(deadline)]
+                else:
+                    flat: list = []
+                    lane.frames_into(deadline, flat)
+                    got[1] += list(zip(flat[0::4], flat[1::4], flat[2::4], flat[3::4]))
+                got[i].append(lane.now())
+        assert got[0] == got[1] and len(got[0]) > 100
+        assert sum(1 for f in got[1] if isinstance(f, tuple) and isinstance(f[3], tuple)) == 2  # the remote frames
+    finally:
+        for lane in lanes:
+            lane.close()
+
+
 def read(i: int, lane: SimLane, deadline: float):
     if i == 2:
         yield from lane.frames_until(deadline)

@@ -16,7 +16,7 @@ import json
 import pytest
 
 from ckesc.bench.station import BenchOptions
-from ckesc.soak import runner
+from ckesc.soak import runner, split
 
 CASES = {
     "faultless, 400 Hz, foreign traffic": (BenchOptions(foreign_traffic="ardupilot"), {"duration_s": 12.0},
@@ -51,9 +51,13 @@ def soak_digest(tmp_path, bench: BenchOptions, options: dict) -> tuple[int, str]
     return outcome.findings, h.hexdigest()
 
 
+@pytest.mark.parametrize("processes", ["1", "2"])
 @pytest.mark.parametrize("case", CASES)
-def test_a_short_simulated_soak_reads_the_frames_and_finds_what_it_did_before(tmp_path, case):
+def test_a_short_simulated_soak_reads_the_frames_and_finds_what_it_did_before(tmp_path, monkeypatch, case, processes):
+    """In one process and in two (the world's frames handed over in batches of 256 here, so that a short soak's
+    frames cross in many)."""
+    monkeypatch.setattr(split, "BATCH_FRAMES", 256)
     bench, options, findings, pinned = CASES[case]
-    found, digest = soak_digest(tmp_path, bench, options)
+    found, digest = soak_digest(tmp_path, bench, {**options, "processes": processes})
     assert found == findings
     assert digest == pinned, f"{case}: the soak's frames or findings changed (digest {digest})"
