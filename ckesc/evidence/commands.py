@@ -18,8 +18,8 @@ The channel is learned from what the bus says of it, no tolerance of its own:
   more than 120 s after a power-up the host reported (R11). Where the power-up is not known (a capture, a lane that
   found the ESC on) an echoed refusal of a legal Set ID that keeps the node id is taken for the ESC's word until the
   next read;
-* what a consumer read before the reader was fed (:meth:`CommandClock.read` through
-  :meth:`~.tracker.Tracker.channel_read`: the explorer's baseline).
+* what a consumer read where the reader was not fed the answer (:meth:`CommandClock.read`, the reader's ``clock``:
+  the explorer's baseline).
 
 Until a node's channel is known no command addresses it: its last command is None (R8 is not judged on it). A
 Set ID that moves an ESC to another node id starts the new id's clock at the request (what the old id heard is

@@ -293,7 +293,8 @@ class Tracker(Findings, Rejoin):
         self._maintenance: dict[tuple[int, int | None, int], int] = {}
         #: what the tracker paired, for the report's plots: None (the default) records nothing
         self.heard: TimingEvidence | None = None
-        #: R8's clock: per ESC node, the last command that addresses its throttle channel (:mod:`.commands`)
+        #: R8's clock: per ESC node, the last command that addresses its throttle channel (:mod:`.commands`); a
+        #: channel read where the reader was not fed the answer (the explorer's baseline) is told to it (``clock.read``)
         self.clock = CommandClock()
         self.events = None
 
@@ -372,11 +373,6 @@ class Tracker(Findings, Rejoin):
         node.periods = [periods.get(k.removesuffix("_interval")) for k in INTERVAL_FIELDS]
         node.floor, node.from_read, node.before_silence = True, True, False
         node.period_note = what
-
-    def channel_read(self, node_id: int, channel: int) -> None:
-        """Node ``node_id``'s throttle channel, read where the reader was not fed the answer (the explorer's baseline):
-        taken as if it had heard it (R8's clock, :mod:`.commands`)."""
-        self.clock.read(node_id, channel)
 
     def power_switched(self, ts: float) -> None:
         """The host switched the DUT's power (off or on) at ``ts``: a pending R9a event is void (the first
@@ -588,6 +584,8 @@ class Tracker(Findings, Rejoin):
             event["event"] = "set at the first MSG1 heard"
         if self._last_throttle is not None:
             event["since_last_throttle_ms"] = round((ts - self._last_throttle[0]) * 1000, 3)
+        if (last := self.clock.last(node.id)) is not None:  # R8's clock: the last that carried the node's channel
+            event["since_last_command_ms"] = round((ts - last) * 1000, 3)
         node.comm_events.append(event)
 
     def _error_frame(self, ts: float, can_id: int, data) -> None:

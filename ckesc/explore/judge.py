@@ -100,7 +100,7 @@ def hear(oracle: Oracle, frames: Iterable[Frame], p: Params) -> EventLog:
     rules = BusRules(tolerance=p.error, own_error=p.own_error, bitrate=p.bitrate, complete=True, power_known=True,
                      jitter=p.jitter, host_nodes=(p.host_node,))
     log = rules.events = EventLog()
-    rules.channel_read(oracle.baseline["node_id"], oracle.start_channel)
+    rules.clock.read(oracle.baseline["node_id"], oracle.start_channel)
     power = [s.t for s in oracle.states if s.label in ("power on", "power off")]
     host = [f for f, _ in oracle.host]
     for f in sorted([*host, *frames], key=lambda f: (f.timestamp, f.source != p.host_node)):
