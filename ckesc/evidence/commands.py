@@ -16,8 +16,8 @@ The channel is learned from what the bus says of it, no tolerance of its own:
   answer may echo a request the ESC refused (R10-R12 leave a refused request's answer free, "the request's values
   echoed while nothing is applied" among them): one with an illegal value, one while reporting is suspended, one
   more than 120 s after a power-up the host reported (R11). Where the power-up is not known (a capture, a lane that
-  found the ESC on) an echoed refusal of a legal Set ID that keeps the node id is taken for the ESC's word until the
-  next read;
+  found the ESC on), an answer that says what the request asked may be such an echo: the channel is then not known
+  until the next read (R8 is not judged meanwhile);
 * what a consumer read where the reader was not fed the answer (:meth:`CommandClock.read`, the reader's ``clock``:
   the explorer's baseline).
 
@@ -90,7 +90,8 @@ class CommandClock:
     def __init__(self) -> None:
         self._on: dict[int, float] = {}  # per command key: the last command's time
         self._escs: dict[int, _Esc] = {}
-        self._set_id = (-math.inf, None, None, False)  # the last taken Set ID: time, node id, channel, maybe refused
+        #: the last taken Set ID: time, node id, channel, refused (R10-R12), taken or not is unknown (the window's)
+        self._set_id: tuple = (-math.inf, None, None, False, False)
         self._snapshot: dict[int, float | None] = {}  # each node's last command at that Set ID
         self.sink: Callable[[float, int], None] | None = None
 
@@ -118,7 +119,7 @@ class CommandClock:
         node, channel = _read(data, _SET_ID_NODE), _read(data, _SET_ID_CHANNEL)
         refused = (not (_SET_ID_NODE.is_legal(node) and _SET_ID_CHANNEL.is_legal(channel)) or suspended
                    or (up_for is not None and up_for > cat.CONFIG_WINDOW_S))
-        self._set_id = (ts, node, channel, refused)
+        self._set_id = (ts, node, channel, refused, up_for is None)
         self._snapshot = {n: self.last(n) for n, esc in self._escs.items() if esc.channel is not None}
 
     def reply(self, node: int, data) -> None:
@@ -136,9 +137,13 @@ class CommandClock:
         if service != _SET_ID.type_id:
             self.read(node, channel)
             return
-        t, asked_node, asked_channel, refused = self._set_id
-        if t != request_t or (refused and (_read(data, _SET_ID_NODE), channel) == (asked_node, asked_channel)):
-            return  # an answer to an earlier Set ID, or maybe a refused request's echo: a read says the channel
+        t, asked_node, asked_channel, refused, unsure = self._set_id
+        if t != request_t:
+            return  # an answer to an earlier Set ID: a read says the channel
+        if (refused or unsure) and (_read(data, _SET_ID_NODE), channel) == (asked_node, asked_channel):
+            if not refused and node == asked_node:  # taken, or refused and echoed from the id it kept: a read says
+                self._escs.pop(node, None)
+            return  # (refused, or from another id than asked: maybe a refused request's echo, the channel unchanged)
         self._learn(node, channel, t)
 
     # ------------------------------------------------------------------ what the reader knows
@@ -154,9 +159,9 @@ class CommandClock:
             esc = self._escs[node] = _Esc()
         if esc.channel == channel:
             return
-        # what addressed it before the change: its last command at that Set ID (none where it had no channel known,
-        # or the Set ID is not the one the reader kept)
-        esc.before = self._snapshot.get(node) if esc.channel is not None and since == self._set_id[0] else None
+        # what addressed it before the change: its last command at that Set ID (none where it had no channel known
+        # then, or the Set ID is not the one the reader kept)
+        esc.before = self._snapshot.get(node) if since == self._set_id[0] else None
         esc.channel, esc.keys, esc.since = channel, keys_for(channel), since
 
     def channel(self, node: int) -> int | None:

@@ -94,13 +94,15 @@ def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params,
 
 def hear(oracle: Oracle, frames: Iterable[Frame], p: Params) -> EventLog:
     """The bus reader (:class:`~ckesc.evidence.rules.BusRules`, with the bench's stated errors) fed the host's frames
-    the oracle took, its power switches and ``frames`` (the DUT's, or the model's own), in time order: what it tells
-    (:class:`~ckesc.evidence.events.EventLog`): the one pairing, reports and restarts, each MSG1's flag, the commands
-    that address the ESC (its throttle channel at the start told as read: the baseline's)."""
+    the oracle took, its power switches (the power-up the program runs in first: Set ID's window) and ``frames`` (the
+    DUT's, or the model's own), in time order: what it tells (:class:`~ckesc.evidence.events.EventLog`): the one
+    pairing, reports and restarts, each MSG1's flag, the commands that address the ESC (its throttle channel at the
+    start told as read: the baseline's)."""
     rules = BusRules(tolerance=p.error, own_error=p.own_error, bitrate=p.bitrate, complete=True, power_known=True,
                      jitter=p.jitter, host_nodes=(p.host_node,))
     log = rules.events = EventLog()
     rules.clock.read(oracle.baseline["node_id"], oracle.start_channel)
+    rules.power_switched(oracle.powered_at)
     power = [s.t for s in oracle.states if s.label in ("power on", "power off")]
     host = [f for f, _ in oracle.host]
     for f in sorted([*host, *frames], key=lambda f: (f.timestamp, f.source != p.host_node)):

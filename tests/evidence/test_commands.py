@@ -38,8 +38,11 @@ def _set_id_answer(node: int, channel: int, tid: int = 1, source: int | None = N
                  destination=0, transfer_id=tid)
 
 
-def _reader(*frames: tuple[float, tuple[int, bytes]], **kw) -> BusRules:
-    rules = BusRules(tolerance=0.0, complete=True, power_known=True, **kw)
+def _reader(*frames: tuple[float, tuple[int, bytes]], powered: float | None = -1.0) -> BusRules:
+    """The reader fed ``frames``; the ESC powered up at ``powered`` (reported: Set ID's window, R11; None: not)."""
+    rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    if powered is not None:
+        rules.power_switched(powered)
     for t, (can_id, data) in frames:
         rules.feed(can_id, data, t, own=(can_id & 0x7F) == 0)
     return rules
@@ -78,6 +81,7 @@ def test_set_id_to_another_channel_counts_from_the_request_what_carried_the_old_
     two is no command for it, one carrying the new channel is."""
     log = EventLog()
     rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    rules.power_switched(-1.0)
     rules.events = log
     for t, (can_id, data) in ((0.0, _reply(1)), (0.10, _command("raw_command_14b")), (0.20, _set_id(NODE, 20)),
                               (0.2002, _command("raw_command_14b")), (0.2005, _set_id_answer(NODE, 20)),
@@ -97,8 +101,7 @@ def test_an_answer_that_may_echo_a_refused_set_id_teaches_nothing(why):
     if why == "suspended":
         before.append((0.05, _wire("msg_control", {"command": cat.MSG_CONTROL_SUSPEND})))
     rules = BusRules(tolerance=0.0, complete=True, power_known=True)
-    if why == "outside the window":
-        rules.power_switched(-cat.CONFIG_WINDOW_S - 1.0)
+    rules.power_switched(-cat.CONFIG_WINDOW_S - 1.0 if why == "outside the window" else -1.0)
     for t, (can_id, data) in [*before, (0.10, _command("raw_command_14b")), (0.20, _set_id(node, 20)),
                               (0.2005, _set_id_answer(node, 20, source=NODE))]:
         rules.feed(can_id, data, t, own=(can_id & 0x7F) == 0)
@@ -119,3 +122,15 @@ def test_an_esc_moved_to_another_node_id_counts_from_the_set_id():
     assert rules.clock.channel(9) == 2 and rules.clock.last(9) is None
     rules.feed(*_command("raw_command_10b"), 0.40, own=True)
     assert rules.clock.last(9) == 0.40
+
+
+def test_where_the_power_up_is_not_known_an_answer_that_may_echo_the_set_id_leaves_the_channel_unknown_until_a_read():
+    """Taken, or refused after the 120 s window and echoed (R11, R10-R12): the bus cannot tell, so R8 waits for a read."""
+    frames = [(0.0, _reply(1)), (0.10, _command("raw_command_14b")), (0.20, _set_id(NODE, 20)),
+              (0.2005, _set_id_answer(NODE, 20)), (0.30, _command("raw_command_14b"))]
+    rules = _reader(*frames, powered=None)
+    assert rules.clock.channel(NODE) is None and rules.clock.last(NODE) is None
+    rules.feed(*_reply(1), 0.35)  # it was refused: the channel unchanged, every frame that carried it counts
+    assert rules.clock.channel(NODE) == 1 and rules.clock.last(NODE) == 0.30
+    known = _reader(*frames)  # powered a second before: inside the window, the answer is the ESC's word
+    assert known.clock.channel(NODE) == 20 and known.clock.last(NODE) == 0.10

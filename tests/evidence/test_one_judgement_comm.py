@@ -177,6 +177,7 @@ def test_r8_counts_from_the_commands_that_address_the_esc_s_channel_in_every_con
     within 10 ms of every MSG1: the flag would be due nowhere, the faultless ESC would be R8 and the faulty ones not."""
     frames = _set_id_trace(faults)
     rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    rules.power_switched(0.0)  # (the ESC's power-up: Set ID's window, R11, known to the reader)
     log = rules.events = EventLog()
     for m in frames:
         rules.feed_message(m)
@@ -191,6 +192,7 @@ def test_r8_counts_from_the_commands_that_address_the_esc_s_channel_in_every_con
     explorer = {r for f in _judged(frames, channel=NODE)[1] for r in f.requirements}
     _, with_its_log = _judged(frames, channel=NODE, heard=log)
     monitor = Monitor(WatchConfig(node_id=NODE, host_node=0, intervals={"msg1": MSG1_S}), t0=0.0)
+    monitor.rules.power_switched(0.0)
     for m in frames:
         monitor.feed(m)
     monitor.close(END_S)
