@@ -9,7 +9,7 @@ command, never, or does not clear it on the next command (the emulator's ``comm_
   flag clear on an MSG1 within an interval of the next command);
 * the soak's comm-flag watch (:class:`~ckesc.soak.comm_watch.CommFlagWatch`: each MSG1 against
   ``judgements.r8_flag_due``);
-* ``ckesc explore``'s judge (``judge._status``: each MSG1's bit 13 against ``r8_flag_due`` from the model's commands).
+* ``ckesc explore``'s judge (``judge._status``: each MSG1's bit 13 against ``r8_flag_due`` from the commands the reader says address the ESC's throttle channel).
 
 Who does not judge it, and why: the live bus rules and ``ckesc check-log`` record the flag's changes with the time
 since the last command (``summary()["nodes"][...]["comm_loss"]``) and judge nothing of them: a capture does not say
