@@ -38,9 +38,10 @@ from ..protocol.transfer import SINGLE_FRAME
 from .taken import taken
 
 _12B = cat.spec("raw_command_12b").type_id
-#: each throttle frame's length on the bus (its table's, with its tail byte), by type id: the stream's common frame
-_LENGTH = {cat.spec(n).type_id: cat.spec(n).layouts[0].size + cat.spec(n).has_tail for n in cat.THROTTLE_FRAMES}
-_TAILED = frozenset(cat.spec(n).type_id for n in cat.THROTTLE_FRAMES if cat.spec(n).has_tail)
+#: each throttle frame's common form, by type id: its length on the bus (its table's, with its tail byte) and the tail
+#: bits of a single frame (start, end; none for RawCommand_10b, which has no tail byte)
+_FORM = {cat.spec(n).type_id: (cat.spec(n).layouts[0].size + cat.spec(n).has_tail,
+                               SINGLE_FRAME if cat.spec(n).has_tail else 0) for n in cat.THROTTLE_FRAMES}
 _SET_ID = cat.spec("set_id")
 _SET_ID_NODE, _SET_ID_CHANNEL = (_SET_ID.request.field(k) for k in ("node_id", "throttle_channel"))  # type: ignore[union-attr]
 #: where each answer that says a node's channel carries it: GET_ESC_ID's reply, Set ID's answer, 242's answer
@@ -98,9 +99,9 @@ class CommandClock:
     # ------------------------------------------------------------------ the bus
     def command(self, can_id: int, type_id: int, data, ts: float) -> None:
         """A host's throttle frame (the hot path: a stream's every frame)."""
-        if len(data) != _LENGTH[type_id] or (type_id in _TAILED and data[-1] & SINGLE_FRAME != SINGLE_FRAME):
-            if not taken(can_id, data):  # (the common frame is taken: its form is read only otherwise)
-                return
+        length, single = _FORM[type_id]
+        if (len(data) != length or data[-1] & single != single) and not taken(can_id, data):
+            return  # (the common frame is taken: its form is read only otherwise)
         key = type_id << 8
         if type_id == _12B:
             key |= data[THROTTLE12_GROUP_BYTE]
