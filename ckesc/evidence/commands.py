@@ -85,8 +85,9 @@ class _Esc:
 
 class CommandClock:
     """Which throttle command addressed which ESC node last (see the module docstring). ``sink``: told
-    ``sink(ts, node)`` for each command that addresses a node whose channel is known (a consumer that keeps them: the
-    explorer's :class:`~.events.EventLog`); None (the default) tells none."""
+    ``sink(ts, node)`` for each command that addresses a node whose channel is known, and when a node's channel is
+    learned, the last frame since the change that carried it (heard before the answer that says so: told late); a
+    consumer that keeps them (the explorer's :class:`~.events.EventLog`) sorts them. None (the default) tells none."""
 
     def __init__(self) -> None:
         self._on: dict[int, float] = {}  # per command key: the last command's time
@@ -164,6 +165,10 @@ class CommandClock:
         # then, or the Set ID is not the one the reader kept)
         esc.before = self._snapshot.get(node) if since == self._set_id[0] else None
         esc.channel, esc.keys, esc.since = channel, keys_for(channel), since
+        if self.sink is not None:  # the last frame that carried it since the change, heard before the answer said so
+            last = max((t for k in esc.keys if (t := self._on.get(k)) is not None and t >= since), default=None)
+            if last is not None:
+                self.sink(last, node)
 
     def channel(self, node: int) -> int | None:
         """``node``'s throttle channel as the reader knows it (None: not known)."""

@@ -84,7 +84,8 @@ class EventLog(ReaderEvents):
         self.reports: dict[tuple[int, str], list[tuple[float, bool]]] = {}
         #: per node: each MSG1's time, comm flag and the last command before it that addresses it (None: none yet)
         self.flags: dict[int, list[tuple[float, bool, float | None]]] = {}
-        #: per node: the times of the throttle commands that address its channel, in the order heard
+        #: per node: the times of the throttle commands that address its channel, as told (one heard before its Set ID
+        #: answer said the channel comes with the answer: sort them)
         self.commands: dict[int, list[float]] = {}
 
     @staticmethod

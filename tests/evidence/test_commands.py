@@ -93,6 +93,15 @@ def test_set_id_to_another_channel_counts_from_the_request_what_carried_the_old_
     assert log.commands[NODE] == [0.10, 0.2002, 0.50]  # (as heard: the answer came after the frame at 0.2002)
 
 
+def test_a_frame_that_carried_the_new_channel_before_the_set_id_answer_is_told_when_the_answer_comes():
+    log = EventLog()
+    rules = _reader((0.0, _reply(1)), (0.10, _command("raw_command_14b")), (0.20, _set_id(NODE, 20)),
+                    (0.201, _command("raw_command_12b", group=5)))
+    rules.events = log
+    rules.feed(*_set_id_answer(NODE, 20), 0.26)
+    assert rules.clock.last(NODE) == 0.201 and log.commands[NODE] == [0.201]
+
+
 @pytest.mark.parametrize("why", ["illegal node id", "suspended", "outside the window"])
 def test_an_answer_that_may_echo_a_refused_set_id_teaches_nothing(why):
     """R10-R12: a refused request's answer may echo the request while nothing is applied."""
