@@ -36,8 +36,8 @@ NOT_ANSWER_IDS = frozenset(cat.spec(name).type_id for name in NOT_ANSWERS)
 #: One throttle frame per period, as a flight controller sends it (400 Hz)
 STREAM_PERIOD_S = 0.0025
 #: Throttle formats by the channels they carry: 4.4.15-4 (1-4), 4.4.17-4 (1-6); 12-bit: the DUT's group
-#: (4.4.16-3). The catalogue names no channel count per format, so it is written here once.
-FORMAT_CHANNELS = {"raw_command_14b": 4, "raw_command_12b": 4, "raw_command_10b": 6}
+#: (4.4.16-3): the catalogue's
+FORMAT_CHANNELS = cat.FORMAT_CHANNELS
 
 
 # ------------------------------------------------------------------------------------------ throttle frames

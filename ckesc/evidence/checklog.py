@@ -59,12 +59,15 @@ def check_capture(path: str, *, bitrate: int = cat.DEFAULT_BITRATE, tolerance: f
 
 # ------------------------------------------------------------------------------------------ text
 def _comm_loss(node: dict[str, Any]):
-    """(time, event, time since the last throttle command) of each comm-loss event, as text."""
+    """(time, event, time since the last throttle command, and since the last that carried the node's throttle
+    channel where the reader knew it: R8's clock) of each comm-loss event, as text."""
     for ev in node["comm_loss"]:
         if "more" in ev:
             yield "", f"... {ev['more']} more events", ""
         else:
             since = f"{ev['since_last_throttle_ms']:g} ms" if "since_last_throttle_ms" in ev else ""
+            if "since_last_command_ms" in ev and ev["since_last_command_ms"] != ev.get("since_last_throttle_ms"):
+                since += f" ({ev['since_last_command_ms']:g} ms on its channel)"
             yield f"{ev['timestamp']:.6f}", ev["event"], since
 
 

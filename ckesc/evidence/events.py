@@ -24,6 +24,9 @@ if TYPE_CHECKING:
 class ReaderEvents:
     """The events, each a no-op here (a consumer overrides those it takes)."""
 
+    #: :meth:`command` is told (it comes for a stream's every frame: only a consumer that keeps them asks for it)
+    wants_commands = False
+
     def query(self, ts: float, source: int) -> None:
         """A GET_ESC_ID query from node ``source`` (the host's, a flight controller's), as the pairing took it."""
 
@@ -47,15 +50,23 @@ class ReaderEvents:
         """A 241 answer of ESC ``node`` read as counter ``name`` (``power_ups``, ``run_time``), before it is judged."""
 
     def msg1(self, ts: float, node: int, flag: bool, last_command: float | None) -> None:
-        """An MSG1 of ESC ``node``: its comm-loss flag (R8), and when the last throttle command was on the bus (None:
-        none yet)."""
+        """An MSG1 of ESC ``node``: its comm-loss flag (R8), and when the last throttle command that addresses the
+        node's throttle channel was on the bus (R8's clock, :mod:`.commands`; None: none yet, or the node's channel is
+        not known)."""
+
+    def command(self, ts: float, node: int) -> None:
+        """A throttle command that addresses ESC ``node``'s throttle channel (as the reader knows it, :mod:`.commands`):
+        told only where :attr:`wants_commands`."""
 
 
 class EventLog(ReaderEvents):
     """A consumer that keeps what the reader told of one bounded stretch of the bus (a program of ``ckesc explore``,
     a test's trace), for a judge that reads it after the stretch: which request each answer answers (F4), which query
-    each GET_ESC_ID reply answers, each report with its restart, each MSG1's comm flag with the last command. Its
-    memory grows with the stretch: :meth:`clear` between stretches (a long run's consumers keep sinks of their own)."""
+    each GET_ESC_ID reply answers, each report with its restart, each MSG1's comm flag with the last command, each
+    command with the nodes it addresses (R8's clock). Its memory grows with the stretch: :meth:`clear` between
+    stretches (a long run's consumers keep sinks of their own)."""
+
+    wants_commands = True
 
     def __init__(self) -> None:
         self.clear()
@@ -71,8 +82,11 @@ class EventLog(ReaderEvents):
         self.paired: set[tuple[int, float]] = set()
         #: per (node, report name): each report's time and whether its counter started again (R9a)
         self.reports: dict[tuple[int, str], list[tuple[float, bool]]] = {}
-        #: per node: each MSG1's time, comm flag and the last command before it (None: none yet)
+        #: per node: each MSG1's time, comm flag and the last command before it that addresses it (None: none yet)
         self.flags: dict[int, list[tuple[float, bool, float | None]]] = {}
+        #: per node: the times of the throttle commands that address its channel, as told (one heard before its Set ID
+        #: answer said the channel comes with the answer: sort them)
+        self.commands: dict[int, list[float]] = {}
 
     @staticmethod
     def key(t: float, service: int, transfer_id: int | None, requester: int) -> tuple:
@@ -101,3 +115,6 @@ class EventLog(ReaderEvents):
 
     def msg1(self, ts: float, node: int, flag: bool, last_command: float | None) -> None:
         self.flags.setdefault(node, []).append((ts, flag, last_command))
+
+    def command(self, ts: float, node: int) -> None:
+        self.commands.setdefault(node, []).append(ts)

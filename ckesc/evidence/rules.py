@@ -156,7 +156,7 @@ class BusRules(ResetRules):
             if not node.host:
                 node.host = True
             if info.throttle:  # the host's stream: most frames (what _host_frame does with one, without its tests)
-                self._throttle(info, ts)
+                self._throttle(info, data, ts)
             elif side == SIDE_HOST or side == SIDE_EITHER:
                 self._host_frame(info, data, ts)
             return _NONE
@@ -261,8 +261,7 @@ class BusRules(ResetRules):
         if info.type_id == MSG1.type_id and len(data) > COMM_BYTE:  # (after its report's events: a restart comes first)
             self._comm_flag(node, bool(data[COMM_BYTE] & COMM_MASK), ts)
             if self.events is not None:
-                self.events.msg1(ts, node.id, bool(data[COMM_BYTE] & COMM_MASK),
-                                 None if self._last_throttle is None else self._last_throttle[0])
+                self.events.msg1(ts, node.id, bool(data[COMM_BYTE] & COMM_MASK), self.clock.last(node.id))
             if self.heard is not None and self.heard.mine(node.id):
                 self.heard.msg1.append([ts, bool(data[COMM_BYTE] & COMM_MASK)])
         return out or _NONE
@@ -430,6 +429,8 @@ class BusRules(ResetRules):
         if p.holds or (p.again and p.request.taken):  # type: ignore[union-attr]
             if self.heard is not None:
                 self._paired_answer(info, p, ts)
+            if not node.shared:  # (two ESCs at one id: whose channel an answer says, the bus cannot tell)
+                self.clock.answer(service, node.id, data, p.request.t)  # type: ignore[union-attr]
             if service == SET_FREQ.type_id:
                 self._set_freq_answer(node, data, ts)
             elif service == MAINTENANCE.type_id:

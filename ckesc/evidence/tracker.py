@@ -27,6 +27,7 @@ from ..protocol import catalogue as cat
 from ..protocol.frame import classify, frame_bits
 from ..protocol.ids import ESC_NODE_IDS, HOST_NODE_ID, MESSAGE_VENDOR_RANGE, SERVICE_VENDOR_RANGE, Kind
 from ..protocol.transfer import tail_transfer_id
+from .commands import CommandClock
 from .events import ReaderEvents
 from .findings import KEEP, Findings, Intervals, quote
 from .pairing import QueryPairing, RequestPairing, ResponsePairing
@@ -292,8 +293,20 @@ class Tracker(Findings, Rejoin):
         self._maintenance: dict[tuple[int, int | None, int], int] = {}
         #: what the tracker paired, for the report's plots: None (the default) records nothing
         self.heard: TimingEvidence | None = None
-        #: a consumer of the reader's events (:class:`.events.ReaderEvents`): None (the default) tells none
-        self.events: ReaderEvents | None = None
+        #: R8's clock: per ESC node, the last command that addresses its throttle channel (:mod:`.commands`); a
+        #: channel read where the reader was not fed the answer (the explorer's baseline) is told to it (``clock.read``)
+        self.clock = CommandClock()
+        self.events = None
+
+    @property
+    def events(self) -> ReaderEvents | None:
+        """A consumer of the reader's events (:class:`.events.ReaderEvents`): None (the default) tells none."""
+        return self._events
+
+    @events.setter
+    def events(self, sink: ReaderEvents | None) -> None:
+        self._events = sink
+        self.clock.sink = sink.command if sink is not None and sink.wants_commands else None
 
     # ------------------------------------------------------------------------------------- setup
     def set_bitrate(self, bitrate: int) -> None:
@@ -396,8 +409,9 @@ class Tracker(Findings, Rejoin):
         for node in self._nodes.values():
             node.reset += 1
 
-    def _throttle(self, info: FrameId, ts: float) -> None:
-        """A host's throttle command (R8: the comm flag's clock, the stream's gaps)."""
+    def _throttle(self, info: FrameId, data, ts: float) -> None:
+        """A host's throttle command (R8: the comm flag's clock per ESC, the stream's gaps)."""
+        self.clock.command(info.can_id, info.type_id, data, ts)
         if self.heard is not None:
             self.heard.commands.append(ts)
         last = self._last_throttle
@@ -414,7 +428,7 @@ class Tracker(Findings, Rejoin):
         type_id = info.type_id
         if info.kind is Kind.MESSAGE:
             if info.throttle:
-                self._throttle(info, ts)
+                self._throttle(info, data, ts)
                 return
             if not taken(info.can_id, data):
                 return  # R17: an ESC ignores it (a multi-frame part, a wrong length): it switches nothing
@@ -450,6 +464,8 @@ class Tracker(Findings, Rejoin):
                 node.moved += 1
                 node.shared = False  # ... nor whether two of them share an id
             self._set_id_shared(data, ts)
+            self.clock.set_id(ts, data, suspended=self._suspended,
+                              up_for=ts - self.last_switch_ts if self.power_known and self.power_switches else None)
         else:
             if type_id == MAINTENANCE.type_id and len(data) > MAINTENANCE_OPTION.offset + MAINTENANCE_OPTION.size:
                 if len(self._maintenance) > 4096:
@@ -513,6 +529,8 @@ class Tracker(Findings, Rejoin):
         when it answers one query only."""
         open_ = bool(self.queries.open(ts))
         p = self.queries.reply(ts, node.id)
+        if not node.shared:
+            self.clock.reply(node.id, data)
         if self.events is not None:
             self.events.reply(ts, node.id, p, info.can_id, bytes(data))
         if p.none:
@@ -566,6 +584,8 @@ class Tracker(Findings, Rejoin):
             event["event"] = "set at the first MSG1 heard"
         if self._last_throttle is not None:
             event["since_last_throttle_ms"] = round((ts - self._last_throttle[0]) * 1000, 3)
+        if (last := self.clock.last(node.id)) is not None:  # R8's clock: the last that carried the node's channel
+            event["since_last_command_ms"] = round((ts - last) * 1000, 3)
         node.comm_events.append(event)
 
     def _error_frame(self, ts: float, can_id: int, data) -> None:

@@ -13,10 +13,11 @@ Observations compared (each a :class:`ExploreFinding` when they differ):
   reset's gap is the reader's R19, never in a mean) against the model's interval, held to R9's tolerance as the suite holds it (1 ms plus twice
   the bench's error and the DUT's declared jitter, over the gaps; a mean whose bound exceeds a quarter of the interval
   is not judged).
-- **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only), 13 and 8 against the model's MSG1s within
-  one interval and a report stamp's error (:func:`~ckesc.protocol.judgements.report_stamp_error_s`; R8's window for
-  bit 13 from the model's last command, a RawCommand carrying its ESC's channel: the reader's last command is any
-  channel's, R8's clock only where every command carries the ESC's).
+- **status** (R7, R8): each MSG1's bits 15, 14 (under CAN throttle only) and 8 against the model's MSG1s within
+  one interval and a report stamp's error (:func:`~ckesc.protocol.judgements.report_stamp_error_s`); bit 13 on R8's
+  own clock, the reader's: the commands that address the ESC's throttle channel as the reader knows it
+  (``evidence/commands.py``, the :class:`~ckesc.evidence.events.EventLog`'s ``commands``), against
+  :func:`~ckesc.protocol.judgements.r8_flag_due`.
 - **malformed and foreign frames** (R17): the model ignores them, so whatever the DUT does on one differs: an
   answer to one (:mod:`.answers`), and any other finding after the first of them in the program, which
   :func:`cite_r17` makes cite R17 too (a setting, mode, suspension, LED or comm-loss flag the DUT changed on one
@@ -91,18 +92,22 @@ def judge(oracle: Oracle, dut: list[Frame], t0: float, t_end: float, p: Params,
     dut = [f for f in dut if f.name != "get_esc_id" or f.layout is None or f.layout.name != "query"]
     out = answers(oracle, dut, t0, p, heard, hear(oracle, oracle.out, Params(host_node=p.host_node, bitrate=p.bitrate)))
     out += _streams(oracle, heard, t0, t_end, p)
-    out += _status(oracle, dut, t0, p)
+    out += _status(oracle, dut, t0, p, heard)
     out += recovery(oracle, dut, t0, p)
     return [f for f in out if f.strength != "OBSERVE" and r18_judged(oracle.max_load(t0 + f.at, t0 + f.at))]
 
 
 def hear(oracle: Oracle, frames: Iterable[Frame], p: Params) -> EventLog:
     """The bus reader (:class:`~ckesc.evidence.rules.BusRules`, with the bench's stated errors) fed the host's frames
-    the oracle took, its power switches and ``frames`` (the DUT's, or the model's own), in time order: what it tells
-    (:class:`~ckesc.evidence.events.EventLog`): the one pairing, reports and restarts, each MSG1's flag."""
+    the oracle took, its power switches (the power-up the program runs in first: Set ID's window) and ``frames`` (the
+    DUT's, or the model's own), in time order: what it tells (:class:`~ckesc.evidence.events.EventLog`): the one
+    pairing, reports and restarts, each MSG1's flag, the commands that address the ESC (its throttle channel at the
+    start told as read: the baseline's)."""
     rules = BusRules(tolerance=p.error, own_error=p.own_error, bitrate=p.bitrate, complete=True, power_known=True,
                      jitter=p.jitter, host_nodes=(p.host_node,))
     log = rules.events = EventLog()
+    rules.clock.read(oracle.baseline["node_id"], oracle.start_channel)
+    rules.power_switched(oracle.powered_at)
     power = [s.t for s in oracle.states if s.label in ("power on", "power off")]
     host = [f for f, _ in oracle.host]
     for f in sorted([*host, *frames], key=lambda f: (f.timestamp, f.source != p.host_node)):
@@ -275,11 +280,11 @@ def _between(stamps: list[float], lo: float, hi: float) -> list[float]:
 
 
 # ------------------------------------------------------------------------------------------ MSG1 status
-def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[ExploreFinding]:
+def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params, heard: EventLog) -> list[ExploreFinding]:
     model = [f for f in oracle.out if f.name == "msg1" and f.kind is Kind.MESSAGE]
     stamps = [f.timestamp for f in model]
     host_times = [f.timestamp for f, _ in oracle.host if f.name not in _THROTTLE]
-    commands = oracle.commands
+    by_node = {node: sorted(times) for node, times in heard.commands.items()}  # R8's clock: the reader's
     ups = [st.t for st in oracle.states if st.label in ("start", "power on")]
     out: list[ExploreFinding] = []
     seen: set[int] = set()
@@ -304,6 +309,7 @@ def _status(oracle: Oracle, dut: list[Frame], t0: float, p: Params) -> list[Expl
             # bit 14 under PWM+CAN: 4.4.4 names it "throttle signal source" without saying configured or in use
             # (4.2: PWM+CAN falls back to CAN by itself), and ESCs of other makes show either: not compared
             mask &= ~int(cat.Status.THROTTLE_PWM)
+        commands = by_node.get(f.source, [])
         comm = _comm_fault_expected(t, commands, ups, state, p, queueing)
         if comm is not None and bool(f.fields["status"] & _COMM) != comm:
             bits = _COMM
@@ -341,10 +347,10 @@ def _comm_fault_expected(t: float, commands: list[float], ups: list[float], stat
                          queueing: float = 0.0) -> bool | None:
     """What MSG1's comm-loss bit must be at ``t`` (R8), or None where it is free: before any command since the
     power-up (when its boot ends is the DUT's own), inside R8's window, near a command, or not under CAN throttle.
-    ``commands``: the model's, the RawCommands that carry its ESC's channel (what the model alone knows; the reader's
-    last command is any channel's, :meth:`~ckesc.evidence.events.ReaderEvents.msg1`, which is R8's clock only where
-    every command carries the ESC's channel, as the soak's stream does). ``queueing``: how long a foreign load may
-    have held the MSG1 back (R18)."""
+    ``commands``: the reader's, the commands that addressed the MSG1's node's throttle channel
+    (:meth:`~ckesc.evidence.events.ReaderEvents.command`: R8's clock, the soak's too), in time order: those stamped up
+    to the bench's stated error after the MSG1 included. ``queueing``: how long a foreign load may have held the MSG1
+    back (R18)."""
     if state.source != 0 or state.mode == "off":
         return None
     up = ups[max(0, bisect.bisect_right(ups, t) - 1)] if ups else float("-inf")

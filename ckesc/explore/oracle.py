@@ -89,11 +89,11 @@ class Oracle:
     out: list[Frame] = field(default_factory=list)  # the model's frames, decoded, stamped with their due time
     states: list[State] = field(default_factory=list)
     host: list[tuple[Frame, int | None]] = field(default_factory=list)  # host frames fed, with the program step
-    commands: list[float] = field(default_factory=list)  # when the model's ESC took a RawCommand as its own (R8's clock)
     malformed: list[Malformed] = field(default_factory=list)  # the frames sent malformed or foreign (R17), in order
     load_share: float = 0.0  # the foreign load on the bus now (R18): the model's ESC does what it does on a quiet one
     #: the requests the host sent alone on the bus (R20), as (name, transfer id): their answers are OBSERVE
     held: set[tuple[str, int]] = field(default_factory=set)
+    start_channel: int = field(init=False, default=0)  # its ESC's throttle channel at the start (the baseline's)
 
     def __post_init__(self) -> None:
         b = self.baseline
@@ -106,6 +106,7 @@ class Oracle:
         if b.get("power_ups") is not None:
             nvm["power_ups"] = (b["power_ups"] - 1) & 0xFFFF  # power_on() below counts the power-up the DUT had
         self.model = EscModel(config, nvm)
+        self.start_channel = nvm["throttle_channel"]
         self.model.on_rejected = lambda req: self.free.add((req.name, req.transfer_id or 0))
         self._decoder = Decoder()
         self.model.power_on(self.powered_at)
@@ -137,8 +138,6 @@ class Oracle:
         except DecodeError:
             frame = None
         self.model.receive(msg, t)
-        if self.model.state.last_command == t:
-            self.commands.append(t)
         self._keep(self.model.poll(t))
         if frame is not None:
             self.host.append((frame, step))

@@ -41,6 +41,10 @@ def unpack_throttle14(payload: bytes) -> list[int]:
     return out
 
 
+#: R4: RawCommand_12b's payload byte that names its group (the four channels' 48 bits before it)
+THROTTLE12_GROUP_BYTE = 6
+
+
 def pack_throttle12(channels: Sequence[int], group: int, *, nibble_order: str = "lsb") -> bytes:
     """R4: four 12-bit channels A..D of group g, LSB-first:
     p0=A[7:0] p1=B[3:0]<<4|A[11:8] p2=B[11:4] p3=C[7:0] p4=D[3:0]<<4|C[11:8] p5=D[11:4] p6=g.
@@ -52,7 +56,7 @@ def pack_throttle12(channels: Sequence[int], group: int, *, nibble_order: str = 
         _check_width("channel", v, 12)
     _check_width("group", group, 8)
     a, b, c, d = channels
-    out = bytearray((a | b << 12 | c << 24 | d << 36).to_bytes(6, "little"))
+    out = bytearray((a | b << 12 | c << 24 | d << 36).to_bytes(THROTTLE12_GROUP_BYTE, "little"))
     if nibble_order == "swapped":
         out[1] = _swap_nibbles(out[1])
         out[4] = _swap_nibbles(out[4])
@@ -63,12 +67,12 @@ def pack_throttle12(channels: Sequence[int], group: int, *, nibble_order: str = 
 
 
 def unpack_throttle12(payload: bytes, *, nibble_order: str = "lsb") -> tuple[list[int], int]:
-    body = bytearray(payload[:6])
+    body = bytearray(payload[:THROTTLE12_GROUP_BYTE])
     if nibble_order == "swapped":
         body[1] = _swap_nibbles(body[1])
         body[4] = _swap_nibbles(body[4])
     v = int.from_bytes(body, "little")
-    return [v & 0xFFF, (v >> 12) & 0xFFF, (v >> 24) & 0xFFF, (v >> 36) & 0xFFF], payload[6]
+    return [v & 0xFFF, (v >> 12) & 0xFFF, (v >> 24) & 0xFFF, (v >> 36) & 0xFFF], payload[THROTTLE12_GROUP_BYTE]
 
 
 TAIL_BITS_10B = 0b1100  # R5: the host writes start=1, end=1, toggle=0 in the high nibble of payload[7]

@@ -1,6 +1,8 @@
 """The soak's comm-flag watch (R8, R19): MSG1's comm-loss flag set only when the host's stream stops
-(:func:`~ckesc.protocol.judgements.r8_flag_due`), each MSG1's flag and the last throttle command as the bus reader
-tells them (:meth:`~ckesc.evidence.events.ReaderEvents.msg1`); the stream's gaps are the reader's statistics."""
+(:func:`~ckesc.protocol.judgements.r8_flag_due`), each MSG1's flag and the last throttle command that carries the ESC's
+throttle channel as the bus reader tells them (:meth:`~ckesc.evidence.events.ReaderEvents.msg1`, R8's clock: none
+before the reader knows the channel, from the ESC's first GET_ESC_ID answer); the stream's gaps are the reader's
+statistics."""
 
 from __future__ import annotations
 

@@ -13,7 +13,7 @@ judgement in :mod:`ckesc.protocol.judgements`:
   gaps, less those R9a leaves unjudged after a restart the reader told (:func:`~ckesc.protocol.judgements.r9_mean`);
   the trend is one mean per minute and report;
 * :class:`~.comm_watch.CommFlagWatch` - the comm flag (MSG1's status, R8) set only when the stream stops
-  (:func:`~ckesc.protocol.judgements.r8_flag_due`, from the last command the reader heard);
+  (:func:`~ckesc.protocol.judgements.r8_flag_due`, from the last command the reader heard carry the ESC's channel);
 * :class:`~.watches.AnswerWatch` - GET_ESC_ID's answers in the node's slot (R2) and within 64 ms (4.4.3-4), their
   delays as a fixed-bin histogram; which query a reply answers is the reader's (another node's query, a flight
   controller's on the bus, is answered too: its answer is neither the host's nor one to no query);

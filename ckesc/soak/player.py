@@ -20,9 +20,10 @@ from ..protocol.frame import WireFrame, encode, new_wire
 from ..protocol.ids import Kind
 from ..protocol.transfer import TAIL_BYTES, TransferIdCounter
 
-#: RawCommand formats by their command-line name: (frame name, channels per frame)
-FORMATS: dict[str, tuple[str, int]] = {"14b": ("raw_command_14b", 4), "12b": ("raw_command_12b", 4),
-                                       "10b": ("raw_command_10b", 6)}
+#: RawCommand formats by their command-line name: (frame name, channels per frame: the catalogue's)
+FORMATS: dict[str, tuple[str, int]] = {f: (n, cat.FORMAT_CHANNELS[n]) for f, n in (("14b", "raw_command_14b"),
+                                                                                  ("12b", "raw_command_12b"),
+                                                                                  ("10b", "raw_command_10b"))}
 #: the stream rates a flight controller uses (issue #31), in Hz
 RATE_RANGE = (50.0, 500.0)
 #: how often each read is made (s): GET_ESC_ID as R19 says, 241 and 242 as often as a log needs them

@@ -9,7 +9,7 @@ command, never, or does not clear it on the next command (the emulator's ``comm_
   flag clear on an MSG1 within an interval of the next command);
 * the soak's comm-flag watch (:class:`~ckesc.soak.comm_watch.CommFlagWatch`: each MSG1 against
   ``judgements.r8_flag_due``);
-* ``ckesc explore``'s judge (``judge._status``: each MSG1's bit 13 against ``r8_flag_due`` from the model's commands).
+* ``ckesc explore``'s judge (``judge._status``: each MSG1's bit 13 against ``r8_flag_due`` from the commands the reader says address the ESC's throttle channel).
 
 Who does not judge it, and why: the live bus rules and ``ckesc check-log`` record the flag's changes with the time
 since the last command (``summary()["nodes"][...]["comm_loss"]``) and judge nothing of them: a capture does not say
@@ -153,22 +153,50 @@ def test_the_bus_rules_record_the_comm_loss_episode_and_no_command_in_the_flight
     assert since_cleared <= MSG1_S * 1000 + 1
 
 
-def test_r8_counts_from_the_commands_that_carry_the_esc_s_channel_the_explorer_s_reading():
-    """Where the readings disagreed (issue #35): the reader's last command (:meth:`ReaderEvents.msg1`) is the last
-    RawCommand of any channel; the explorer's model counts R8 from the commands that carry its ESC's channel (a
-    RawCommand for other channels is no command for it: 4.4.4-3 "does not receive any command", R8 "no RawCommand has
-    arrived", as the emulator's ESC reads it). Found taking R8's clock from the reader: 'MSG1 comm-loss bit set' on the
-    faultless emulator after Set ID to throttle channel 20 and a RawCommand 14b stream (channels 1..4). The explorer's
-    reading won: the ESC at channel 20 under that stream raises the flag and the judge finds nothing, where the
-    reader's clock says a command came 10 ms before each MSG1."""
-    events = [(t / 1000, request("raw_command_14b", {"channels": [0] * 4}, t / 1000, destination=None,
-                                 transfer_id=(t // 10) % 32)) for t in range(300, 1601, 10)]
-    frames = play(events, END_S, throttle_channel=20)
+def _set_id_trace(faults: tuple[str, ...]) -> list:
+    """The ESC at node NODE, throttle channel NODE (5), under a RawCommand_10b stream (channels 1..6) every 10 ms from
+    0.3 s to the end; the host reads GET_ESC_ID at 0.35 s and sends Set ID (node NODE, channel 20) at 0.6 s: from then on no
+    frame of the stream carries the ESC's channel, and R8's flag is due 200 ms after the last one that did."""
+    events = [(t / 1000, request("raw_command_10b", {"channels": [0] * 6}, t / 1000, destination=None))
+              for t in range(300, round(END_S * 1000) + 1, 10)]
+    events += [(0.355, request("get_esc_id", {"option": 0}, 0.355, layout="query", destination=None)),
+               (0.605, request("set_id", {"node_id": NODE, "throttle_channel": 20}, 0.605, transfer_id=1))]
+    return play(sorted(events, key=lambda e: e[0]), END_S, faults=faults)
+
+
+@pytest.mark.parametrize("faults, expected", [((), set()), (("comm_loss_never",), {"R8"}), (("comm_loss_late",), {"R8"})],
+                         ids=["faultless", "never", "late"])
+def test_r8_counts_from_the_commands_that_address_the_esc_s_channel_in_every_consumer(faults, expected):
+    """Where the readings disagreed (issue #35): the reader's last command was the last RawCommand of any channel; the
+    explorer's model counted R8 from the commands that carry its ESC's channel (a RawCommand for other channels is no
+    command for it: 4.4.4-3 "does not receive any command", R8 "no RawCommand has arrived", as the emulator's ESC
+    reads it). The model's reading won, and is now the reader's (``evidence/commands.py``: the channel from the
+    GET_ESC_ID reply, then the Set ID answer), which the explorer's judge and the soak's comm watch take: after Set ID
+    to channel 20 under a 10-bit stream the flag is due, the faultless ESC raises it and nobody finds anything; an ESC
+    that never raises it, or late, is R8 to both. On the losing reading (any channel's command) a stream frame came
+    within 10 ms of every MSG1: the flag would be due nowhere, the faultless ESC would be R8 and the faulty ones not."""
+    frames = _set_id_trace(faults)
     rules = BusRules(tolerance=0.0, complete=True, power_known=True)
+    rules.power_switched(0.0)  # (the ESC's power-up: Set ID's window, R11, known to the reader)
     log = rules.events = EventLog()
     for m in frames:
         rules.feed_message(m)
-    late = [(t, flag) for t, flag, last in log.flags[NODE] if t > 0.5 and last is not None and t - last < MSG1_S]
-    assert late and all(flag for _, flag in late)  # the reader's clock: a command just before, the flag set
-    oracle, found = _judged(frames, channel=20, heard=log)
-    assert not oracle.commands and [f.text() for f in found] == []
+    assert rules.clock.channel(NODE) == 20
+    streamed = [m.timestamp for m in frames if not m.is_rx and m.dlc == 8]
+    assert all(t - max(s for s in streamed if s <= t) <= 0.010 for t, _, _ in log.flags[NODE] if t > 0.35)
+    due = [(t, flag) for t, flag, last in log.flags[NODE] if last is not None and t - last > 0.2 + MSG1_S + 0.001]
+    assert len(due) > 20  # the reader's clock: the flag due, 200 ms after the last frame that carried channel 5
+    assert max(last for t, _, last in log.flags[NODE] if last is not None) < 0.605 + 0.001
+    if not faults:
+        assert all(flag for _, flag in due)
+    explorer = {r for f in _judged(frames, channel=NODE)[1] for r in f.requirements}
+    _, with_its_log = _judged(frames, channel=NODE, heard=log)
+    monitor = Monitor(WatchConfig(node_id=NODE, host_node=0, intervals={"msg1": MSG1_S}), t0=0.0)
+    monitor.rules.power_switched(0.0)
+    for m in frames:
+        monitor.feed(m)
+    monitor.close(END_S)
+    soak = {r for f in monitor.findings if f.watch == monitor.comm.name for r in f.rules}
+    assert {"explorer": explorer & {"R8"}, "explorer on the reader's log": {r for f in with_its_log for r in f.requirements}
+            & {"R8"}, "soak": soak & {"R8"}} == dict.fromkeys(("explorer", "explorer on the reader's log", "soak"), expected)
+    assert monitor.comm.trials > 20  # the soak judged the flag through the Set ID (never: not judged at all)

@@ -39,11 +39,13 @@ from .frames import (
     CATALOGUE,
     ESC_REPORT_FRAMES,
     EXP_REPORT_FRAMES,
+    FORMAT_CHANNELS,
     FREQ_READ,
     MESSAGES,
     PSEUDO_BROADCAST,
     SERVICES,
     THROTTLE_FRAMES,
+    addressed_channels,
     firmware_date,
     spec,
 )

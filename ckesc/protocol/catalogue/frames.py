@@ -20,6 +20,7 @@ from .codes import (
     MSG_CONTROL_SUSPEND,
     MSG_EXP12_RECORDS,
     THROTTLE_CHANNELS,
+    THROTTLE_GROUPS,
     THROTTLE_MAX,
     Status,
 )
@@ -506,6 +507,20 @@ BY_NAME: Mapping[str, FrameSpec] = MappingProxyType({s.name: s for s in CATALOGU
 
 #: The throttle frames, RawCommand 14b/12b/10b (4.4.15-4.4.17, R3-R5), in the document's order.
 THROTTLE_FRAMES: tuple[str, ...] = tuple(s.name for s in CATALOGUE if any(lay.codec.startswith("throttle") for lay in s.layouts))
+#: The throttle channels each throttle frame carries, by its name: RawCommand_14b channels 1..4 (4.4.15-4),
+#: RawCommand_12b four, those of the group it names (4.4.16-3), RawCommand_10b 1..6 (4.4.17-4).
+FORMAT_CHANNELS: Mapping[str, int] = MappingProxyType({"raw_command_14b": 4, "raw_command_12b": 4, "raw_command_10b": 6})
+
+
+def addressed_channels(name: str, group: int | None = None) -> range:
+    """The throttle channels a throttle frame ``name`` commands: RawCommand_12b's those of its ``group``, 4g-3..4g
+    (4.4.16-3; a group outside 1..5 none), the others' all they carry."""
+    n = FORMAT_CHANNELS[name]
+    if name != "raw_command_12b":
+        return range(1, n + 1)
+    return range(n * (group - 1) + 1, n * group + 1) if group in THROTTLE_GROUPS else range(0)
+
+
 #: Set/Get Freq's read (option 0; the intervals sent are ignored, 4.4.22).
 FREQ_READ: Mapping[str, int] = MappingProxyType({"option": 0, **{k: 0 for k in INTERVAL_FIELDS}})
 #: MSG_EXP mode's periodic reports (4.4.7-4.4.13); MSG_EXP12 comes once per Get Rec instead (R15).
@@ -551,6 +566,7 @@ def _self_check() -> None:
         assert writer.request is not None and set(p.fields) | set(p.save) <= set(writer.request.field_names), p.name
         assert p.reader is None or p.reader in BY_NAME, p.name
     assert len(THROTTLE_FRAMES) == 3 and len(REPORT_FRAMES) == 3, (THROTTLE_FRAMES, REPORT_FRAMES)
+    assert set(FORMAT_CHANNELS) == set(THROTTLE_FRAMES), FORMAT_CHANNELS
 
 
 _self_check()
