@@ -46,6 +46,9 @@ from ..protocol.ids import DEFAULT_ESC_NODE_ID
 from ..protocol.judgements import r18_judged
 from ..protocol.legality import field_cases
 
+#: how long the explorer reads for an answer: the 64 ms bound and a read window past it (the bench's error added)
+ANSWER_READ_S = cat.ANSWER_DELAY_MAX_S + 0.006
+
 #: The streams a program may start (zero on every channel; a stopped stream is a comm loss, R8)
 STREAMS = cat.THROTTLE_FRAMES
 #: Services a program may request of the DUT (addressed to the node id the oracle says it has)

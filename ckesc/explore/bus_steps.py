@@ -26,12 +26,8 @@ from typing import Any, Callable
 from ..protocol import catalogue as cat
 from ..protocol.ids import Kind
 from ..protocol.judgements import R20_UNJUDGED, r20_bound_s
-from .actions import Action, asks_only, stream_fields
+from .actions import ANSWER_READ_S, Action, asks_only, stream_fields
 from .oracle import SHORT_MARKS, Oracle
-
-#: how long after the power-up the answers to the frames held are read for (they go out as the ESC's controller comes
-#: up, within its boot; each is answered within the 64 ms bound): the bound and a read window past it
-HELD_ANSWER_S = cat.ANSWER_DELAY_MAX_S + 0.006
 
 
 def play_short(session: Any, action: Action, oracle: Oracle, step: int, feed: Callable[[int], None]) -> None:
@@ -110,7 +106,7 @@ def play_alone(session: Any, action: Action, oracle: Oracle, step: int, feed: Ca
     lane.wait_power(max(0.0, off + profile.off_s - lane.now()))
     heard = len(dut.trace)
     dut.supply.power_on(others, profile.boot_s)
-    dut.wait(HELD_ANSWER_S)
+    dut.wait(ANSWER_READ_S)  # the answers to the frames held: they go out as the ESC's controller comes up
     # what the ESC did with them (a write taken at its boot restarts its reports from there, not from its send), until
     # each report came once more: the reader's report timing unjudged meanwhile (R20: OBSERVE)
     dut.wait(2 * cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S)

@@ -47,7 +47,7 @@ from ..protocol.frame import Decoder, Frame
 from ..protocol.ids import Kind
 from ..protocol.judgements import r18_judged
 from ..protocol.load import LoadSource
-from .actions import Action, ProgramBench, stream_fields
+from .actions import ANSWER_READ_S, Action, ProgramBench, stream_fields
 from .bus_steps import play_alone, play_short
 from .judge import ExploreFinding, Params, cite_r17, cite_r18, judge
 from .oracle import SETTING_KEYS, Oracle
@@ -73,8 +73,6 @@ RESTORE_TRIES = 3
 UNJUDGED_ABOVE_HALF = frozenset({"R9", "R9a"})
 
 
-#: how long the explorer reads for an answer: the 64 ms bound and a read window past it (the bench's error added)
-ANSWER_READ_S = cat.ANSWER_DELAY_MAX_S + 0.006
 
 class Recorder(can.Listener):
     """Every frame the lane reads (both directions) and every power switch, with lane times."""
