@@ -139,7 +139,8 @@ class ControlCommands:
         value = req.get("bitrate")
         if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
             raise ValueError(f"bitrate must be a positive integer (bit/s), not {value!r}")
-        self.bitrate = self.can.bitrate = value
+        self.bitrate = value
+        self.can.set_bitrate(value, time.monotonic())  # the host's adapter moved: it listens at the new rate from now
         return {"bitrate": value}
 
     # ------------------------------------------------------------------ bus faults (:mod:`.hub_can`)
