@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, NamedTuple
 
-from ..protocol.canbus import Attempt, CanController, ErrorState, attempt_bits, recovery_seconds
+from ..protocol.canbus import Attempt, CanController, ErrorFrame, ErrorState, attempt_bits, recovery_seconds
 from ..protocol.frame import WireFrame, frame_bits
 from .model import EscModel
 from .sim_can import esc_controller, retry_slot
@@ -51,6 +51,9 @@ KINDS = ("short", "other_bitrate")
 #: whole-millisecond grid, so that an ESC's reports meet its frames at every phase as an unsynchronised node's do (at
 #: exactly 1 ms an ESC whose report grid fell in the gaps never went bus-off, so the fault missed a controller
 #: without recovery at 7 of 20 starting phases)
+#: how long after a bus-off the host's adapter is restarted (SocketCAN's ``restart-ms``, as docs/bench/bus-fault.md
+#: asks a bench to set it)
+HOST_RESTART_S = 0.1
 FOREIGN_FRAME_S = 0.0005
 FOREIGN_PERIOD_S = 0.00103
 
@@ -115,15 +118,18 @@ class HubCan:
     :meth:`host_listens` and :meth:`host_gone` as the host's handles come and go, :meth:`set_bitrate` when the host
     moves; ``escs``: the ESCs on the bus (each acknowledges the others' frames at its rate once booted)."""
 
-    def __init__(self, bitrate: int, escs: Iterable[EscModel] = ()) -> None:
+    def __init__(self, bitrate: int, escs: Iterable[EscModel] = (), host_restart_s: float | None = HOST_RESTART_S) -> None:
         self.bitrate = bitrate
         self.escs = list(escs)
+        self.host_restart_s = host_restart_s
         self.fault: Disturbance | None = None
         self.counters = {"bus_faults": 0, "esc_bus_off": 0, "esc_recovered": 0, "esc_dropped": 0, "esc_no_ack": 0}
         self.hosts: dict[Any, float] = {}  # each host handle open: from when it listens at the hub's rate
         self._ctl: dict[EscModel, CanController] = {}
         self._free: dict[EscModel, float] = {}  # when each controller may start its next try
         self._parked: dict[EscModel, tuple[float, float]] = {}  # nobody acknowledges: (last try's end, retry period)
+        self._host_ctl: dict[Any, CanController] = {}  # the host's adapters that met a fault, by handle
+        self._host_free: dict[Any, float] = {}
 
     # ------------------------------------------------------------------ who listens
     def host_listens(self, handle: Any, since: float) -> None:
@@ -131,8 +137,9 @@ class HubCan:
         self.hosts[handle] = min(self.hosts.get(handle, INF), since)
 
     def host_gone(self, handle: Any) -> None:
-        """The host's ``handle`` closed: it acknowledges nothing any more."""
+        """The host's ``handle`` closed: it acknowledges nothing any more (and its adapter's state goes)."""
         self.hosts.pop(handle, None)
+        self.host_gone_adapter(handle)
 
     def set_bitrate(self, bitrate: int, now: float) -> None:
         """The host moved to ``bitrate`` at ``now`` (its adapter reopened there): its handles listen at it from now."""
@@ -157,7 +164,7 @@ class HubCan:
     @property
     def quiet(self) -> bool:
         """No fault and no controller kept: every ESC frame is acknowledged at once (the emulator's fast path)."""
-        return self.fault is None and not self._ctl
+        return self.fault is None and not self._ctl and not self._host_ctl
 
     def start(self, kind: str, now: float, seconds: float | None = None) -> Disturbance:
         """A fault from ``now`` for ``seconds`` (None: until :meth:`stop`). One at a time."""
@@ -271,6 +278,12 @@ class HubCan:
     def next_deadline(self) -> float | None:
         """The next instant :meth:`poll` has work: a try to start, a recovery, the fault's end."""
         times = [] if self.fault is None or self.fault.end == INF else [self.fault.end]
+        if (restart := self.host_restart_due()) is not None:
+            times.append(restart)
+        for handle, ctl in self._host_ctl.items():
+            if ctl.size and not ctl.bus_off and self.fault is not None:
+                if (t := self.fault.next_dominant(self._host_free[handle])) < INF:
+                    times.append(t)
         for esc, ctl in self._ctl.items():
             if ctl.bus_off:
                 due = self.recovery_due(esc)
@@ -310,6 +323,66 @@ class HubCan:
                     self.forget(esc)
         sent.sort(key=lambda pair: pair[1].timestamp)
         return sent, rebooted
+
+    # ------------------------------------------------------------------ the host's adapters
+    def host_waiting(self, handle: Any, since: float, dlc: int) -> None:
+        """The host's ``handle`` has a frame of ``dlc`` bytes held from ``since`` while a fault is on: its adapter's
+        controller tries it (:meth:`host_poll`) and meets the fault as an ESC's does."""
+        ctl = self._host_ctl.get(handle)
+        if ctl is None:  # SocketCAN's: no recovery of its own, the driver restarts it after restart-ms
+            ctl = self._host_ctl[handle] = CanController(self.bitrate, txqueuelen=None, auto_recovery=False)
+        if not ctl.size:
+            ctl.submit(dlc, 0)
+            self._host_free[handle] = max(self._host_free.get(handle, -INF), since)
+
+    def host_poll(self, now: float) -> list[tuple[Any, ErrorFrame]]:
+        """The host adapters' tries by ``now`` while the bus is held dominant (a bit error each: error-passive after
+        16, bus-off after 32) and their restarts ``host_restart_s`` after a bus-off (SocketCAN's ``restart-ms``;
+        None: never); the error frames each reports (SocketCAN's, state changes only), with its handle."""
+        out: list[tuple[Any, ErrorFrame]] = []
+        fault, bit_s = self.fault, 1.0 / self.bitrate
+        for handle, ctl in self._host_ctl.items():
+            t = self._host_free.get(handle, -INF)
+            if ctl.bus_off_at is not None and self.host_restart_s is not None and now >= ctl.bus_off_at + self.host_restart_s:
+                t = ctl.bus_off_at + self.host_restart_s
+                ctl.restart(t)
+            while ctl.size and not ctl.bus_off and fault is not None and t < fault.end:
+                t = max(t, fault.next_dominant(t))
+                if t > now:
+                    break
+                ctl.begin()
+                t += attempt_bits(ctl.head(), Attempt.SHORT, ctl.passive) * bit_s
+                ctl.attempt(Attempt.SHORT, t)
+            self._host_free[handle] = t
+            out += [(handle, f) for f in ctl.take_error_frames()]
+        return out
+
+    def host_sent(self, handle: Any, t: float) -> None:
+        """A frame of the host's ``handle`` went on the bus at ``t`` (acknowledged): its adapter's TEC takes 1 off;
+        an adapter back to error-active, counters at 0, is forgotten."""
+        ctl = self._host_ctl.get(handle)
+        if ctl is None or ctl.bus_off:
+            return
+        if not ctl.size:
+            ctl.submit(0, 0)
+        ctl.begin()
+        ctl.attempt(Attempt.ACKED, t)
+        ctl.take_error_frames()  # (its way back to error-active: python-can's socketcand client cannot carry it)
+        if ctl.state is ErrorState.ACTIVE and not ctl.tec and not ctl.rec:
+            self.host_gone_adapter(handle)
+
+    def host_restart_due(self) -> float | None:
+        """The next restart of a bus-off host adapter (None: none due)."""
+        return min((ctl.bus_off_at + self.host_restart_s for ctl in self._host_ctl.values()
+                    if ctl.bus_off_at is not None and self.host_restart_s is not None), default=None)
+
+    def host_bus_off(self) -> bool:
+        """Whether a host adapter is bus-off (it sends nothing until its restart)."""
+        return any(ctl.bus_off for ctl in self._host_ctl.values())
+
+    def host_gone_adapter(self, handle: Any) -> None:
+        self._host_ctl.pop(handle, None)
+        self._host_free.pop(handle, None)
 
     def forget(self, esc: EscModel) -> None:
         """``esc`` left the bus (powered off, rebooted): its controller and what it held go."""

@@ -409,8 +409,9 @@ class RealtimeEmulator(ControlCommands):
         ``ready_at``, and from a bus fault's end and its own bus-off recovery), None when none is or nothing is held."""
         if not self.host_alone.held:
             return None
-        return min((max(esc.state.ready_at, up) for esc in self._escs
-                    if esc.powered and (up := self.can.listens_from(esc)) is not None), default=None)
+        up = min((max(esc.state.ready_at, up) for esc in self._escs
+                  if esc.powered and (up := self.can.listens_from(esc)) is not None), default=None)
+        return up if up is None or not self.can.host_bus_off() else max(up, self.can.host_restart_due() or up)
 
     def _acknowledged(self, t: float) -> bool:
         """Whether some node acknowledges a host frame at ``t``: an ESC powered with its controller up (no bus fault
@@ -516,12 +517,16 @@ class RealtimeEmulator(ControlCommands):
         if self.host_alone.mode == "deliver" and not hold:
             self._host_delivered(item, t)
             return
-        for held in self.host_alone.take(item, self._acknowledged(t), hold=hold):
+        out = self.host_alone.take(item, self._acknowledged(t), hold=hold)
+        if not out and self.can.fault is not None:  # held in a fault: its adapter tries it (hub_can.host_poll)
+            self.can.host_waiting(item.origin, t, len(item.wire.data))
+        for held in out:
             self._host_delivered(held, t)
         self.counters.update(self.host_alone.counters)
 
     def _host_delivered(self, item: _Input, t: float) -> None:
         self.counters["rx"] += 1
+        self.can.host_sent(item.origin, t)
         self.bench.deliver(item.msg, t, self.bitrate)
         self._deadlines_stale = True
         if item.origin is not self.bus and self.bus is not None:  # bridge: a socketcand client's frame

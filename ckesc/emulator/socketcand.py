@@ -48,6 +48,14 @@ def fmt_frame(wire: Any, stamp: float) -> bytes:
     return f"< frame {can_id} {sec}.{usec:06d} {bytes(wire.data).hex().upper()} >".encode("ascii")
 
 
+def fmt_error(error_class: int, stamp: float) -> bytes:
+    """``< error CLASS SEC.USEC >``, as socketcand passes on an error frame of its SocketCAN socket: the class (the
+    id without ``CAN_ERR_FLAG``) and its stamp; socketcand carries none of its data bytes (python-can's client makes
+    an ``is_error_frame`` message of it with that class as its id and one zero byte)."""
+    sec, usec = divmod(round(stamp * 1e6), 1_000_000)
+    return f"< error {error_class:03X} {sec}.{usec:06d} >".encode("ascii")
+
+
 def _parse_send(words: list[str]) -> WireFrame | None:
     """``send ID LEN B0 B1 ...`` (python-can writes bytes without zero padding) -> a frame, None if malformed."""
     try:

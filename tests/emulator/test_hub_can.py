@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from ckesc.emulator.config import EscConfig
-from ckesc.emulator.hub_can import FOREIGN_FRAME_S, FOREIGN_PERIOD_S, INF, Disturbance, HubCan
+from ckesc.emulator.hub_can import FOREIGN_FRAME_S, FOREIGN_PERIOD_S, HOST_RESTART_S, INF, Disturbance, HubCan
 from ckesc.emulator.model import EscModel
 from ckesc.emulator.sim_can import ESC_TX_MAILBOXES
 from ckesc.protocol.canbus import recovery_seconds
@@ -243,3 +243,37 @@ def test_what_waits_for_a_listener_is_bounded_by_its_mailboxes():
     _drive(hub, esc, 0.0, 2.0)
     assert hub.state(esc)["queued"] == ESC_TX_MAILBOXES and hub.counters["esc_dropped"] > 0
     assert hub.settled()  # nothing to wait for but a listener: not a fault's work
+
+
+# ---------------------------------------------------------------------- the host's adapter in a fault
+
+
+def test_the_hosts_adapter_goes_bus_off_in_a_short_and_is_restarted_after_restart_ms():
+    """A host frame held in a short: its adapter tries it, error-passive after 16 bit errors, bus-off after 32 (704
+    bit times); SocketCAN's driver restarts it after restart-ms and it goes bus-off again while the short lasts; after
+    the short its restart stays: each as the error frame SocketCAN reports (the class python-can reads)."""
+    hub = _hub()
+    hub.start("short", 0.0, 0.15)
+    hub.host_waiting("conn", 0.01, 8)
+    frames = []
+    t = 0.0
+    while t < 0.4:
+        frames += [(round(f.timestamp, 6), f.can_id) for _, f in hub.host_poll(t)]
+        t = round(t + STEP_S, 9)
+    crtl, off = 0x204, 0x240  # CAN_ERR_CRTL | CAN_ERR_CNT (its data: warning, passive), CAN_ERR_BUSOFF | CAN_ERR_CNT
+    restarted = 0x300  # CAN_ERR_RESTARTED | CAN_ERR_CNT
+    assert [c for _, c in frames] == [crtl, crtl, off, restarted] * 2
+    assert frames[2][0] == pytest.approx(0.01 + 704 / DEFAULT_BITRATE)
+    assert frames[3][0] == pytest.approx(frames[2][0] + HOST_RESTART_S)  # still shorted: tried again, bus-off again
+    assert frames[7][0] == pytest.approx(frames[6][0] + HOST_RESTART_S) and frames[7][0] > 0.15
+    assert hub.host_restart_due() is None and not hub.host_bus_off()
+    hub.host_sent("conn", 0.4)
+    hub.poll(0.4)
+    assert hub.quiet  # its frame sent, the short over: nothing left of either
+
+
+def test_without_restart_ms_the_hosts_adapter_stays_bus_off():
+    hub = HubCan(DEFAULT_BITRATE, host_restart_s=None)
+    hub.start("short", 0.0, 0.01)
+    hub.host_waiting("conn", 0.0, 8)
+    assert [f.can_id for _, f in hub.host_poll(0.5)] == [0x204, 0x204, 0x240] and hub.host_bus_off()
