@@ -132,9 +132,13 @@ class HubCan:
         self._host_free: dict[Any, float] = {}
 
     # ------------------------------------------------------------------ who listens
-    def host_listens(self, handle: Any, since: float) -> None:
-        """The host's ``handle`` (a connection, a bus) listens at the hub's rate from ``since`` (kept if earlier)."""
-        self.hosts[handle] = min(self.hosts.get(handle, INF), since)
+    def host_listens(self, handle: Any, since: float | None) -> None:
+        """The host's ``handle`` (a connection, a bus) listens at the hub's rate from ``since`` (kept if earlier);
+        None: it closed (:meth:`host_gone`)."""
+        if since is None:
+            self.host_gone(handle)
+        else:
+            self.hosts[handle] = min(self.hosts.get(handle, INF), since)
 
     def host_gone(self, handle: Any) -> None:
         """The host's ``handle`` closed: it acknowledges nothing any more (and its adapter's state goes)."""
@@ -206,6 +210,18 @@ class HubCan:
                     continue
             ctl.submit(w, w.arbitration_id)
         return self._run(esc, ctl, now)
+
+    def place_host(self, t: float, dlc: int) -> float:
+        """A host frame of ``dlc`` bytes heard (its end) at ``t`` while controllers are kept: where it goes on the one
+        wire. An ESC frame on the bus then (a held queue going back to back) is not overlapped: the host's frame goes
+        at the next frame boundary and the ESCs' next tries wait for its end, which is returned."""
+        dur = frame_bits(dlc) / self.bitrate
+        sending = [esc for esc, ctl in self._ctl.items()
+                   if esc.state.bitrate == self.bitrate and not ctl.bus_off and esc not in self._parked]
+        end = max([t] + [self._free.get(esc, -INF) + dur for esc in sending])
+        for esc in sending:
+            self._free[esc] = max(self._free.get(esc, -INF), end)
+        return end
 
     def _resume(self, esc: EscModel) -> float:
         """A parked controller's first retransmission that someone acknowledges (INF: nobody listens)."""

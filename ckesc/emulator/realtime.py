@@ -177,7 +177,7 @@ class RealtimeEmulator(ControlCommands):
             if socketcand_port is not None:
                 self._socketcand = SocketcandServer(socketcand_port, on_frame=self._host_input, counters=self.counters,
                                                     log=self._log, handles=handles, echo_own=echo_own,
-                                                    on_listen=self._host_listens)
+                                                    on_listen=self.can.host_listens)
             if control_port is not None:
                 self._control = ControlServer(control_port, submit=self._submit, log=self._log)
         except OSError:
@@ -499,13 +499,6 @@ class RealtimeEmulator(ControlCommands):
         wire = WireFrame(msg.arbitration_id, bytes(msg.data), 0.0, is_extended_id=msg.is_extended_id)
         self._host_input(t, msg, wire, self.bus)
 
-    def _host_listens(self, conn: Conn, since: float | None) -> None:
-        """A socketcand client listens (acknowledges the ESCs' frames) from ``since``; None: it closed."""
-        if since is None:
-            self.can.host_gone(conn)
-        else:
-            self.can.host_listens(conn, since)
-
     def _host_input(self, t: float, msg: can.Message, wire: WireFrame, origin: Any) -> None:
         """A frame from the host (the bus or a socketcand client) heard at ``t``: fed to the ESCs in :meth:`_process`."""
         self._inputs.append(_Input(t, msg, wire, origin))
@@ -513,6 +506,9 @@ class RealtimeEmulator(ControlCommands):
     def _host_frame(self, item: _Input, t: float) -> None:
         """A host frame heard at ``t``, unless it is held or lost while no ESC acknowledges it (--host-alone hold, and
         whatever it says while a bus fault and its recovery last: :mod:`.hub_can`)."""
+        if not self.can.quiet:  # the ESCs' controllers at work (a held queue going back to back): one wire, in order
+            self._can_poll(t)
+            t = self.can.place_host(t, len(item.wire.data))
         hold = not self.can.quiet or bool(self.host_alone.held)
         if self.host_alone.mode == "deliver" and not hold:
             self._host_delivered(item, t)

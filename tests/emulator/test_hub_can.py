@@ -277,3 +277,19 @@ def test_without_restart_ms_the_hosts_adapter_stays_bus_off():
     hub.start("short", 0.0, 0.01)
     hub.host_waiting("conn", 0.0, 8)
     assert [f.can_id for _, f in hub.host_poll(0.5)] == [0x204, 0x204, 0x240] and hub.host_bus_off()
+
+
+def test_a_host_frame_heard_while_the_held_queue_goes_waits_for_the_frame_on_the_bus():
+    """One wire: the host's frame does not overlap the ESC frame in flight; it goes at its end, and the ESC's next
+    frame after the host's (so the stamps a host reads stay in bus order, a busy stretch without a hole)."""
+    hub, esc = HubCan(DEFAULT_BITRATE), _esc()
+    _drive(hub, esc, 0.0, 0.3)
+    hub.host_listens("host", 0.3)
+    slot = hub.next_deadline()  # its next retransmission: acknowledged now
+    (_, w), = hub.poll(slot)[0]  # the first held frame, on the bus from then
+    in_flight_end = w.timestamp + frame_bits(len(w.data)) / DEFAULT_BITRATE
+    end = hub.place_host(slot, 2)
+    assert end == pytest.approx(in_flight_end + frame_bits(2) / DEFAULT_BITRATE)
+    nxt = hub.poll(0.31)[0]
+    assert nxt[0][1].timestamp == pytest.approx(end)
+    assert hub.place_host(5.0, 2) == 5.0  # the bus free: where it was heard
