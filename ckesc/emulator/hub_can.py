@@ -46,14 +46,14 @@ from .sim_can import esc_controller, retry_slot
 INF = math.inf
 #: the kinds of fault
 KINDS = ("short", "other_bitrate")
+#: how long after a bus-off the host's adapter is restarted (SocketCAN's ``restart-ms``, as docs/bench/bus-fault.md
+#: asks a bench to set it)
+HOST_RESTART_S = 0.1
 #: ``other_bitrate``: how long each frame of the node at another bit rate holds the bus (an 8-byte extended frame at
 #: 250 kbit/s) and how often it sends one (about 1 kHz: a babbling node). On its own clock: a period that divides no
 #: whole-millisecond grid, so that an ESC's reports meet its frames at every phase as an unsynchronised node's do (at
 #: exactly 1 ms an ESC whose report grid fell in the gaps never went bus-off, so the fault missed a controller
 #: without recovery at 7 of 20 starting phases)
-#: how long after a bus-off the host's adapter is restarted (SocketCAN's ``restart-ms``, as docs/bench/bus-fault.md
-#: asks a bench to set it)
-HOST_RESTART_S = 0.1
 FOREIGN_FRAME_S = 0.0005
 FOREIGN_PERIOD_S = 0.00103
 
@@ -143,7 +143,7 @@ class HubCan:
     def host_gone(self, handle: Any) -> None:
         """The host's ``handle`` closed: it acknowledges nothing any more (and its adapter's state goes)."""
         self.hosts.pop(handle, None)
-        self.host_gone_adapter(handle)
+        self._forget_host(handle)
 
     def set_bitrate(self, bitrate: int, now: float) -> None:
         """The host moved to ``bitrate`` at ``now`` (its adapter reopened there): its handles listen at it from now."""
@@ -385,7 +385,7 @@ class HubCan:
         ctl.attempt(Attempt.ACKED, t)
         ctl.take_error_frames()  # (its way back to error-active: python-can's socketcand client cannot carry it)
         if ctl.state is ErrorState.ACTIVE and not ctl.tec and not ctl.rec:
-            self.host_gone_adapter(handle)
+            self._forget_host(handle)
 
     def host_restart_due(self) -> float | None:
         """The next restart of a bus-off host adapter (None: none due)."""
@@ -396,7 +396,8 @@ class HubCan:
         """Whether a host adapter is bus-off (it sends nothing until its restart)."""
         return any(ctl.bus_off for ctl in self._host_ctl.values())
 
-    def host_gone_adapter(self, handle: Any) -> None:
+    def _forget_host(self, handle: Any) -> None:
+        """The host adapter of ``handle`` left (its handle closed) or is back to nothing to tell."""
         self._host_ctl.pop(handle, None)
         self._host_free.pop(handle, None)
 
