@@ -170,6 +170,13 @@ class HubCan:
         """No fault and no controller kept: every ESC frame is acknowledged at once (the emulator's fast path)."""
         return self.fault is None and not self._ctl and not self._host_ctl
 
+    @property
+    def disturbing(self) -> bool:
+        """A fault on, a controller still bus-off from one, or a host adapter that met one: the host's frames meet it
+        (held while no ESC can acknowledge them), whatever ``--host-alone`` says. An ESC that merely waited for a
+        listener changes nothing of the host's frames."""
+        return self.fault is not None or bool(self._host_ctl) or any(ctl.bus_off for ctl in self._ctl.values())
+
     def start(self, kind: str, now: float, seconds: float | None = None) -> Disturbance:
         """A fault from ``now`` for ``seconds`` (None: until :meth:`stop`). One at a time."""
         if self.fault is not None and self.fault.end > now:

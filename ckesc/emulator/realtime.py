@@ -509,7 +509,7 @@ class RealtimeEmulator(ControlCommands):
         if not self.can.quiet:  # the ESCs' controllers at work (a held queue going back to back): one wire, in order
             self._can_poll(t)
             t = self.can.place_host(t, len(item.wire.data))
-        hold = not self.can.quiet or bool(self.host_alone.held)
+        hold = self.can.disturbing or bool(self.host_alone.held)
         if self.host_alone.mode == "deliver" and not hold:
             self._host_delivered(item, t)
             return
