@@ -28,9 +28,13 @@ Buses
     ``socketcand_port``: serve the socketcand ASCII protocol on 127.0.0.1, as a hub that python-can's
     stock socketcand client connects to (:mod:`.socketcand`, which describes the protocol as served).
     Both may be given: the emulator then also bridges the two.
-    The emulated bus has one bit rate (``bitrate``): an ESC at another bit rate (after Set Baud and
-    a power cycle) neither hears nor is heard. Arbitration and frame durations are not modelled
-    here: frames leave in due order as soon as they are due.
+    The emulated bus has one bit rate (``bitrate``, the host's): an ESC at another bit rate (after Set
+    Baud and a power cycle) neither hears nor is heard by the host. An ESC frame is sent only when
+    another node acknowledges it (:mod:`.hub_can`): a socketcand client in raw mode (from when it can
+    take frames), the python-can bus (its other nodes), or another booted ESC at its rate; until one
+    does, the ESC's controller holds its queue and sends it back to back when one comes (the host's
+    handle reopened, the host moved to its rate). While someone listens, frames leave in due order as
+    soon as they are due: arbitration is not modelled.
 
 Control channel (``control_port``), for harness power switching and fault injection
     Line-based JSON on 127.0.0.1, served by :mod:`.control`, which lists the requests; their
@@ -40,6 +44,7 @@ Control channel (``control_port``), for harness power switching and fault inject
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import sys
@@ -60,7 +65,7 @@ from .host_alone import HostAlone
 from .hub_can import HubCan
 from .model import EscModel
 from .realtime_control import ControlCommands
-from .realtime_timing import clock_offset, durations, set_timer_slack
+from .realtime_timing import clock_offset, durations, set_rt_priority, set_timer_slack
 from .socketcand import SocketcandServer, fmt_frame
 from .tcp import Conn
 
@@ -128,7 +133,8 @@ class RealtimeEmulator(ControlCommands):
         self.counters = {"tx": 0, "rx": 0, "tx_other_bitrate": 0, "tx_errors": 0, "rx_malformed": 0, "clients": 0}
         self.host_alone = HostAlone(host_alone)  # the host's frames while no ESC acknowledges them (--host-alone)
         self.counters.update(self.host_alone.counters)
-        self.can = HubCan(self.bitrate)  # the ESCs' controllers while a bus fault lasts (ckesc control bus)
+        #: the ESCs' controllers while nobody acknowledges them or a bus fault lasts (ckesc control bus)
+        self.can = HubCan(self.bitrate, bench.escs)
         #: bus faults and settles answered later: (by when, whether a settled bus answers it sooner, the answer)
         self._bus_waiters: list[tuple[float, bool, Callable[[], None]]] = []
         self._escs: list[EscModel] = list(bench.escs)
@@ -170,13 +176,15 @@ class RealtimeEmulator(ControlCommands):
         try:
             if socketcand_port is not None:
                 self._socketcand = SocketcandServer(socketcand_port, on_frame=self._host_input, counters=self.counters,
-                                                    log=self._log, handles=handles, echo_own=echo_own)
+                                                    log=self._log, handles=handles, echo_own=echo_own,
+                                                    on_listen=self.can.host_listens)
             if control_port is not None:
                 self._control = ControlServer(control_port, submit=self._submit, log=self._log)
         except OSError:
             self._close_sockets()
             raise
         if bus is not None:
+            self.can.host_listens(bus, -math.inf)  # a python-can bus: its other nodes are taken to acknowledge
             try:
                 fd = bus.fileno()
                 self._bus_fd = fd if isinstance(fd, int) and fd >= 0 else None
@@ -201,7 +209,7 @@ class RealtimeEmulator(ControlCommands):
         old_slack = set_timer_slack(TIMER_SLACK_NS)
         old_switch = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
-        old_policy = self._set_rt_priority()
+        old_policy, self.scheduling = set_rt_priority(self.rt_priority, self._log)
         self._loop_ident = threading.get_ident()
         try:
             now = time.monotonic()
@@ -227,22 +235,6 @@ class RealtimeEmulator(ControlCommands):
                 if old_policy is not None:
                     os.sched_setscheduler(0, *old_policy)
                 self._finished.set()
-
-    def _set_rt_priority(self) -> tuple[int, os.sched_param] | None:
-        """SCHED_FIFO for the calling thread when asked (and permitted); the policy to restore."""
-        if self.rt_priority is None:
-            return None
-        if not hasattr(os, "sched_setscheduler"):
-            self._log("--rt-priority: this platform has no SCHED_FIFO; running at normal priority")
-            return None
-        old = (os.sched_getscheduler(0), os.sched_getparam(0))
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
-        except (PermissionError, OSError) as exc:
-            self._log(f"--rt-priority {self.rt_priority}: SCHED_FIFO not permitted ({exc.strerror or exc}); running at normal priority")
-            return None
-        self.scheduling = f"SCHED_FIFO {self.rt_priority}"
-        return old
 
     def start(self, **kwargs: Any) -> RealtimeEmulator:
         """Run in a background thread; returns once the loop has started."""
@@ -417,8 +409,9 @@ class RealtimeEmulator(ControlCommands):
         ``ready_at``, and from a bus fault's end and its own bus-off recovery), None when none is or nothing is held."""
         if not self.host_alone.held:
             return None
-        return min((max(esc.state.ready_at, up) for esc in self._escs
-                    if esc.powered and (up := self.can.listens_from(esc)) is not None), default=None)
+        up = min((max(esc.state.ready_at, up) for esc in self._escs
+                  if esc.powered and (up := self.can.listens_from(esc)) is not None), default=None)
+        return up if up is None or not self.can.host_bus_off() else max(up, self.can.host_restart_due() or up)
 
     def _acknowledged(self, t: float) -> bool:
         """Whether some node acknowledges a host frame at ``t``: an ESC powered with its controller up (no bus fault
@@ -444,8 +437,8 @@ class RealtimeEmulator(ControlCommands):
                 esc = self._escs[i]
                 frames = esc.poll(t)
                 self._deadlines[i] = esc.next_deadline()
-                if frames and not self.can.quiet and esc.state.bitrate == self.bitrate:
-                    frames = self.can.send(esc, frames, t)  # a bus fault: through its controller
+                if frames:  # acknowledged at once, else through its controller (nobody listens, a bus fault)
+                    frames = self.can.send(esc, frames, t)
                 if frames:
                     self._transmit(esc, frames)
                     sent.extend((esc, w) for w in frames)
@@ -513,16 +506,23 @@ class RealtimeEmulator(ControlCommands):
     def _host_frame(self, item: _Input, t: float) -> None:
         """A host frame heard at ``t``, unless it is held or lost while no ESC acknowledges it (--host-alone hold, and
         whatever it says while a bus fault and its recovery last: :mod:`.hub_can`)."""
-        hold = not self.can.quiet or bool(self.host_alone.held)
+        if not self.can.quiet:  # the ESCs' controllers at work (a held queue going back to back): one wire, in order
+            self._can_poll(t)
+            t = self.can.place_host(t, len(item.wire.data))
+        hold = self.can.disturbing or bool(self.host_alone.held)
         if self.host_alone.mode == "deliver" and not hold:
             self._host_delivered(item, t)
             return
-        for held in self.host_alone.take(item, self._acknowledged(t), hold=hold):
+        out = self.host_alone.take(item, self._acknowledged(t), hold=hold)
+        if not out and self.can.fault is not None:  # held in a fault: its adapter tries it (hub_can.host_poll)
+            self.can.host_waiting(item.origin, t, len(item.wire.data))
+        for held in out:
             self._host_delivered(held, t)
         self.counters.update(self.host_alone.counters)
 
     def _host_delivered(self, item: _Input, t: float) -> None:
         self.counters["rx"] += 1
+        self.can.host_sent(item.origin, t)
         self.bench.deliver(item.msg, t, self.bitrate)
         self._deadlines_stale = True
         if item.origin is not self.bus and self.bus is not None:  # bridge: a socketcand client's frame

@@ -12,6 +12,7 @@ from . import faults as _faults
 from .control import Reply
 from .hub_can import KINDS
 from .realtime_timing import summary
+from .socketcand import fmt_error
 
 
 class ControlCommands:
@@ -24,6 +25,7 @@ class ControlCommands:
     _stopping: bool
     can: Any  # the hub's bus faults (:class:`.hub_can.HubCan`)
     _bus_waiters: list
+    _socketcand: Any  # the socketcand hub (:class:`.socketcand.SocketcandServer`) or None
 
     def _cmd_status(self, req: dict, reply: Reply) -> dict:
         now = time.monotonic()
@@ -139,7 +141,8 @@ class ControlCommands:
         value = req.get("bitrate")
         if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
             raise ValueError(f"bitrate must be a positive integer (bit/s), not {value!r}")
-        self.bitrate = self.can.bitrate = value
+        self.bitrate = value
+        self.can.set_bitrate(value, time.monotonic())  # the host's adapter moved: it listens at the new rate from now
         return {"bitrate": value}
 
     # ------------------------------------------------------------------ bus faults (:mod:`.hub_can`)
@@ -179,6 +182,9 @@ class ControlCommands:
     def _can_poll(self, now: float) -> None:
         """The bus fault's work due by ``now`` (recoveries, held frames sent, reboots) and the answers due."""
         sent, rebooted = self.can.poll(now)
+        for handle, err in self.can.host_poll(now):  # the host adapter's error frames, to that handle alone
+            if self._socketcand is not None and handle in self._socketcand.conns:
+                self._socketcand.write(handle, fmt_error(err.can_id, err.timestamp + self.offset))
         if sent:
             for esc, w in sent:
                 self._transmit(esc, [w])

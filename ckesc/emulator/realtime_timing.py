@@ -4,9 +4,10 @@ clock and bus stamps, staggered boots of a bench's ESCs, and the lateness histog
 from __future__ import annotations
 
 import ctypes
+import os
 import sys
 import time
-from typing import Any
+from typing import Any, Callable
 
 from ..protocol.histogram import Histogram
 from .emulated_bench import EmulatedBench
@@ -34,6 +35,23 @@ def set_timer_slack(ns: int) -> int | None:
     if old < 0 or prctl(_PR_SET_TIMERSLACK, ns, 0, 0, 0) != 0:
         return None
     return old
+
+
+def set_rt_priority(priority: int | None, log: Callable[[str], None]) -> tuple[tuple[int, Any] | None, str]:
+    """SCHED_FIFO at ``priority`` for the calling thread when asked (and permitted): the policy to restore (None:
+    nothing changed) and the scheduling in words."""
+    if priority is None:
+        return None, "normal"
+    if not hasattr(os, "sched_setscheduler"):
+        log("--rt-priority: this platform has no SCHED_FIFO; running at normal priority")
+        return None, "normal"
+    old = (os.sched_getscheduler(0), os.sched_getparam(0))
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, OSError) as exc:
+        log(f"--rt-priority {priority}: SCHED_FIFO not permitted ({exc.strerror or exc}); running at normal priority")
+        return None, "normal"
+    return old, f"SCHED_FIFO {priority}"
 
 
 def stagger_boot(bench: EmulatedBench, spread: float) -> None:

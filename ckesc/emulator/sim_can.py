@@ -22,6 +22,23 @@ INF = float("inf")
 ESC_TX_MAILBOXES = 32
 
 
+def esc_controller(esc: EscModel) -> CanController:
+    """An ESC's CAN controller, on either lane (this one and the real-time hub, :mod:`.hub_can`): its mailboxes
+    (:data:`ESC_TX_MAILBOXES`, lowest id first) at its own bit rate, recovering from bus-off by itself unless the
+    fault ``no_busoff_recovery`` is on."""
+    return CanController(esc.state.bitrate, txqueuelen=ESC_TX_MAILBOXES, order="priority",
+                         auto_recovery="no_busoff_recovery" not in esc.faults)
+
+
+def retry_slot(since: float, period: float, t: float) -> float:
+    """A node retransmitting every ``period`` since ``since`` (parked: nobody acknowledges it): its first try that
+    starts at ``t`` or after."""
+    if t == INF:
+        return INF
+    k = max(0, math.ceil(round((t - since) / period, 9)))
+    return round(since + k * period, 12)
+
+
 class CanNodes:
     """The CAN side of :class:`~ckesc.emulator.sim_bus.SimWorld` (see this module's docstring)."""
 
@@ -118,8 +135,7 @@ class CanNodes:
             if options is not None:
                 ctl = CanController(node.bitrate, **options)
             elif isinstance(node, EscModel):
-                ctl = CanController(node.state.bitrate, txqueuelen=ESC_TX_MAILBOXES, order="priority",
-                                    auto_recovery="no_busoff_recovery" not in node.faults)
+                ctl = esc_controller(node)
             else:
                 ctl = CanController(node.bitrate or self._host_bitrate(), txqueuelen=None, order="priority")
             self._ctl[node] = ctl
@@ -157,7 +173,7 @@ class CanNodes:
             self._contending.remove(node)
             p = ctl.head()
             period = attempt_bits(len(p.wire.data), Attempt.NO_ACK, True) / p.bitrate
-            self._parked[node] = (end, period, self._slot(end, period, self._next_listener(p.bitrate)))
+            self._parked[node] = (end, period, retry_slot(end, period, self._next_listener(p.bitrate)))
             self._set_alarm()
 
     def _report(self, node: Any, ctl: CanController) -> None:
@@ -165,14 +181,6 @@ class CanNodes:
         if frames and getattr(node, "error_frames", False):  # a host's bus that asked for them
             for f in frames:
                 node._deliver_error(f)
-
-    @staticmethod
-    def _slot(since: float, period: float, t: float) -> float:
-        """A parked node's first retransmission that starts at ``t`` or after."""
-        if t == INF:
-            return INF
-        k = max(0, math.ceil(round((t - since) / period, 9)))
-        return round(since + k * period, 12)
 
     def _next_listener(self, bitrate: int) -> float:
         """When the next ESC at ``bitrate`` that is booting now starts to listen (INF: none is)."""
@@ -188,7 +196,7 @@ class CanNodes:
         at their next retransmission slot."""
         now = self.now
         for node, (since, period, resume) in self._parked.items():
-            self._parked[node] = (since, period, min(resume, self._slot(since, period, now)))
+            self._parked[node] = (since, period, min(resume, retry_slot(since, period, now)))
         self._set_alarm()
 
     def _set_alarm(self) -> None:

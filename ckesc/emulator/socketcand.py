@@ -48,6 +48,14 @@ def fmt_frame(wire: Any, stamp: float) -> bytes:
     return f"< frame {can_id} {sec}.{usec:06d} {bytes(wire.data).hex().upper()} >".encode("ascii")
 
 
+def fmt_error(error_class: int, stamp: float) -> bytes:
+    """``< error CLASS SEC.USEC >``, as socketcand passes on an error frame of its SocketCAN socket: the class (the
+    id without ``CAN_ERR_FLAG``) and its stamp; socketcand carries none of its data bytes (python-can's client makes
+    an ``is_error_frame`` message of it with that class as its id and one zero byte)."""
+    sec, usec = divmod(round(stamp * 1e6), 1_000_000)
+    return f"< error {error_class:03X} {sec}.{usec:06d} >".encode("ascii")
+
+
 def _parse_send(words: list[str]) -> WireFrame | None:
     """``send ID LEN B0 B1 ...`` (python-can writes bytes without zero padding) -> a frame, None if malformed."""
     try:
@@ -76,6 +84,7 @@ class SocketcandServer(TcpServer):
         log: Callable[[str], None],
         handles: str = "shared",
         echo_own: bool = True,
+        on_listen: Callable[[Conn, float | None], None] = lambda conn, since: None,
     ) -> None:
         if handles not in HANDLES:
             raise ValueError(f"handles must be one of {', '.join(HANDLES)}, not {handles!r}")
@@ -84,6 +93,7 @@ class SocketcandServer(TcpServer):
         self._counters = counters
         self.handles = handles
         self.echo_own = echo_own
+        self._on_listen = on_listen
 
     def accepted(self, conn: Conn) -> None:
         self._counters["clients"] += 1
@@ -111,6 +121,8 @@ class SocketcandServer(TcpServer):
                     self._counters["rx_malformed"] += 1
                     continue
                 conn.rx += 1
+                if conn.quiet_until:
+                    self._on_listen(conn, now)
                 conn.quiet_until = 0.0  # it has read our "< ok >": frames may flow
                 msg = can.Message(arbitration_id=wire.arbitration_id, is_extended_id=wire.is_extended_id, data=wire.data)
                 self._on_frame(now, msg, wire, conn)
@@ -127,11 +139,16 @@ class SocketcandServer(TcpServer):
             elif cmd == "rawmode" and conn.state in ("open", "raw"):
                 conn.state = "raw"
                 conn.quiet_until = time.monotonic() + RAWMODE_QUIET_S
+                self._on_listen(conn, conn.quiet_until)  # it acknowledges from when it can take frames
                 self.write(conn, b"< ok >")
             elif cmd == "echo":
                 self.write(conn, b"< echo >")
             # anything else (bcmmode commands, filters, ...) is ignored: python-can never sends it,
             # and an "< error >" line would be read by its client as a CAN error frame
+
+    def drop(self, conn: Conn) -> None:
+        super().drop(conn)
+        self._on_listen(conn, None)
 
     def to_clients(self, data: bytes, now: float, origin: Conn | None = None) -> None:
         """``data`` (formatted frames) to every client in raw mode that hears it, unless it is still quiet: a frame of

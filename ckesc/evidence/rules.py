@@ -123,8 +123,8 @@ class BusRules(ResetRules):
         self.frames += 1
         if ts >= self.last_ts:
             self.last_ts = ts
-        elif ts < self.last_ts - self.tolerance:  # back by more than the stamps' stated error: the clock went back
-            self._time_jump(ts)
+        elif ts < self.last_ts - (self.own_error if own else self.tolerance):  # back by more than the stamps' error:
+            self._time_jump(ts)  # the clock went back
             self.last_ts = ts
         # (back by less: two frames stamped in the other order within their error, e.g. by two handles; no jump)
         if self.first_ts is None:
@@ -135,7 +135,8 @@ class BusRules(ResetRules):
         if start > self._bus_end + self._slack[n if n < 9 else 8]:
             self._busy_from = start  # the bus was idle before this frame: it did not wait
         busy_from = self._busy_from
-        self._bus_end = ts
+        if ts > self._bus_end:  # (one stamped earlier, within the error: the host's own by its clock, without echo)
+            self._bus_end = ts
         if error:
             self._error_frame(ts, can_id, data)
             return _NONE

@@ -248,6 +248,7 @@ class Tracker(Findings, Rejoin):
     def __init__(self, *, tolerance: float = 0.0, bitrate: int = cat.DEFAULT_BITRATE, complete: bool = False,
                  host_nodes=(HOST_NODE_ID,), jitter: float = 0.0, power_known: bool = False, own_error: float = 0.0) -> None:
         self.tolerance = max(float(tolerance), 1e-9)
+        self.own_error = max(self.tolerance, own_error)  #: the error of the stamps on the host's own frames
         self.jitter = max(float(jitter), 0.0)
         self.complete = complete
         self.power_known = power_known
