@@ -12,7 +12,8 @@ Time bases
     The models run on ``time.monotonic()`` seconds (CLOCK_MONOTONIC, shared by every process on
     the machine). Frames on the bus carry wall-clock stamps (``time.time()`` base, as SocketCAN,
     socketcand and python-can's virtual bus use): ``bus = monotonic + offset``, with ``offset``
-    measured once at start-up so that intervals between stamps are exact. An ESC frame is stamped
+    read again every ``OFFSET_REFRESH_S`` so that stamps follow a wall clock NTP slews, as the host's
+    do (intervals between stamps are exact but for the slew). An ESC frame is stamped
     at its end, as SocketCAN stamps a frame it received: its start plus its duration at the bus's
     bit rate (``frame_bits``). With ``stamp="due"`` (the default) it starts when it was due, so
     report intervals and answer delays seen in bus timestamps are the model's, not this machine's
@@ -65,7 +66,7 @@ from .host_alone import HostAlone
 from .hub_can import HubCan
 from .model import EscModel
 from .realtime_control import ControlCommands
-from .realtime_timing import clock_offset, durations, set_rt_priority, set_timer_slack
+from .realtime_timing import OFFSET_REFRESH_S, clock_offset, durations, set_rt_priority, set_timer_slack
 from .socketcand import SocketcandServer, fmt_frame
 from .tcp import Conn
 
@@ -127,7 +128,7 @@ class RealtimeEmulator(ControlCommands):
         self.rt_priority = rt_priority
         self.scheduling = "normal"
         self._log = log or (lambda text: print(f"ckesc emulate: {text}", file=sys.stderr, flush=True))
-        self.offset = clock_offset()
+        self.offset, self._offset_due = clock_offset(), time.monotonic() + OFFSET_REFRESH_S
         self.lateness = durations()  # per frame: handed to the bus - due
         self.wakeup = durations()  # per timed wake: select() returned - the deadline it waited for
         self.counters = {"tx": 0, "rx": 0, "tx_other_bitrate": 0, "tx_errors": 0, "rx_malformed": 0, "clients": 0}
@@ -348,6 +349,8 @@ class RealtimeEmulator(ControlCommands):
             timeout = None if deadline is None else max(0.0, deadline - mono())
             readable, writable, _ = select.select(rlist, wlist, [], timeout)
             now = mono()
+            if now >= self._offset_due:  # the wall clock as it is now: NTP may slew it (stamps follow it, as SocketCAN's)
+                self.offset, self._offset_due = clock_offset(), now + OFFSET_REFRESH_S
             if not readable and not writable and deadline is not None:
                 self.wakeup.add(max(now - deadline, 0.0))
             for c in writable:

@@ -64,6 +64,13 @@ def stagger_boot(bench: EmulatedBench, spread: float) -> None:
         esc.config.boot_time += spread * k / n
 
 
+#: how often the emulator reads :func:`clock_offset` again: its frames' stamps are the wall clock's (``time.time()``,
+#: as SocketCAN's and the host's), and a wall clock that NTP slews moved 5 ms a second against the monotonic clock on
+#: this machine (a bench whose stamps kept the offset read at start drifted 7.5 s from the host's in 15 minutes):
+#: read every 0.1 s, a slew of that rate puts at most 0.5 ms between them
+OFFSET_REFRESH_S = 0.1
+
+
 def clock_offset() -> float:
     """``time.time() - time.monotonic()``, read so that the two clocks are sampled together."""
     best = None

@@ -544,3 +544,23 @@ def test_histogram_percentiles():
     assert s["over_1ms"] == 1 and s["over_5ms"] == 1
     h.reset()
     assert summary(h)["p50_us"] is None
+
+
+def test_stamps_follow_the_wall_clock_as_it_is_moved(virtual, monkeypatch):
+    """Stamps are the wall clock's (``time.time()``, as SocketCAN's and the host's), and NTP may slew it: this
+    machine's moved 5 ms a second against the monotonic clock, and an emulator that kept the offset read at start
+    drifted 7.5 s from the host in 15 minutes of the bench matrix (F4 and R9a FAILs on a conforming ESC without echo).
+    The wall clock cannot be slewed here, so the offset the emulator reads is moved by 5 s instead: its frames follow."""
+    from ckesc.emulator import realtime as rt
+
+    moved = [0.0]
+    real = rt.clock_offset
+    monkeypatch.setattr(rt, "clock_offset", lambda: real() + moved[0])
+    emu, host = virtual((1,))
+    wait_reporting(host, (1,))
+    moved[0] = 5.0
+    collect(host, 2 * rt.OFFSET_REFRESH_S)  # the emulator reads the offset again within its refresh period
+    frames = collect(host, 0.1)
+    now = time.time()  # each frame was heard within the 0.1 s before, stamped within its duration and the lane's error
+    assert frames and all(5.0 - 0.1 - DEFAULT_BUS_ERROR_S < m.timestamp - now <= 5.0 for m in frames), \
+        [round(m.timestamp - now, 3) for m in frames]
