@@ -47,7 +47,7 @@ def summary(doc: dict, wall_s: float | None) -> dict:
         verdicts[r["outcome"]] = verdicts.get(r["outcome"], 0) + 1
     return {
         "about": "the faultless simulated run the documentation's figures come from (docs/recorded/record_run.py)",
-        "recorded": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
+        "recorded": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d"),
         "command": " ".join(COMMAND),
         "suite_version": info.get("suite_version"),
         "git_revision": info.get("git_revision"),
