@@ -131,14 +131,18 @@ class QueryPairing:
         self.kept: list[ReplyPairing] = []
 
     def _time(self, t: float) -> None:
-        if t < self._last_t - self.error:  # back by more than the stamps' stated error (a capture's jump):
-            self._queries.clear()        # nothing before is paired with what follows
-            self._taken.clear()
-        elif t < self._last_t:  # back by less: two stamps of different sources in the other order within their
-            return              # error (a host's frame timed by its send, without echo, and the ESC's by the bus)
-        self._last_t = t
-        while self._queries and t - self._queries[0].t > self.reach:
-            self._queries.popleft()
+        # (a time earlier than the latest is no jump here: the host's own frames, timed by their send without echo,
+        # run ahead of the bus's frames not read yet; whether the clock jumped is the reader's to say, :meth:`forget`)
+        if t > self._last_t:
+            self._last_t = t
+            while self._queries and t - self._queries[0].t > self.reach:
+                self._queries.popleft()
+
+    def forget(self) -> None:
+        """The clock went back (a capture's jump, as the reader tells): nothing before is paired with what follows."""
+        self._queries.clear()
+        self._taken.clear()
+        self._last_t = float("-inf")
 
     def query(self, t: float, source: int) -> Query:
         """A GET_ESC_ID query from node ``source`` at ``t``."""

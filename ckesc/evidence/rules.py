@@ -121,10 +121,12 @@ class BusRules(ResetRules):
         """One frame as it was on the bus: its timestamp is when it ended (SocketCAN, the simulated lane).
         ``own``: the host's own frame (its echo). Returns the violations it shows (usually none)."""
         self.frames += 1
-        if ts >= self.last_ts:
+        if own:  # the host's own frame moves no clock: by its echo it is in order; without echo it is timed by its
+            pass  # send, ahead of the bus's frames the host has not read yet (by its read latency, not the stamps' error)
+        elif ts >= self.last_ts:
             self.last_ts = ts
-        elif ts < self.last_ts - (self.own_error if own else self.tolerance):  # back by more than the stamps' error:
-            self._time_jump(ts)  # the clock went back
+        elif ts < self.last_ts - self.tolerance:  # back by more than the stamps' error: the clock went back
+            self._time_jump(ts)
             self.last_ts = ts
         # (back by less: two frames stamped in the other order within their error, e.g. by two handles; no jump)
         if self.first_ts is None:

@@ -405,6 +405,7 @@ class Tracker(Findings, Rejoin):
             node.chain += 1
             node.last_ts = -math.inf
         self._bus_end = self._busy_from = -math.inf
+        self.queries.forget()
 
     def _reset_all(self) -> None:
         for node in self._nodes.values():
