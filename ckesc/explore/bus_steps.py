@@ -26,6 +26,7 @@ from typing import Any, Callable
 from ..protocol import catalogue as cat
 from ..protocol.ids import Kind
 from ..protocol.judgements import R20_UNJUDGED, r20_bound_s
+from ..protocol.transfer import tail_transfer_id
 from .actions import ANSWER_READ_S, Action, asks_only, stream_fields
 from .oracle import SHORT_MARKS, Oracle
 
@@ -112,7 +113,7 @@ def play_alone(session: Any, action: Action, oracle: Oracle, step: int, feed: Ca
     dut.wait(2 * cat.REPORT_INTERVAL_RANGE[1] * cat.INTERVAL_UNIT_S)
     session.rules.excuse(frozenset())
     for name, fields, kind, wire in sent:
-        tid = wire.data[-1] & 0x1F if wire.data and cat.spec(name).has_tail else 0
+        tid = tail_transfer_id(wire.data[-1]) if wire.data and cat.spec(name).has_tail else 0
         if kind is Kind.RESPONSE or name == "get_esc_id":
             oracle.held.add((name, tid))  # (its answer, or none: R20's OBSERVE)
         if kind is not Kind.RESPONSE or asks_only(name, fields):

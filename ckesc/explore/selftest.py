@@ -15,8 +15,12 @@ from dataclasses import asdict, dataclass
 from typing import Any, Callable, Iterable, Mapping
 
 from ..emulator.faults import FAULTS
+from ..protocol.requirements import REQUIREMENTS
 from .engine import explore
 from .runner import Session
+
+#: R20's clauses (the bus as hardware): a fault that breaks one is explored with R20's bus steps
+R20_CLAUSES = frozenset(r for r in REQUIREMENTS if r.startswith("R20-"))
 
 
 @dataclass
@@ -47,7 +51,7 @@ def find_faults(faults: Iterable[str], *, budget_s: float = 120.0, seed: int = 1
     for fault in faults:
         session = Session({**dict(options or {}), "emulator_faults": fault},
                           load="R18" in FAULTS[fault].rules if load is None else load,
-                          bus=any(r.startswith("R20") for r in FAULTS[fault].rules) if bus is None else bus)
+                          bus=bool(R20_CLAUSES & set(FAULTS[fault].rules)) if bus is None else bus)
         try:
             found, stats = explore(session, budget_s=budget_s, seed=seed, database=None, stop_at_first=True,
                                    max_programs=max_programs, shrink_s=shrink_s)
