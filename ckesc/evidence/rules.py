@@ -153,6 +153,9 @@ class BusRules(ResetRules):
         side = info.side
         if self._held is not None:
             self.held(node, ts, busy_from, own)
+        # its queueing began no later than its own start: a stretch heard first may start later (the host's own
+        # frames without echo are timed by their send, ahead of the bus's frames not read yet)
+        busy_from = min(busy_from, start)
         if node.first_ts is None:
             node.first_ts = ts
         if own:

@@ -574,3 +574,18 @@ def test_r9a_in_a_capture_a_very_late_first_report_is_only_recorded():
     _resume(rules, t + 0.03)
     assert stream(rules, 1, [t + 2.0], start_tid=2) == []
     assert [v.check for v in rules.findings(observations=True)] == ["first-report-unjudged"]
+
+
+def test_the_hosts_own_frames_ahead_of_the_bus_stretch_no_report_interval():
+    """The bench matrix without echo (fb825ac): the host's own frame, timed by its send, is handed to the reader
+    before the ESC's report stamped 5 ms earlier that it had not read yet. The busy stretch the own frame opened
+    began after that report's start, the report took it as its own, and its next 20 ms gap was judged against
+    'bus queueing allows up to 15 ms': an R9 FAIL on a conforming emulator in 13 tests. A report's busy stretch
+    never starts after the report."""
+    rules = BusRules(bitrate=BITRATE, complete=True, tolerance=0.002)
+    t = stated(rules, 1, 0.0)
+    out = stream(rules, 1, [t + 0.02 * i for i in range(4)])
+    own = encode("get_esc_id", {"option": 0}, source=0, transfer_id=1, layout="query")
+    out += feed(rules, own, t + 0.085, own=True)  # sent at 85 ms, handed out before the report of 80 ms
+    out += stream(rules, 1, [t + 0.02 * i for i in range(4, 10)], start_tid=4)
+    assert checks(out) == [], [str(v) for v in out]
