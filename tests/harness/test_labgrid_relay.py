@@ -56,6 +56,10 @@ def _args(tmp: Path, emu: Emulator, relay: BusRelay) -> list[str]:
             "--labgrid-env", str(relay.env_file(tmp))]
 
 
+# slow while undiagnosed: the section's bit-rate test FAILs now and then in real time with 'a reset the host did not
+# make (msg1)' (R19) on the conforming emulator: 2 of 3 CI runs on 2026-12-03, and 1 to 2 of 3 copies run at once,
+# with the reader of 211d0fb as with today's (the closing note of that day); the relay's own tests below stay in CI
+@pytest.mark.slow
 def test_the_r20_shorts_go_through_the_labgrid_relay(tmp_path, bench):
     emu, relay = bench
     done = subprocess.run([*CKESC, *_args(tmp_path, emu, relay)], cwd=tmp_path, env=_env(tmp_path),
