@@ -264,7 +264,7 @@ class Tracker(Findings, Rejoin):
         self._ids: dict[int, FrameId] = {}
         self._streams: dict[tuple[int, int], EscStream] = {}
         #: which request each answer answers (F4), every node's (the one owner of that decision)
-        self.requests = RequestPairing(error=max(self.tolerance, own_error))
+        self.requests = RequestPairing(error=self.own_error)
         super().__init__()
         self._last_throttle: tuple[float, str, int] | None = None
         #: answers per node to the last Set ID (more than one: a shared id)
@@ -272,7 +272,7 @@ class Tracker(Findings, Rejoin):
         #: which GET_ESC_ID query each reply answers, from any node: another host on the bus (a flight controller, F6)
         #: queries too, and the ESC may answer both (the one owner of that decision)
         #: ``own_error``: the error of the stamps on the host's own frames (a query's), where larger than ``tolerance``
-        self.queries = QueryPairing(error=max(self.tolerance, own_error), host=min(self._host_nodes, default=HOST_NODE_ID))
+        self.queries = QueryPairing(error=self.own_error, host=min(self._host_nodes, default=HOST_NODE_ID))
         #: the throttle commands heard (any host's), the longest gap between two, and the gaps longer than the comm-loss
         #: time (R8: the ESC may then flag it)
         self.commands = 0
